@@ -1,0 +1,42 @@
+//! Exit codes, and the one place errors are printed.
+
+use std::fmt;
+use std::process::ExitCode;
+
+/// Exit code for bad input or configuration (a file the user gave us is wrong).
+pub const BAD_INPUT: u8 = 2;
+
+/// Marks an error as the user's input or configuration being wrong, so `main` exits with
+/// code 2. Wrap with [`bad_input`]; the message is the wrapped error's.
+#[derive(Debug)]
+pub struct BadInput(pub anyhow::Error);
+
+impl fmt::Display for BadInput {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Display::fmt(&self.0, f)
+    }
+}
+
+impl std::error::Error for BadInput {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        self.0.source()
+    }
+}
+
+/// Wraps an error as bad input (exit code 2).
+pub fn bad_input(err: impl Into<anyhow::Error>) -> anyhow::Error {
+    anyhow::Error::new(BadInput(err.into()))
+}
+
+/// Prints `error: …` and every cause once, and picks the exit code.
+pub fn report(err: &anyhow::Error) -> ExitCode {
+    eprintln!("error: {err}");
+    for cause in err.chain().skip(1) {
+        eprintln!("  caused by: {cause}");
+    }
+    if err.chain().any(|e| e.is::<BadInput>()) {
+        ExitCode::from(BAD_INPUT)
+    } else {
+        ExitCode::FAILURE
+    }
+}

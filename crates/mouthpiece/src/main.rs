@@ -1,0 +1,45 @@
+//! `mouthpiece`: the command-line front end and daemon.
+//!
+//! Thin glue: every subcommand lives in `cmd/<name>.rs`, parses its arguments with clap and
+//! calls into the library crates. Errors travel as `anyhow::Error`; `main` prints the chain
+//! once and maps it to an exit code (2 for bad input or configuration, 1 otherwise).
+
+mod cmd;
+mod exit;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Debug, Parser)]
+#[command(name = "mouthpiece", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Retarget 3D dot positions (JSONL) onto a character's mouth (JSONL).
+    Retarget(cmd::retarget::Args),
+}
+
+fn main() -> ExitCode {
+    init_logging();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Retarget(args) => cmd::retarget::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => exit::report(&err),
+    }
+}
+
+/// Logs go to stderr (stdout may carry data, e.g. `retarget --out -`). `RUST_LOG` filters;
+/// the default is INFO for mouthpiece's own crates.
+fn init_logging() {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+}
