@@ -335,12 +335,12 @@ fn bad_lines_exit_2_naming_the_line_and_write_nothing() {
         (
             Box::new(|l| l[7] = "{not json".into()),
             "line 8",
-            "not a valid line",
+            "not a valid input line",
         ),
         (
             Box::new(|l| l[9] = l[9].replacen("0.6", "1e999", 1)),
             "line 10",
-            "not a valid line",
+            "not a valid input line",
         ),
         (
             Box::new(|l| l[12] = l[12].replacen("\"t\":0.4", "\"t\":0.1", 1)),
@@ -360,7 +360,7 @@ fn bad_lines_exit_2_naming_the_line_and_write_nothing() {
         (
             Box::new(|l| l[3] = "[1, 2, 3]".into()),
             "line 4",
-            "not a valid line",
+            "not a valid input line",
         ),
         (
             Box::new(|l| l[14] = l[14].replace("\"t\":", "\"time\":")),
