@@ -492,3 +492,62 @@ fn existing_output_is_not_clobbered_on_error() {
     assert_eq!(cmd.output().unwrap().status.code(), Some(2));
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "precious\n");
 }
+
+#[test]
+fn one_euro_smooths_over_time_and_bad_values_exit_2() {
+    let example = repo().join("tests/data/example-performer.jsonl");
+    let parse = |bytes: &[u8]| -> Vec<Value> {
+        String::from_utf8_lossy(bytes)
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    };
+    let mut plain = mouthpiece();
+    example_args(&mut plain, &example, "-");
+    let plain = parse(&run_ok(&mut plain).stdout);
+    let mut filtered = mouthpiece();
+    example_args(&mut filtered, &example, "-");
+    filtered.args(["--one-euro", "0.5,0.0", "--smooth", "none"]);
+    let filtered = parse(&run_ok(&mut filtered).stdout);
+    assert_eq!(plain.len(), filtered.len());
+    // The first sample passes unchanged; afterwards the filter lags and smooths.
+    assert_eq!(
+        vectors(&plain[0]["points"]),
+        vectors(&filtered[0]["points"])
+    );
+    assert_eq!(filtered[0]["curve"], Value::Null);
+    let roughness = |lines: &[Value]| -> f64 {
+        let mut sum = 0.0;
+        for w in lines.windows(3) {
+            let (a, b, c) = (
+                vectors(&w[0]["points"]),
+                vectors(&w[1]["points"]),
+                vectors(&w[2]["points"]),
+            );
+            for i in 0..a.len() {
+                for k in 0..3 {
+                    sum += (a[i][k] - 2.0 * b[i][k] + c[i][k]).powi(2);
+                }
+            }
+        }
+        sum
+    };
+    let (rp, rf) = (roughness(&plain), roughness(&filtered));
+    assert!(rf < 0.25 * rp, "One Euro should smooth: {rf} vs {rp}");
+
+    for bad in ["1", "0,0.1", "1,-1", "x,1"] {
+        let mut cmd = mouthpiece();
+        example_args(&mut cmd, &example, "-");
+        let o = cmd.args(["--one-euro", bad]).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "--one-euro {bad}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--one-euro"));
+    }
+    let mut cmd = mouthpiece();
+    example_args(&mut cmd, &example, "-");
+    let o = cmd
+        .args(["--smooth", "bspline", "--samples-per-span", "0"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("samples_per_span"));
+}
