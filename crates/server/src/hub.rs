@@ -160,6 +160,9 @@ pub struct PublishedFrame {
     pub published_at: Option<Instant>,
     /// The frame.
     pub frame: StreamFrame,
+    /// JSON text for subscriptions to all characters, indexed by (curve, performer):
+    /// serialized once per frame by the first client that needs it, shared by the rest.
+    pub(crate) json_cache: [std::sync::OnceLock<tokio_tungstenite::tungstenite::Utf8Bytes>; 4],
 }
 
 /// A character as described in `hello`.
@@ -400,6 +403,9 @@ impl Hub {
             published.timecode = timecode;
             published.published_at = Some(Instant::now());
             published.frame.clone_from(frame);
+            for cached in &mut published.json_cache {
+                cached.take();
+            }
         }
         inner.metrics.frames_in.fetch_add(1, Ordering::Relaxed);
         if let Some(p) = frame.processing {

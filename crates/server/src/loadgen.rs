@@ -286,7 +286,27 @@ pub async fn run_client(
         HeaderValue::from_str(&protocols)
             .map_err(|e| tokio_tungstenite::tungstenite::Error::HttpFormat(e.into()))?,
     );
-    let (mut ws, _) = tokio_tungstenite::connect_async(request).await?;
+    let (mut ws, _) = if kind == ClientKind::Stalled {
+        // A tiny receive buffer, so that the server's send path fills quickly and the
+        // server has to deal with a client that really is not reading.
+        let host = request.uri().host().unwrap_or("127.0.0.1").to_owned();
+        let port = request.uri().port_u16().unwrap_or(80);
+        let addr = tokio::net::lookup_host((host.as_str(), port))
+            .await?
+            .next()
+            .ok_or_else(|| std::io::Error::other(format!("{host}: no address")))?;
+        let socket = if addr.is_ipv4() {
+            tokio::net::TcpSocket::new_v4()?
+        } else {
+            tokio::net::TcpSocket::new_v6()?
+        };
+        socket.set_recv_buffer_size(4096)?;
+        let stream = socket.connect(addr).await?;
+        tokio_tungstenite::client_async(request, tokio_tungstenite::MaybeTlsStream::Plain(stream))
+            .await?
+    } else {
+        tokio_tungstenite::connect_async(request).await?
+    };
     ws.send(Message::text(subscribe)).await?;
     let mut report = ClientReport::default();
     let mut announced = false;

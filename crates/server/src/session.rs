@@ -323,6 +323,13 @@ impl Writer {
             return Ok(());
         }
         let message = match self.format {
+            FrameFormat::Json if self.selection.characters.is_none() => {
+                let slot =
+                    usize::from(self.selection.curve) * 2 + usize::from(self.selection.performer);
+                let text = frame.json_cache[slot]
+                    .get_or_init(|| FrameView::new(frame, &self.selection).to_json().into());
+                Message::Text(text.clone())
+            }
             FrameFormat::Json => Message::text(FrameView::new(frame, &self.selection).to_json()),
             FrameFormat::Binary => {
                 self.buffer.clear();
