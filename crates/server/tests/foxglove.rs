@@ -53,14 +53,22 @@ async fn next_json_op(ws: &mut Client, op: &str) -> Value {
 #[tokio::test]
 async fn foxglove_clients_list_subscribe_and_receive_channels() {
     let server = TestServer::start(ServerConfig::default()).await;
-    let mut ws = connect(&server.url(), &["foxglove.websocket.v1"]).await.unwrap();
+    let mut ws = connect(&server.url(), &["foxglove.websocket.v1"])
+        .await
+        .unwrap();
     let info = next_json_op(&mut ws, "serverInfo").await;
     assert_eq!(info["name"], "mouthpiece");
     assert!(info["capabilities"].is_array());
     let adv = next_json_op(&mut ws, "advertise").await;
     let channels = adv["channels"].as_array().unwrap();
-    let topics: Vec<&str> = channels.iter().map(|c| c["topic"].as_str().unwrap()).collect();
-    assert_eq!(topics, ["/head", "/performer", "/character/human", "/character/wolf"]);
+    let topics: Vec<&str> = channels
+        .iter()
+        .map(|c| c["topic"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        topics,
+        ["/head", "/performer", "/character/human", "/character/wolf"]
+    );
     let mut schemas = serde_json::Map::new();
     for c in channels {
         assert_eq!(c["encoding"], "json");
@@ -70,7 +78,9 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
         schemas.insert(c["id"].to_string(), schema);
     }
     let id_of = |topic: &str| {
-        channels.iter().find(|c| c["topic"] == topic).unwrap()["id"].as_u64().unwrap()
+        channels.iter().find(|c| c["topic"] == topic).unwrap()["id"]
+            .as_u64()
+            .unwrap()
     };
     let subscribe = json!({"op": "subscribe", "subscriptions": [
         {"id": 7, "channelId": id_of("/character/wolf")},
@@ -97,15 +107,23 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
             payloads.push(json!({"schema": schemas[&channel.to_string()], "payload": payload}));
         }
     }
-    assert_eq!(seen.into_iter().collect::<Vec<_>>(), [(7, 3), (8, 3), (9, 3)]);
-    let wolf = payloads.iter().find(|p| p["payload"]["name"] == "wolf").unwrap();
+    assert_eq!(
+        seen.into_iter().collect::<Vec<_>>(),
+        [(7, 3), (8, 3), (9, 3)]
+    );
+    let wolf = payloads
+        .iter()
+        .find(|p| p["payload"]["name"] == "wolf")
+        .unwrap();
     assert_eq!(wolf["payload"]["points"].as_array().unwrap().len(), 12);
     assert!(wolf["payload"]["points"][0]["x"].is_number());
 
     // Unsubscribe two; only the head remains.
-    ws.send(Message::text(json!({"op": "unsubscribe", "subscriptionIds": [7, 9]}).to_string()))
-        .await
-        .unwrap();
+    ws.send(Message::text(
+        json!({"op": "unsubscribe", "subscriptionIds": [7, 9]}).to_string(),
+    ))
+    .await
+    .unwrap();
     tokio::time::sleep(Duration::from_millis(100)).await;
     server.publish(3);
     match next(&mut ws).await {
