@@ -21,6 +21,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let config = SynthConfig {
         seconds: times.iter().cloned().fold(0.0, f64::max) + 0.1,
         head_motion: motion,
+        seed: std::env::var("SEED")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(1),
         noise: NoiseModel::Kinect,
         ..SynthConfig::default()
     };

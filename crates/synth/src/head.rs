@@ -132,7 +132,7 @@ pub fn attrs_at(a: f64, v: f64, zc: f64) -> Attrs {
     let ax = x.abs();
     // Groove: inwards along the radial direction, only inside the mouth.
     let g = if front {
-        0.022 * lip_taper(x).sqrt() * seam_profile(v)
+        0.022 * lip_taper(x).powi(2) * seam_profile(v)
     } else {
         0.0
     };
@@ -407,7 +407,8 @@ pub fn lip_dot_material(count: usize, zc: f64) -> Vec<(f64, f64)> {
     let per_lip = (count - 2) / 2;
     let upper_crest = |x: f64| -0.0047 * lip_taper(x).sqrt();
     let lower_crest = |x: f64| 0.0060 * lip_taper(x).sqrt();
-    let corner = HALF_MOUTH;
+    // Painted on the corner of the mouth, just outside the commissure.
+    let corner = HALF_MOUTH + 0.001;
     // Samples from x = +corner to -corner (performer's left to right).
     let sample = |crest: &dyn Fn(f64) -> f64| -> Vec<(f64, f64, f64)> {
         let n = 800;

@@ -17,8 +17,8 @@
 //!
 //! Default paint colours (HSV in OpenCV's 0–180 hue scale), chosen far from skin (hue ≈ 10,
 //! low saturation) and lips (hue ≈ 0/180):
-//! - lip dots: [`LIP_DOT_RGB`], green, hue ≈ 64;
-//! - forehead dots: [`FOREHEAD_DOT_RGB`], blue, hue ≈ 111.
+//! - lip dots: [`LIP_DOT_RGB`], green, hue ≈ 66 (rendered: [`LIP_DOT_HUE_RANGE_CV`]);
+//! - forehead dots: [`FOREHEAD_DOT_RGB`], blue, hue ≈ 111 (rendered: [`FOREHEAD_DOT_HUE_RANGE_CV`]).
 
 mod head;
 mod layout;
@@ -42,12 +42,12 @@ pub const LIP_DOT_RGB: [u8; 3] = [40, 200, 70];
 pub const FOREHEAD_DOT_RGB: [u8; 3] = [40, 90, 230];
 /// OpenCV-scale (0–180) hue ranges that contain the default lip-dot paint under the
 /// renderer's lighting and noise (for detector defaults).
-pub const LIP_DOT_HUE_RANGE_CV: (u8, u8) = (50, 80);
+pub const LIP_DOT_HUE_RANGE_CV: (u8, u8) = (40, 85);
 /// OpenCV-scale hue range of the default forehead-dot paint.
-pub const FOREHEAD_DOT_HUE_RANGE_CV: (u8, u8) = (100, 125);
-/// Minimum OpenCV-scale saturation (0–255) of the painted dots as rendered; skin and lips stay
-/// well below it in value-weighted terms only for green/blue hues, so use hue first.
-pub const DOT_MIN_SATURATION_CV: u8 = 90;
+pub const FOREHEAD_DOT_HUE_RANGE_CV: (u8, u8) = (98, 128);
+/// Minimum OpenCV-scale saturation (0–255) of the painted dots as rendered (shading, motion
+/// blur into the lips and sensor noise included).
+pub const DOT_MIN_SATURATION_CV: u8 = 80;
 /// Default dot radius, metres.
 pub const DEFAULT_DOT_RADIUS_M: f64 = 0.00225;
 

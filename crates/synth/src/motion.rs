@@ -54,7 +54,7 @@ impl SpeechTrack {
             let period = 1.0 / rate;
             for _ in 0..syllables {
                 // Onset: a consonant, sometimes a lip closure with the lower lip rolled in.
-                let bilabial = rng.unit() < 0.18;
+                let bilabial = rng.unit() < 0.25;
                 let onset = MouthState {
                     jaw: if bilabial { 0.0 } else { rng.range(0.01, 0.05) },
                     spread: rng.range(0.0, 0.3),

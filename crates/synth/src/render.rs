@@ -455,10 +455,9 @@ impl Renderer {
                     let m = buf.material[i];
                     let d = ((m[0] - dot.material[0]) * dot.metric[0]).powi(2)
                         + ((m[1] - dot.material[1]) * dot.metric[1]).powi(2);
-                    seen = buf.z[i].is_finite()
-                        && d <= r2
-                        && (buf.z[i] as f64 - centre[2]).abs() < 0.004
-                        && buf.facing[i] > 0.0;
+                    // Visible exactly when the surface the camera sees at the centre's pixel
+                    // is this dot's paint: a hidden dot never shows there.
+                    seen = buf.z[i].is_finite() && d <= r2;
                 }
                 // Paint every pixel whose surface is this dot's material.
                 let reach =
