@@ -22,6 +22,8 @@ struct Cli {
 enum Command {
     /// Retarget 3D dot positions (JSONL) onto a character's mouth (JSONL).
     Retarget(cmd::retarget::Args),
+    /// Render a synthetic performer (head with painted dots, depth + colour, ground truth) to MCAP.
+    Synth(cmd::synth::Args),
 }
 
 fn main() -> ExitCode {
@@ -29,6 +31,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
+        Command::Synth(args) => cmd::synth::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
