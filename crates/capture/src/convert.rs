@@ -157,7 +157,8 @@ pub fn depth_to_mm(width: u32, height: u32, data: &[u8], units_m: f64) -> Result
 #[cfg(test)]
 mod tests {
     use super::*;
-    use opencv::core::{Mat, MatTraitConst, CV_8UC2, CV_8UC3};
+    use opencv::core::{Mat, CV_8UC2, CV_8UC3};
+    use opencv::prelude::*;
     use opencv::imgproc;
 
     /// A deterministic buffer that covers every byte value in every channel position.

@@ -13,6 +13,8 @@
 //! - `openni`: OpenNI2 cameras and `.oni` replay and recording (feature `openni2`), on top
 //!   of the safe `mouthpiece-openni2` layer.
 //! - `v4l2`: V4L2 cameras (feature `v4l2`).
+//! - `mcap_replay`: MCAP session replay through the recording crate (feature `mcap`).
+//! - [`record`]: `mouthpiece record` (any source to MCAP; OpenNI2 sources to `.oni`).
 //! - `devices`: what `mouthpiece devices` lists.
 //!
 //! This crate has no `unsafe`: all native calls live in `mouthpiece-openni2` and `v4l`.
@@ -28,6 +30,9 @@ pub mod spec;
 pub mod openni;
 #[cfg(feature = "v4l2")]
 pub mod v4l2;
+#[cfg(feature = "mcap")]
+pub mod mcap_replay;
+pub mod record;
 
 mod pairing;
 
@@ -163,15 +168,23 @@ fn open_replay(text: &str, replay: &ReplaySpec, config: &CaptureConfig) -> Resul
     }
     match replay.path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
         Some("oni") => open_oni_replay(text, replay, config),
-        Some("mcap") => Err(open_error(
-            text,
-            "MCAP replay needs the recording crate (mouthpiece-recording), which this build does not have yet",
-        )),
+        Some("mcap") => open_mcap_replay(text, replay, config),
         _ => Err(open_error(
             text,
             format!("cannot tell the format of {}: expected a .mcap or .oni file", replay.path.display()),
         )),
     }
+}
+
+#[cfg(feature = "mcap")]
+fn open_mcap_replay(text: &str, replay: &ReplaySpec, config: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
+    let _ = text;
+    mcap_replay::McapReplay::open(replay, config).map(|s| Box::new(s) as Box<dyn FrameSource>)
+}
+
+#[cfg(not(feature = "mcap"))]
+fn open_mcap_replay(text: &str, _: &ReplaySpec, _: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
+    Err(open_error(text, "MCAP replay needs the mcap feature, which this build lacks"))
 }
 
 #[cfg(feature = "openni2")]

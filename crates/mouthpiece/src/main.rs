@@ -22,6 +22,10 @@ struct Cli {
 enum Command {
     /// Retarget 3D dot positions (JSONL) onto a character's mouth (JSONL).
     Retarget(cmd::retarget::Args),
+    /// Record a source (camera, Dummy device, replay) to MCAP, or an OpenNI2 source to .oni.
+    Record(cmd::record::Args),
+    /// List OpenNI2 devices and V4L2 nodes with their modes and formats.
+    Devices(cmd::devices::Args),
 }
 
 fn main() -> ExitCode {
@@ -29,6 +33,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
+        Command::Record(args) => cmd::record::run(args),
+        Command::Devices(args) => cmd::devices::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
