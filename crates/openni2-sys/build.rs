@@ -6,7 +6,12 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 const KNOWN_INCLUDE_DIRS: &[&str] = &["/usr/include/openni2", "/usr/local/include/openni2"];
-const KNOWN_LIB_DIRS: &[&str] = &["/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib", "/usr/local/lib"];
+const KNOWN_LIB_DIRS: &[&str] = &[
+    "/usr/lib/x86_64-linux-gnu",
+    "/usr/lib/aarch64-linux-gnu",
+    "/usr/lib",
+    "/usr/local/lib",
+];
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
@@ -31,7 +36,10 @@ fn main() {
         .allowlist_var("ONI_.*|XN_.*")
         // Values the library hands back may be ones this header does not know: newtypes,
         // never Rust enums (an unknown discriminant in a Rust enum is undefined behaviour).
-        .default_enum_style(bindgen::EnumVariation::NewType { is_bitfield: false, is_global: false })
+        .default_enum_style(bindgen::EnumVariation::NewType {
+            is_bitfield: false,
+            is_global: false,
+        })
         .prepend_enum_name(false)
         .derive_default(true)
         .derive_debug(true)
@@ -42,7 +50,9 @@ fn main() {
         .expect("bindgen could not generate OpenNI2 bindings from OniCAPI.h");
 
     let out = PathBuf::from(env::var("OUT_DIR").expect("OUT_DIR is set by cargo"));
-    bindings.write_to_file(out.join("bindings.rs")).expect("cannot write bindings.rs");
+    bindings
+        .write_to_file(out.join("bindings.rs"))
+        .expect("cannot write bindings.rs");
 }
 
 /// Include directory and (when not on the default linker path) library directory.
@@ -63,13 +73,19 @@ fn locate() -> (PathBuf, Option<PathBuf>) {
                  install Debian's libopenni2-dev or set OPENNI2_INCLUDE and OPENNI2_REDIST"
             )
         });
-    let lib = KNOWN_LIB_DIRS.iter().map(Path::new).find(|d| d.join("libOpenNI2.so").exists());
+    let lib = KNOWN_LIB_DIRS
+        .iter()
+        .map(Path::new)
+        .find(|d| d.join("libOpenNI2.so").exists());
     (include.to_path_buf(), lib.map(Path::to_path_buf))
 }
 
 /// Asks `pkg-config` for `libopenni2` (Debian ships `libopenni2.pc`).
 fn pkg_config() -> Option<(PathBuf, Option<PathBuf>)> {
-    let cflags = Command::new("pkg-config").args(["--cflags-only-I", "libopenni2"]).output().ok()?;
+    let cflags = Command::new("pkg-config")
+        .args(["--cflags-only-I", "libopenni2"])
+        .output()
+        .ok()?;
     if !cflags.status.success() {
         return None;
     }
@@ -78,7 +94,10 @@ fn pkg_config() -> Option<(PathBuf, Option<PathBuf>)> {
         .filter_map(|f| f.strip_prefix("-I"))
         .map(PathBuf::from)
         .find(|d| d.join("OniCAPI.h").exists())?;
-    let libs = Command::new("pkg-config").args(["--libs-only-L", "libopenni2"]).output().ok()?;
+    let libs = Command::new("pkg-config")
+        .args(["--libs-only-L", "libopenni2"])
+        .output()
+        .ok()?;
     let lib = String::from_utf8_lossy(&libs.stdout)
         .split_whitespace()
         .filter_map(|f| f.strip_prefix("-L"))

@@ -10,19 +10,42 @@ use std::fmt;
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ConvertError {
     #[error("{format} frame of {width}x{height} needs {expected} bytes, got {got}")]
-    Size { format: &'static str, width: u32, height: u32, expected: usize, got: usize },
+    Size {
+        format: &'static str,
+        width: u32,
+        height: u32,
+        expected: usize,
+        got: usize,
+    },
     #[error("YUYV needs an even width, got {0}")]
     OddWidth(u32),
     #[error("MJPG frame does not decode: {0}")]
     Jpeg(String),
     #[error("MJPG frame decodes to {got_w}x{got_h}, the stream is {width}x{height}")]
-    JpegSize { width: u32, height: u32, got_w: u32, got_h: u32 },
+    JpegSize {
+        width: u32,
+        height: u32,
+        got_w: u32,
+        got_h: u32,
+    },
 }
 
-fn check_size(format: &'static str, width: u32, height: u32, bpp: usize, got: usize) -> Result<(), ConvertError> {
+fn check_size(
+    format: &'static str,
+    width: u32,
+    height: u32,
+    bpp: usize,
+    got: usize,
+) -> Result<(), ConvertError> {
     let expected = width as usize * height as usize * bpp;
     if got < expected {
-        return Err(ConvertError::Size { format, width, height, expected, got });
+        return Err(ConvertError::Size {
+            format,
+            width,
+            height,
+            expected,
+            got,
+        });
     }
     Ok(())
 }
@@ -48,7 +71,12 @@ impl fmt::Display for ColorFormat {
 }
 
 /// Converts one colour frame to packed BGR8 (`width * height * 3` bytes).
-pub fn to_bgr(format: ColorFormat, width: u32, height: u32, data: &[u8]) -> Result<Vec<u8>, ConvertError> {
+pub fn to_bgr(
+    format: ColorFormat,
+    width: u32,
+    height: u32,
+    data: &[u8],
+) -> Result<Vec<u8>, ConvertError> {
     match format {
         ColorFormat::Bgr24 => {
             check_size("BGR3", width, height, 3, data.len())?;
@@ -115,7 +143,10 @@ pub fn yuyv_to_bgr(width: u32, height: u32, data: &[u8]) -> Result<Vec<u8>, Conv
 pub fn uyvy_to_bgr(width: u32, height: u32, data: &[u8]) -> Result<Vec<u8>, ConvertError> {
     check_size("UYVY", width, height, 2, data.len())?;
     let n = width as usize * height as usize * 2;
-    let yuyv: Vec<u8> = data[..n].chunks_exact(4).flat_map(|q| [q[1], q[0], q[3], q[2]]).collect();
+    let yuyv: Vec<u8> = data[..n]
+        .chunks_exact(4)
+        .flat_map(|q| [q[1], q[0], q[3], q[2]])
+        .collect();
     yuyv_to_bgr(width, height, &yuyv)
 }
 
@@ -123,43 +154,71 @@ pub fn uyvy_to_bgr(width: u32, height: u32, data: &[u8]) -> Result<Vec<u8>, Conv
 #[cfg(feature = "v4l2")]
 pub fn mjpg_to_bgr(width: u32, height: u32, data: &[u8]) -> Result<Vec<u8>, ConvertError> {
     let mut decoder = jpeg_decoder::Decoder::new(data);
-    let pixels = decoder.decode().map_err(|e| ConvertError::Jpeg(e.to_string()))?;
-    let info = decoder.info().ok_or_else(|| ConvertError::Jpeg("no image header".into()))?;
+    let pixels = decoder
+        .decode()
+        .map_err(|e| ConvertError::Jpeg(e.to_string()))?;
+    let info = decoder
+        .info()
+        .ok_or_else(|| ConvertError::Jpeg("no image header".into()))?;
     if (info.width as u32, info.height as u32) != (width, height) {
-        return Err(ConvertError::JpegSize { width, height, got_w: info.width as u32, got_h: info.height as u32 });
+        return Err(ConvertError::JpegSize {
+            width,
+            height,
+            got_w: info.width as u32,
+            got_h: info.height as u32,
+        });
     }
     match info.pixel_format {
         jpeg_decoder::PixelFormat::RGB24 => rgb_to_bgr(width, height, &pixels),
         jpeg_decoder::PixelFormat::L8 => Ok(pixels.iter().flat_map(|&l| [l, l, l]).collect()),
-        other => Err(ConvertError::Jpeg(format!("unsupported JPEG pixel format {other:?}"))),
+        other => Err(ConvertError::Jpeg(format!(
+            "unsupported JPEG pixel format {other:?}"
+        ))),
     }
 }
 
 /// Motion-JPEG needs the `v4l2` feature (its decoder comes with it).
 #[cfg(not(feature = "v4l2"))]
 pub fn mjpg_to_bgr(_width: u32, _height: u32, _data: &[u8]) -> Result<Vec<u8>, ConvertError> {
-    Err(ConvertError::Jpeg("built without the v4l2 feature (no JPEG decoder)".into()))
+    Err(ConvertError::Jpeg(
+        "built without the v4l2 feature (no JPEG decoder)".into(),
+    ))
 }
 
 /// 16-bit little-endian depth in `units_m` metres per unit → millimetres (0 stays 0, values
 /// past 65535 mm saturate). `units_m = 0.001` copies.
-pub fn depth_to_mm(width: u32, height: u32, data: &[u8], units_m: f64) -> Result<Vec<u16>, ConvertError> {
+pub fn depth_to_mm(
+    width: u32,
+    height: u32,
+    data: &[u8],
+    units_m: f64,
+) -> Result<Vec<u16>, ConvertError> {
     check_size("Z16", width, height, 2, data.len())?;
     let n = width as usize * height as usize;
-    let raw = data[..n * 2].chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+    let raw = data[..n * 2]
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]));
     if (units_m - 0.001).abs() < 1e-12 {
         return Ok(raw.collect());
     }
     let scale = units_m * 1000.0;
-    Ok(raw.map(|d| if d == 0 { 0 } else { (d as f64 * scale).round().clamp(1.0, 65535.0) as u16 }).collect())
+    Ok(raw
+        .map(|d| {
+            if d == 0 {
+                0
+            } else {
+                (d as f64 * scale).round().clamp(1.0, 65535.0) as u16
+            }
+        })
+        .collect())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use opencv::core::{Mat, CV_8UC2, CV_8UC3};
-    use opencv::prelude::*;
     use opencv::imgproc;
+    use opencv::prelude::*;
 
     /// A deterministic buffer that covers every byte value in every channel position.
     fn fixture(len: usize, seed: u32) -> Vec<u8> {
@@ -178,8 +237,16 @@ mod tests {
 
     /// A Mat over a copy of `data`: `height` rows of `channels`-channel u8 pixels.
     fn mat_from(data: &[u8], height: u32, channels: i32) -> Mat {
-        let flat = Mat::new_rows_cols_with_data(height as i32, (data.len() / height as usize) as i32, data).unwrap();
-        flat.reshape(channels, height as i32).unwrap().try_clone().unwrap()
+        let flat = Mat::new_rows_cols_with_data(
+            height as i32,
+            (data.len() / height as usize) as i32,
+            data,
+        )
+        .unwrap();
+        flat.reshape(channels, height as i32)
+            .unwrap()
+            .try_clone()
+            .unwrap()
     }
 
     fn bytes(m: &Mat) -> Vec<u8> {
@@ -225,20 +292,38 @@ mod tests {
 
     #[test]
     fn short_or_odd_buffers_are_errors_not_panics() {
-        assert!(matches!(yuyv_to_bgr(4, 2, &[0; 15]), Err(ConvertError::Size { expected: 16, .. })));
+        assert!(matches!(
+            yuyv_to_bgr(4, 2, &[0; 15]),
+            Err(ConvertError::Size { expected: 16, .. })
+        ));
         assert_eq!(yuyv_to_bgr(3, 2, &[0; 12]), Err(ConvertError::OddWidth(3)));
         assert!(rgb_to_bgr(4, 4, &[0; 47]).is_err());
         assert!(depth_to_mm(4, 4, &[0; 31], 0.001).is_err());
-        assert!(matches!(mjpg_to_bgr(4, 4, b"not a jpeg"), Err(ConvertError::Jpeg(_))));
+        assert!(matches!(
+            mjpg_to_bgr(4, 4, b"not a jpeg"),
+            Err(ConvertError::Jpeg(_))
+        ));
     }
 
     #[test]
     fn depth_units_convert_to_millimetres() {
-        let raw: Vec<u8> = [0u16, 1, 1000, 65535].iter().flat_map(|v| v.to_le_bytes()).collect();
-        assert_eq!(depth_to_mm(2, 2, &raw, 0.001).unwrap(), vec![0, 1, 1000, 65535]);
+        let raw: Vec<u8> = [0u16, 1, 1000, 65535]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        assert_eq!(
+            depth_to_mm(2, 2, &raw, 0.001).unwrap(),
+            vec![0, 1, 1000, 65535]
+        );
         // RealSense D4xx default: 1 unit = 0.1 mm... here 100 µm units.
-        assert_eq!(depth_to_mm(2, 2, &raw, 0.0001).unwrap(), vec![0, 1, 100, 6554]);
+        assert_eq!(
+            depth_to_mm(2, 2, &raw, 0.0001).unwrap(),
+            vec![0, 1, 100, 6554]
+        );
         // 0.25 mm units round; sub-millimetre non-zero readings stay non-zero.
-        assert_eq!(depth_to_mm(2, 2, &raw, 0.00025).unwrap(), vec![0, 1, 250, 16384]);
+        assert_eq!(
+            depth_to_mm(2, 2, &raw, 0.00025).unwrap(),
+            vec![0, 1, 250, 16384]
+        );
     }
 }

@@ -48,7 +48,10 @@ pub const DEPTH_FOURCCS: [&str; 5] = ["Z16 ", "Y16 ", "INVZ", "INZI", "Y12I"];
 
 /// Lists OpenNI2 devices (opening each briefly to read its modes) and V4L2 nodes.
 pub fn list() -> DeviceReport {
-    DeviceReport { openni2: list_openni2(), v4l2: list_v4l2() }
+    DeviceReport {
+        openni2: list_openni2(),
+        v4l2: list_v4l2(),
+    }
 }
 
 #[cfg(feature = "openni2")]
@@ -58,18 +61,25 @@ fn list_openni2() -> Result<Vec<OpenNiDevice>, String> {
     Ok(devices
         .into_iter()
         .map(|d| {
-            let modes = Device::open(&d.uri).map_err(|e| format!("cannot open it: {e} (in use by another process?)")).map(
-                |dev| {
+            let modes = Device::open(&d.uri)
+                .map_err(|e| format!("cannot open it: {e} (in use by another process?)"))
+                .map(|dev| {
                     [SensorType::Depth, SensorType::Color, SensorType::Ir]
                         .into_iter()
                         .filter_map(|s| match dev.sensor_modes(s) {
-                            Ok(Some(modes)) => Some((s.to_string(), modes.iter().map(|m| m.to_string()).collect())),
+                            Ok(Some(modes)) => {
+                                Some((s.to_string(), modes.iter().map(|m| m.to_string()).collect()))
+                            }
                             _ => None,
                         })
                         .collect()
-                },
-            );
-            OpenNiDevice { uri: d.uri, vendor: d.vendor, name: d.name, modes }
+                });
+            OpenNiDevice {
+                uri: d.uri,
+                vendor: d.vendor,
+                name: d.name,
+                modes,
+            }
         })
         .collect())
 }
@@ -81,7 +91,10 @@ fn list_openni2() -> Result<Vec<OpenNiDevice>, String> {
 
 #[cfg(feature = "v4l2")]
 fn list_v4l2() -> Vec<V4l2Node> {
-    crate::v4l2::video_nodes().into_iter().map(|p| crate::v4l2::describe_node(&p)).collect()
+    crate::v4l2::video_nodes()
+        .into_iter()
+        .map(|p| crate::v4l2::describe_node(&p))
+        .collect()
 }
 
 #[cfg(not(feature = "v4l2"))]
@@ -94,9 +107,10 @@ impl fmt::Display for DeviceReport {
         writeln!(f, "OpenNI2 devices:")?;
         match &self.openni2 {
             Err(e) => writeln!(f, "  (OpenNI2 unavailable: {e})")?,
-            Ok(list) if list.is_empty() => {
-                writeln!(f, "  none found (the Dummy test device is always there: openni2:Dummy)")?
-            }
+            Ok(list) if list.is_empty() => writeln!(
+                f,
+                "  none found (the Dummy test device is always there: openni2:Dummy)"
+            )?,
             Ok(list) => {
                 for d in list {
                     writeln!(f, "  openni2:{}  {} {}", d.uri, d.vendor, d.name)?;
@@ -116,12 +130,22 @@ impl fmt::Display for DeviceReport {
             writeln!(f, "  none found (no /dev/video*)")?;
         }
         for n in &self.v4l2 {
-            let kind = if n.looks_like_depth { "depth" } else { "colour" };
+            let kind = if n.looks_like_depth {
+                "depth"
+            } else {
+                "colour"
+            };
             if let Some(e) = &n.error {
                 writeln!(f, "  {}  {e}", n.path.display())?;
                 continue;
             }
-            writeln!(f, "  {}  {} ({}), looks like {kind}", n.path.display(), n.card, n.driver)?;
+            writeln!(
+                f,
+                "  {}  {} ({}), looks like {kind}",
+                n.path.display(),
+                n.card,
+                n.driver
+            )?;
             if n.formats.is_empty() {
                 writeln!(f, "    no capture formats (a metadata or output node)")?;
             }
@@ -130,7 +154,12 @@ impl fmt::Display for DeviceReport {
                 for (i, (w, h)) in fmt.sizes.iter().enumerate() {
                     let _ = write!(sizes, "{}{w}x{h}", if i == 0 { "" } else { " " });
                 }
-                writeln!(f, "    {} ({}): {sizes}", fmt.fourcc.trim_end(), fmt.description)?;
+                writeln!(
+                    f,
+                    "    {} ({}): {sizes}",
+                    fmt.fourcc.trim_end(),
+                    fmt.description
+                )?;
             }
         }
         Ok(())
@@ -143,7 +172,10 @@ mod tests {
 
     #[test]
     fn an_empty_report_says_so() {
-        let r = DeviceReport { openni2: Ok(vec![]), v4l2: vec![] };
+        let r = DeviceReport {
+            openni2: Ok(vec![]),
+            v4l2: vec![],
+        };
         let text = r.to_string();
         assert!(text.contains("OpenNI2 devices:\n  none found"), "{text}");
         assert!(text.contains("V4L2 nodes:\n  none found"), "{text}");
@@ -156,21 +188,42 @@ mod tests {
                 uri: "1d27/0601@1/5".into(),
                 vendor: "PrimeSense".into(),
                 name: "PS1080".into(),
-                modes: Ok(vec![("depth".into(), vec!["640x480 @ 30 fps DEPTH_1_MM".into()])]),
+                modes: Ok(vec![(
+                    "depth".into(),
+                    vec!["640x480 @ 30 fps DEPTH_1_MM".into()],
+                )]),
             }]),
             v4l2: vec![V4l2Node {
                 path: "/dev/video2".into(),
                 card: "Intel(R) RealSense(TM) Depth Camera 435".into(),
                 driver: "uvcvideo".into(),
-                formats: vec![V4l2Format { fourcc: "Z16 ".into(), description: "16-bit Depth".into(), sizes: vec![(848, 480), (640, 480)] }],
+                formats: vec![V4l2Format {
+                    fourcc: "Z16 ".into(),
+                    description: "16-bit Depth".into(),
+                    sizes: vec![(848, 480), (640, 480)],
+                }],
                 looks_like_depth: true,
                 error: None,
             }],
         };
         let text = r.to_string();
-        assert!(text.contains("openni2:1d27/0601@1/5  PrimeSense PS1080"), "{text}");
-        assert!(text.contains("depth: 640x480 @ 30 fps DEPTH_1_MM"), "{text}");
-        assert!(text.contains("/dev/video2  Intel(R) RealSense(TM) Depth Camera 435 (uvcvideo), looks like depth"), "{text}");
-        assert!(text.contains("Z16 (16-bit Depth): 848x480 640x480"), "{text}");
+        assert!(
+            text.contains("openni2:1d27/0601@1/5  PrimeSense PS1080"),
+            "{text}"
+        );
+        assert!(
+            text.contains("depth: 640x480 @ 30 fps DEPTH_1_MM"),
+            "{text}"
+        );
+        assert!(
+            text.contains(
+                "/dev/video2  Intel(R) RealSense(TM) Depth Camera 435 (uvcvideo), looks like depth"
+            ),
+            "{text}"
+        );
+        assert!(
+            text.contains("Z16 (16-bit Depth): 848x480 640x480"),
+            "{text}"
+        );
     }
 }

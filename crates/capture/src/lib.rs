@@ -26,21 +26,21 @@ pub mod devices;
 pub mod registration;
 pub mod spec;
 
-#[cfg(feature = "openni2")]
-pub mod openni;
-#[cfg(feature = "v4l2")]
-pub mod v4l2;
 #[cfg(feature = "mcap")]
 pub mod mcap_replay;
+#[cfg(feature = "openni2")]
+pub mod openni;
 pub mod record;
+#[cfg(feature = "v4l2")]
+pub mod v4l2;
 
 mod pairing;
 
 use std::path::Path;
 use std::time::Duration;
 
-pub use mouthpiece_frame::{Frame, FrameSource, SourceError, SourceInfo};
 use mouthpiece_frame::{Extrinsics, Intrinsics};
+pub use mouthpiece_frame::{Frame, FrameSource, SourceError, SourceInfo};
 pub use spec::{ReplaySpec, SourceSpec, SpecError};
 
 /// What a source should ask the device for, and what the device cannot tell us.
@@ -91,13 +91,22 @@ impl CaptureConfig {
     /// Checks the values a user can get wrong; the message names the field.
     pub fn validate(&self) -> Result<(), String> {
         if !(2..=4).contains(&self.v4l2_buffers) {
-            return Err(format!("v4l2_buffers = {}: expected 2 to 4", self.v4l2_buffers));
+            return Err(format!(
+                "v4l2_buffers = {}: expected 2 to 4",
+                self.v4l2_buffers
+            ));
         }
         if !(self.depth_units_m > 0.0 && self.depth_units_m.is_finite()) {
-            return Err(format!("depth_units_m = {}: expected a positive number of metres", self.depth_units_m));
+            return Err(format!(
+                "depth_units_m = {}: expected a positive number of metres",
+                self.depth_units_m
+            ));
         }
         if self.width == 0 || self.height == 0 || self.fps == 0 {
-            return Err(format!("width/height/fps = {}x{}@{}: expected positive values", self.width, self.height, self.fps));
+            return Err(format!(
+                "width/height/fps = {}x{}@{}: expected positive values",
+                self.width, self.height, self.fps
+            ));
         }
         if self.stall_timeout.is_zero() {
             return Err("stall_timeout: expected more than 0 s".into());
@@ -115,7 +124,11 @@ impl CaptureConfig {
 }
 
 pub(crate) fn open_error(spec: &str, message: impl Into<String>) -> SourceError {
-    SourceError::Open { spec: spec.to_string(), message: message.into(), cause: None }
+    SourceError::Open {
+        spec: spec.to_string(),
+        message: message.into(),
+        cause: None,
+    }
 }
 
 pub(crate) fn open_error_with(
@@ -123,11 +136,19 @@ pub(crate) fn open_error_with(
     message: impl Into<String>,
     cause: impl std::error::Error + Send + Sync + 'static,
 ) -> SourceError {
-    SourceError::Open { spec: spec.to_string(), message: message.into(), cause: Some(Box::new(cause)) }
+    SourceError::Open {
+        spec: spec.to_string(),
+        message: message.into(),
+        cause: Some(Box::new(cause)),
+    }
 }
 
 pub(crate) fn format_error(spec: &str, message: impl Into<String>) -> SourceError {
-    SourceError::Format { spec: spec.to_string(), message: message.into(), cause: None }
+    SourceError::Format {
+        spec: spec.to_string(),
+        message: message.into(),
+        cause: None,
+    }
 }
 
 pub(crate) fn lost_error(
@@ -135,11 +156,18 @@ pub(crate) fn lost_error(
     message: impl Into<String>,
     cause: Option<Box<dyn std::error::Error + Send + Sync>>,
 ) -> SourceError {
-    SourceError::Disconnected { spec: spec.to_string(), message: message.into(), cause }
+    SourceError::Disconnected {
+        spec: spec.to_string(),
+        message: message.into(),
+        cause,
+    }
 }
 
 /// Opens the source a spec names.
-pub fn open_source(spec: &str, config: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
+pub fn open_source(
+    spec: &str,
+    config: &CaptureConfig,
+) -> Result<Box<dyn FrameSource>, SourceError> {
     let parsed = SourceSpec::parse(spec).map_err(|e| SourceError::Open {
         spec: spec.to_string(),
         message: e.reason.clone(),
@@ -149,71 +177,132 @@ pub fn open_source(spec: &str, config: &CaptureConfig) -> Result<Box<dyn FrameSo
 }
 
 /// Opens an already parsed spec.
-pub fn open_parsed(spec: &SourceSpec, config: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
+pub fn open_parsed(
+    spec: &SourceSpec,
+    config: &CaptureConfig,
+) -> Result<Box<dyn FrameSource>, SourceError> {
     let text = spec.to_string();
-    config.validate().map_err(|m| open_error(&text, format!("bad capture configuration: {m}")))?;
+    config
+        .validate()
+        .map_err(|m| open_error(&text, format!("bad capture configuration: {m}")))?;
     match spec {
         SourceSpec::Replay(replay) => open_replay(&text, replay, config),
-        SourceSpec::OpenNi2 { .. } => open_openni2(spec, config).map(|s| Box::new(s) as Box<dyn FrameSource>),
+        SourceSpec::OpenNi2 { .. } => {
+            open_openni2(spec, config).map(|s| Box::new(s) as Box<dyn FrameSource>)
+        }
         SourceSpec::V4l2 { color, depth } => open_v4l2(&text, color, depth.as_deref(), config),
     }
 }
 
-fn open_replay(text: &str, replay: &ReplaySpec, config: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
+fn open_replay(
+    text: &str,
+    replay: &ReplaySpec,
+    config: &CaptureConfig,
+) -> Result<Box<dyn FrameSource>, SourceError> {
     if !replay.path.exists() {
-        return Err(open_error(text, format!("no such file: {}", replay.path.display())));
+        return Err(open_error(
+            text,
+            format!("no such file: {}", replay.path.display()),
+        ));
     }
     if replay.path.is_dir() {
-        return Err(open_error(text, format!("{} is a directory, not a recording", replay.path.display())));
+        return Err(open_error(
+            text,
+            format!("{} is a directory, not a recording", replay.path.display()),
+        ));
     }
-    match replay.path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+    match replay
+        .path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
         Some("oni") => open_oni_replay(text, replay, config),
         Some("mcap") => open_mcap_replay(text, replay, config),
         _ => Err(open_error(
             text,
-            format!("cannot tell the format of {}: expected a .mcap or .oni file", replay.path.display()),
+            format!(
+                "cannot tell the format of {}: expected a .mcap or .oni file",
+                replay.path.display()
+            ),
         )),
     }
 }
 
 #[cfg(feature = "mcap")]
-fn open_mcap_replay(text: &str, replay: &ReplaySpec, config: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
+fn open_mcap_replay(
+    text: &str,
+    replay: &ReplaySpec,
+    config: &CaptureConfig,
+) -> Result<Box<dyn FrameSource>, SourceError> {
     let _ = text;
     mcap_replay::McapReplay::open(replay, config).map(|s| Box::new(s) as Box<dyn FrameSource>)
 }
 
 #[cfg(not(feature = "mcap"))]
-fn open_mcap_replay(text: &str, _: &ReplaySpec, _: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
-    Err(open_error(text, "MCAP replay needs the mcap feature, which this build lacks"))
+fn open_mcap_replay(
+    text: &str,
+    _: &ReplaySpec,
+    _: &CaptureConfig,
+) -> Result<Box<dyn FrameSource>, SourceError> {
+    Err(open_error(
+        text,
+        "MCAP replay needs the mcap feature, which this build lacks",
+    ))
 }
 
 #[cfg(feature = "openni2")]
-fn open_oni_replay(text: &str, replay: &ReplaySpec, config: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
+fn open_oni_replay(
+    text: &str,
+    replay: &ReplaySpec,
+    config: &CaptureConfig,
+) -> Result<Box<dyn FrameSource>, SourceError> {
     let _ = text;
     openni::OpenNiSource::open_file(replay, config).map(|s| Box::new(s) as Box<dyn FrameSource>)
 }
 
 #[cfg(not(feature = "openni2"))]
-fn open_oni_replay(text: &str, _: &ReplaySpec, _: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
-    Err(open_error(text, ".oni replay needs the openni2 feature, which this build lacks"))
+fn open_oni_replay(
+    text: &str,
+    _: &ReplaySpec,
+    _: &CaptureConfig,
+) -> Result<Box<dyn FrameSource>, SourceError> {
+    Err(open_error(
+        text,
+        ".oni replay needs the openni2 feature, which this build lacks",
+    ))
 }
 
 /// Opens an OpenNI2 source (camera, `Dummy`, or an `.oni` replay) as its concrete type, for
 /// callers that need more than [`FrameSource`] (`.oni` recording, seeking).
 #[cfg(feature = "openni2")]
-pub fn open_openni2(spec: &SourceSpec, config: &CaptureConfig) -> Result<openni::OpenNiSource, SourceError> {
+pub fn open_openni2(
+    spec: &SourceSpec,
+    config: &CaptureConfig,
+) -> Result<openni::OpenNiSource, SourceError> {
     match spec {
         SourceSpec::OpenNi2 { uri } => openni::OpenNiSource::open_device(uri.as_deref(), config),
-        SourceSpec::Replay(r) if r.path.extension().is_some_and(|e| e.eq_ignore_ascii_case("oni")) => {
+        SourceSpec::Replay(r)
+            if r.path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("oni")) =>
+        {
             openni::OpenNiSource::open_file(r, config)
         }
-        other => Err(open_error(&other.to_string(), "not an OpenNI2 source (openni2:… or replay:….oni)")),
+        other => Err(open_error(
+            &other.to_string(),
+            "not an OpenNI2 source (openni2:… or replay:….oni)",
+        )),
     }
 }
 
 #[cfg(not(feature = "openni2"))]
 fn open_openni2(spec: &SourceSpec, _: &CaptureConfig) -> Result<Box<dyn FrameSource>, SourceError> {
-    Err(open_error(&spec.to_string(), "OpenNI2 support is not built in (feature openni2)"))
+    Err(open_error(
+        &spec.to_string(),
+        "OpenNI2 support is not built in (feature openni2)",
+    ))
 }
 
 #[cfg(feature = "v4l2")]
@@ -233,5 +322,8 @@ fn open_v4l2(
     _: Option<&Path>,
     _: &CaptureConfig,
 ) -> Result<Box<dyn FrameSource>, SourceError> {
-    Err(open_error(text, "V4L2 support is not built in (feature v4l2)"))
+    Err(open_error(
+        text,
+        "V4L2 support is not built in (feature v4l2)",
+    ))
 }

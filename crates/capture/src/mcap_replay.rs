@@ -28,23 +28,41 @@ pub struct McapReplay {
 fn recording_error(spec: &str, err: RecordingError) -> SourceError {
     match err {
         RecordingError::Open { .. } => open_error_with(spec, "cannot open the recording", err),
-        other => SourceError::Format { spec: spec.to_string(), message: "cannot read the recording".into(), cause: Some(Box::new(other)) },
+        other => SourceError::Format {
+            spec: spec.to_string(),
+            message: "cannot read the recording".into(),
+            cause: Some(Box::new(other)),
+        },
     }
 }
 
 impl McapReplay {
     pub fn open(replay: &ReplaySpec, _config: &CaptureConfig) -> Result<McapReplay, SourceError> {
         let spec = SourceSpec::Replay(replay.clone()).to_string();
-        let mut reader = SessionReader::open(&replay.path).map_err(|e| recording_error(&spec, e))?;
+        let mut reader =
+            SessionReader::open(&replay.path).map_err(|e| recording_error(&spec, e))?;
         reader.set_looping(replay.looping);
         if replay.start_s > 0.0 {
-            reader.seek(Duration::from_secs_f64(replay.start_s)).map_err(|e| recording_error(&spec, e))?;
+            reader
+                .seek(Duration::from_secs_f64(replay.start_s))
+                .map_err(|e| recording_error(&spec, e))?;
         }
-        let first = reader.next_frame().map_err(|e| recording_error(&spec, e))?.ok_or_else(|| SourceError::Format {
-            spec: spec.clone(),
-            message: format!("{} holds no frames{}", replay.path.display(), if replay.start_s > 0.0 { " after the start time" } else { "" }),
-            cause: None,
-        })?;
+        let first = reader
+            .next_frame()
+            .map_err(|e| recording_error(&spec, e))?
+            .ok_or_else(|| SourceError::Format {
+                spec: spec.clone(),
+                message: format!(
+                    "{} holds no frames{}",
+                    replay.path.display(),
+                    if replay.start_s > 0.0 {
+                        " after the start time"
+                    } else {
+                        ""
+                    }
+                ),
+                cause: None,
+            })?;
         let f = &first.frame;
         let info = SourceInfo {
             spec: spec.clone(),
@@ -73,7 +91,9 @@ impl McapReplay {
     pub fn seek(&mut self, t: Duration) -> Result<(), SourceError> {
         self.first = None;
         self.anchor = None;
-        self.reader.seek(t).map_err(|e| recording_error(&self.spec, e))
+        self.reader
+            .seek(t)
+            .map_err(|e| recording_error(&self.spec, e))
     }
 
     fn pace(&mut self, log_time: u64) {
@@ -83,7 +103,8 @@ impl McapReplay {
         }
         self.last_log_time = log_time;
         let (anchor, anchor_log) = *self.anchor.get_or_insert((Instant::now(), log_time));
-        let due = anchor + Duration::from_secs_f64(log_time.saturating_sub(anchor_log) as f64 / 1e9 / speed);
+        let due = anchor
+            + Duration::from_secs_f64(log_time.saturating_sub(anchor_log) as f64 / 1e9 / speed);
         let now = Instant::now();
         if due > now {
             std::thread::sleep(due - now);
@@ -102,7 +123,11 @@ impl FrameSource for McapReplay {
             self.pace(t);
             return Ok(Some(first));
         }
-        match self.reader.next_frame().map_err(|e| recording_error(&self.spec, e))? {
+        match self
+            .reader
+            .next_frame()
+            .map_err(|e| recording_error(&self.spec, e))?
+        {
             Some(sf) => {
                 self.pace(sf.log_time);
                 Ok(Some(sf.frame))

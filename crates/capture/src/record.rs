@@ -65,10 +65,17 @@ pub enum OutputFormat {
 
 impl OutputFormat {
     pub fn from_path(path: &Path) -> Result<OutputFormat, RecordError> {
-        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        match path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref()
+        {
             Some("mcap") => Ok(OutputFormat::Mcap),
             Some("oni") => Ok(OutputFormat::Oni),
-            _ => Err(RecordError::UnknownFormat { path: path.to_path_buf() }),
+            _ => Err(RecordError::UnknownFormat {
+                path: path.to_path_buf(),
+            }),
         }
     }
 }
@@ -107,7 +114,11 @@ fn pump(
         write(&frame)?;
         frames += 1;
     }
-    Ok((frames, first_ts.map_or(0.0, |f| (last_ts - f) as f64 / 1e6), None))
+    Ok((
+        frames,
+        first_ts.map_or(0.0, |f| (last_ts - f) as f64 / 1e6),
+        None,
+    ))
 }
 
 /// Records `spec` to an MCAP session at `out`. `on_frame` sees every frame written.
@@ -121,21 +132,37 @@ pub fn record_mcap(
     mut on_frame: impl FnMut(&Frame),
 ) -> Result<RecordSummary, RecordError> {
     let mut source = crate::open_parsed(spec, config)?;
-    let mut writer = mouthpiece_recording::SessionWriter::create(out, options)
-        .map_err(|e| RecordError::Write { path: out.to_path_buf(), source: Box::new(e) })?;
+    let mut writer = mouthpiece_recording::SessionWriter::create(out, options).map_err(|e| {
+        RecordError::Write {
+            path: out.to_path_buf(),
+            source: Box::new(e),
+        }
+    })?;
     tracing::info!(source = %spec, file = %out.display(), "recording MCAP session");
     let result = pump(source.as_mut(), limits, |f| {
-        writer.write_frame(f).map_err(|e| RecordError::Write { path: out.to_path_buf(), source: Box::new(e) })?;
+        writer.write_frame(f).map_err(|e| RecordError::Write {
+            path: out.to_path_buf(),
+            source: Box::new(e),
+        })?;
         on_frame(f);
         Ok(())
     });
     let skipped = source.skipped();
     drop(source);
     // Close the file whatever happened, so it stays readable.
-    let finished = writer.finish().map_err(|e| RecordError::Write { path: out.to_path_buf(), source: Box::new(e) });
+    let finished = writer.finish().map_err(|e| RecordError::Write {
+        path: out.to_path_buf(),
+        source: Box::new(e),
+    });
     let (frames, duration_s, lost) = result?;
     finished?;
-    Ok(RecordSummary { frames, duration_s, skipped, oni_fixed_nodes: 0, lost })
+    Ok(RecordSummary {
+        frames,
+        duration_s,
+        skipped,
+        oni_fixed_nodes: 0,
+        lost,
+    })
 }
 
 #[cfg(not(feature = "mcap"))]
@@ -162,14 +189,18 @@ pub fn record_oni(
 ) -> Result<RecordSummary, RecordError> {
     let is_openni = match spec {
         SourceSpec::OpenNi2 { .. } => true,
-        SourceSpec::Replay(r) => r.path.extension().is_some_and(|e| e.eq_ignore_ascii_case("oni")),
+        SourceSpec::Replay(r) => r
+            .path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("oni")),
         SourceSpec::V4l2 { .. } => false,
     };
     if !is_openni {
-        return Err(RecordError::NotOpenNi { spec: spec.to_string() });
+        return Err(RecordError::NotOpenNi {
+            spec: spec.to_string(),
+        });
     }
-    let mut source = crate::open_openni2(spec, config)?;
-    let recording = source.start_oni_recording(out)?;
+    let (mut source, recording) = crate::openni::OpenNiSource::open_recording(spec, config, out)?;
     let result = pump(&mut source, limits, |f| {
         on_frame(f);
         Ok(())

@@ -28,7 +28,9 @@ pub fn register_depth(
             }
             let p = depth_k.deproject_ideal([u as f64, v as f64], d as f64 * depth_scale_m);
             let q = depth_to_color.apply(p);
-            let Some([x, y]) = color_k.project_ideal(q) else { continue };
+            let Some([x, y]) = color_k.project_ideal(q) else {
+                continue;
+            };
             let (x, y) = (x.round(), y.round());
             if x < 0.0 || y < 0.0 || x >= color_k.width as f64 || y >= color_k.height as f64 {
                 continue;
@@ -65,7 +67,10 @@ mod tests {
         // ahead of the depth camera at 0.5 m is seen left of centre by... the colour camera
         // at x = +0.025 m.
         let k = Intrinsics::ideal(64, 48, 50.0, 50.0, 31.5, 23.5);
-        let e = Extrinsics { translation: [0.025, 0.0, 0.0], ..Extrinsics::IDENTITY };
+        let e = Extrinsics {
+            translation: [0.025, 0.0, 0.0],
+            ..Extrinsics::IDENTITY
+        };
         let mut d = DepthImage::new(64, 48);
         let (u, v) = (31u32, 23u32);
         d.data[(v * 64 + u) as usize] = 500;
@@ -75,7 +80,10 @@ mod tests {
         let (x, y) = (q[0].round() as u32, q[1].round() as u32);
         assert_eq!(r.at(x, y), 500);
         assert_eq!(r.data.iter().filter(|&&z| z != 0).count(), 1);
-        assert_eq!(x, 34, "0.025 m at 0.5 m with f = 50 px is 2.5 px to the right");
+        assert_eq!(
+            x, 34,
+            "0.025 m at 0.5 m with f = 50 px is 2.5 px to the right"
+        );
     }
 
     #[test]

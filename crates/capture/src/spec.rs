@@ -9,8 +9,13 @@ use std::path::PathBuf;
 pub enum SourceSpec {
     Replay(ReplaySpec),
     /// `None`: the first device OpenNI2 lists.
-    OpenNi2 { uri: Option<String> },
-    V4l2 { color: PathBuf, depth: Option<PathBuf> },
+    OpenNi2 {
+        uri: Option<String>,
+    },
+    V4l2 {
+        color: PathBuf,
+        depth: Option<PathBuf>,
+    },
 }
 
 /// How to play a recording.
@@ -28,12 +33,20 @@ pub struct ReplaySpec {
 
 impl ReplaySpec {
     pub fn new(path: impl Into<PathBuf>) -> Self {
-        ReplaySpec { path: path.into(), looping: false, speed: Some(1.0), start_s: 0.0 }
+        ReplaySpec {
+            path: path.into(),
+            looping: false,
+            speed: Some(1.0),
+            start_s: 0.0,
+        }
     }
 
     /// An unpaced, non-looping replay (batch work, tests).
     pub fn unpaced(path: impl Into<PathBuf>) -> Self {
-        ReplaySpec { speed: None, ..ReplaySpec::new(path) }
+        ReplaySpec {
+            speed: None,
+            ..ReplaySpec::new(path)
+        }
     }
 }
 
@@ -47,8 +60,13 @@ pub struct SpecError {
 
 impl SourceSpec {
     pub fn parse(spec: &str) -> Result<SourceSpec, SpecError> {
-        let err = |reason: String| SpecError { spec: spec.to_string(), reason };
-        let (scheme, rest) = spec.split_once(':').ok_or_else(|| err("no scheme before ':'".into()))?;
+        let err = |reason: String| SpecError {
+            spec: spec.to_string(),
+            reason,
+        };
+        let (scheme, rest) = spec
+            .split_once(':')
+            .ok_or_else(|| err("no scheme before ':'".into()))?;
         match scheme {
             "replay" => {
                 let (path, query) = match rest.rsplit_once('?') {
@@ -59,9 +77,14 @@ impl SourceSpec {
                     return Err(err("replay needs a file path".into()));
                 }
                 let mut replay = ReplaySpec::new(path);
-                for pair in query.into_iter().flat_map(|q| q.split('&')).filter(|p| !p.is_empty()) {
-                    let (key, value) =
-                        pair.split_once('=').ok_or_else(|| err(format!("option {pair:?} is not key=value")))?;
+                for pair in query
+                    .into_iter()
+                    .flat_map(|q| q.split('&'))
+                    .filter(|p| !p.is_empty())
+                {
+                    let (key, value) = pair
+                        .split_once('=')
+                        .ok_or_else(|| err(format!("option {pair:?} is not key=value")))?;
                     match key {
                         "loop" => {
                             replay.looping = match value {
@@ -71,28 +94,37 @@ impl SourceSpec {
                             }
                         }
                         "speed" => {
-                            let s: f64 =
-                                value.parse().map_err(|_| err(format!("speed={value:?}: expected a number")))?;
+                            let s: f64 = value
+                                .parse()
+                                .map_err(|_| err(format!("speed={value:?}: expected a number")))?;
                             if !s.is_finite() || s < 0.0 {
-                                return Err(err(format!("speed={value}: expected 0 (unpaced) or a positive number")));
+                                return Err(err(format!(
+                                    "speed={value}: expected 0 (unpaced) or a positive number"
+                                )));
                             }
                             replay.speed = if s == 0.0 { None } else { Some(s) };
                         }
                         "start" => {
-                            let s: f64 = value
-                                .parse()
-                                .map_err(|_| err(format!("start={value:?}: expected seconds from the start")))?;
+                            let s: f64 = value.parse().map_err(|_| {
+                                err(format!("start={value:?}: expected seconds from the start"))
+                            })?;
                             if !s.is_finite() || s < 0.0 {
                                 return Err(err(format!("start={value}: expected seconds >= 0")));
                             }
                             replay.start_s = s;
                         }
-                        _ => return Err(err(format!("unknown replay option {key:?} (known: loop, speed, start)"))),
+                        _ => {
+                            return Err(err(format!(
+                                "unknown replay option {key:?} (known: loop, speed, start)"
+                            )))
+                        }
                     }
                 }
                 Ok(SourceSpec::Replay(replay))
             }
-            "openni2" => Ok(SourceSpec::OpenNi2 { uri: (!rest.is_empty()).then(|| rest.to_string()) }),
+            "openni2" => Ok(SourceSpec::OpenNi2 {
+                uri: (!rest.is_empty()).then(|| rest.to_string()),
+            }),
             "v4l2" => {
                 let (color, depth) = match rest.split_once('+') {
                     Some((c, d)) => (c, Some(d)),
@@ -102,9 +134,14 @@ impl SourceSpec {
                     return Err(err("v4l2 needs a colour node, e.g. v4l2:/dev/video0".into()));
                 }
                 if depth == Some("") {
-                    return Err(err("nothing after '+': expected a depth node, e.g. +/dev/video2".into()));
+                    return Err(err(
+                        "nothing after '+': expected a depth node, e.g. +/dev/video2".into(),
+                    ));
                 }
-                Ok(SourceSpec::V4l2 { color: PathBuf::from(color), depth: depth.map(PathBuf::from) })
+                Ok(SourceSpec::V4l2 {
+                    color: PathBuf::from(color),
+                    depth: depth.map(PathBuf::from),
+                })
             }
             other => Err(err(format!("unknown source kind {other:?}"))),
         }
@@ -155,32 +192,60 @@ mod tests {
             SourceSpec::parse("replay:recordings/demo.mcap").unwrap(),
             SourceSpec::Replay(ReplaySpec::new("recordings/demo.mcap"))
         );
-        let SourceSpec::Replay(r) = SourceSpec::parse("replay:a b/take.oni?loop=1&speed=2.5&start=3").unwrap() else {
+        let SourceSpec::Replay(r) =
+            SourceSpec::parse("replay:a b/take.oni?loop=1&speed=2.5&start=3").unwrap()
+        else {
             panic!()
         };
-        assert_eq!((r.path, r.looping, r.speed, r.start_s), (PathBuf::from("a b/take.oni"), true, Some(2.5), 3.0));
-        let SourceSpec::Replay(r) = SourceSpec::parse("replay:x.mcap?speed=0").unwrap() else { panic!() };
+        assert_eq!(
+            (r.path, r.looping, r.speed, r.start_s),
+            (PathBuf::from("a b/take.oni"), true, Some(2.5), 3.0)
+        );
+        let SourceSpec::Replay(r) = SourceSpec::parse("replay:x.mcap?speed=0").unwrap() else {
+            panic!()
+        };
         assert_eq!(r.speed, None);
-        assert_eq!(SourceSpec::parse("openni2:").unwrap(), SourceSpec::OpenNi2 { uri: None });
-        assert_eq!(SourceSpec::parse("openni2:Dummy").unwrap(), SourceSpec::OpenNi2 { uri: Some("Dummy".into()) });
+        assert_eq!(
+            SourceSpec::parse("openni2:").unwrap(),
+            SourceSpec::OpenNi2 { uri: None }
+        );
+        assert_eq!(
+            SourceSpec::parse("openni2:Dummy").unwrap(),
+            SourceSpec::OpenNi2 {
+                uri: Some("Dummy".into())
+            }
+        );
         assert_eq!(
             SourceSpec::parse("openni2:1d27/0601@1/5").unwrap(),
-            SourceSpec::OpenNi2 { uri: Some("1d27/0601@1/5".into()) }
+            SourceSpec::OpenNi2 {
+                uri: Some("1d27/0601@1/5".into())
+            }
         );
         assert_eq!(
             SourceSpec::parse("v4l2:/dev/video4+/dev/video2").unwrap(),
-            SourceSpec::V4l2 { color: "/dev/video4".into(), depth: Some("/dev/video2".into()) }
+            SourceSpec::V4l2 {
+                color: "/dev/video4".into(),
+                depth: Some("/dev/video2".into())
+            }
         );
         assert_eq!(
             SourceSpec::parse("v4l2:/dev/video0").unwrap(),
-            SourceSpec::V4l2 { color: "/dev/video0".into(), depth: None }
+            SourceSpec::V4l2 {
+                color: "/dev/video0".into(),
+                depth: None
+            }
         );
     }
 
     #[test]
     fn display_round_trips() {
-        for s in ["replay:t.mcap", "replay:t.oni?loop=1&speed=0&start=2", "openni2:", "openni2:Dummy", "v4l2:/dev/a+/dev/b"]
-        {
+        for s in [
+            "replay:t.mcap",
+            "replay:t.oni?loop=1&speed=0&start=2",
+            "openni2:",
+            "openni2:Dummy",
+            "v4l2:/dev/a+/dev/b",
+        ] {
             assert_eq!(SourceSpec::parse(s).unwrap().to_string(), s);
         }
     }

@@ -17,7 +17,10 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender, TrySendError};
-use mouthpiece_frame::{Calibration, ColorImage, DepthImage, Extrinsics, Frame, FrameSource, Intrinsics, SourceError, SourceInfo};
+use mouthpiece_frame::{
+    Calibration, ColorImage, DepthImage, Extrinsics, Frame, FrameSource, Intrinsics, SourceError,
+    SourceInfo,
+};
 use v4l::buffer::Type;
 use v4l::io::traits::CaptureStream;
 use v4l::prelude::*;
@@ -93,13 +96,19 @@ pub fn describe_node(path: &Path) -> V4l2Node {
             .collect();
         sizes.dedup();
         node.looks_like_depth |= DEPTH_FOURCCS.contains(&fourcc.as_str());
-        node.formats.push(V4l2Format { fourcc, description: desc.description, sizes });
+        node.formats.push(V4l2Format {
+            fourcc,
+            description: desc.description,
+            sizes,
+        });
     }
     node
 }
 
 fn fourcc_string(f: FourCC) -> String {
-    f.str().map(str::to_string).unwrap_or_else(|_| format!("{:?}", f.repr))
+    f.str()
+        .map(str::to_string)
+        .unwrap_or_else(|_| format!("{:?}", f.repr))
 }
 
 fn explain_open_error(e: &io::Error) -> String {
@@ -157,17 +166,39 @@ struct Negotiated {
 }
 
 /// Opens a node and sets the closest format among `wanted` (in preference order).
-fn negotiate(spec: &str, path: &Path, wanted: &[&[u8; 4]], config: &CaptureConfig) -> Result<Negotiated, SourceError> {
-    let device = Device::with_path(path)
-        .map_err(|e| open_error_with(spec, format!("cannot open {}: {}", path.display(), explain_open_error(&e)), e))?;
-    let formats = device
-        .enum_formats()
-        .map_err(|e| open_error_with(spec, format!("{} is not a capture device", path.display()), e))?;
+fn negotiate(
+    spec: &str,
+    path: &Path,
+    wanted: &[&[u8; 4]],
+    config: &CaptureConfig,
+) -> Result<Negotiated, SourceError> {
+    let device = Device::with_path(path).map_err(|e| {
+        open_error_with(
+            spec,
+            format!("cannot open {}: {}", path.display(), explain_open_error(&e)),
+            e,
+        )
+    })?;
+    let formats = device.enum_formats().map_err(|e| {
+        open_error_with(
+            spec,
+            format!("{} is not a capture device", path.display()),
+            e,
+        )
+    })?;
     let offered: Vec<FourCC> = formats.iter().map(|f| f.fourcc).collect();
-    let Some(&fourcc) = wanted.iter().map(|w| FourCC::new(w)).collect::<Vec<_>>().iter().find(|f| offered.contains(f))
+    let Some(&fourcc) = wanted
+        .iter()
+        .map(|w| FourCC::new(w))
+        .collect::<Vec<_>>()
+        .iter()
+        .find(|f| offered.contains(f))
     else {
         let offered: Vec<String> = offered.iter().map(|f| fourcc_string(*f)).collect();
-        let wanted: Vec<String> = wanted.iter().map(|w| String::from_utf8_lossy(&w[..]).trim().to_string()).collect();
+        let wanted: Vec<String> = wanted
+            .iter()
+            .map(|w| String::from_utf8_lossy(&w[..]).trim().to_string())
+            .collect();
         return Err(format_error(
             spec,
             format!(
@@ -188,11 +219,21 @@ fn negotiate(spec: &str, path: &Path, wanted: &[&[u8; 4]], config: &CaptureConfi
     let (w, h) = sizes
         .iter()
         .copied()
-        .min_by_key(|&(w, h)| (w as i64 - config.width as i64).abs() + (h as i64 - config.height as i64).abs())
+        .min_by_key(|&(w, h)| {
+            (w as i64 - config.width as i64).abs() + (h as i64 - config.height as i64).abs()
+        })
         .unwrap_or((config.width, config.height));
-    let agreed = device
-        .set_format(&Format::new(w, h, fourcc))
-        .map_err(|e| open_error_with(spec, format!("{} refused {w}x{h} {}", path.display(), fourcc_string(fourcc)), e))?;
+    let agreed = device.set_format(&Format::new(w, h, fourcc)).map_err(|e| {
+        open_error_with(
+            spec,
+            format!(
+                "{} refused {w}x{h} {}",
+                path.display(),
+                fourcc_string(fourcc)
+            ),
+            e,
+        )
+    })?;
     if agreed.fourcc != fourcc {
         return Err(format_error(
             spec,
@@ -211,12 +252,33 @@ fn negotiate(spec: &str, path: &Path, wanted: &[&[u8; 4]], config: &CaptureConfi
         .filter(|p| p.interval.numerator > 0)
         .map(|p| p.interval.denominator as f64 / p.interval.numerator as f64)
         .unwrap_or(0.0);
-    Ok(Negotiated { device, width: agreed.width, height: agreed.height, fourcc, fps })
+    Ok(Negotiated {
+        device,
+        width: agreed.width,
+        height: agreed.height,
+        fourcc,
+        fps,
+    })
 }
 
-fn spawn_node(spec: &str, path: &Path, device: Device, buffers: u32) -> Result<NodeThread, SourceError> {
-    let mut stream = MmapStream::with_buffers(&device, Type::VideoCapture, buffers)
-        .map_err(|e| open_error_with(spec, format!("cannot start streaming {}: {}", path.display(), explain_open_error(&e)), e))?;
+fn spawn_node(
+    spec: &str,
+    path: &Path,
+    device: Device,
+    buffers: u32,
+) -> Result<NodeThread, SourceError> {
+    let mut stream =
+        MmapStream::with_buffers(&device, Type::VideoCapture, buffers).map_err(|e| {
+            open_error_with(
+                spec,
+                format!(
+                    "cannot start streaming {}: {}",
+                    path.display(),
+                    explain_open_error(&e)
+                ),
+                e,
+            )
+        })?;
     stream.set_timeout(DEQUEUE_TIMEOUT);
     let (tx, rx): (Sender<NodeEvent>, Receiver<NodeEvent>) = bounded(2);
     let drain = rx.clone();
@@ -241,8 +303,13 @@ fn spawn_node(spec: &str, path: &Path, device: Device, buffers: u32) -> Result<N
                 match stream.next() {
                     Ok((buf, meta)) => {
                         let used = (meta.bytesused as usize).min(buf.len());
-                        let ts_us = meta.timestamp.sec as u64 * 1_000_000 + meta.timestamp.usec as u64;
-                        let frame = RawFrame { data: buf[..used].to_vec(), ts_us, host_rx: Instant::now() };
+                        let ts_us =
+                            meta.timestamp.sec as u64 * 1_000_000 + meta.timestamp.usec as u64;
+                        let frame = RawFrame {
+                            data: buf[..used].to_vec(),
+                            ts_us,
+                            host_rx: Instant::now(),
+                        };
                         tracing::trace!(%node, ts_us, bytes = used, "V4L2 buffer");
                         if !send_newest(NodeEvent::Frame(frame)) {
                             return;
@@ -251,14 +318,22 @@ fn spawn_node(spec: &str, path: &Path, device: Device, buffers: u32) -> Result<N
                     Err(e) if e.kind() == io::ErrorKind::TimedOut => continue,
                     Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
                     Err(e) => {
-                        let _ = send_newest(NodeEvent::Lost(format!("{node}: {}", explain_open_error(&e))));
+                        let _ = send_newest(NodeEvent::Lost(format!(
+                            "{node}: {}",
+                            explain_open_error(&e)
+                        )));
                         return;
                     }
                 }
             }
         })
         .map_err(|e| open_error_with(spec, "cannot start a capture thread", e))?;
-    Ok(NodeThread { stop, rx, dropped, handle: Some(handle) })
+    Ok(NodeThread {
+        stop,
+        rx,
+        dropped,
+        handle: Some(handle),
+    })
 }
 
 /// A V4L2 colour node, optionally with a depth node.
@@ -281,7 +356,12 @@ pub struct V4l2Source {
 }
 
 impl V4l2Source {
-    pub fn open(spec: &str, color_path: &Path, depth_path: Option<&Path>, config: &CaptureConfig) -> Result<V4l2Source, SourceError> {
+    pub fn open(
+        spec: &str,
+        color_path: &Path,
+        depth_path: Option<&Path>,
+        config: &CaptureConfig,
+    ) -> Result<V4l2Source, SourceError> {
         let wanted: Vec<&[u8; 4]> = COLOR_FOURCCS.iter().map(|(f, _)| *f).collect();
         let color = negotiate(spec, color_path, &wanted, config)?;
         let color_format = COLOR_FOURCCS
@@ -312,7 +392,9 @@ impl V4l2Source {
         let depth_size = depth.as_ref().map(|(_, d)| (d.width, d.height));
         let native_depth_k = match (config.depth_intrinsics, depth_size) {
             (Some(k), _) => k,
-            (None, Some((w, h))) => Intrinsics::from_fov(w, h, DEFAULT_FOV_RAD.0, DEFAULT_FOV_RAD.1),
+            (None, Some((w, h))) => {
+                Intrinsics::from_fov(w, h, DEFAULT_FOV_RAD.0, DEFAULT_FOV_RAD.1)
+            }
             (None, None) => color_k,
         };
         let fps = color.fps;
@@ -325,7 +407,13 @@ impl V4l2Source {
             fps,
             depth
                 .as_ref()
-                .map(|(p, d)| format!(" + {} {}x{} {}", p.display(), d.width, d.height, fourcc_string(d.fourcc)))
+                .map(|(p, d)| format!(
+                    " + {} {}x{} {}",
+                    p.display(),
+                    d.width,
+                    d.height,
+                    fourcc_string(d.fourcc)
+                ))
                 .unwrap_or_default()
         );
         let color_thread = spawn_node(spec, color_path, color.device, config.v4l2_buffers)?;
@@ -385,18 +473,35 @@ impl V4l2Source {
         let bgr = convert::to_bgr(self.color_format, w, h, &color.data).map_err(fmt_err)?;
         let depth_img = match (depth.as_ref(), self.depth_size) {
             (Some(d), Some((dw, dh))) => {
-                let mm = convert::depth_to_mm(dw, dh, &d.data, self.depth_units_m).map_err(fmt_err)?;
-                let native = DepthImage { width: dw, height: dh, data: mm };
-                registration::register_depth(&native, &self.native_depth_k, &self.calibration.color, &self.depth_to_color, 0.001)
+                let mm =
+                    convert::depth_to_mm(dw, dh, &d.data, self.depth_units_m).map_err(fmt_err)?;
+                let native = DepthImage {
+                    width: dw,
+                    height: dh,
+                    data: mm,
+                };
+                registration::register_depth(
+                    &native,
+                    &self.native_depth_k,
+                    &self.calibration.color,
+                    &self.depth_to_color,
+                    0.001,
+                )
             }
             _ => DepthImage::new(w, h),
         };
         let frame = Frame {
             seq: self.seq,
             device_ts_us: color.ts_us,
-            host_rx: depth.as_ref().map_or(color.host_rx, |d| d.host_rx.max(color.host_rx)),
+            host_rx: depth
+                .as_ref()
+                .map_or(color.host_rx, |d| d.host_rx.max(color.host_rx)),
             wall_clock: Some(SystemTime::now()),
-            color: ColorImage { width: w, height: h, data: bgr },
+            color: ColorImage {
+                width: w,
+                height: h,
+                data: bgr,
+            },
             depth: depth_img,
             calibration: Arc::clone(&self.calibration),
         };
@@ -419,7 +524,11 @@ impl FrameSource for V4l2Source {
             while let Ok(ev) = self.color.rx.try_recv() {
                 self.accept(ev, false)?;
             }
-            let depth_events: Vec<NodeEvent> = self.depth.as_ref().map(|d| d.rx.try_iter().collect()).unwrap_or_default();
+            let depth_events: Vec<NodeEvent> = self
+                .depth
+                .as_ref()
+                .map(|d| d.rx.try_iter().collect())
+                .unwrap_or_default();
             for ev in depth_events {
                 self.accept(ev, true)?;
             }
@@ -443,11 +552,18 @@ impl FrameSource for V4l2Source {
             }
             let now = Instant::now();
             if now >= deadline {
-                let msg = format!("no frame for {:.1} s (unplugged or stalled?)", self.stall_timeout.as_secs_f64());
+                let msg = format!(
+                    "no frame for {:.1} s (unplugged or stalled?)",
+                    self.stall_timeout.as_secs_f64()
+                );
                 self.lost = Some(msg.clone());
                 return Err(lost_error(&self.spec, msg, None));
             }
-            match self.color.rx.recv_timeout((deadline - now).min(Duration::from_millis(50))) {
+            match self
+                .color
+                .rx
+                .recv_timeout((deadline - now).min(Duration::from_millis(50)))
+            {
                 Ok(ev) => self.accept(ev, false)?,
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => {
@@ -462,7 +578,10 @@ impl FrameSource for V4l2Source {
     fn skipped(&self) -> u64 {
         self.pairer.skipped
             + self.color.dropped.load(Ordering::Relaxed)
-            + self.depth.as_ref().map_or(0, |d| d.dropped.load(Ordering::Relaxed))
+            + self
+                .depth
+                .as_ref()
+                .map_or(0, |d| d.dropped.load(Ordering::Relaxed))
     }
 }
 
@@ -473,7 +592,9 @@ mod tests {
 
     #[test]
     fn a_missing_node_is_a_clear_open_error() {
-        let err = open_source("v4l2:/dev/video-does-not-exist", &CaptureConfig::default()).err().unwrap();
+        let err = open_source("v4l2:/dev/video-does-not-exist", &CaptureConfig::default())
+            .err()
+            .unwrap();
         let text = err.to_string();
         assert!(text.contains("v4l2:/dev/video-does-not-exist"), "{text}");
         assert!(text.contains("no such device node"), "{text}");
@@ -495,7 +616,11 @@ mod tests {
         let nodes = video_nodes();
         let Some(colour) = nodes.iter().map(|p| describe_node(p)).find(|n| {
             n.error.is_none()
-                && n.formats.iter().any(|f| COLOR_FOURCCS.iter().any(|(c, _)| f.fourcc.as_bytes() == &c[..]))
+                && n.formats.iter().any(|f| {
+                    COLOR_FOURCCS
+                        .iter()
+                        .any(|(c, _)| f.fourcc.as_bytes() == &c[..])
+                })
         }) else {
             eprintln!("SKIPPED real_device_when_present: no V4L2 colour node on this machine ({} /dev/video* nodes)", nodes.len());
             return;
@@ -505,7 +630,10 @@ mod tests {
         let mut last = None;
         for _ in 0..10 {
             let f = src.next_frame().unwrap().unwrap();
-            assert_eq!(f.color.data.len(), (f.color.width * f.color.height * 3) as usize);
+            assert_eq!(
+                f.color.data.len(),
+                (f.color.width * f.color.height * 3) as usize
+            );
             if let Some(prev) = last {
                 assert!(f.device_ts_us > prev);
             }

@@ -28,7 +28,10 @@ mod tests {
     fn the_library_links_and_reports_its_version() {
         // SAFETY: oniGetVersion takes no arguments, touches no state and returns a plain struct.
         let version = unsafe { oniGetVersion() };
-        assert_eq!((version.major, version.minor), (ONI_VERSION_MAJOR as i32, ONI_VERSION_MINOR as i32));
+        assert_eq!(
+            (version.major, version.minor),
+            (ONI_VERSION_MAJOR as i32, ONI_VERSION_MINOR as i32)
+        );
     }
 
     #[test]

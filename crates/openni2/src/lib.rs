@@ -81,7 +81,11 @@ impl fmt::Display for Status {
 pub enum Error {
     /// An OpenNI call failed; `message` is `oniGetExtendedError()` at the time.
     #[error("{call} failed with {status}: {message}")]
-    Call { call: &'static str, status: Status, message: String },
+    Call {
+        call: &'static str,
+        status: Status,
+        message: String,
+    },
     /// The OpenNI thread could not be started or has stopped.
     #[error("the OpenNI2 thread is not running: {0}")]
     Runtime(String),
@@ -147,10 +151,14 @@ impl fmt::Display for SensorType {
 pub struct PixelFormat(pub u32);
 
 impl PixelFormat {
-    pub const DEPTH_1_MM: PixelFormat = PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_DEPTH_1_MM.0);
-    pub const DEPTH_100_UM: PixelFormat = PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_DEPTH_100_UM.0);
-    pub const SHIFT_9_2: PixelFormat = PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_SHIFT_9_2.0);
-    pub const SHIFT_9_3: PixelFormat = PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_SHIFT_9_3.0);
+    pub const DEPTH_1_MM: PixelFormat =
+        PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_DEPTH_1_MM.0);
+    pub const DEPTH_100_UM: PixelFormat =
+        PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_DEPTH_100_UM.0);
+    pub const SHIFT_9_2: PixelFormat =
+        PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_SHIFT_9_2.0);
+    pub const SHIFT_9_3: PixelFormat =
+        PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_SHIFT_9_3.0);
     pub const RGB888: PixelFormat = PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_RGB888.0);
     pub const YUV422: PixelFormat = PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_YUV422.0);
     pub const GRAY8: PixelFormat = PixelFormat(sys::OniPixelFormat::ONI_PIXEL_FORMAT_GRAY8.0);
@@ -177,7 +185,11 @@ impl PixelFormat {
     /// Bytes per pixel of the uncompressed formats (`None` for JPEG and unknown ones).
     pub fn bytes_per_pixel(self) -> Option<usize> {
         match self {
-            Self::DEPTH_1_MM | Self::DEPTH_100_UM | Self::SHIFT_9_2 | Self::SHIFT_9_3 | Self::GRAY16 => Some(2),
+            Self::DEPTH_1_MM
+            | Self::DEPTH_100_UM
+            | Self::SHIFT_9_2
+            | Self::SHIFT_9_3
+            | Self::GRAY16 => Some(2),
             Self::YUV422 | Self::YUYV => Some(2),
             Self::RGB888 => Some(3),
             Self::GRAY8 => Some(1),
@@ -229,7 +241,11 @@ impl VideoMode {
 
 impl fmt::Display for VideoMode {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}x{} @ {} fps {}", self.width, self.height, self.fps, self.pixel_format)
+        write!(
+            f,
+            "{}x{} @ {} fps {}",
+            self.width, self.height, self.fps, self.pixel_format
+        )
     }
 }
 
@@ -290,15 +306,20 @@ impl Drop for DeviceInner {
 impl Device {
     /// Opens a device by URI: a camera's URI from [`devices`], `Dummy`, or an `.oni` path.
     pub fn open(uri: &str) -> Result<Device> {
-        let c_uri = CString::new(uri).map_err(|_| Error::InvalidArgument(format!("URI {uri:?} contains a NUL byte")))?;
+        let c_uri = CString::new(uri)
+            .map_err(|_| Error::InvalidArgument(format!("URI {uri:?} contains a NUL byte")))?;
         let (id, info, is_file) = runtime::get()?.call(move |s| s.open_device(c_uri))??;
         tracing::info!(uri = %info.uri, name = %info.name, vendor = %info.vendor, "OpenNI2 device open");
-        Ok(Device { inner: Arc::new(DeviceInner { id, info, is_file }) })
+        Ok(Device {
+            inner: Arc::new(DeviceInner { id, info, is_file }),
+        })
     }
 
     /// Opens an `.oni` recording through OpenNI2's file driver.
     pub fn open_file(path: &Path) -> Result<Device> {
-        let uri = path.to_str().ok_or_else(|| Error::InvalidArgument(format!("path {} is not UTF-8", path.display())))?;
+        let uri = path.to_str().ok_or_else(|| {
+            Error::InvalidArgument(format!("path {} is not UTF-8", path.display()))
+        })?;
         Device::open(uri)
     }
 
@@ -353,7 +374,11 @@ impl Device {
     pub fn create_stream(&self, sensor: SensorType) -> Result<Stream> {
         let id = self.inner.id;
         let stream_id = runtime::get()?.call(move |s| s.create_stream(id, sensor))??;
-        Ok(Stream { id: stream_id, sensor, device: Arc::clone(&self.inner) })
+        Ok(Stream {
+            id: stream_id,
+            sensor,
+            device: Arc::clone(&self.inner),
+        })
     }
 }
 
@@ -464,7 +489,10 @@ pub struct OwnedFrame {
 pub enum ReaderEvent {
     Frame(OwnedFrame),
     /// OpenNI2 reported the device disconnected (or in an error state).
-    DeviceLost { uri: String, reason: String },
+    DeviceLost {
+        uri: String,
+        reason: String,
+    },
     /// Reading failed; the reader has stopped.
     Failed(Error),
 }
@@ -484,7 +512,12 @@ impl FrameReader {
         let ids: Vec<u64> = streams.iter().map(|s| s.id).collect();
         let (tx, rx) = crossbeam_channel::bounded(capacity.max(1));
         let dropped = Arc::new(AtomicU64::new(0));
-        let sink = runtime::Sink { tx, drain: rx.clone(), overflow, dropped: Arc::clone(&dropped) };
+        let sink = runtime::Sink {
+            tx,
+            drain: rx.clone(),
+            overflow,
+            dropped: Arc::clone(&dropped),
+        };
         let id = runtime::get()?.call(move |s| s.start_reader(ids, sink))??;
         Ok(FrameReader { id, rx, dropped })
     }
@@ -494,7 +527,9 @@ impl FrameReader {
         match self.rx.recv_timeout(timeout) {
             Ok(ev) => Ok(Some(ev)),
             Err(RecvTimeoutError::Timeout) => Ok(None),
-            Err(RecvTimeoutError::Disconnected) => Err(Error::Runtime("the frame reader was stopped".into())),
+            Err(RecvTimeoutError::Disconnected) => {
+                Err(Error::Runtime("the frame reader was stopped".into()))
+            }
         }
     }
 
@@ -503,7 +538,9 @@ impl FrameReader {
         match self.rx.try_recv() {
             Ok(ev) => Ok(Some(ev)),
             Err(TryRecvError::Empty) => Ok(None),
-            Err(TryRecvError::Disconnected) => Err(Error::Runtime("the frame reader was stopped".into())),
+            Err(TryRecvError::Disconnected) => {
+                Err(Error::Runtime("the frame reader was stopped".into()))
+            }
         }
     }
 
@@ -534,10 +571,16 @@ pub struct Recorder {
 impl Recorder {
     /// Creates the file (truncating it) and the recorder.
     pub fn create(path: &Path) -> Result<Recorder> {
-        let s = path.to_str().ok_or_else(|| Error::InvalidArgument(format!("path {} is not UTF-8", path.display())))?;
-        let c = CString::new(s).map_err(|_| Error::InvalidArgument(format!("path {s:?} contains a NUL byte")))?;
+        let s = path.to_str().ok_or_else(|| {
+            Error::InvalidArgument(format!("path {} is not UTF-8", path.display()))
+        })?;
+        let c = CString::new(s)
+            .map_err(|_| Error::InvalidArgument(format!("path {s:?} contains a NUL byte")))?;
         let id = runtime::get()?.call(move |st| st.create_recorder(c))??;
-        Ok(Recorder { id, finished: false })
+        Ok(Recorder {
+            id,
+            finished: false,
+        })
     }
 
     /// Attaches a stream; lossy compression lets OpenNI2 store colour as JPEG.

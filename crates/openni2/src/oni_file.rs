@@ -55,7 +55,11 @@ pub enum OniFileError {
     #[error("{path} is not an OpenNI recording: {reason}")]
     NotOni { path: PathBuf, reason: String },
     #[error("{path}: corrupt record at byte {offset}: {reason}")]
-    Corrupt { path: PathBuf, offset: u64, reason: String },
+    Corrupt {
+        path: PathBuf,
+        offset: u64,
+        reason: String,
+    },
 }
 
 /// One record's header, and where it starts.
@@ -82,7 +86,10 @@ impl RecordHeader {
 }
 
 fn io_err(path: &Path) -> impl FnOnce(io::Error) -> OniFileError + '_ {
-    move |source| OniFileError::Io { path: path.to_path_buf(), source }
+    move |source| OniFileError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
 }
 
 fn u32_at(b: &[u8], at: usize) -> u32 {
@@ -118,10 +125,14 @@ pub fn list_records(path: &Path, allow_truncated: bool) -> Result<Vec<RecordHead
     let file_len = file.get_ref().metadata().map_err(io_err(path))?.len();
     let mut header = [0u8; FILE_HEADER_LEN as usize];
     file.read_exact(&mut header).map_err(|e| match e.kind() {
-        io::ErrorKind::UnexpectedEof => {
-            OniFileError::NotOni { path: path.to_path_buf(), reason: format!("only {file_len} bytes") }
-        }
-        _ => OniFileError::Io { path: path.to_path_buf(), source: e },
+        io::ErrorKind::UnexpectedEof => OniFileError::NotOni {
+            path: path.to_path_buf(),
+            reason: format!("only {file_len} bytes"),
+        },
+        _ => OniFileError::Io {
+            path: path.to_path_buf(),
+            source: e,
+        },
     })?;
     if &header[0..2] != b"NI" {
         return Err(OniFileError::NotOni {
@@ -161,7 +172,9 @@ pub fn list_records(path: &Path, allow_truncated: bool) -> Result<Vec<RecordHead
             return Err(OniFileError::Corrupt {
                 path: path.to_path_buf(),
                 offset,
-                reason: format!("bad record header (magic {magic:#010x}, fields size {fields_size})"),
+                reason: format!(
+                    "bad record header (magic {magic:#010x}, fields size {fields_size})"
+                ),
             });
         }
         let mut rec = RecordHeader {
@@ -180,7 +193,10 @@ pub fn list_records(path: &Path, allow_truncated: bool) -> Result<Vec<RecordHead
             return Err(OniFileError::Corrupt {
                 path: path.to_path_buf(),
                 offset,
-                reason: format!("record of {} bytes runs past the end of the file", rec.len()),
+                reason: format!(
+                    "record of {} bytes runs past the end of the file",
+                    rec.len()
+                ),
             });
         }
         if is_property(rec.kind) {
@@ -250,7 +266,10 @@ impl CroppingFix {
 /// 5 = IR), before the `STATE_READY` record of every node that lacks them, fixing all stored
 /// file positions. Rewrites the file through a temporary file next to it; a file that needs
 /// nothing is left untouched.
-pub fn add_missing_cropping(path: &Path, fov: impl Fn(u32) -> (f64, f64)) -> Result<CroppingFix, OniFileError> {
+pub fn add_missing_cropping(
+    path: &Path,
+    fov: impl Fn(u32) -> (f64, f64),
+) -> Result<CroppingFix, OniFileError> {
     let records = list_records(path, false)?;
     let mut node_types: BTreeMap<u32, u32> = BTreeMap::new();
     let mut has_cropping = HashSet::new();
@@ -264,12 +283,18 @@ pub fn add_missing_cropping(path: &Path, fov: impl Fn(u32) -> (f64, f64)) -> Res
         match rec.kind {
             record_type::NODE_ADDED | record_type::NODE_ADDED_1_0_0_5 => {
                 let fields = read_range(&mut reader, path, rec.offset, rec.fields_size as usize)?;
-                let (_, after_name) = string_field(&fields, RECORD_HEADER_LEN).ok_or_else(|| OniFileError::Corrupt {
-                    path: path.to_path_buf(),
-                    offset: rec.offset,
-                    reason: "NODE_ADDED without a node name".into(),
-                })?;
-                let node_type = fields.get(after_name..after_name + 4).map(|b| u32_at(b, 0)).unwrap_or(0);
+                let (_, after_name) =
+                    string_field(&fields, RECORD_HEADER_LEN).ok_or_else(|| {
+                        OniFileError::Corrupt {
+                            path: path.to_path_buf(),
+                            offset: rec.offset,
+                            reason: "NODE_ADDED without a node name".into(),
+                        }
+                    })?;
+                let node_type = fields
+                    .get(after_name..after_name + 4)
+                    .map(|b| u32_at(b, 0))
+                    .unwrap_or(0);
                 node_types.insert(rec.node_id, node_type);
             }
             k if is_property(k) => match rec.property.as_deref() {
@@ -284,7 +309,11 @@ pub fn add_missing_cropping(path: &Path, fov: impl Fn(u32) -> (f64, f64)) -> Res
             record_type::NODE_STATE_READY if ready_seen.insert(rec.node_id) => {
                 let mut bytes = Vec::new();
                 if !has_cropping.contains(&rec.node_id) {
-                    bytes.extend(general_property(rec.node_id, "xnCropping", &disabled_cropping()));
+                    bytes.extend(general_property(
+                        rec.node_id,
+                        "xnCropping",
+                        &disabled_cropping(),
+                    ));
                     fix.cropping_added.push(rec.node_id);
                 }
                 if !has_fov.contains(&rec.node_id) {
@@ -318,7 +347,11 @@ pub fn add_missing_cropping(path: &Path, fov: impl Fn(u32) -> (f64, f64)) -> Res
         if pos == 0 {
             return 0;
         }
-        let shift = points.iter().take_while(|(at, _)| *at <= pos).last().map_or(0, |&(_, acc)| acc);
+        let shift = points
+            .iter()
+            .take_while(|(at, _)| *at <= pos)
+            .last()
+            .map_or(0, |&(_, acc)| acc);
         pos + shift
     };
 
@@ -367,7 +400,88 @@ pub fn add_missing_cropping(path: &Path, fov: impl Fn(u32) -> (f64, f64)) -> Res
     Ok(fix)
 }
 
-fn read_range(reader: &mut BufReader<File>, path: &Path, offset: u64, len: usize) -> Result<Vec<u8>, OniFileError> {
+/// What [`repair_truncated`] kept.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct TruncationRepair {
+    /// Frames kept per node id.
+    pub frames: BTreeMap<u32, u32>,
+    /// Bytes of the original file that were dropped (a partial record at the cut and any
+    /// records after the last frame).
+    pub dropped_bytes: u64,
+}
+
+/// Writes to `dst` a playable copy of a recording cut short at any byte (the recorder was
+/// killed): every complete record up to the last complete frame, each node's `NODE_ADDED`
+/// rewritten with the frames that remain (count, last timestamp, no seek table), and an `END`
+/// record. OpenNI2's player refuses the cut file itself.
+pub fn repair_truncated(src: &Path, dst: &Path) -> Result<TruncationRepair, OniFileError> {
+    let records = list_records(src, true)?;
+    let last_data = records
+        .iter()
+        .rposition(|r| r.kind == record_type::NEW_DATA)
+        .ok_or_else(|| OniFileError::Corrupt {
+            path: src.to_path_buf(),
+            offset: FILE_HEADER_LEN,
+            reason: "no complete frame before the cut".into(),
+        })?;
+    let kept = &records[..=last_data];
+    let mut reader = BufReader::new(File::open(src).map_err(io_err(src))?);
+    let mut frames: BTreeMap<u32, u32> = BTreeMap::new();
+    let mut last_ts: BTreeMap<u32, u64> = BTreeMap::new();
+    for rec in kept.iter().filter(|r| r.kind == record_type::NEW_DATA) {
+        let fields = read_range(&mut reader, src, rec.offset, RECORD_HEADER_LEN + 8)?;
+        *frames.entry(rec.node_id).or_default() += 1;
+        last_ts.insert(rec.node_id, u64_at(&fields, RECORD_HEADER_LEN));
+    }
+    let out_file = File::create(dst).map_err(io_err(dst))?;
+    let mut out = BufWriter::new(out_file);
+    let header = read_range(&mut reader, src, 0, FILE_HEADER_LEN as usize)?;
+    out.write_all(&header).map_err(io_err(dst))?;
+    for rec in kept {
+        let mut bytes = read_range(&mut reader, src, rec.offset, rec.len() as usize)?;
+        if rec.kind == record_type::NODE_ADDED {
+            // fields: header, name, node type u32, codec u32, frames u32, min ts u64, max ts u64,
+            // seek-table position u64.
+            let (_, after_name) =
+                string_field(&bytes, RECORD_HEADER_LEN).ok_or_else(|| OniFileError::Corrupt {
+                    path: src.to_path_buf(),
+                    offset: rec.offset,
+                    reason: "NODE_ADDED without a node name".into(),
+                })?;
+            let n = frames.get(&rec.node_id).copied().unwrap_or(0);
+            let at = after_name + 8;
+            if bytes.len() >= at + 28 {
+                bytes[at..at + 4].copy_from_slice(&n.to_le_bytes());
+                let max_ts = last_ts.get(&rec.node_id).copied().unwrap_or(0);
+                bytes[at + 12..at + 20].copy_from_slice(&max_ts.to_le_bytes());
+                bytes[at + 20..at + 28].copy_from_slice(&0u64.to_le_bytes());
+            }
+        }
+        out.write_all(&bytes).map_err(io_err(dst))?;
+    }
+    let mut end = Vec::with_capacity(RECORD_HEADER_LEN);
+    end.extend_from_slice(&RECORD_MAGIC.to_le_bytes());
+    end.extend_from_slice(&record_type::END.to_le_bytes());
+    end.extend_from_slice(&0u32.to_le_bytes());
+    end.extend_from_slice(&(RECORD_HEADER_LEN as u32).to_le_bytes());
+    end.extend_from_slice(&0u32.to_le_bytes());
+    end.extend_from_slice(&0u64.to_le_bytes());
+    out.write_all(&end).map_err(io_err(dst))?;
+    out.flush().map_err(io_err(dst))?;
+    let src_len = std::fs::metadata(src).map_err(io_err(src))?.len();
+    let kept_end = kept.last().map_or(FILE_HEADER_LEN, |r| r.offset + r.len());
+    Ok(TruncationRepair {
+        frames,
+        dropped_bytes: src_len - kept_end,
+    })
+}
+
+fn read_range(
+    reader: &mut BufReader<File>,
+    path: &Path,
+    offset: u64,
+    len: usize,
+) -> Result<Vec<u8>, OniFileError> {
     let mut buf = vec![0u8; len];
     reader.seek(SeekFrom::Start(offset)).map_err(io_err(path))?;
     reader.read_exact(&mut buf).map_err(io_err(path))?;
@@ -411,7 +525,13 @@ mod tests {
             f.extend_from_slice(&seek.to_le_bytes());
             f
         };
-        file.extend(record(record_type::NODE_ADDED, 1, &node_added_fields(0), &[], 0));
+        file.extend(record(
+            record_type::NODE_ADDED,
+            1,
+            &node_added_fields(0),
+            &[],
+            0,
+        ));
         let prop = general_property(1, "xnMapOutputMode", &[0; 12]);
         file.extend(prop);
         file.extend(record(record_type::NODE_STATE_READY, 1, &[], &[], 0));
@@ -419,7 +539,13 @@ mod tests {
         file.extend(record(record_type::NEW_DATA, 1, &[0; 12], &[7; 10], 0));
         let d2 = file.len() as u64;
         file.extend(record(record_type::NEW_DATA, 1, &[0; 12], &[8; 10], d1));
-        file.extend(record(record_type::NODE_REMOVED, 1, &[], &[], node_added_at));
+        file.extend(record(
+            record_type::NODE_REMOVED,
+            1,
+            &[],
+            &[],
+            node_added_at,
+        ));
         let seek_at = file.len() as u64;
         let mut table = vec![0u8; SEEK_ENTRY_LEN];
         for (i, pos) in [d1, d2].iter().enumerate() {
@@ -432,7 +558,11 @@ mod tests {
         let rewritten = record(
             record_type::NODE_ADDED,
             1,
-            &node_added_fields(if seek_table_pos_placeholder { 0 } else { seek_at }),
+            &node_added_fields(if seek_table_pos_placeholder {
+                0
+            } else {
+                seek_at
+            }),
             &[],
             0,
         );
@@ -458,33 +588,53 @@ mod tests {
         let recs = list_records(&path, false).unwrap();
         let names: Vec<_> = recs.iter().filter_map(|r| r.property.clone()).collect();
         assert_eq!(names, ["xnMapOutputMode", "xnCropping", "xnFOV"]);
-        let ready = recs.iter().position(|r| r.kind == record_type::NODE_STATE_READY).unwrap();
+        let ready = recs
+            .iter()
+            .position(|r| r.kind == record_type::NODE_STATE_READY)
+            .unwrap();
         assert_eq!(recs[ready - 1].property.as_deref(), Some("xnFOV"));
 
         let new = std::fs::read(&path).unwrap();
         assert_eq!(new.len() as u64, bytes.len() as u64 + inserted);
         // NEW_DATA #2's undo position points at NEW_DATA #1's new place.
-        let datas: Vec<_> = recs.iter().filter(|r| r.kind == record_type::NEW_DATA).collect();
+        let datas: Vec<_> = recs
+            .iter()
+            .filter(|r| r.kind == record_type::NEW_DATA)
+            .collect();
         assert_eq!(datas[0].offset, data_at[0] + inserted);
         assert_eq!(datas[1].undo_position, datas[0].offset);
         // NODE_REMOVED still points at NODE_ADDED (before the insertion, unmoved).
-        let removed = recs.iter().find(|r| r.kind == record_type::NODE_REMOVED).unwrap();
+        let removed = recs
+            .iter()
+            .find(|r| r.kind == record_type::NODE_REMOVED)
+            .unwrap();
         assert_eq!(removed.undo_position, FILE_HEADER_LEN);
         // NODE_ADDED's seek-table position and the table's entries moved.
         let added = &recs[0];
         let at = (added.offset + added.fields_size as u64 - 8) as usize;
         assert_eq!(u64_at(&new, at), seek_at + inserted);
-        let table = recs.iter().find(|r| r.kind == record_type::SEEK_TABLE).unwrap();
+        let table = recs
+            .iter()
+            .find(|r| r.kind == record_type::SEEK_TABLE)
+            .unwrap();
         let entries = (table.offset + table.fields_size as u64) as usize;
         assert_eq!(u64_at(&new, entries + 12), 0, "entry 0 is the empty one");
-        assert_eq!(u64_at(&new, entries + SEEK_ENTRY_LEN + 12), data_at[0] + inserted);
-        assert_eq!(u64_at(&new, entries + 2 * SEEK_ENTRY_LEN + 12), data_at[1] + inserted);
+        assert_eq!(
+            u64_at(&new, entries + SEEK_ENTRY_LEN + 12),
+            data_at[0] + inserted
+        );
+        assert_eq!(
+            u64_at(&new, entries + 2 * SEEK_ENTRY_LEN + 12),
+            data_at[1] + inserted
+        );
         // The payload bytes themselves are untouched.
         let d = (datas[1].offset + datas[1].fields_size as u64) as usize;
         assert_eq!(&new[d..d + 10], &[8; 10]);
 
         // A second pass finds nothing to do.
-        assert!(!add_missing_cropping(&path, |_| (1.0, 0.75)).unwrap().changed());
+        assert!(!add_missing_cropping(&path, |_| (1.0, 0.75))
+            .unwrap()
+            .changed());
     }
 
     #[test]

@@ -17,7 +17,10 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{bounded, Receiver, RecvTimeoutError, Sender, TryRecvError, TrySendError};
 use openni2_sys as sys;
 
-use crate::{DeviceInfo, Error, OwnedFrame, Overflow, PixelFormat, ReaderEvent, Result, SensorType, Status, VideoMode};
+use crate::{
+    DeviceInfo, Error, Overflow, OwnedFrame, PixelFormat, ReaderEvent, Result, SensorType, Status,
+    VideoMode,
+};
 
 /// Pause between stopping streams and destroying them (or closing their device). The Dummy
 /// driver never joins its frame thread and the file player walks its stream list without a
@@ -65,15 +68,22 @@ fn start() -> std::result::Result<Runtime, String> {
             }
         })
         .map_err(|e| format!("cannot spawn the OpenNI2 thread: {e}"))?;
-    ready_rx.recv().map_err(|_| "the OpenNI2 thread died during start-up".to_string())??;
+    ready_rx
+        .recv()
+        .map_err(|_| "the OpenNI2 thread died during start-up".to_string())??;
     Ok(Runtime { tx })
 }
 
 impl Runtime {
     /// Runs `f` on the OpenNI thread and returns its result.
-    pub(crate) fn call<R: Send + 'static>(&self, f: impl FnOnce(&mut State) -> R + Send + 'static) -> Result<R> {
+    pub(crate) fn call<R: Send + 'static>(
+        &self,
+        f: impl FnOnce(&mut State) -> R + Send + 'static,
+    ) -> Result<R> {
         if thread::current().name() == Some(THREAD_NAME) {
-            return Err(Error::Runtime("re-entrant call from the OpenNI2 thread".into()));
+            return Err(Error::Runtime(
+                "re-entrant call from the OpenNI2 thread".into(),
+            ));
         }
         let (reply_tx, reply_rx) = bounded(1);
         self.tx
@@ -81,7 +91,9 @@ impl Runtime {
                 let _ = reply_tx.send(f(state));
             }))
             .map_err(|_| Error::Runtime("the OpenNI2 thread has stopped".into()))?;
-        reply_rx.recv().map_err(|_| Error::Runtime("the OpenNI2 call panicked; see the log".into()))
+        reply_rx
+            .recv()
+            .map_err(|_| Error::Runtime("the OpenNI2 call panicked; see the log".into()))
     }
 }
 
@@ -170,12 +182,20 @@ fn check(call: &'static str, status: sys::OniStatus) -> Result<()> {
         if message.is_empty() {
             message = "(OpenNI2 gave no further detail)".into();
         }
-        Err(Error::Call { call, status: Status(status.0), message })
+        Err(Error::Call {
+            call,
+            status: Status(status.0),
+            message,
+        })
     }
 }
 
 fn c_chars_to_string(chars: &[std::ffi::c_char]) -> String {
-    let bytes: Vec<u8> = chars.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
+    let bytes: Vec<u8> = chars
+        .iter()
+        .take_while(|&&c| c != 0)
+        .map(|&c| c as u8)
+        .collect();
     String::from_utf8_lossy(&bytes).into_owned()
 }
 
@@ -221,7 +241,9 @@ unsafe extern "C" fn on_device_state_changed(
 impl State {
     fn initialize() -> Result<State> {
         // SAFETY: first OpenNI call of the process, on the thread that makes all later ones.
-        check("oniInitialize", unsafe { sys::oniInitialize(sys::ONI_API_VERSION) })?;
+        check("oniInitialize", unsafe {
+            sys::oniInitialize(sys::ONI_API_VERSION)
+        })?;
         let callbacks = Box::leak(Box::new(sys::OniDeviceCallbacks {
             deviceConnected: None,
             deviceDisconnected: Some(on_device_disconnected),
@@ -230,7 +252,8 @@ impl State {
         let mut handle: sys::OniCallbackHandle = ptr::null_mut();
         // SAFETY: the callbacks struct is leaked (lives for the process); the callbacks only
         // copy strings into a mutex-guarded queue and never unwind.
-        let status = unsafe { sys::oniRegisterDeviceCallbacks(callbacks, ptr::null_mut(), &mut handle) };
+        let status =
+            unsafe { sys::oniRegisterDeviceCallbacks(callbacks, ptr::null_mut(), &mut handle) };
         if let Err(err) = check("oniRegisterDeviceCallbacks", status) {
             tracing::warn!(%err, "unplug notifications unavailable; relying on frame timeouts");
         }
@@ -282,11 +305,15 @@ impl State {
     }
 
     fn device(&self, id: u64) -> Result<&DeviceEntry> {
-        self.devices.get(&id).ok_or_else(|| Error::InvalidArgument(format!("no open device with id {id}")))
+        self.devices
+            .get(&id)
+            .ok_or_else(|| Error::InvalidArgument(format!("no open device with id {id}")))
     }
 
     fn stream(&self, id: u64) -> Result<&StreamEntry> {
-        self.streams.get(&id).ok_or_else(|| Error::InvalidArgument(format!("no stream with id {id}")))
+        self.streams
+            .get(&id)
+            .ok_or_else(|| Error::InvalidArgument(format!("no stream with id {id}")))
     }
 
     // ---- devices ----
@@ -295,7 +322,9 @@ impl State {
         let mut list: *mut sys::OniDeviceInfo = ptr::null_mut();
         let mut count: c_int = 0;
         // SAFETY: out-pointers to locals; the list is released below.
-        check("oniGetDeviceList", unsafe { sys::oniGetDeviceList(&mut list, &mut count) })?;
+        check("oniGetDeviceList", unsafe {
+            sys::oniGetDeviceList(&mut list, &mut count)
+        })?;
         let mut out = Vec::new();
         if !list.is_null() {
             // SAFETY: OpenNI returned `count` contiguous entries at `list`.
@@ -310,7 +339,9 @@ impl State {
     pub(crate) fn open_device(&mut self, uri: CString) -> Result<(u64, DeviceInfo, bool)> {
         let mut handle: sys::OniDeviceHandle = ptr::null_mut();
         // SAFETY: `uri` is NUL-terminated and outlives the call; `handle` is an out-pointer.
-        check("oniDeviceOpen", unsafe { sys::oniDeviceOpen(uri.as_ptr(), &mut handle) })?;
+        check("oniDeviceOpen", unsafe {
+            sys::oniDeviceOpen(uri.as_ptr(), &mut handle)
+        })?;
         let handle = NonNull::new(handle).ok_or_else(|| Error::Call {
             call: "oniDeviceOpen",
             status: Status(sys::OniStatus::ONI_STATUS_ERROR.0),
@@ -318,7 +349,9 @@ impl State {
         })?;
         let mut raw = sys::OniDeviceInfo::default();
         // SAFETY: `handle` is an open device; `raw` is a valid out-struct.
-        let info = match check("oniDeviceGetInfo", unsafe { sys::oniDeviceGetInfo(handle.as_ptr(), &mut raw) }) {
+        let info = match check("oniDeviceGetInfo", unsafe {
+            sys::oniDeviceGetInfo(handle.as_ptr(), &mut raw)
+        }) {
             Ok(()) => device_info_from_sys(&raw),
             Err(err) => {
                 // SAFETY: no stream was created on the device yet.
@@ -328,16 +361,30 @@ impl State {
         };
         // SAFETY: `handle` is an open device; a property-support query has no side effects.
         let is_file = unsafe {
-            sys::oniDeviceIsPropertySupported(handle.as_ptr(), sys::ONI_DEVICE_PROPERTY_PLAYBACK_SPEED.0 as c_int)
+            sys::oniDeviceIsPropertySupported(
+                handle.as_ptr(),
+                sys::ONI_DEVICE_PROPERTY_PLAYBACK_SPEED.0 as c_int,
+            )
         } != 0;
         let id = self.new_id();
-        self.devices.insert(id, DeviceEntry { handle, uri: info.uri.clone() });
+        self.devices.insert(
+            id,
+            DeviceEntry {
+                handle,
+                uri: info.uri.clone(),
+            },
+        );
         Ok((id, info, is_file))
     }
 
     pub(crate) fn close_device(&mut self, id: u64) {
         // Streams keep their device alive (Arc), so none is left; be defensive anyway.
-        let orphans: Vec<u64> = self.streams.iter().filter(|(_, s)| s.device == id).map(|(&k, _)| k).collect();
+        let orphans: Vec<u64> = self
+            .streams
+            .iter()
+            .filter(|(_, s)| s.device == id)
+            .map(|(&k, _)| k)
+            .collect();
         for sid in orphans {
             self.destroy_stream(sid);
         }
@@ -352,7 +399,11 @@ impl State {
         }
     }
 
-    pub(crate) fn sensor_modes(&mut self, id: u64, sensor: SensorType) -> Result<Option<Vec<VideoMode>>> {
+    pub(crate) fn sensor_modes(
+        &mut self,
+        id: u64,
+        sensor: SensorType,
+    ) -> Result<Option<Vec<VideoMode>>> {
         let dev = self.device(id)?;
         // SAFETY: open device; the returned info (or null) is owned by OpenNI and copied here.
         let info = unsafe { sys::oniDeviceGetSensorInfo(dev.handle.as_ptr(), sensor.to_sys()) };
@@ -365,7 +416,12 @@ impl State {
             return Ok(Some(Vec::new()));
         }
         // SAFETY: OpenNI reports `numSupportedVideoModes` contiguous modes at the pointer.
-        let modes = unsafe { std::slice::from_raw_parts(info.pSupportedVideoModes, info.numSupportedVideoModes as usize) };
+        let modes = unsafe {
+            std::slice::from_raw_parts(
+                info.pSupportedVideoModes,
+                info.numSupportedVideoModes as usize,
+            )
+        };
         Ok(Some(modes.iter().map(VideoMode::from_sys).collect()))
     }
 
@@ -402,7 +458,9 @@ impl State {
     pub(crate) fn enable_sync(&mut self, id: u64) -> Result<()> {
         let dev = self.device(id)?;
         // SAFETY: open device.
-        check("oniDeviceEnableDepthColorSync", unsafe { sys::oniDeviceEnableDepthColorSync(dev.handle.as_ptr()) })
+        check("oniDeviceEnableDepthColorSync", unsafe {
+            sys::oniDeviceEnableDepthColorSync(dev.handle.as_ptr())
+        })
     }
 
     pub(crate) fn set_playback_speed(&mut self, id: u64, speed: f32) -> Result<()> {
@@ -440,7 +498,9 @@ impl State {
         let dev = self.device(device)?;
         let mut handle: sys::OniStreamHandle = ptr::null_mut();
         // SAFETY: open device; `handle` is an out-pointer.
-        let status = unsafe { sys::oniDeviceCreateStream(dev.handle.as_ptr(), sensor.to_sys(), &mut handle) };
+        let status = unsafe {
+            sys::oniDeviceCreateStream(dev.handle.as_ptr(), sensor.to_sys(), &mut handle)
+        };
         check("oniDeviceCreateStream", status)?;
         let handle = NonNull::new(handle).ok_or_else(|| Error::Call {
             call: "oniDeviceCreateStream",
@@ -448,21 +508,35 @@ impl State {
             message: "returned OK but no stream".into(),
         })?;
         let id = self.new_id();
-        self.streams.insert(id, StreamEntry { handle, device, sensor, started: false });
+        self.streams.insert(
+            id,
+            StreamEntry {
+                handle,
+                device,
+                sensor,
+                started: false,
+            },
+        );
         Ok(id)
     }
 
     pub(crate) fn destroy_stream(&mut self, id: u64) {
         // A recorder must not outlive a stream attached to it.
-        let recorders: Vec<u64> =
-            self.recorders.iter().filter(|(_, r)| r.streams.contains(&id)).map(|(&k, _)| k).collect();
+        let recorders: Vec<u64> = self
+            .recorders
+            .iter()
+            .filter(|(_, r)| r.streams.contains(&id))
+            .map(|(&k, _)| k)
+            .collect();
         for rid in recorders {
             let _ = self.destroy_recorder(rid);
         }
         for reader in self.readers.values_mut() {
             reader.streams.retain(|&s| s != id);
         }
-        let Some(stream) = self.streams.remove(&id) else { return };
+        let Some(stream) = self.streams.remove(&id) else {
+            return;
+        };
         if stream.started {
             // SAFETY: a started stream; stopping is always allowed.
             unsafe { sys::oniStreamStop(stream.handle.as_ptr()) };
@@ -482,7 +556,12 @@ impl State {
         let mut size = std::mem::size_of::<T>() as c_int;
         // SAFETY: `value` is a T-sized buffer and its size is passed; T is the property's C type.
         let status = unsafe {
-            sys::oniStreamGetProperty(stream.handle.as_ptr(), property as c_int, (&mut value as *mut T).cast(), &mut size)
+            sys::oniStreamGetProperty(
+                stream.handle.as_ptr(),
+                property as c_int,
+                (&mut value as *mut T).cast(),
+                &mut size,
+            )
         };
         if status != sys::OniStatus::ONI_STATUS_OK {
             return Ok(None);
@@ -490,7 +569,13 @@ impl State {
         Ok(Some(value))
     }
 
-    fn set_stream_property<T>(&self, id: u64, call: &'static str, property: u32, value: &T) -> Result<()> {
+    fn set_stream_property<T>(
+        &self,
+        id: u64,
+        call: &'static str,
+        property: u32,
+        value: &T,
+    ) -> Result<()> {
         let stream = self.stream(id)?;
         // SAFETY: `value` points to a T and its size is passed; T is the property's C type.
         let status = unsafe {
@@ -512,7 +597,12 @@ impl State {
 
     pub(crate) fn set_video_mode(&mut self, id: u64, mode: VideoMode) -> Result<()> {
         let raw = mode.to_sys();
-        self.set_stream_property(id, "oniStreamSetProperty(VIDEO_MODE)", sys::ONI_STREAM_PROPERTY_VIDEO_MODE.0, &raw)
+        self.set_stream_property(
+            id,
+            "oniStreamSetProperty(VIDEO_MODE)",
+            sys::ONI_STREAM_PROPERTY_VIDEO_MODE.0,
+            &raw,
+        )
     }
 
     pub(crate) fn field_of_view(&mut self, id: u64) -> Result<Option<(f32, f32)>> {
@@ -528,7 +618,8 @@ impl State {
         let stream = self.stream(id)?;
         let prop = sys::ONI_STREAM_PROPERTY_MIRRORING.0;
         // SAFETY: open stream; a capability query.
-        if unsafe { sys::oniStreamIsPropertySupported(stream.handle.as_ptr(), prop as c_int) } == 0 {
+        if unsafe { sys::oniStreamIsPropertySupported(stream.handle.as_ptr(), prop as c_int) } == 0
+        {
             return Ok(false);
         }
         let value: sys::OniBool = on.into();
@@ -537,7 +628,9 @@ impl State {
     }
 
     pub(crate) fn supports_cropping(&mut self, id: u64) -> Result<bool> {
-        Ok(self.get_stream_property::<sys::OniCropping>(id, sys::ONI_STREAM_PROPERTY_CROPPING.0)?.is_some())
+        Ok(self
+            .get_stream_property::<sys::OniCropping>(id, sys::ONI_STREAM_PROPERTY_CROPPING.0)?
+            .is_some())
     }
 
     pub(crate) fn number_of_frames(&mut self, id: u64) -> Result<Option<u32>> {
@@ -553,7 +646,9 @@ impl State {
             return Ok(());
         }
         // SAFETY: open, stopped stream.
-        check("oniStreamStart", unsafe { sys::oniStreamStart(stream.handle.as_ptr()) })?;
+        check("oniStreamStart", unsafe {
+            sys::oniStreamStart(stream.handle.as_ptr())
+        })?;
         if let Some(s) = self.streams.get_mut(&id) {
             s.started = true;
         }
@@ -579,7 +674,14 @@ impl State {
             self.stream(sid)?;
         }
         let id = self.new_id();
-        self.readers.insert(id, ReaderEntry { streams, sink, active: true });
+        self.readers.insert(
+            id,
+            ReaderEntry {
+                streams,
+                sink,
+                active: true,
+            },
+        );
         Ok(id)
     }
 
@@ -602,7 +704,13 @@ impl State {
                         .is_some_and(|d| d.uri == uri)
                 });
                 if affected {
-                    reader.sink.deliver(ReaderEvent::DeviceLost { uri: uri.clone(), reason: reason.clone() }, true);
+                    reader.sink.deliver(
+                        ReaderEvent::DeviceLost {
+                            uri: uri.clone(),
+                            reason: reason.clone(),
+                        },
+                        true,
+                    );
                     reader.active = false;
                 }
             }
@@ -614,7 +722,9 @@ impl State {
         let mut handles: Vec<sys::OniStreamHandle> = Vec::new();
         let mut owners: Vec<(u64, usize)> = Vec::new();
         for (&rid, reader) in &self.readers {
-            if !reader.active || (reader.sink.overflow == Overflow::Backpressure && reader.sink.tx.is_full()) {
+            if !reader.active
+                || (reader.sink.overflow == Overflow::Backpressure && reader.sink.tx.is_full())
+            {
                 continue;
             }
             for (index, sid) in reader.streams.iter().enumerate() {
@@ -630,8 +740,14 @@ impl State {
         }
         let mut ready: c_int = -1;
         // SAFETY: `handles` are started streams owned by this thread; `ready` is an out-int.
-        let status =
-            unsafe { sys::oniWaitForAnyStream(handles.as_mut_ptr(), handles.len() as c_int, &mut ready, WAIT_SLICE_MS) };
+        let status = unsafe {
+            sys::oniWaitForAnyStream(
+                handles.as_mut_ptr(),
+                handles.len() as c_int,
+                &mut ready,
+                WAIT_SLICE_MS,
+            )
+        };
         if status == sys::OniStatus::ONI_STATUS_TIME_OUT {
             return;
         }
@@ -639,7 +755,9 @@ impl State {
             self.fail_readers(owners.iter().map(|o| o.0).collect(), err);
             return;
         }
-        let Some(&(rid, index)) = usize::try_from(ready).ok().and_then(|i| owners.get(i)) else { return };
+        let Some(&(rid, index)) = usize::try_from(ready).ok().and_then(|i| owners.get(i)) else {
+            return;
+        };
         let handle = handles[ready as usize];
         let frame = match read_frame(handle, index) {
             Ok(frame) => frame,
@@ -662,7 +780,9 @@ impl State {
         for rid in ids {
             if let Some(reader) = self.readers.get_mut(&rid) {
                 if reader.active {
-                    let err = first.take().unwrap_or_else(|| Error::Runtime(message.clone()));
+                    let err = first
+                        .take()
+                        .unwrap_or_else(|| Error::Runtime(message.clone()));
                     reader.sink.deliver(ReaderEvent::Failed(err), true);
                     reader.active = false;
                 }
@@ -675,42 +795,72 @@ impl State {
     pub(crate) fn create_recorder(&mut self, path: CString) -> Result<u64> {
         let mut handle: sys::OniRecorderHandle = ptr::null_mut();
         // SAFETY: NUL-terminated path outliving the call; `handle` is an out-pointer.
-        check("oniCreateRecorder", unsafe { sys::oniCreateRecorder(path.as_ptr(), &mut handle) })?;
+        check("oniCreateRecorder", unsafe {
+            sys::oniCreateRecorder(path.as_ptr(), &mut handle)
+        })?;
         let handle = NonNull::new(handle).ok_or_else(|| Error::Call {
             call: "oniCreateRecorder",
             status: Status(sys::OniStatus::ONI_STATUS_ERROR.0),
             message: "returned OK but no recorder".into(),
         })?;
         let id = self.new_id();
-        self.recorders.insert(id, RecorderEntry { handle, streams: Vec::new() });
+        self.recorders.insert(
+            id,
+            RecorderEntry {
+                handle,
+                streams: Vec::new(),
+            },
+        );
         Ok(id)
     }
 
-    pub(crate) fn attach_to_recorder(&mut self, id: u64, stream: u64, allow_lossy: bool) -> Result<()> {
+    pub(crate) fn attach_to_recorder(
+        &mut self,
+        id: u64,
+        stream: u64,
+        allow_lossy: bool,
+    ) -> Result<()> {
         let stream_handle = self.stream(stream)?.handle;
-        let rec = self.recorders.get_mut(&id).ok_or_else(|| Error::InvalidArgument(format!("no recorder {id}")))?;
+        let rec = self
+            .recorders
+            .get_mut(&id)
+            .ok_or_else(|| Error::InvalidArgument(format!("no recorder {id}")))?;
         // SAFETY: live recorder and stream, both owned by this thread.
-        let status =
-            unsafe { sys::oniRecorderAttachStream(rec.handle.as_ptr(), stream_handle.as_ptr(), allow_lossy.into()) };
+        let status = unsafe {
+            sys::oniRecorderAttachStream(
+                rec.handle.as_ptr(),
+                stream_handle.as_ptr(),
+                allow_lossy.into(),
+            )
+        };
         check("oniRecorderAttachStream", status)?;
         rec.streams.push(stream);
         Ok(())
     }
 
     pub(crate) fn start_recorder(&mut self, id: u64) -> Result<()> {
-        let rec = self.recorders.get(&id).ok_or_else(|| Error::InvalidArgument(format!("no recorder {id}")))?;
+        let rec = self
+            .recorders
+            .get(&id)
+            .ok_or_else(|| Error::InvalidArgument(format!("no recorder {id}")))?;
         // SAFETY: live recorder.
-        check("oniRecorderStart", unsafe { sys::oniRecorderStart(rec.handle.as_ptr()) })
+        check("oniRecorderStart", unsafe {
+            sys::oniRecorderStart(rec.handle.as_ptr())
+        })
     }
 
     pub(crate) fn destroy_recorder(&mut self, id: u64) -> Result<()> {
-        let Some(rec) = self.recorders.remove(&id) else { return Ok(()) };
+        let Some(rec) = self.recorders.remove(&id) else {
+            return Ok(());
+        };
         let mut handle = rec.handle.as_ptr();
         // SAFETY: live recorder, stopped then destroyed exactly once; destruction flushes the
         // queued frames, writes the end record and joins the recorder thread.
         unsafe { sys::oniRecorderStop(handle) };
         // SAFETY: as above.
-        check("oniRecorderDestroy", unsafe { sys::oniRecorderDestroy(&mut handle) })
+        check("oniRecorderDestroy", unsafe {
+            sys::oniRecorderDestroy(&mut handle)
+        })
     }
 }
 
@@ -718,7 +868,9 @@ impl State {
 fn read_frame(handle: sys::OniStreamHandle, stream_index: usize) -> Result<OwnedFrame> {
     let mut frame: *mut sys::OniFrame = ptr::null_mut();
     // SAFETY: a started stream that oniWaitForAnyStream reported ready; `frame` is an out-ptr.
-    check("oniStreamReadFrame", unsafe { sys::oniStreamReadFrame(handle, &mut frame) })?;
+    check("oniStreamReadFrame", unsafe {
+        sys::oniStreamReadFrame(handle, &mut frame)
+    })?;
     if frame.is_null() {
         return Err(Error::Call {
             call: "oniStreamReadFrame",
@@ -737,8 +889,9 @@ fn read_frame(handle: sys::OniStreamHandle, stream_index: usize) -> Result<Owned
 
 fn copy_frame(f: &sys::OniFrame, stream_index: usize, host_rx: Instant) -> Result<OwnedFrame> {
     let pixel_format = PixelFormat(f.videoMode.pixelFormat.0);
-    let sensor = SensorType::from_sys(f.sensorType)
-        .ok_or_else(|| Error::Unsupported(format!("frame of unknown sensor type {}", f.sensorType.0)))?;
+    let sensor = SensorType::from_sys(f.sensorType).ok_or_else(|| {
+        Error::Unsupported(format!("frame of unknown sensor type {}", f.sensorType.0))
+    })?;
     let width = f.width.max(0) as usize;
     let height = f.height.max(0) as usize;
     let size = f.dataSize.max(0) as usize;

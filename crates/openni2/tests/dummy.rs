@@ -24,8 +24,14 @@ fn dummy_device_records_and_plays_back_through_openni2() {
     let depth = device.create_stream(SensorType::Depth).unwrap();
     let color = device.create_stream(SensorType::Color).unwrap();
     let mode = depth.video_mode().unwrap();
-    assert_eq!((mode.width, mode.height, mode.pixel_format), (320, 240, openni2::PixelFormat::DEPTH_1_MM));
-    assert!(!depth.supports_cropping().unwrap(), "the Dummy driver gained cropping: the fix is moot");
+    assert_eq!(
+        (mode.width, mode.height, mode.pixel_format),
+        (320, 240, openni2::PixelFormat::DEPTH_1_MM)
+    );
+    assert!(
+        !depth.supports_cropping().unwrap(),
+        "the Dummy driver gained cropping: the fix is moot"
+    );
     let recorder = Recorder::create(&oni).unwrap();
     recorder.attach(&depth, false).unwrap();
     recorder.attach(&color, false).unwrap();
@@ -41,10 +47,17 @@ fn dummy_device_records_and_plays_back_through_openni2() {
     drop(reader);
     drop((depth, color));
     drop(device);
-    let depth_ts: Vec<u64> = live.iter().filter(|f| f.sensor == SensorType::Depth).map(|f| f.timestamp_us).collect();
+    let depth_ts: Vec<u64> = live
+        .iter()
+        .filter(|f| f.sensor == SensorType::Depth)
+        .map(|f| f.timestamp_us)
+        .collect();
     assert!(depth_ts.windows(2).all(|w| w[1] > w[0]), "{depth_ts:?}");
     for f in &live {
-        assert_eq!(f.data.len(), 320 * 240 * if f.sensor == SensorType::Depth { 2 } else { 3 });
+        assert_eq!(
+            f.data.len(),
+            320 * 240 * if f.sensor == SensorType::Depth { 2 } else { 3 }
+        );
     }
 
     // As recorded, OpenNI2's player would deliver nothing; fix it.
@@ -72,17 +85,36 @@ fn dummy_device_records_and_plays_back_through_openni2() {
     drop(player);
     // Every live frame was recorded: its bytes come back, in order.
     for sensor in [SensorType::Depth, SensorType::Color] {
-        let rec: Vec<&Vec<u8>> = played.iter().filter(|f| f.sensor == sensor).map(|f| &f.data).collect();
-        let got: Vec<&Vec<u8>> = live.iter().filter(|f| f.sensor == sensor).map(|f| &f.data).collect();
+        let rec: Vec<&Vec<u8>> = played
+            .iter()
+            .filter(|f| f.sensor == sensor)
+            .map(|f| &f.data)
+            .collect();
+        let got: Vec<&Vec<u8>> = live
+            .iter()
+            .filter(|f| f.sensor == sensor)
+            .map(|f| &f.data)
+            .collect();
         let distinct: std::collections::HashSet<_> = rec.iter().collect();
-        eprintln!("{sensor}: {} recorded, {} distinct, {} live", rec.len(), distinct.len(), got.len());
+        eprintln!(
+            "{sensor}: {} recorded, {} distinct, {} live",
+            rec.len(),
+            distinct.len(),
+            got.len()
+        );
         // The recorder starts asynchronously and may miss the first frames; from the first
         // live frame it has on, every live frame is in the recording, in order.
-        let first = got.iter().position(|g| rec.contains(g)).expect("no live frame was recorded");
+        let first = got
+            .iter()
+            .position(|g| rec.contains(g))
+            .expect("no live frame was recorded");
         assert!(first <= 3, "the recorder missed {first} frames");
         let mut it = rec.iter();
         for g in &got[first..] {
-            assert!(it.any(|r| r == g), "a live {sensor} frame is missing from the recording");
+            assert!(
+                it.any(|r| r == g),
+                "a live {sensor} frame is missing from the recording"
+            );
         }
     }
 }

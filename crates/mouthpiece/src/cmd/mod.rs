@@ -1,5 +1,5 @@
 //! One module per subcommand.
 
-pub mod retarget;
 pub mod devices;
 pub mod record;
+pub mod retarget;

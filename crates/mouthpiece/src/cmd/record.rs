@@ -46,17 +46,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let color = parse_color(&args.color).map_err(bad_input)?;
     if let Some(s) = args.seconds {
         if !(s > 0.0 && s.is_finite()) {
-            return Err(bad_input(anyhow::anyhow!("--seconds {s}: expected a positive number")));
+            return Err(bad_input(anyhow::anyhow!(
+                "--seconds {s}: expected a positive number"
+            )));
         }
     }
     if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         if !dir.is_dir() {
-            return Err(bad_input(anyhow::anyhow!("--out {}: directory {} does not exist", args.out.display(), dir.display())));
+            return Err(bad_input(anyhow::anyhow!(
+                "--out {}: directory {} does not exist",
+                args.out.display(),
+                dir.display()
+            )));
         }
     }
-    let limits = RecordLimits { seconds: args.seconds, ..Default::default() };
+    let limits = RecordLimits {
+        seconds: args.seconds,
+        ..Default::default()
+    };
     let stop = limits.stop.clone();
-    ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed)).context("cannot install the Ctrl-C handler")?;
+    ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
+        .context("cannot install the Ctrl-C handler")?;
 
     let config = CaptureConfig::default();
     let started = Instant::now();
@@ -71,7 +81,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let result = match format {
         OutputFormat::Mcap => {
-            let options = WriterOptions { color, ..Default::default() };
+            let options = WriterOptions {
+                color,
+                ..Default::default()
+            };
             record::record_mcap(&spec, &config, &args.out, options, &limits, progress)
         }
         OutputFormat::Oni => record::record_oni(&spec, &config, &args.out, &limits, progress),
@@ -79,7 +92,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let summary = result.map_err(|err| match err {
         // The user named something that cannot work: exit code 2.
         RecordError::NotOpenNi { .. } | RecordError::UnknownFormat { .. } => bad_input(err),
-        RecordError::Source(SourceError::Open { .. } | SourceError::Format { .. }) if matches!(spec, SourceSpec::Replay(_)) => {
+        RecordError::Source(SourceError::Open { .. } | SourceError::Format { .. })
+            if matches!(spec, SourceSpec::Replay(_)) =>
+        {
             bad_input(err)
         }
         other => anyhow::Error::new(other),
@@ -92,13 +107,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.out.display(),
         started.elapsed().as_secs_f64(),
         if summary.oni_fixed_nodes > 0 {
-            format!("; added the cropping records OpenNI2's player needs to {} streams", summary.oni_fixed_nodes)
+            format!(
+                "; added the cropping records OpenNI2's player needs to {} streams",
+                summary.oni_fixed_nodes
+            )
         } else {
             String::new()
         }
     );
     if let Some(lost) = summary.lost {
-        anyhow::bail!("the source was lost while recording (the file keeps what came before): {lost}");
+        anyhow::bail!(
+            "the source was lost while recording (the file keeps what came before): {lost}"
+        );
     }
     Ok(())
 }
@@ -110,8 +130,14 @@ mod tests {
     #[test]
     fn colour_encodings_parse() {
         assert_eq!(parse_color("raw").unwrap(), ColorEncoding::Raw);
-        assert_eq!(parse_color("jpeg").unwrap(), ColorEncoding::Jpeg { quality: 90 });
-        assert_eq!(parse_color("jpeg:75").unwrap(), ColorEncoding::Jpeg { quality: 75 });
+        assert_eq!(
+            parse_color("jpeg").unwrap(),
+            ColorEncoding::Jpeg { quality: 90 }
+        );
+        assert_eq!(
+            parse_color("jpeg:75").unwrap(),
+            ColorEncoding::Jpeg { quality: 75 }
+        );
         assert!(parse_color("jpeg:0").is_err());
         assert!(parse_color("png").is_err());
     }
