@@ -68,6 +68,7 @@ def load_character(path):
     up = np.array(doc.get("up", [0.0, 1.0, 0.0]), float)
     origin, axes, width = mouth_frame(pts[left], pts[right], up)
     p0 = (pts - origin) @ axes
+    p0[np.abs(p0) <= 1e-9 * width] = 0.0  # rounding noise where the file means an exact 0
     mode = doc.get("m_mode", "per-point")
     manual = np.array([doc["m"][nm] for nm in names], float) if mode == "manual" else None
     return dict(name=doc["name"], names=names, p0=p0, driver=np.array(driver), mode=mode,

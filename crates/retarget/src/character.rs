@@ -76,6 +76,9 @@ pub struct Character {
     pub manual_m: Option<Vec<Vec3>>,
 }
 
+/// Mouth-frame coordinates within this fraction of the mouth width of zero are exactly zero.
+pub const SNAP_TO_ZERO: f64 = 1e-9;
+
 /// The character's "up" in its model frame when the file gives none.
 pub const DEFAULT_UP: [f64; 3] = [0.0, 1.0, 0.0];
 
@@ -144,7 +147,17 @@ impl Character {
                     other => other,
                 }
             })?;
-        let neutral = model_points.iter().map(|p| frame.to_mouth(p)).collect();
+        // Rounding in the frame change leaves ~1e-17 where the artist wrote an exact 0 (the
+        // corners' y and z, a centred point's x); §5 looks at signs, so make those exact.
+        let snap = SNAP_TO_ZERO * frame.width;
+        let neutral = model_points
+            .iter()
+            .map(|p| {
+                frame
+                    .to_mouth(p)
+                    .map(|v| if v.abs() <= snap { 0.0 } else { v })
+            })
+            .collect();
         Ok(Self {
             name: name.into(),
             units: None,
@@ -730,5 +743,9 @@ lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
         let wolf = Character::from_toml_str(&wolf).unwrap();
         assert_relative_eq!(wolf.mouth_width(), 0.15, epsilon = 1e-9);
         assert!(wolf.neutral[3].z > 0.1, "a long muzzle");
+        // Exact zeros survive the frame change (the §5 sign test depends on them).
+        assert_eq!(wolf.neutral[3].x, 0.0);
+        assert_eq!((wolf.neutral[0].y, wolf.neutral[0].z), (0.0, 0.0));
+        assert_eq!((wolf.neutral[6].y, wolf.neutral[6].z), (0.0, 0.0));
     }
 }

@@ -197,3 +197,97 @@ impl OutputLine {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn layout() -> PerformerLayout {
+        PerformerLayout {
+            lip_dots: 4,
+            forehead_dots: 3,
+        }
+    }
+
+    #[test]
+    fn input_line_fills_dots() {
+        let line = InputLine::parse(
+            r#"{"t": 0.5, "points": {"D2": [1, 2, 3], "D1": null, "F3": [0, 0, 1], "F7": [1, 1, 1]}, "frame": 9}"#,
+        )
+        .unwrap();
+        assert!(!line.neutral);
+        assert_eq!(line.forehead_count(), 7);
+        let mut dots = PerformerDots::default();
+        line.dots_into(layout(), &mut dots).unwrap();
+        assert_eq!(dots.lip, [None, Some(Vec3::new(1.0, 2.0, 3.0)), None, None]);
+        assert_eq!(dots.forehead, [None, None, Some(Vec3::z())]);
+    }
+
+    #[test]
+    fn input_line_errors() {
+        let mut dots = PerformerDots::default();
+        let check = |s: &str, dots: &mut PerformerDots| {
+            InputLine::parse(s)
+                .and_then(|l| l.dots_into(layout(), dots))
+                .unwrap_err()
+        };
+        assert!(matches!(
+            check(r#"{"t": 0, "points": {"D5": [0, 0, 0]}}"#, &mut dots),
+            Error::UnknownDot { .. }
+        ));
+        assert!(matches!(
+            check(r#"{"t": 0, "points": {"nose": [0, 0, 0]}}"#, &mut dots),
+            Error::UnknownDot { .. }
+        ));
+        assert!(matches!(
+            check(
+                r#"{"t": 0, "points": {"D1": [0, 0, 0], "D1": null}}"#,
+                &mut dots
+            ),
+            Error::DuplicateDot { .. }
+        ));
+        assert!(matches!(
+            check(r#"{"t": 0, "points": {"D1": [0, 0]}}"#, &mut dots),
+            Error::Json { .. }
+        ));
+        assert!(matches!(
+            check(r#"{"points": {}}"#, &mut dots),
+            Error::Json { .. }
+        ));
+        assert!(matches!(check("[]", &mut dots), Error::Json { .. }));
+    }
+
+    #[test]
+    fn output_line_round_trips_in_order() {
+        let line = OutputLine {
+            t: 0.25,
+            seq: 7,
+            character: "wolf".into(),
+            points: Named(vec![
+                ("P2".into(), [1.0, 2.0, 3.0]),
+                ("P1".into(), [4.0, 5.0, 6.0]),
+            ]),
+            confidence: Named(vec![("P2".into(), 1.0), ("P1".into(), 0.0)]),
+            head: HeadPose {
+                rotation: [1.0, 0.0, 0.0, 0.0],
+                translation: [0.0, 0.1, 0.0],
+            },
+            head_lost: true,
+            curve: Some(Curve {
+                method: "sg5".into(),
+                closed: true,
+                points: vec![[0.0; 3]],
+            }),
+        };
+        let text = serde_json::to_string(&line).unwrap();
+        assert!(
+            text.starts_with(r#"{"t":0.25,"seq":7,"character":"wolf","points":{"P2":"#),
+            "{text}"
+        );
+        let back: OutputLine = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, line);
+        // A consumer can read lines that carry more fields (`process` adds some).
+        let extended = text.replacen('{', r#"{"performer":{"D1":null},"#, 1);
+        assert_eq!(serde_json::from_str::<OutputLine>(&extended).unwrap(), line);
+    }
+}

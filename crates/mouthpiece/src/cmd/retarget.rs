@@ -4,7 +4,7 @@
 //! - Input from a file: two passes. The first validates every line (JSON, dot names, finite
 //!   numbers, time order) and collects the neutral lines wherever they are; the second writes
 //!   the output. A bad line is reported before anything is written.
-//! - Input from stdin: one pass. The neutral lines must come first (they are the only lines
+//! - Input from stdin (or a pipe given by path): one pass. The neutral lines must come first (they are the only lines
 //!   held in memory); output streams line by line, flushed per line. A bad line stops the run
 //!   with exit code 2 after the lines before it were written, each of them complete.
 //!
@@ -151,14 +151,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let file = File::open(&args.input)
             .with_context(|| format!("cannot open input {}", args.input.display()))
             .map_err(bad_input)?;
+        let regular = file.metadata().is_ok_and(|m| m.is_file());
         let mut reader = BufReader::new(file);
-        let neutral = scan(&mut reader, &input_name, character.len())?;
-        reader
-            .rewind()
-            .with_context(|| format!("cannot rewind {input_name}"))?;
-        let mut out = Output::open(&args.out, false)?;
-        let written = retarget_file(reader, &input_name, character, config, neutral, &mut out);
-        written.and_then(|n| out.finish().map(|()| n))
+        if regular {
+            let neutral = scan(&mut reader, &input_name, character.len())?;
+            reader
+                .rewind()
+                .with_context(|| format!("cannot rewind {input_name}"))?;
+            let mut out = Output::open(&args.out, false)?;
+            let written = retarget_file(reader, &input_name, character, config, neutral, &mut out);
+            written.and_then(|n| out.finish().map(|()| n))
+        } else {
+            // A pipe or device given by path: it cannot be read twice, so stream it like stdin.
+            let mut out = Output::open(&args.out, true)?;
+            let written = retarget_stream(reader, &input_name, character, config, &mut out);
+            written.and_then(|n| out.finish().map(|()| n))
+        }
     };
     match result {
         Ok(lines) => {
@@ -533,7 +541,11 @@ impl Output {
             Some(p) if !p.as_os_str().is_empty() => p,
             _ => Path::new("."),
         };
+        // Readable like any file the user writes (the umask still applies); tempfile's 0600
+        // default would surprise.
+        use std::os::unix::fs::PermissionsExt as _;
         let temp = tempfile::Builder::new()
+            .permissions(std::fs::Permissions::from_mode(0o666))
             .prefix(".mouthpiece-retarget-")
             .suffix(".jsonl.tmp")
             .tempfile_in(dir)
