@@ -329,12 +329,12 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                         Ok(ClientOp::Subscribe { subscriptions: subs }) => {
                             let mut problems = Vec::new();
                             for s in subs {
-                                if subscriptions.contains_key(&s.id) {
-                                    problems.push(format!("subscription id {} already in use", s.id));
-                                } else if !current.iter().any(|c| c.id == s.channel_id) {
+                                if !current.iter().any(|c| c.id == s.channel_id) {
                                     problems.push(format!("no channel with id {}", s.channel_id));
+                                } else if let std::collections::btree_map::Entry::Vacant(slot) = subscriptions.entry(s.id) {
+                                    slot.insert(s.channel_id);
                                 } else {
-                                    subscriptions.insert(s.id, s.channel_id);
+                                    problems.push(format!("subscription id {} already in use", s.id));
                                 }
                             }
                             if !subscriptions.is_empty() && frames.is_none() {

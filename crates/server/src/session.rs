@@ -705,7 +705,7 @@ mod tests {
             next_due: None,
         };
         let n = (0..600).filter(|i| d.admit(f64::from(*i) / 60.0)).count();
-        assert!(n <= 450 && n >= 290, "{n} frames in 10 s");
+        assert!((290..=450).contains(&n), "{n} frames in 10 s");
     }
 
     #[test]
