@@ -98,8 +98,10 @@ pub async fn run(
                     }
                     let shared = shared.clone();
                     let span = tracing::info_span!("conn", %peer);
+                    // Created before spawning, so an aborted task still gives its slot back.
+                    let open = OpenConnection(shared.clone());
                     tasks.spawn(async move {
-                        let _open = OpenConnection(shared.clone());
+                        let _open = open;
                         handle_connection(&shared, stream, peer).await;
                     }.instrument(span));
                 }
