@@ -252,7 +252,10 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
         let mut refused_in_a_row = 0u32;
         while let Some(message) = stream.next().await {
             heard.store(started.elapsed().as_millis() as u64, Ordering::Relaxed);
-            if matches!(message, Ok(Message::Text(_) | Message::Binary(_) | Message::Ping(_))) {
+            if matches!(
+                message,
+                Ok(Message::Text(_) | Message::Binary(_) | Message::Ping(_))
+            ) {
                 if !bucket.take() {
                     metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
                     refused_in_a_row += 1;
