@@ -247,8 +247,28 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
     let reader_shared = shared.clone();
     let reader = tokio::spawn(async move {
         let metrics = &reader_shared.hub.inner.metrics;
+        let rate = reader_shared.config.limits.max_messages_per_second;
+        let mut bucket = crate::session::TokenBucket::new(rate);
+        let mut refused_in_a_row = 0u32;
         while let Some(message) = stream.next().await {
             heard.store(started.elapsed().as_millis() as u64, Ordering::Relaxed);
+            if matches!(
+                message,
+                Ok(Message::Text(_) | Message::Binary(_) | Message::Ping(_))
+            ) {
+                if !bucket.take() {
+                    metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+                    refused_in_a_row += 1;
+                    if refused_in_a_row > rate.saturating_mul(2) {
+                        return Some((
+                            CloseCode::Policy,
+                            format!("too many messages (limit {rate} per second)"),
+                        ));
+                    }
+                    continue;
+                }
+                refused_in_a_row = 0;
+            }
             let parsed = match message {
                 Ok(Message::Text(text)) => match serde_json::from_str::<Value>(&text) {
                     Err(e) => Err(format!("invalid JSON: {e}")),
@@ -329,12 +349,12 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                         Ok(ClientOp::Subscribe { subscriptions: subs }) => {
                             let mut problems = Vec::new();
                             for s in subs {
-                                if subscriptions.contains_key(&s.id) {
-                                    problems.push(format!("subscription id {} already in use", s.id));
-                                } else if !current.iter().any(|c| c.id == s.channel_id) {
+                                if !current.iter().any(|c| c.id == s.channel_id) {
                                     problems.push(format!("no channel with id {}", s.channel_id));
+                                } else if let std::collections::btree_map::Entry::Vacant(slot) = subscriptions.entry(s.id) {
+                                    slot.insert(s.channel_id);
                                 } else {
-                                    subscriptions.insert(s.id, s.channel_id);
+                                    problems.push(format!("subscription id {} already in use", s.id));
                                 }
                             }
                             if !subscriptions.is_empty() && frames.is_none() {

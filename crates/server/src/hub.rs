@@ -457,9 +457,15 @@ impl Hub {
         self.inner.status.borrow().clone()
     }
 
-    /// Sets the stream description; connected clients get a new `hello`.
+    /// Sets the stream description; connected clients get a new `hello` when it changed.
     pub fn set_info(&self, info: StreamInfo) {
-        self.inner.info.send_replace(Arc::new(info));
+        self.inner.info.send_if_modified(|current| {
+            let changed = **current != info;
+            if changed {
+                *current = Arc::new(info);
+            }
+            changed
+        });
     }
 
     /// The current stream description.
@@ -540,6 +546,20 @@ mod tests {
             hub.publish(&frame);
         }
         assert!(hub.inner.pool.lock().unwrap().len() <= 4 + 64 + 1);
+    }
+
+    #[test]
+    fn set_info_notifies_clients_only_on_change() {
+        let (hub, _control) = Hub::new(&HubConfig::default());
+        let mut rx = hub.inner.info.subscribe();
+        rx.mark_unchanged();
+        hub.set_info(StreamInfo::default());
+        assert!(!rx.has_changed().unwrap());
+        hub.set_info(StreamInfo {
+            frame_rate: 30.0,
+            ..StreamInfo::default()
+        });
+        assert!(rx.has_changed().unwrap());
     }
 
     #[test]

@@ -40,6 +40,10 @@ pub(crate) struct Shared {
     tls: Option<tokio_rustls::TlsAcceptor>,
 }
 
+/// An upgrade the front door said yes to: protocol, subprotocol to name in the response,
+/// access level, `Sec-WebSocket-Accept` value.
+type Accepted = (Flavor, Option<&'static str>, Access, String);
+
 /// Which protocol a session speaks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Flavor {
@@ -94,8 +98,10 @@ pub async fn run(
                     }
                     let shared = shared.clone();
                     let span = tracing::info_span!("conn", %peer);
+                    // Created before spawning, so an aborted task still gives its slot back.
+                    let open = OpenConnection(shared.clone());
                     tasks.spawn(async move {
-                        let _open = OpenConnection(shared.clone());
+                        let _open = open;
                         handle_connection(&shared, stream, peer).await;
                     }.instrument(span));
                 }
@@ -236,7 +242,7 @@ async fn upgrade(
     peer: SocketAddr,
 ) {
     let metrics = &shared.hub.inner.metrics;
-    let decision: Result<(Flavor, Option<&str>, Access, String), (u16, String)> = async {
+    let decision: Result<Accepted, (u16, String)> = async {
         if req.method != "GET" {
             return Err((400, "a WebSocket upgrade must be a GET".into()));
         }

@@ -425,15 +425,21 @@ impl Decimator {
     }
 }
 
+#[derive(Clone, Copy)]
+enum Kind {
+    Binary,
+    Other,
+}
+
 /// Messages per second with a burst of the same size.
-struct TokenBucket {
+pub(crate) struct TokenBucket {
     rate: f64,
     tokens: f64,
     last: Instant,
 }
 
 impl TokenBucket {
-    fn new(rate: u32) -> Self {
+    pub(crate) fn new(rate: u32) -> Self {
         Self {
             rate: f64::from(rate),
             tokens: f64::from(rate),
@@ -441,7 +447,7 @@ impl TokenBucket {
         }
     }
 
-    fn take(&mut self) -> bool {
+    pub(crate) fn take(&mut self) -> bool {
         let now = Instant::now();
         self.tokens =
             (self.tokens + now.duration_since(self.last).as_secs_f64() * self.rate).min(self.rate);
@@ -486,21 +492,16 @@ async fn read_loop(
     let reply = |text: String| out.try_send(Outgoing::Text(text)).is_ok();
     while let Some(message) = stream.next().await {
         last_heard.store(started.elapsed().as_millis() as u64, Ordering::Relaxed);
+        let message_kind = match &message {
+            Ok(Message::Binary(_)) => Kind::Binary,
+            _ => Kind::Other,
+        };
+        // Text and binary messages and pings count against the rate limit; pongs answer ours.
         let text = match message {
-            Ok(Message::Text(text)) => text,
-            Ok(Message::Binary(_)) => {
-                metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
-                if !reply(error_json(
-                    ErrorCode::UnsupportedBinary,
-                    "clients send JSON text messages only",
-                    None,
-                )) {
-                    return overflow();
-                }
-                continue;
-            }
+            Ok(Message::Text(text)) => Some(text),
+            Ok(Message::Binary(_) | Message::Ping(_)) => None,
             Ok(Message::Close(_)) => return None,
-            Ok(_) => continue, // ping/pong: tungstenite answers pings itself
+            Ok(_) => continue,
             Err(WsError::Capacity(e)) => {
                 metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
                 info!(error = %e, "client message too big");
@@ -545,6 +546,20 @@ async fn read_loop(
             continue;
         }
         refused_in_a_row = 0;
+        let Some(text) = text else {
+            // tungstenite answers pings itself.
+            if matches!(message_kind, Kind::Binary) {
+                metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+                if !reply(error_json(
+                    ErrorCode::UnsupportedBinary,
+                    "clients send JSON text messages only",
+                    None,
+                )) {
+                    return overflow();
+                }
+            }
+            continue;
+        };
         let message = match protocol::parse_client_message(&text) {
             Ok(m) => m,
             Err(failure) => {
@@ -705,7 +720,7 @@ mod tests {
             next_due: None,
         };
         let n = (0..600).filter(|i| d.admit(f64::from(*i) / 60.0)).count();
-        assert!(n <= 450 && n >= 290, "{n} frames in 10 s");
+        assert!((290..=450).contains(&n), "{n} frames in 10 s");
     }
 
     #[test]
