@@ -24,6 +24,10 @@ enum Command {
     Retarget(cmd::retarget::Args),
     /// Render a synthetic performer (head with painted dots, depth + colour, ground truth) to MCAP.
     Synth(cmd::synth::Args),
+    /// Record a source (camera, Dummy device, replay) to MCAP, or an OpenNI2 source to .oni.
+    Record(cmd::record::Args),
+    /// List OpenNI2 devices and V4L2 nodes with their modes and formats.
+    Devices(cmd::devices::Args),
 }
 
 fn main() -> ExitCode {
@@ -32,6 +36,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
         Command::Synth(args) => cmd::synth::run(args),
+        Command::Record(args) => cmd::record::run(args),
+        Command::Devices(args) => cmd::devices::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -44,5 +50,8 @@ fn main() -> ExitCode {
 fn init_logging() {
     use tracing_subscriber::EnvFilter;
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
 }
