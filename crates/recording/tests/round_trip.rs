@@ -275,3 +275,25 @@ fn garbage_is_an_error_not_a_panic() {
     assert!(reader.next_frame().is_err());
     assert!(SessionReader::open(dir.path().join("missing.mcap")).is_err());
 }
+
+#[test]
+fn the_committed_demo_session_replays() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../recordings/demo.mcap");
+    let mut depth_messages = 0;
+    for m in MessageReader::open(&path).unwrap() {
+        if &*m.unwrap().topic == mouthpiece_recording::TOPIC_DEPTH {
+            depth_messages += 1;
+        }
+    }
+    assert_eq!(depth_messages, 600, "20 s at 30 fps");
+    let mut reader = SessionReader::open(&path).unwrap();
+    for k in 0..5 {
+        let f = reader.next_frame().unwrap().unwrap();
+        assert_eq!((f.frame.color.width, f.frame.depth.height), (640, 480));
+        assert_eq!(f.frame.calibration.color.fx, 525.0);
+        let gt = f.ground_truth.expect("synthetic session with ground truth");
+        assert_eq!(gt.points.len(), 15);
+        assert!((gt.t - k as f64 / 30.0).abs() < 1e-9);
+    }
+    assert!(!reader.is_truncated());
+}

@@ -237,3 +237,86 @@ fn same_seed_same_session_other_seed_other_session() {
     assert!(a == run(4), "deterministic per seed");
     assert!(a != run(5), "the seed matters");
 }
+
+/// OpenCV's distorted projection, written out independently of the renderer's.
+fn project_distorted(k: &Intrinsics, p: [f64; 3]) -> (i64, i64) {
+    let (x, y) = (p[0] / p[2], p[1] / p[2]);
+    let [k1, k2, p1, p2, k3] = k.distortion;
+    let r2 = x * x + y * y;
+    let radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
+    let xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+    let yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+    (
+        (k.fx * xd + k.cx).round() as i64,
+        (k.fy * yd + k.cy).round() as i64,
+    )
+}
+
+#[test]
+fn lens_distortion_moves_the_dots_where_opencv_puts_them() {
+    let mut camera = SynthConfig::camera_for_size(640, 480);
+    camera.distortion = [-0.25, 0.08, 0.001, -0.001, 0.0];
+    let config = SynthConfig {
+        seed: 3,
+        seconds: 3.0,
+        camera,
+        head_motion: HeadMotion::Strong,
+        noise: NoiseModel::None,
+        colour_effects: false,
+        ..SynthConfig::default()
+    };
+    let mut checked = 0;
+    for (frame, gt) in Synth::new(config).unwrap().step_by(5) {
+        assert_eq!(frame.calibration.color.distortion, camera.distortion);
+        for (name, &p) in &gt.points {
+            if gt.is_visible(name) {
+                let (u, v) = project_distorted(&camera, p);
+                let bgr = frame.color.pixel(u as u32, v as u32);
+                assert!(
+                    is_paint(bgr, name.starts_with('D')),
+                    "t={} {name} at ({u}, {v}): {bgr:?}",
+                    gt.t
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 150);
+}
+
+#[test]
+fn separate_depth_camera_sees_the_dots_at_their_depth() {
+    let color = SynthConfig::camera_for_size(640, 480);
+    let depth_to_color = mouthpiece_frame::Extrinsics {
+        translation: [0.025, 0.0, 0.0],
+        ..Default::default()
+    };
+    let config = SynthConfig {
+        seed: 8,
+        seconds: 3.0,
+        depth_camera: Some((color, depth_to_color)),
+        noise: NoiseModel::None,
+        colour_effects: false,
+        ..SynthConfig::default()
+    };
+    let (mut good, mut total) = (0, 0);
+    for (frame, gt) in Synth::new(config).unwrap().step_by(5) {
+        let cal = &frame.calibration;
+        assert!(!cal.depth_registered);
+        for (name, &p) in &gt.points {
+            if !gt.is_visible(name) {
+                continue;
+            }
+            // Colour frame → depth frame: the inverse of depth_to_color (a pure translation).
+            let q = [p[0] - 0.025, p[1], p[2]];
+            let (u, v) = project(&cal.depth, q);
+            let d = frame.depth.at(u as u32, v as u32) as f64 / 1000.0;
+            total += 1;
+            if (d - q[2]).abs() < 0.005 {
+                good += 1;
+            }
+        }
+    }
+    // Dots seen by the colour camera may be hidden from the depth camera 25 mm away.
+    assert!(good as f64 > 0.9 * total as f64, "{good} of {total}");
+}
