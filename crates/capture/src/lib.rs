@@ -123,6 +123,13 @@ impl CaptureConfig {
     }
 }
 
+/// Field of view assumed when neither the device nor the configuration gives one
+/// (PrimeSense/Kinect v1 depth camera: 58° x 45°), radians.
+pub(crate) const DEFAULT_FOV_RAD: (f64, f64) = (
+    58.0 * std::f64::consts::PI / 180.0,
+    45.0 * std::f64::consts::PI / 180.0,
+);
+
 pub(crate) fn open_error(spec: &str, message: impl Into<String>) -> SourceError {
     SourceError::Open {
         spec: spec.to_string(),
