@@ -108,9 +108,9 @@ fn seconds_limit_and_bad_input_exit_codes() {
                 "--out",
                 "x.mcap",
                 "--seconds",
-                "-1",
+                "0",
             ],
-            "--seconds",
+            "--seconds 0",
         ),
     ] {
         let o = mouthpiece()
