@@ -20,6 +20,11 @@
 //! This crate has no `unsafe`: all native calls live in `mouthpiece-openni2` and `v4l`.
 
 #![forbid(unsafe_code)]
+// Helpers shared by the backends go unused when a backend feature is off.
+#![cfg_attr(
+    not(all(feature = "openni2", feature = "v4l2", feature = "mcap")),
+    allow(dead_code)
+)]
 
 pub mod convert;
 pub mod devices;
