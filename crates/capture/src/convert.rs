@@ -115,7 +115,7 @@ fn clamp_u8(v: i32) -> u8 {
 
 /// YUYV 4:2:2 (Y0 U Y1 V) → BGR888, bit-exact with OpenCV's `COLOR_YUV2BGR_YUYV`.
 pub fn yuyv_to_bgr(width: u32, height: u32, data: &[u8]) -> Result<Vec<u8>, ConvertError> {
-    if width % 2 != 0 {
+    if !width.is_multiple_of(2) {
         return Err(ConvertError::OddWidth(width));
     }
     check_size("YUYV", width, height, 2, data.len())?;

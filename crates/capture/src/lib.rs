@@ -20,6 +20,11 @@
 //! This crate has no `unsafe`: all native calls live in `mouthpiece-openni2` and `v4l`.
 
 #![forbid(unsafe_code)]
+// Helpers shared by the backends go unused when a backend feature is off.
+#![cfg_attr(
+    not(all(feature = "openni2", feature = "v4l2", feature = "mcap")),
+    allow(dead_code)
+)]
 
 pub mod convert;
 pub mod devices;
@@ -122,6 +127,13 @@ impl CaptureConfig {
         }
     }
 }
+
+/// Field of view assumed when neither the device nor the configuration gives one
+/// (PrimeSense/Kinect v1 depth camera: 58° x 45°), radians.
+pub(crate) const DEFAULT_FOV_RAD: (f64, f64) = (
+    58.0 * std::f64::consts::PI / 180.0,
+    45.0 * std::f64::consts::PI / 180.0,
+);
 
 pub(crate) fn open_error(spec: &str, message: impl Into<String>) -> SourceError {
     SourceError::Open {

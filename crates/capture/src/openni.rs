@@ -23,10 +23,9 @@ use crate::pairing::{Pairer, Stamped};
 use crate::spec::ReplaySpec;
 use crate::{
     convert, format_error, lost_error, open_error, open_error_with, registration, CaptureConfig,
+    DEFAULT_FOV_RAD,
 };
 
-/// Field of view assumed when a stream reports none (PrimeSense/Kinect v1 depth: 58°x45°).
-const DEFAULT_FOV_RAD: (f64, f64) = (1.012_29, 0.785_40);
 /// Events buffered between the OpenNI thread and the pairing here.
 const READER_CAPACITY: usize = 8;
 /// A file that delivers nothing for this long has ended (a truncated recording).

@@ -30,9 +30,11 @@ use v4l::{Format, FourCC};
 use crate::convert::{self, ColorFormat};
 use crate::devices::{V4l2Format, V4l2Node, DEPTH_FOURCCS};
 use crate::pairing::{Pairer, Stamped};
-use crate::{format_error, lost_error, open_error, open_error_with, registration, CaptureConfig};
+use crate::{
+    format_error, lost_error, open_error, open_error_with, registration, CaptureConfig,
+    DEFAULT_FOV_RAD,
+};
 
-const DEFAULT_FOV_RAD: (f64, f64) = (1.012_29, 0.785_40);
 /// How long one dequeue may block before the capture thread checks its stop flag.
 const DEQUEUE_TIMEOUT: Duration = Duration::from_millis(500);
 
