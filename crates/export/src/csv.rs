@@ -2,9 +2,10 @@
 //! import scripts. Streams straight to the output (through a temporary file renamed at the
 //! end), so memory does not grow with the take.
 
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
+use crate::output::PendingFile;
 use crate::{ExportError, MouthRig, TakeFrame};
 
 /// What [`CsvWriter::finish`] wrote.
@@ -20,7 +21,7 @@ pub struct CsvSummary {
 /// written in full (shortest text that reads back to the same f64); a point that is `null`
 /// in the take leaves its three cells empty. Lines end in `\n`.
 pub struct CsvWriter {
-    out: BufWriter<tempfile::NamedTempFile>,
+    out: PendingFile,
     path: PathBuf,
     points: usize,
     rows: u64,
@@ -30,13 +31,8 @@ pub struct CsvWriter {
 impl CsvWriter {
     /// Starts `path` (written under a temporary name until [`finish`](Self::finish)).
     pub fn create(rig: &MouthRig, path: &Path) -> Result<Self, ExportError> {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
         let err = |cause| ExportError::write(path, cause);
-        let tmp = tempfile::NamedTempFile::new_in(dir).map_err(err)?;
-        let mut out = BufWriter::with_capacity(64 * 1024, tmp);
+        let mut out = PendingFile::create(path).map_err(err)?;
         let mut header = String::from("t");
         for p in rig.points() {
             for axis in ["x", "y", "z"] {
@@ -93,9 +89,8 @@ impl CsvWriter {
                 source_name: "take".into(),
             });
         }
-        let tmp = self.out.into_inner().map_err(|e| err(e.into_error()))?;
-        tmp.persist(&path).map_err(|e| err(e.error))?;
-        tracing::info!(rows = self.rows, out = %path.display(), "CSV written");
+        self.out.commit().map_err(err)?;
+        tracing::debug!(rows = self.rows, out = %path.display(), "CSV written");
         Ok(CsvSummary {
             rows: self.rows,
             file: path,

@@ -18,6 +18,7 @@ use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 use serde_json::Value;
 
+use crate::output::{parent_dir, PendingFile};
 use crate::reduce::{Key, Reducer};
 use crate::{ExportError, MouthRig, TakeFrame};
 
@@ -283,7 +284,7 @@ impl GltfWriter {
                 write_atomically(out, |w| assembler.write_embedded(&json, w))?;
             }
         }
-        tracing::info!(
+        tracing::debug!(
             frames = summary.frames,
             keys = summary.keys,
             dropped = summary.dropped,
@@ -713,21 +714,14 @@ fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> Result<(), WriteError>,
 ) -> Result<(), ExportError> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
     let out_err = |cause: io::Error| ExportError::write(path, cause);
-    let tmp = tempfile::NamedTempFile::new_in(dir).map_err(out_err)?;
-    let mut writer = BufWriter::with_capacity(64 * 1024, tmp);
-    write(&mut writer).map_err(|e| match e {
+    let mut pending = PendingFile::create(path).map_err(out_err)?;
+    write(&mut pending).map_err(|e| match e {
         WriteError::Out(cause) => out_err(cause),
-        WriteError::Spool(cause) => ExportError::write(dir, cause),
+        WriteError::Spool(cause) => ExportError::write(parent_dir(path), cause),
         WriteError::TooLarge(bytes) => ExportError::TooLargeForGlb { bytes },
     })?;
-    let tmp = writer.into_inner().map_err(|e| out_err(e.into_error()))?;
-    tmp.persist(path).map_err(|e| out_err(e.error))?;
-    Ok(())
+    pending.commit().map_err(out_err)
 }
 
 #[cfg(test)]

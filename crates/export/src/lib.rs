@@ -20,6 +20,7 @@
 pub mod csv;
 mod error;
 pub mod gltf;
+mod output;
 pub mod reduce;
 pub mod rig;
 pub mod take;

@@ -123,7 +123,9 @@ mod tests {
         let mut x = 0.0;
         let samples: Vec<Key> = (0..50)
             .map(|i| {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 x += 1.0 + (state >> 40) as f64 / (1u64 << 24) as f64;
                 (i as f64, [if i % 2 == 0 { x } else { -x }, 0.0, 0.0])
             })

@@ -22,6 +22,8 @@ struct Cli {
 enum Command {
     /// Retarget 3D dot positions (JSONL) onto a character's mouth (JSONL).
     Retarget(cmd::retarget::Args),
+    /// Export a take (JSONL or recording) as keyframe animation: glTF 2.0, GLB or CSV.
+    Export(cmd::export::Args),
 }
 
 fn main() -> ExitCode {
@@ -29,6 +31,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
+        Command::Export(args) => cmd::export::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
