@@ -126,9 +126,9 @@ impl<const N: usize> Bounds<N> {
         }
     }
     fn add(&mut self, v: &[f32; N]) {
-        for k in 0..N {
-            self.min[k] = self.min[k].min(v[k]);
-            self.max[k] = self.max[k].max(v[k]);
+        for (k, &c) in v.iter().enumerate() {
+            self.min[k] = self.min[k].min(c);
+            self.max[k] = self.max[k].max(c);
         }
     }
     /// JSON arrays holding the f32 values exactly (as f64), so validators compare equal.
@@ -655,7 +655,7 @@ impl Assembler<'_> {
         out: &mut dyn Write,
     ) -> Result<(), WriteError> {
         // Chunks are 4-byte aligned: JSON padded with spaces; our buffer is all 4-byte data.
-        while json.len() % 4 != 0 {
+        while !json.len().is_multiple_of(4) {
             json.push(b' ');
         }
         debug_assert_eq!(bin_len % 4, 0);

@@ -6,13 +6,13 @@
 //! one translation channel per point, or CSV.
 //!
 //! # Layout
-//! - [`take`]: [`TakeReader`], the streaming, checking JSONL reader → [`TakeFrame`]s.
-//! - [`rig`]: [`MouthRig`], the points' names, rest pose and the mouth's placement in the
+//! - [`take`]: the streaming, checking JSONL reader → [`TakeFrame`]s.
+//! - [`rig`]: the [`MouthRig`], the points' names, rest pose and the mouth's placement in the
 //!   character's model.
-//! - [`gltf`]: [`GltfWriter`], streaming: keys spool to temporary files, the document is
+//! - [`gltf`]: the streaming [`GltfWriter`]: keys spool to temporary files, the document is
 //!   assembled at the end. Memory is constant in the number of frames.
-//! - [`reduce`]: [`Reducer`], streaming key reduction within a tolerance.
-//! - [`csv`]: [`CsvWriter`].
+//! - [`reduce`]: the [`Reducer`], streaming key reduction within a tolerance.
+//! - [`csv`]: the streaming [`CsvWriter`].
 //!
 //! The writers take frames from any source, so a recording turned into frames by the
 //! processing pipeline feeds them the same way as a JSONL file.

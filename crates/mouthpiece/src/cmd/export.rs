@@ -30,7 +30,7 @@ pub struct Args {
     pub character: Option<PathBuf>,
     /// Drop glTF keys that linear interpolation reproduces within TOLERANCE (character units,
     /// per axis).
-    #[arg(long, value_name = "TOLERANCE")]
+    #[arg(long, value_name = "TOLERANCE", allow_negative_numbers = true)]
     pub reduce: Option<f64>,
     /// `gltf` only: embed the buffer in the .gltf as base64 instead of writing a .bin.
     #[arg(long)]
@@ -261,7 +261,7 @@ fn rig_from_take<R: BufRead>(
         points,
         nalgebra::Isometry3::identity(),
     )
-    .map_err(|e| bad_input(e))
+    .map_err(bad_input)
 }
 
 fn load_character(path: &Path) -> anyhow::Result<MouthRig> {
