@@ -33,10 +33,24 @@ pub enum GltfLayout {
     Glb,
 }
 
+/// Which way is up in the character's model frame (the frame its file's points are given in).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ModelUp {
+    /// +Y up, front +Z: glTF's own convention (and the character file's default `up`).
+    #[default]
+    Y,
+    /// +Z up, front −Y: Blender's and many DCC tools' convention. The export turns it into
+    /// glTF's (x, y, z) = (x, z, −y), the same conversion Blender's glTF exporter applies, so
+    /// the mouth lands on the artist's model again after import.
+    Z,
+}
+
 /// What to write.
 #[derive(Clone, Debug)]
 pub struct GltfOptions {
     pub layout: GltfLayout,
+    /// The axis convention of the character's model frame.
+    pub model_up: ModelUp,
     /// Drop keys that linear interpolation reproduces within this tolerance (character units,
     /// per axis). `None` keeps every frame.
     pub reduce: Option<f64>,
@@ -49,6 +63,7 @@ impl Default for GltfOptions {
     fn default() -> Self {
         Self {
             layout: GltfLayout::Glb,
+            model_up: ModelUp::Y,
             reduce: None,
             markers: true,
         }
@@ -392,13 +407,12 @@ impl GltfWriter {
                 })
             })
             .collect();
-        let placement = self.rig.placement();
-        let translation = placement.translation.vector.map(|c| c as f32);
-        let q = placement.rotation.coords.map(|c| c as f32).normalize();
+        let transform = mouth_transform(&self.rig, self.options.model_up);
         let mouth = root.push(json::Node {
             name: Some("mouth".into()),
-            translation: (translation.norm() > 0.0).then(|| translation.into()),
-            rotation: (q.w.abs() < 1.0).then(|| json::scene::UnitQuaternion([q.x, q.y, q.z, q.w])),
+            translation: transform.translation,
+            rotation: transform.rotation,
+            scale: transform.scale,
             children: Some(point_nodes.clone()),
             ..Default::default()
         });
@@ -514,6 +528,37 @@ impl GltfWriter {
             uri,
         });
         Ok((root, pieces, offset))
+    }
+}
+
+/// The `mouth` node's TRS, each part left out when it is the identity.
+struct NodeTransform {
+    translation: Option<[f32; 3]>,
+    rotation: Option<json::scene::UnitQuaternion>,
+    scale: Option<[f32; 3]>,
+}
+
+/// glTF world = C · s · placement · mouth, with C the model-axes conversion and s the units'
+/// metres: translation s·C·o, rotation C·R, scale s.
+fn mouth_transform(rig: &MouthRig, model_up: ModelUp) -> NodeTransform {
+    use nalgebra::{UnitQuaternion, Vector3};
+    let conversion = match model_up {
+        ModelUp::Y => UnitQuaternion::identity(),
+        ModelUp::Z => {
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -std::f64::consts::FRAC_PI_2)
+        }
+    };
+    let s = rig.metres_per_unit().unwrap_or(1.0);
+    let placement = rig.placement();
+    let translation = (conversion * placement.translation.vector * s).map(|c| c as f32);
+    let q = (conversion * placement.rotation)
+        .coords
+        .map(|c| c as f32)
+        .normalize();
+    NodeTransform {
+        translation: (translation.norm() > 0.0).then(|| translation.into()),
+        rotation: (q.w.abs() < 1.0).then(|| json::scene::UnitQuaternion([q.x, q.y, q.z, q.w])),
+        scale: (s != 1.0).then(|| [s as f32; 3]),
     }
 }
 

@@ -30,6 +30,7 @@ pub struct MouthRig {
     character: Option<String>,
     points: Vec<RigPoint>,
     placement: Isometry3<f64>,
+    metres_per_unit: Option<f64>,
 }
 
 impl MouthRig {
@@ -70,7 +71,26 @@ impl MouthRig {
             character,
             points,
             placement,
+            metres_per_unit: None,
         })
+    }
+
+    /// Declares the character's units (metres per unit, from the character file's `units`).
+    /// glTF is in metres: the `mouth` node then scales the character's units to metres, so the
+    /// keys stay the take's numbers. Unknown units are taken to be metres.
+    pub fn with_metres_per_unit(mut self, metres_per_unit: f64) -> Result<Self, ExportError> {
+        if !(metres_per_unit.is_finite() && metres_per_unit > 0.0) {
+            return Err(ExportError::BadRig(format!(
+                "units: {metres_per_unit} metres per unit is not a positive number"
+            )));
+        }
+        self.metres_per_unit = Some(metres_per_unit);
+        Ok(self)
+    }
+
+    /// Metres per character unit, if the character said.
+    pub fn metres_per_unit(&self) -> Option<f64> {
+        self.metres_per_unit
     }
 
     /// The placement of a mouth frame given by its origin and axes in model coordinates

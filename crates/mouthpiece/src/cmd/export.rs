@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use anyhow::{anyhow, Context as _};
 use mouthpiece_export::{
-    CsvWriter, ExportError, GltfLayout, GltfOptions, GltfWriter, MouthRig, RigPoint, TakeFrame,
-    TakeReader,
+    CsvWriter, ExportError, GltfLayout, GltfOptions, GltfWriter, ModelUp, MouthRig, RigPoint,
+    TakeFrame, TakeReader,
 };
 
 use crate::exit::bad_input;
@@ -35,9 +35,19 @@ pub struct Args {
     /// `gltf` only: embed the buffer in the .gltf as base64 instead of writing a .bin.
     #[arg(long)]
     pub embed: bool,
+    /// Up axis of the character's model frame: `y` (glTF's convention, +Y up, front +Z) or
+    /// `z` (Blender's, +Z up, front -Y; converted to glTF's axes on export).
+    #[arg(long, value_enum, default_value = "y")]
+    pub model_up: ModelUpArg,
     /// Leave the point nodes empty (no small marker mesh).
     #[arg(long)]
     pub no_markers: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModelUpArg {
+    Y,
+    Z,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -136,6 +146,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     Format::Glb => GltfLayout::Glb,
                     _ if args.embed => GltfLayout::Embedded,
                     _ => GltfLayout::SeparateBin,
+                },
+                model_up: match args.model_up {
+                    ModelUpArg::Y => ModelUp::Y,
+                    ModelUpArg::Z => ModelUp::Z,
                 },
                 reduce: args.reduce,
                 markers: !args.no_markers,
