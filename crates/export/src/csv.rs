@@ -137,12 +137,14 @@ mod tests {
             line: 1,
             t: 0.0,
             points: vec![Some([0.1, -2.5, 3.0]), None],
+            curve: None,
         })
         .unwrap();
         w.push(&TakeFrame {
             line: 2,
             t: 1.0 / 3.0,
             points: vec![Some([1e-9, 0.0, 1.0]), Some([1.0, 2.0, 3.0])],
+            curve: None,
         })
         .unwrap();
         let summary = w.finish().unwrap();

@@ -35,6 +35,21 @@ pub enum ExportError {
         #[source]
         cause: io::Error,
     },
+    /// The character file cannot be read.
+    #[error("reading the character file {}", path.display())]
+    CharacterRead {
+        path: PathBuf,
+        #[source]
+        cause: io::Error,
+    },
+    /// The character file is not a valid character (the retarget core says why).
+    #[error("character file {}", path.display())]
+    Character {
+        path: PathBuf,
+        /// Boxed: the retarget error is large and this one is rare.
+        #[source]
+        cause: Box<mouthpiece_retarget::Error>,
+    },
     /// The description of the character's mouth (names, rest pose, placement) is unusable.
     #[error("character: {0}")]
     BadRig(String),
@@ -63,6 +78,8 @@ impl ExportError {
             self,
             Self::Json { .. }
                 | Self::BadLine { .. }
+                | Self::CharacterRead { .. }
+                | Self::Character { .. }
                 | Self::EmptyTake { .. }
                 | Self::BadRig(_)
                 | Self::BadTolerance(_)

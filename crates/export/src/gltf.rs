@@ -54,6 +54,9 @@ pub struct GltfOptions {
     /// Drop keys that linear interpolation reproduces within this tolerance (character units,
     /// per axis). `None` keeps every frame.
     pub reduce: Option<f64>,
+    /// Also animate the take's smoothed mouth outline (`curve`, written by `retarget
+    /// --smooth`): a `curve` node under `mouth` with one child `C0`, `C1`, … per curve point.
+    pub curve: bool,
     /// Give each point node a small octahedron (2 % of the mouth width) so viewers show the
     /// points; without it the nodes are empties.
     pub markers: bool,
@@ -65,6 +68,7 @@ impl Default for GltfOptions {
             layout: GltfLayout::Glb,
             model_up: ModelUp::Y,
             reduce: None,
+            curve: false,
             markers: true,
         }
     }
@@ -90,7 +94,10 @@ pub struct GltfWriter {
     rig: MouthRig,
     options: GltfOptions,
     spool_dir: PathBuf,
+    /// The points' channels, then the curve's (created at the first frame).
     channels: Vec<Channel>,
+    /// Rest positions of the curve's points (the first frame's curve), with `options.curve`.
+    curve_rest: Option<Vec<[f64; 3]>>,
     frames: u64,
     /// Every channel has a key at every frame: one time accessor serves them all.
     shared_times: bool,
@@ -110,6 +117,32 @@ struct Channel {
 const RECORD: usize = 16;
 
 impl Channel {
+    fn new(spool_dir: &Path, reduce: Option<f64>) -> Result<Self, ExportError> {
+        let file = tempfile::tempfile_in(spool_dir)
+            .map_err(|cause| ExportError::write(spool_dir, cause))?;
+        Ok(Self {
+            spool: BufWriter::with_capacity(16 * 1024, file),
+            reducer: reduce.map(Reducer::new),
+            samples: 0,
+            keys: 0,
+            t_bounds: Bounds::new(),
+            v_bounds: Bounds::new(),
+        })
+    }
+
+    /// Takes one sample (through the reducer, if any) and spools the key it settles.
+    fn sample(&mut self, t: f64, v: [f64; 3]) -> io::Result<()> {
+        self.samples += 1;
+        let key = match &mut self.reducer {
+            Some(reducer) => reducer.push(t, v),
+            None => Some((t, v)),
+        };
+        match key {
+            Some(key) => self.write_key(key),
+            None => Ok(()),
+        }
+    }
+
     fn write_key(&mut self, (t, v): Key) -> io::Result<()> {
         let t32 = t as f32;
         let v32 = v.map(|c| c as f32);
@@ -169,23 +202,11 @@ impl GltfWriter {
                 return Err(ExportError::BadTolerance(tol));
             }
         }
-        let channels = rig
-            .points()
-            .iter()
-            .map(|_| {
-                let file = tempfile::tempfile_in(spool_dir)
-                    .map_err(|cause| ExportError::write(spool_dir, cause))?;
-                Ok(Channel {
-                    spool: BufWriter::with_capacity(16 * 1024, file),
-                    reducer: options.reduce.map(Reducer::new),
-                    samples: 0,
-                    keys: 0,
-                    t_bounds: Bounds::new(),
-                    v_bounds: Bounds::new(),
-                })
-            })
+        let channels = (0..rig.points().len())
+            .map(|_| Channel::new(spool_dir, options.reduce))
             .collect::<Result<Vec<_>, ExportError>>()?;
         Ok(Self {
+            curve_rest: None,
             shared_times: options.reduce.is_none(),
             rig,
             options,
@@ -197,37 +218,69 @@ impl GltfWriter {
 
     /// Adds one frame (times strictly increasing, as [`crate::TakeReader`] guarantees).
     pub fn push(&mut self, frame: &TakeFrame) -> Result<(), ExportError> {
-        if frame.points.len() != self.channels.len() {
+        let points = self.rig.points().len();
+        if frame.points.len() != points {
             return Err(ExportError::BadRig(format!(
-                "line {}: the frame has {} points, the rig {}",
+                "line {}: the frame has {} points, the rig {points}",
                 frame.line,
                 frame.points.len(),
-                self.channels.len()
             )));
         }
-        for (i, (channel, value)) in self.channels.iter_mut().zip(&frame.points).enumerate() {
+        let bad_line = |problem: String| ExportError::BadLine {
+            source_name: "take".into(),
+            line: frame.line,
+            problem,
+        };
+        let in_f32 = |v: &[f64; 3]| v.iter().all(|&c| (c as f32).is_finite());
+        for (i, value) in frame.points.iter().enumerate() {
             let Some(v) = *value else {
                 self.shared_times = false;
                 continue;
             };
-            if !v.iter().all(|&c| (c as f32).is_finite()) {
-                return Err(ExportError::BadLine {
-                    source_name: "take".into(),
-                    line: frame.line,
-                    problem: format!(
-                        "point {} = {v:?} is out of the range of glTF's 32-bit floats",
-                        self.rig.points()[i].name
-                    ),
-                });
+            if !in_f32(&v) {
+                return Err(bad_line(format!(
+                    "point {} = {v:?} is out of the range of glTF's 32-bit floats",
+                    self.rig.points()[i].name
+                )));
             }
-            channel.samples += 1;
-            let key = match &mut channel.reducer {
-                Some(reducer) => reducer.push(frame.t, v),
-                None => Some((frame.t, v)),
+            self.channels[i]
+                .sample(frame.t, v)
+                .map_err(|cause| ExportError::write(&self.spool_dir, cause))?;
+        }
+        if self.options.curve {
+            let Some(curve) = &frame.curve else {
+                return Err(bad_line(
+                    "no `curve` on this line: the take was made without shape smoothing \
+                     (retarget --smooth); export without --curve"
+                        .into(),
+                ));
             };
-            if let Some(key) = key {
+            match &self.curve_rest {
+                None => {
+                    if curve.is_empty() {
+                        return Err(bad_line("the `curve` has no points".into()));
+                    }
+                    for _ in curve {
+                        self.channels
+                            .push(Channel::new(&self.spool_dir, self.options.reduce)?);
+                    }
+                    self.curve_rest = Some(curve.clone());
+                }
+                Some(rest) if rest.len() != curve.len() => {
+                    return Err(bad_line(format!(
+                        "the `curve` has {} points, the first line's {}",
+                        curve.len(),
+                        rest.len()
+                    )));
+                }
+                Some(_) => {}
+            }
+            for (channel, v) in self.channels[points..].iter_mut().zip(curve) {
+                if !in_f32(v) {
+                    return Err(bad_line(format!("curve point {v:?} is out of f32 range")));
+                }
                 channel
-                    .write_key(key)
+                    .sample(frame.t, *v)
                     .map_err(|cause| ExportError::write(&self.spool_dir, cause))?;
             }
         }
@@ -394,26 +447,44 @@ impl GltfWriter {
             None
         };
 
+        let node = |root: &mut json::Root, name: String, rest: &[f64; 3]| {
+            root.push(json::Node {
+                name: Some(name),
+                translation: Some(rest.map(|c| c as f32)),
+                mesh: marker_mesh,
+                ..Default::default()
+            })
+        };
         let point_nodes: Vec<json::Index<json::Node>> = self
             .rig
             .points()
             .iter()
-            .map(|p| {
-                root.push(json::Node {
-                    name: Some(p.name.clone()),
-                    translation: Some(p.rest.map(|c| c as f32)),
-                    mesh: marker_mesh,
-                    ..Default::default()
-                })
-            })
+            .map(|p| node(&mut root, p.name.clone(), &p.rest))
             .collect();
+        let mut mouth_children = point_nodes.clone();
+        let mut channel_nodes = point_nodes;
+        let mut channel_names = self.rig.names();
+        if let Some(rest) = &self.curve_rest {
+            let curve_nodes: Vec<_> = rest
+                .iter()
+                .enumerate()
+                .map(|(i, p)| node(&mut root, format!("C{i}"), p))
+                .collect();
+            mouth_children.push(root.push(json::Node {
+                name: Some("curve".into()),
+                children: Some(curve_nodes.clone()),
+                ..Default::default()
+            }));
+            channel_names.extend((0..rest.len()).map(|i| format!("C{i}")));
+            channel_nodes.extend(curve_nodes);
+        }
         let transform = mouth_transform(&self.rig, self.options.model_up);
         let mouth = root.push(json::Node {
             name: Some("mouth".into()),
             translation: transform.translation,
             rotation: transform.rotation,
             scale: transform.scale,
-            children: Some(point_nodes.clone()),
+            children: Some(mouth_children),
             ..Default::default()
         });
         let scene = root.push(json::Scene {
@@ -449,9 +520,9 @@ impl GltfWriter {
         };
         let mut samplers = Vec::new();
         let mut channels = Vec::new();
-        for (i, (channel, node)) in self.channels.iter().zip(&point_nodes).enumerate() {
+        for (i, (channel, node)) in self.channels.iter().zip(&channel_nodes).enumerate() {
             if channel.keys == 0 {
-                tracing::warn!(point = %self.rig.points()[i].name, "point never seen in the take: no animation channel");
+                tracing::warn!(point = %channel_names[i], "point never seen in the take: no animation channel");
                 continue;
             }
             let input = match shared_input {
@@ -558,7 +629,7 @@ fn mouth_transform(rig: &MouthRig, model_up: ModelUp) -> NodeTransform {
     NodeTransform {
         translation: (translation.norm() > 0.0).then(|| translation.into()),
         rotation: (q.w.abs() < 1.0).then(|| json::scene::UnitQuaternion([q.x, q.y, q.z, q.w])),
-        scale: (s != 1.0).then(|| [s as f32; 3]),
+        scale: (s != 1.0).then_some([s as f32; 3]),
     }
 }
 

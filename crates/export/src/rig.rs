@@ -2,8 +2,11 @@
 //! in the character's model.
 
 use std::collections::HashSet;
+use std::path::Path;
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+use mouthpiece_retarget::Character;
 
 use crate::ExportError;
 
@@ -116,6 +119,51 @@ impl MouthRig {
         ))
     }
 
+    /// The rig of a character from the retarget core: its point names in file order, `P⁰`
+    /// (neutral points in the mouth frame) as rest pose, its mouth frame as placement, and its
+    /// units.
+    pub fn from_character(character: &Character) -> Result<Self, ExportError> {
+        let points = character
+            .point_names
+            .iter()
+            .zip(&character.neutral)
+            .map(|(name, p)| RigPoint {
+                name: name.clone(),
+                rest: [p.x, p.y, p.z],
+            })
+            .collect();
+        let frame = &character.frame;
+        let axis = |k: usize| {
+            let c = frame.axes.column(k);
+            [c[0], c[1], c[2]]
+        };
+        let placement = Self::placement_from_axes(
+            [frame.origin.x, frame.origin.y, frame.origin.z],
+            axis(0),
+            axis(1),
+            axis(2),
+        )?;
+        let rig = Self::new(Some(character.name.clone()), points, placement)?;
+        match character.units {
+            Some(units) => rig.with_metres_per_unit(units.metres_per_unit()),
+            None => Ok(rig),
+        }
+    }
+
+    /// Reads a character file (TOML, parsed and checked by the retarget core).
+    pub fn load_character(path: &Path) -> Result<Self, ExportError> {
+        let text = std::fs::read_to_string(path).map_err(|cause| ExportError::CharacterRead {
+            path: path.to_path_buf(),
+            cause,
+        })?;
+        let character =
+            Character::from_toml_str(&text).map_err(|cause| ExportError::Character {
+                path: path.to_path_buf(),
+                cause: Box::new(cause),
+            })?;
+        Self::from_character(&character)
+    }
+
     /// The character's name, when known (character file or the take's `character` field).
     pub fn character(&self) -> Option<&str> {
         self.character.as_deref()
@@ -189,6 +237,34 @@ mod tests {
             [0.0, 0.0, -1.0],
         );
         assert!(left_handed.is_err());
+    }
+
+    #[test]
+    fn character_rest_points_land_on_the_model_points() {
+        let toml = r#"
+            name = "tilted"
+            units = "cm"
+            up = [0.0, 0.2588, 0.9659]
+            [points]
+            P1 = [7.5, -30.0, 52.0]
+            P2 = [0.0, -42.0, 58.0]
+            P3 = [-7.5, -30.0, 52.0]
+            P4 = [0.0, -43.0, 52.0]
+        "#;
+        let character = Character::from_toml_str(toml).unwrap();
+        let rig = MouthRig::from_character(&character).unwrap();
+        assert_eq!(rig.names(), ["P1", "P2", "P3", "P4"]);
+        assert_eq!(rig.character(), Some("tilted"));
+        assert_eq!(rig.metres_per_unit(), Some(0.01));
+        for (p, model) in rig.points().iter().zip(&character.model_points) {
+            let world = rig.placement() * nalgebra::Point3::from(p.rest);
+            assert!(
+                (world.coords - model).norm() < 1e-9,
+                "{}: {world} vs {model}",
+                p.name
+            );
+        }
+        assert!((rig.mouth_width() - 15.0).abs() < 1e-9);
     }
 
     #[test]

@@ -1,15 +1,14 @@
 //! Streaming reader of a take: `retarget` / `process` JSONL, one frame per line.
 //!
-//! Only `t`, `points` and `character` are read; every other field (`seq`, `confidence`,
-//! `head`, `curve`, `performer`, `frame`, …) is skipped, so both commands' output reads the
-//! same. Memory is one line and one frame, whatever the take's length.
+//! Each line is parsed as the retarget core's [`OutputLine`] (the documented line format;
+//! `process` adds fields, which are skipped), so a file of another kind — the raw dots that
+//! go *into* `retarget`, say — is refused on its first line with the field it lacks. Memory is
+//! one line and one frame, whatever the take's length.
 
 use std::collections::HashMap;
-use std::fmt;
 use std::io::BufRead;
 
-use serde::de::{Deserializer, MapAccess, Visitor};
-use serde::Deserialize;
+use mouthpiece_retarget::jsonl::OutputLine;
 
 use crate::ExportError;
 
@@ -20,16 +19,18 @@ pub struct TakeFrame {
     pub line: u64,
     /// Seconds since the start of the stream.
     pub t: f64,
-    /// Mouth-frame position per point, `None` where the line says `null` (no key there).
+    /// Mouth-frame position per point. JSONL lines always have every point (`retarget` holds
+    /// a lost dot's last value); `None` is for frame sources with gaps: no key there.
     pub points: Vec<Option<[f64; 3]>>,
+    /// The smoothed mouth outline (`curve`), when the take has one.
+    pub curve: Option<Vec<[f64; 3]>>,
 }
 
 /// Reads frames from JSONL, checking each line as it goes.
 ///
-/// Checks: valid JSON with a finite `t` ≥ 0 and a `points` object; times strictly increasing,
-/// also after rounding to f32 (glTF stores times as f32 and requires them to increase); the
-/// same point names on every line (all of them: an unknown or missing name is an error, an
-/// explicit `null` is a gap); finite coordinates.
+/// Checks: a valid [`OutputLine`]; `t` finite and ≥ 0, strictly increasing, also after
+/// rounding to f32 (glTF stores times as f32 and requires them to increase); the same point
+/// names on every line (an unknown, missing or repeated name is an error); finite coordinates.
 pub struct TakeReader<R> {
     input: R,
     source_name: String,
@@ -124,7 +125,7 @@ impl<R: BufRead> TakeReader<R> {
                 break;
             }
         }
-        let parsed: TakeLine =
+        let parsed: OutputLine =
             serde_json::from_str(&self.buf).map_err(|cause| ExportError::Json {
                 source_name: self.source_name.clone(),
                 line: self.line_no,
@@ -132,7 +133,7 @@ impl<R: BufRead> TakeReader<R> {
             })?;
         self.check_time(parsed.t)?;
         if self.names.is_none() {
-            self.character = parsed.character.clone();
+            self.character = Some(parsed.character.clone());
             let names: Vec<String> = parsed.points.0.iter().map(|(n, _)| n.clone()).collect();
             if names.is_empty() {
                 return Err(self.bad("`points` is empty"));
@@ -146,7 +147,7 @@ impl<R: BufRead> TakeReader<R> {
         let count = self.index.len();
         let mut points = vec![None; count];
         let mut present = vec![false; count];
-        for (name, value) in parsed.points.0 {
+        for (name, v) in parsed.points.0 {
             let Some(&i) = self.index.get(&name) else {
                 return Err(self.bad(format!(
                     "point {name} is not one of the take's points ({})",
@@ -156,24 +157,29 @@ impl<R: BufRead> TakeReader<R> {
             if std::mem::replace(&mut present[i], true) {
                 return Err(self.bad(format!("point {name} appears twice")));
             }
-            if let Some(v) = value {
-                if !v.iter().all(|c| c.is_finite()) {
-                    return Err(self.bad(format!("point {name} = {v:?} is not finite")));
-                }
-                points[i] = Some(v);
+            if !v.iter().all(|c| c.is_finite()) {
+                return Err(self.bad(format!("point {name} = {v:?} is not finite")));
             }
+            points[i] = Some(v);
         }
         if let Some(i) = present.iter().position(|p| !p) {
             let name = &self.names.as_deref().unwrap_or_default()[i];
-            return Err(self.bad(format!(
-                "point {name} is missing (write `\"{name}\": null` for a point not seen)"
-            )));
+            return Err(self.bad(format!("point {name} is missing")));
         }
         tracing::trace!(line = self.line_no, t = parsed.t, "take frame");
+        let curve = parsed.curve.map(|c| c.points);
+        if let Some(bad) = curve
+            .iter()
+            .flatten()
+            .find(|p| !p.iter().all(|c| c.is_finite()))
+        {
+            return Err(self.bad(format!("curve point {bad:?} is not finite")));
+        }
         Ok(Some(TakeFrame {
             line: self.line_no,
             t: parsed.t,
             points,
+            curve,
         }))
     }
 
@@ -208,40 +214,16 @@ impl<R: BufRead> Iterator for TakeReader<R> {
     }
 }
 
-#[derive(Deserialize)]
-struct TakeLine {
-    t: f64,
-    #[serde(default)]
-    character: Option<String>,
-    points: OrderedPoints,
-}
-
-/// `points` in document order (a map would sort `P10` before `P2`).
-struct OrderedPoints(Vec<(String, Option<[f64; 3]>)>);
-
-impl<'de> Deserialize<'de> for OrderedPoints {
-    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        struct PointsVisitor;
-        impl<'de> Visitor<'de> for PointsVisitor {
-            type Value = OrderedPoints;
-            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("an object mapping point names to [x, y, z] or null")
-            }
-            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<OrderedPoints, A::Error> {
-                let mut points = Vec::with_capacity(map.size_hint().unwrap_or(16));
-                while let Some(entry) = map.next_entry::<String, Option<[f64; 3]>>()? {
-                    points.push(entry);
-                }
-                Ok(OrderedPoints(points))
-            }
-        }
-        deserializer.deserialize_map(PointsVisitor)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A line in retarget's output format.
+    fn line(t: &str, points: &str) -> String {
+        format!(
+            r#"{{"t": {t}, "seq": 0, "character": "wolf", "points": {points}, "confidence": {{}}, "head": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0]}}, "curve": null}}"#
+        )
+    }
 
     fn read_all(text: &str) -> Result<Vec<TakeFrame>, ExportError> {
         TakeReader::new(text.as_bytes(), "take.jsonl").collect()
@@ -249,11 +231,11 @@ mod tests {
 
     #[test]
     fn reads_points_in_document_order_and_skips_other_fields() {
-        let text = concat!(
-            r#"{"t": 0.0, "seq": 0, "character": "wolf", "points": {"P2": [1, 2, 3], "P10": [4, 5, 6], "P1": null}, "curve": {"x": 1}}"#,
-            "\n\n",
-            r#"{"t": 0.5, "points": {"P1": [0, 0, 1], "P2": [1, 2, 3.5], "P10": [4, 5, 6]}}"#,
-            "\n"
+        let text = format!(
+            "{}\n\n{}\n",
+            line("0.0", r#"{"P2": [1, 2, 3], "P10": [4, 5, 6], "P1": [0, 0, 0]}"#)
+                .replace("\"curve\": null", r#""curve": {"method": "sg5", "closed": true, "points": [[1, 2, 3]]}, "performer": {"D1": null}"#),
+            line("0.5", r#"{"P1": [0, 0, 1], "P2": [1, 2, 3.5], "P10": [4, 5, 6]}"#),
         );
         let mut reader = TakeReader::new(text.as_bytes(), "take.jsonl");
         let first = reader.next_frame().unwrap().unwrap();
@@ -261,11 +243,13 @@ mod tests {
         assert_eq!(reader.character(), Some("wolf"));
         assert_eq!(
             first.points,
-            vec![Some([1.0, 2.0, 3.0]), Some([4.0, 5.0, 6.0]), None]
+            vec![Some([1.0, 2.0, 3.0]), Some([4.0, 5.0, 6.0]), Some([0.0; 3])]
         );
+        assert_eq!(first.curve, Some(vec![[1.0, 2.0, 3.0]]));
         let second = reader.next_frame().unwrap().unwrap();
         assert_eq!(second.line, 3);
         assert_eq!(second.points[2], Some([0.0, 0.0, 1.0]));
+        assert_eq!(second.curve, None);
         assert!(reader.next_frame().unwrap().is_none());
     }
 
@@ -275,40 +259,43 @@ mod tests {
 
     #[test]
     fn errors_name_the_line_and_problem() {
-        let ok = r#"{"t": 0.1, "points": {"P1": [0, 0, 0]}}"#;
+        let ok = line("0.1", r#"{"P1": [0, 0, 0]}"#);
         let e = error_of(&format!("{ok}\nnot json\n"));
         assert!(e.starts_with("take.jsonl: line 2: not a take line"), "{e}");
         let e = error_of(&format!("{ok}\n{ok}\n"));
         assert!(e.contains("line 2: t = 0.1 does not come after"), "{e}");
-        let e = error_of(&format!(
-            "{ok}\n{}\n",
-            r#"{"t": 0.2, "points": {"P9": [0, 0, 0]}}"#
-        ));
+        let e = error_of(&format!("{ok}\n{}\n", line("0.2", r#"{"P9": [0, 0, 0]}"#)));
         assert!(
             e.contains("line 2: point P9 is not one of the take's points (P1)"),
             "{e}"
         );
-        let e = error_of(&format!("{ok}\n{}\n", r#"{"t": 0.2, "points": {}}"#));
+        let e = error_of(&format!("{ok}\n{}\n", line("0.2", "{}")));
         assert!(e.contains("line 2: point P1 is missing"), "{e}");
-        let e = error_of(r#"{"t": -1, "points": {"P1": [0, 0, 0]}}"#);
+        let e = error_of(&line("-1", r#"{"P1": [0, 0, 0]}"#));
         assert!(e.contains("line 1: t = -1 is not a finite time"), "{e}");
-        let e = error_of(r#"{"t": 0, "points": {"P1": [0, 0]}}"#);
+        let e = error_of(&line("0", r#"{"P1": [0, 0]}"#));
         assert!(e.contains("line 1: not a take line"), "{e}");
-        let e = error_of(r#"{"t": 0, "points": {"P1": [0, 0, 1e999]}}"#);
+        let e = error_of(&line("0", r#"{"P1": [0, 0, 1e999]}"#));
         assert!(e.contains("line 1"), "{e}");
-        let e = error_of(r#"{"t": 0, "points": {"P1": [0, 0, 0], "P1": [0, 0, 0]}}"#);
+        let e = error_of(&line("0", r#"{"P1": [0, 0, 0], "P1": [0, 0, 0]}"#));
         assert!(e.contains("line 1: point P1 appears twice"), "{e}");
         let e = error_of(&format!(
             "{}\n{}\n",
-            r#"{"t": 100000.0, "points": {"P1": [0, 0, 0]}}"#,
-            r#"{"t": 100000.001, "points": {"P1": [0, 0, 0]}}"#
+            line("100000.0", r#"{"P1": [0, 0, 0]}"#),
+            line("100000.001", r#"{"P1": [0, 0, 0]}"#)
         ));
         assert!(e.contains("line 2") && e.contains("32-bit"), "{e}");
+        // The raw dots that go into `retarget` are not a take.
+        let e = error_of(r#"{"t": 0, "points": {"D1": [0, 0, 0.6]}, "neutral": true}"#);
+        assert!(
+            e.contains("line 1: not a take line") && e.contains("seq"),
+            "{e}"
+        );
     }
 
     #[test]
     fn given_names_fix_the_order() {
-        let text = r#"{"t": 0, "points": {"P2": [2, 0, 0], "P1": [1, 0, 0]}}"#;
+        let text = line("0", r#"{"P2": [2, 0, 0], "P1": [1, 0, 0]}"#);
         let mut reader =
             TakeReader::with_points(text.as_bytes(), "x", vec!["P1".into(), "P2".into()]);
         let frame = reader.next_frame().unwrap().unwrap();

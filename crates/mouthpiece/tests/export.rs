@@ -165,6 +165,10 @@ fn write_take(path: &Path, frames: usize, points: usize) -> Vec<(f64, Vec<[f64; 
 }
 
 fn check_gltf(take: &Path, gltf: &Path) -> Value {
+    check_gltf_with(take, gltf, &[])
+}
+
+fn check_gltf_with(take: &Path, gltf: &Path, extra: &[&str]) -> Value {
     let script = repo().join("tests/python/check_gltf.py");
     run_json(
         Command::new(python())
@@ -172,7 +176,8 @@ fn check_gltf(take: &Path, gltf: &Path) -> Value {
             .arg("--take")
             .arg(take)
             .arg("--gltf")
-            .arg(gltf),
+            .arg(gltf)
+            .args(extra),
         "check_gltf.py",
     )
 }
@@ -426,5 +431,116 @@ fn bad_input_is_exit_2_naming_the_line() {
         let (code, stderr) = run(&args);
         assert_eq!(code, Some(2), "{args:?}: {stderr}");
         assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    }
+}
+
+/// The real chain: `mouthpiece retarget` puts the example performer on the wolf (modelled
+/// Z-up, head tilted), then export with the character file, `--model-up z` and the curve.
+#[test]
+fn wolf_take_from_retarget_lands_on_the_wolf_model() {
+    use mouthpiece_retarget::Character;
+    let dir = tempfile::tempdir().unwrap();
+    let root = repo();
+    let wolf_toml = root.join("config/characters/wolf.toml");
+    let take = dir.path().join("wolf.jsonl");
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(["retarget", "--character"])
+        .arg(&wolf_toml)
+        .arg("--input")
+        .arg(root.join("tests/data/example-performer.jsonl"))
+        .arg("--out")
+        .arg(&take)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "retarget: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let glb = dir.path().join("wolf.glb");
+    let (t, c, g) = (
+        take.to_str().unwrap(),
+        wolf_toml.to_str().unwrap(),
+        glb.to_str().unwrap(),
+    );
+    let stderr = export_ok(&[
+        t,
+        "--out",
+        g,
+        "--character",
+        c,
+        "--model-up",
+        "z",
+        "--curve",
+    ]);
+    assert!(stderr.contains("120 frames"), "{stderr}");
+    assert_valid(&glb);
+    let check = check_gltf_with(&take, &glb, &["--character", c, "--model-up", "z"]);
+    let character =
+        Character::from_toml_str(&std::fs::read_to_string(&wolf_toml).unwrap()).unwrap();
+    let width = character.mouth_width();
+    assert!(
+        check["max_error"].as_f64().unwrap() < 1e-6 * width,
+        "{check}"
+    );
+    assert!(
+        check["max_curve_error"].as_f64().unwrap() < 1e-6 * width,
+        "{check}"
+    );
+    assert!(check["curve_points"].as_u64().unwrap() > 12, "{check}");
+    // Rest pose through the node hierarchy = the wolf file's model points (glTF axes).
+    assert!(
+        check["max_rest_world_error"].as_f64().unwrap() < 1e-6 * width,
+        "{check}"
+    );
+
+    let gltf = dir.path().join("wolf.gltf");
+    export_ok(&[
+        t,
+        "--out",
+        gltf.to_str().unwrap(),
+        "--character",
+        c,
+        "--model-up",
+        "z",
+        "--reduce",
+        "0.0005",
+    ]);
+    assert_valid(&gltf);
+    let check = check_gltf_with(&take, &gltf, &["--character", c, "--model-up", "z"]);
+    assert!(
+        check["max_error"].as_f64().unwrap() <= 0.0005 + 1e-6,
+        "{check}"
+    );
+
+    // Blender: after import the points sit on the wolf model as the artist built it (Blender
+    // is Z-up like the model), following the take: model = frame origin + axes · point.
+    let frames: Vec<Value> = std::fs::read_to_string(&take)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let probes = [0usize, 40, 77, 119];
+    let result = blender_samples(
+        &glb,
+        probes.iter().map(|&i| frames[i]["t"].as_f64().unwrap()),
+    );
+    for &i in &probes {
+        let t = frames[i]["t"].as_f64().unwrap();
+        let at = &result["samples"][format!("{t:?}")];
+        for name in &character.point_names {
+            let p: Vec<f64> = serde_json::from_value(frames[i]["points"][name].clone()).unwrap();
+            let model = character
+                .frame
+                .to_parent(&nalgebra::Vector3::new(p[0], p[1], p[2]));
+            let got: Vec<f64> = serde_json::from_value(at[name].clone()).unwrap();
+            for a in 0..3 {
+                assert!(
+                    (got[a] - model[a]).abs() <= 1e-4 * width,
+                    "{name} at t={t}: Blender {got:?}, wolf model {model:?}"
+                );
+            }
+        }
     }
 }

@@ -39,6 +39,10 @@ pub struct Args {
     /// `z` (Blender's, +Z up, front -Y; converted to glTF's axes on export).
     #[arg(long, value_enum, default_value = "y")]
     pub model_up: ModelUpArg,
+    /// glTF only: also animate the take's smoothed mouth outline (`curve`, from `retarget
+    /// --smooth`) as nodes C0, C1, … under a `curve` node.
+    #[arg(long)]
+    pub curve: bool,
     /// Leave the point nodes empty (no small marker mesh).
     #[arg(long)]
     pub no_markers: bool,
@@ -90,6 +94,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if !tolerance.is_finite() || tolerance < 0.0 {
             return Err(bad_input(ExportError::BadTolerance(tolerance)));
         }
+    }
+    if args.curve && format == Format::Csv {
+        return Err(bad_input(anyhow!(
+            "--curve applies to glTF; CSV has the points only"
+        )));
     }
     if args.embed && format != Format::Gltf {
         return Err(bad_input(anyhow!("--embed applies to --format gltf only")));
@@ -152,6 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     ModelUpArg::Z => ModelUp::Z,
                 },
                 reduce: args.reduce,
+                curve: args.curve,
                 markers: !args.no_markers,
             };
             let dir = spool_dir(&args.out);
@@ -279,10 +289,7 @@ fn rig_from_take<R: BufRead>(
 }
 
 fn load_character(path: &Path) -> anyhow::Result<MouthRig> {
-    Err(bad_input(anyhow!(
-        "{}: character files are read by the retarget core, not merged yet",
-        path.display()
-    )))
+    MouthRig::load_character(path).map_err(export_error)
 }
 
 /// Spool files live next to the output: same disk, not a RAM-backed /tmp.
