@@ -10,7 +10,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
     /// A take line that is not JSON of the expected shape.
-    #[error("{source_name}: line {line}: not a take line: {cause}")]
+    #[error("{source_name}: line {line}: not a take line")]
     Json {
         source_name: String,
         line: u64,
@@ -50,6 +50,9 @@ pub enum ExportError {
         #[source]
         cause: Box<mouthpiece_retarget::Error>,
     },
+    /// The take names another character than the character file.
+    #[error("the take was made for character `{take}`, the character file is `{file}`")]
+    CharacterMismatch { take: String, file: String },
     /// The description of the character's mouth (names, rest pose, placement) is unusable.
     #[error("character: {0}")]
     BadRig(String),
@@ -80,6 +83,7 @@ impl ExportError {
                 | Self::BadLine { .. }
                 | Self::CharacterRead { .. }
                 | Self::Character { .. }
+                | Self::CharacterMismatch { .. }
                 | Self::EmptyTake { .. }
                 | Self::BadRig(_)
                 | Self::BadTolerance(_)

@@ -132,8 +132,10 @@ impl<R: BufRead> TakeReader<R> {
                 cause,
             })?;
         self.check_time(parsed.t)?;
-        if self.names.is_none() {
+        if self.character.is_none() {
             self.character = Some(parsed.character.clone());
+        }
+        if self.names.is_none() {
             let names: Vec<String> = parsed.points.0.iter().map(|(n, _)| n.clone()).collect();
             if names.is_empty() {
                 return Err(self.bad("`points` is empty"));
@@ -253,8 +255,16 @@ mod tests {
         assert!(reader.next_frame().unwrap().is_none());
     }
 
+    /// The error and its causes, as `main` prints them.
     fn error_of(text: &str) -> String {
-        read_all(text).unwrap_err().to_string()
+        let err = read_all(text).unwrap_err();
+        let mut message = err.to_string();
+        let mut cause = std::error::Error::source(&err);
+        while let Some(c) = cause {
+            message += &format!(": {c}");
+            cause = c.source();
+        }
+        message
     }
 
     #[test]

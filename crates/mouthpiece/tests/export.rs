@@ -402,6 +402,11 @@ fn bad_input_is_exit_2_naming_the_line() {
     let good = dir.path().join("good.jsonl");
     write_take(&good, 5, 12);
     let g = good.to_str().unwrap();
+    let wolf = repo()
+        .join("config/characters/wolf.toml")
+        .to_str()
+        .unwrap()
+        .to_owned();
     for (args, needle) in [
         (
             vec![g, "--out", "x.csv", "--reduce", "0.1"],

@@ -118,13 +118,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })?;
     let rig = match character {
         Some(rig) => {
-            if let (Some(take), Some(ours)) = (reader.character(), rig.character()) {
-                if take != ours {
-                    tracing::warn!(
-                        take,
-                        character = ours,
-                        "the take was made for another character"
-                    );
+            if let (Some(take), Some(file)) = (reader.character(), rig.character()) {
+                if take != file {
+                    return Err(bad_input(ExportError::CharacterMismatch {
+                        take: take.to_owned(),
+                        file: file.to_owned(),
+                    }));
                 }
             }
             rig
