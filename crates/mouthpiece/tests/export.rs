@@ -432,6 +432,18 @@ fn bad_input_is_exit_2_naming_the_line() {
             vec!["session.mcap", "--out", "x.glb"],
             "processing pipeline",
         ),
+        (
+            vec![g, "--out", "x.glb", "--character", wolf.as_str()],
+            "made for character `human`, the character file is `wolf`",
+        ),
+        (
+            vec![g, "--out", "x.csv", "--curve"],
+            "--curve applies to glTF",
+        ),
+        (
+            vec![g, "--out", "x.glb", "--curve"],
+            "line 1: no `curve` on this line",
+        ),
     ] {
         let (code, stderr) = run(&args);
         assert_eq!(code, Some(2), "{args:?}: {stderr}");
