@@ -26,7 +26,12 @@ def write_take(path, frames, points=12):
                 f"{0.002 * math.sin(3 * t + k):.6f}]"
                 for k in range(points)
             )
-            f.write(f'{{"t": {t!r}, "seq": {i}, "character": "human", "points": {{{pts}}}}}\n')
+            conf = ", ".join(f'"P{k + 1}": 1.0' for k in range(points))
+            f.write(
+                f'{{"t": {t!r}, "seq": {i}, "character": "human", "points": {{{pts}}}, '
+                f'"confidence": {{{conf}}}, "head": {{"rotation": [1.0, 0.0, 0.0, 0.0], '
+                f'"translation": [0.0, 0.0, 0.6]}}, "head_lost": false, "curve": null}}\n'
+            )
 
 
 def run(cmd):
