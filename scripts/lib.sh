@@ -33,3 +33,18 @@ ensure_python_venv() {
     MOUTHPIECE_PYTHON="$PWD/$venv/bin/python"
     export MOUTHPIECE_PYTHON
 }
+
+# The JavaScript test tools (tests/js: Khronos glTF-Validator), installed from the committed
+# lock file into tests/js/node_modules; again only when the lock file changed. Node and npm
+# come from Debian when no `npm` is on the PATH (a NodeSource `nodejs` bundles its own npm
+# and conflicts with Debian's `npm` package).
+ensure_js_test_tools() {
+    local dir=$1
+    local stamp="$dir/node_modules/.mouthpiece-lock"
+    command -v npm >/dev/null || ensure_apt nodejs npm
+    if ! cmp -s "$dir/package-lock.json" "$stamp"; then
+        echo "mouthpiece: installing JavaScript test tools in $dir" >&2
+        (cd "$dir" && npm ci --silent --no-audit --no-fund >/dev/null)
+        cp "$dir/package-lock.json" "$stamp"
+    fi
+}

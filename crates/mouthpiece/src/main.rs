@@ -28,6 +28,8 @@ enum Command {
     Record(cmd::record::Args),
     /// List OpenNI2 devices and V4L2 nodes with their modes and formats.
     Devices(cmd::devices::Args),
+    /// Export a take (JSONL or recording) as keyframe animation: glTF 2.0, GLB or CSV.
+    Export(cmd::export::Args),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +40,7 @@ fn main() -> ExitCode {
         Command::Synth(args) => cmd::synth::run(args),
         Command::Record(args) => cmd::record::run(args),
         Command::Devices(args) => cmd::devices::run(args),
+        Command::Export(args) => cmd::export::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

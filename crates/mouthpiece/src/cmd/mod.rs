@@ -2,5 +2,6 @@
 
 pub mod devices;
 pub mod record;
+pub mod export;
 pub mod retarget;
 pub mod synth;

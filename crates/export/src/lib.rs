@@ -1,0 +1,33 @@
+//! mouthpiece-export: a take as keyframe animation (method.md §9).
+//!
+//! A take is the stream `mouthpiece retarget` or `mouthpiece process` writes: one JSON line
+//! per time step with the character's mouth points in its mouth frame. This crate turns it
+//! into what animators load: glTF 2.0 (`.gltf` + `.bin`, embedded `.gltf`, or `.glb`) with
+//! one translation channel per point, or CSV.
+//!
+//! # Layout
+//! - [`take`]: the streaming, checking JSONL reader → [`TakeFrame`]s.
+//! - [`rig`]: the [`MouthRig`], the points' names, rest pose and the mouth's placement in the
+//!   character's model.
+//! - [`gltf`]: the streaming [`GltfWriter`]: keys spool to temporary files, the document is
+//!   assembled at the end. Memory is constant in the number of frames.
+//! - [`reduce`]: the [`Reducer`], streaming key reduction within a tolerance.
+//! - [`csv`]: the streaming [`CsvWriter`].
+//!
+//! The writers take frames from any source, so a recording turned into frames by the
+//! processing pipeline feeds them the same way as a JSONL file.
+
+pub mod csv;
+mod error;
+pub mod gltf;
+mod output;
+pub mod reduce;
+pub mod rig;
+pub mod take;
+
+pub use csv::{CsvSummary, CsvWriter};
+pub use error::ExportError;
+pub use gltf::{GltfLayout, GltfOptions, GltfSummary, GltfWriter, ModelUp};
+pub use reduce::Reducer;
+pub use rig::{MouthRig, RigPoint};
+pub use take::{TakeFrame, TakeReader};

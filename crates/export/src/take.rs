@@ -1,0 +1,317 @@
+//! Streaming reader of a take: `retarget` / `process` JSONL, one frame per line.
+//!
+//! Each line is parsed as the retarget core's [`OutputLine`] (the documented line format;
+//! `process` adds fields, which are skipped), so a file of another kind — the raw dots that
+//! go *into* `retarget`, say — is refused on its first line with the field it lacks. Memory is
+//! one line and one frame, whatever the take's length.
+
+use std::collections::HashMap;
+use std::io::BufRead;
+
+use mouthpiece_retarget::jsonl::OutputLine;
+
+use crate::ExportError;
+
+/// One time step of the take: the character's mouth points, in the rig's order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TakeFrame {
+    /// 1-based line of the input this frame came from (for error messages).
+    pub line: u64,
+    /// Seconds since the start of the stream.
+    pub t: f64,
+    /// Mouth-frame position per point. JSONL lines always have every point (`retarget` holds
+    /// a lost dot's last value); `None` is for frame sources with gaps: no key there.
+    pub points: Vec<Option<[f64; 3]>>,
+    /// The smoothed mouth outline (`curve`), when the take has one.
+    pub curve: Option<Vec<[f64; 3]>>,
+}
+
+/// Reads frames from JSONL, checking each line as it goes.
+///
+/// Checks: a valid [`OutputLine`]; `t` finite and ≥ 0, strictly increasing, also after
+/// rounding to f32 (glTF stores times as f32 and requires them to increase); the same point
+/// names on every line (an unknown, missing or repeated name is an error); finite coordinates.
+pub struct TakeReader<R> {
+    input: R,
+    source_name: String,
+    line_no: u64,
+    buf: String,
+    bytes_read: u64,
+    names: Option<Vec<String>>,
+    index: HashMap<String, usize>,
+    last_t: Option<(f64, f32)>,
+    character: Option<String>,
+}
+
+impl<R: BufRead> TakeReader<R> {
+    /// A reader that takes the point names, in order, from the first line.
+    pub fn new(input: R, source_name: impl Into<String>) -> Self {
+        Self {
+            input,
+            source_name: source_name.into(),
+            line_no: 0,
+            buf: String::new(),
+            bytes_read: 0,
+            names: None,
+            index: HashMap::new(),
+            last_t: None,
+            character: None,
+        }
+    }
+
+    /// A reader that expects exactly these point names (a character file's), in this order.
+    pub fn with_points(input: R, source_name: impl Into<String>, names: Vec<String>) -> Self {
+        let mut reader = Self::new(input, source_name);
+        reader.set_names(names);
+        reader
+    }
+
+    fn set_names(&mut self, names: Vec<String>) {
+        self.index = names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (n.clone(), i))
+            .collect();
+        self.names = Some(names);
+    }
+
+    /// The point names in frame order: known once the first frame is read, or given.
+    pub fn point_names(&self) -> Option<&[String]> {
+        self.names.as_deref()
+    }
+
+    /// The first line's `character` field, if it had one.
+    pub fn character(&self) -> Option<&str> {
+        self.character.as_deref()
+    }
+
+    /// Bytes consumed so far (for progress).
+    pub fn bytes_read(&self) -> u64 {
+        self.bytes_read
+    }
+
+    /// The input's name as used in error messages.
+    pub fn source_name(&self) -> &str {
+        &self.source_name
+    }
+
+    fn bad(&self, problem: impl Into<String>) -> ExportError {
+        ExportError::BadLine {
+            source_name: self.source_name.clone(),
+            line: self.line_no,
+            problem: problem.into(),
+        }
+    }
+
+    /// The next frame, `None` at the end. Blank lines are skipped.
+    pub fn next_frame(&mut self) -> Result<Option<TakeFrame>, ExportError> {
+        loop {
+            self.buf.clear();
+            self.line_no += 1;
+            let n = self
+                .input
+                .read_line(&mut self.buf)
+                .map_err(|cause| ExportError::Read {
+                    source_name: self.source_name.clone(),
+                    line: self.line_no,
+                    cause,
+                })?;
+            if n == 0 {
+                self.line_no -= 1;
+                return Ok(None);
+            }
+            self.bytes_read += n as u64;
+            if !self.buf.trim().is_empty() {
+                break;
+            }
+        }
+        let parsed: OutputLine =
+            serde_json::from_str(&self.buf).map_err(|cause| ExportError::Json {
+                source_name: self.source_name.clone(),
+                line: self.line_no,
+                cause,
+            })?;
+        self.check_time(parsed.t)?;
+        if self.character.is_none() {
+            self.character = Some(parsed.character.clone());
+        }
+        if self.names.is_none() {
+            let names: Vec<String> = parsed.points.0.iter().map(|(n, _)| n.clone()).collect();
+            if names.is_empty() {
+                return Err(self.bad("`points` is empty"));
+            }
+            let mut seen = std::collections::HashSet::new();
+            if let Some(dup) = names.iter().find(|n| !seen.insert(n.as_str())) {
+                return Err(self.bad(format!("point {dup} appears twice")));
+            }
+            self.set_names(names);
+        }
+        let count = self.index.len();
+        let mut points = vec![None; count];
+        let mut present = vec![false; count];
+        for (name, v) in parsed.points.0 {
+            let Some(&i) = self.index.get(&name) else {
+                return Err(self.bad(format!(
+                    "point {name} is not one of the take's points ({})",
+                    self.names.as_deref().unwrap_or_default().join(", ")
+                )));
+            };
+            if std::mem::replace(&mut present[i], true) {
+                return Err(self.bad(format!("point {name} appears twice")));
+            }
+            if !v.iter().all(|c| c.is_finite()) {
+                return Err(self.bad(format!("point {name} = {v:?} is not finite")));
+            }
+            points[i] = Some(v);
+        }
+        if let Some(i) = present.iter().position(|p| !p) {
+            let name = &self.names.as_deref().unwrap_or_default()[i];
+            return Err(self.bad(format!("point {name} is missing")));
+        }
+        tracing::trace!(line = self.line_no, t = parsed.t, "take frame");
+        let curve = parsed.curve.map(|c| c.points);
+        if let Some(bad) = curve
+            .iter()
+            .flatten()
+            .find(|p| !p.iter().all(|c| c.is_finite()))
+        {
+            return Err(self.bad(format!("curve point {bad:?} is not finite")));
+        }
+        Ok(Some(TakeFrame {
+            line: self.line_no,
+            t: parsed.t,
+            points,
+            curve,
+        }))
+    }
+
+    fn check_time(&mut self, t: f64) -> Result<(), ExportError> {
+        if !t.is_finite() || t < 0.0 {
+            return Err(self.bad(format!("t = {t} is not a finite time ≥ 0")));
+        }
+        let t32 = t as f32;
+        if let Some((prev, prev32)) = self.last_t {
+            if t <= prev {
+                return Err(self.bad(format!(
+                    "t = {t} does not come after the previous line's t = {prev}"
+                )));
+            }
+            if t32 <= prev32 {
+                return Err(self.bad(format!(
+                    "t = {t} and the previous t = {prev} are the same time in glTF's 32-bit \
+                     floats (frames too close for this time offset)"
+                )));
+            }
+        }
+        self.last_t = Some((t, t32));
+        Ok(())
+    }
+}
+
+impl<R: BufRead> Iterator for TakeReader<R> {
+    type Item = Result<TakeFrame, ExportError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_frame().transpose()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A line in retarget's output format.
+    fn line(t: &str, points: &str) -> String {
+        format!(
+            r#"{{"t": {t}, "seq": 0, "character": "wolf", "points": {points}, "confidence": {{}}, "head": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0]}}, "curve": null}}"#
+        )
+    }
+
+    fn read_all(text: &str) -> Result<Vec<TakeFrame>, ExportError> {
+        TakeReader::new(text.as_bytes(), "take.jsonl").collect()
+    }
+
+    #[test]
+    fn reads_points_in_document_order_and_skips_other_fields() {
+        let text = format!(
+            "{}\n\n{}\n",
+            line("0.0", r#"{"P2": [1, 2, 3], "P10": [4, 5, 6], "P1": [0, 0, 0]}"#)
+                .replace("\"curve\": null", r#""curve": {"method": "sg5", "closed": true, "points": [[1, 2, 3]]}, "performer": {"D1": null}"#),
+            line("0.5", r#"{"P1": [0, 0, 1], "P2": [1, 2, 3.5], "P10": [4, 5, 6]}"#),
+        );
+        let mut reader = TakeReader::new(text.as_bytes(), "take.jsonl");
+        let first = reader.next_frame().unwrap().unwrap();
+        assert_eq!(reader.point_names().unwrap(), ["P2", "P10", "P1"]);
+        assert_eq!(reader.character(), Some("wolf"));
+        assert_eq!(
+            first.points,
+            vec![Some([1.0, 2.0, 3.0]), Some([4.0, 5.0, 6.0]), Some([0.0; 3])]
+        );
+        assert_eq!(first.curve, Some(vec![[1.0, 2.0, 3.0]]));
+        let second = reader.next_frame().unwrap().unwrap();
+        assert_eq!(second.line, 3);
+        assert_eq!(second.points[2], Some([0.0, 0.0, 1.0]));
+        assert_eq!(second.curve, None);
+        assert!(reader.next_frame().unwrap().is_none());
+    }
+
+    /// The error and its causes, as `main` prints them.
+    fn error_of(text: &str) -> String {
+        let err = read_all(text).unwrap_err();
+        let mut message = err.to_string();
+        let mut cause = std::error::Error::source(&err);
+        while let Some(c) = cause {
+            message += &format!(": {c}");
+            cause = c.source();
+        }
+        message
+    }
+
+    #[test]
+    fn errors_name_the_line_and_problem() {
+        let ok = line("0.1", r#"{"P1": [0, 0, 0]}"#);
+        let e = error_of(&format!("{ok}\nnot json\n"));
+        assert!(e.starts_with("take.jsonl: line 2: not a take line"), "{e}");
+        let e = error_of(&format!("{ok}\n{ok}\n"));
+        assert!(e.contains("line 2: t = 0.1 does not come after"), "{e}");
+        let e = error_of(&format!("{ok}\n{}\n", line("0.2", r#"{"P9": [0, 0, 0]}"#)));
+        assert!(
+            e.contains("line 2: point P9 is not one of the take's points (P1)"),
+            "{e}"
+        );
+        let e = error_of(&format!("{ok}\n{}\n", line("0.2", "{}")));
+        assert!(e.contains("line 2: point P1 is missing"), "{e}");
+        let e = error_of(&line("-1", r#"{"P1": [0, 0, 0]}"#));
+        assert!(e.contains("line 1: t = -1 is not a finite time"), "{e}");
+        let e = error_of(&line("0", r#"{"P1": [0, 0]}"#));
+        assert!(e.contains("line 1: not a take line"), "{e}");
+        let e = error_of(&line("0", r#"{"P1": [0, 0, 1e999]}"#));
+        assert!(e.contains("line 1"), "{e}");
+        let e = error_of(&line("0", r#"{"P1": [0, 0, 0], "P1": [0, 0, 0]}"#));
+        assert!(e.contains("line 1: point P1 appears twice"), "{e}");
+        let e = error_of(&format!(
+            "{}\n{}\n",
+            line("100000.0", r#"{"P1": [0, 0, 0]}"#),
+            line("100000.001", r#"{"P1": [0, 0, 0]}"#)
+        ));
+        assert!(e.contains("line 2") && e.contains("32-bit"), "{e}");
+        // The raw dots that go into `retarget` are not a take.
+        let e = error_of(r#"{"t": 0, "points": {"D1": [0, 0, 0.6]}, "neutral": true}"#);
+        assert!(
+            e.contains("line 1: not a take line") && e.contains("seq"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn given_names_fix_the_order() {
+        let text = line("0", r#"{"P2": [2, 0, 0], "P1": [1, 0, 0]}"#);
+        let mut reader =
+            TakeReader::with_points(text.as_bytes(), "x", vec!["P1".into(), "P2".into()]);
+        let frame = reader.next_frame().unwrap().unwrap();
+        assert_eq!(
+            frame.points,
+            vec![Some([1.0, 0.0, 0.0]), Some([2.0, 0.0, 0.0])]
+        );
+    }
+}

@@ -1,0 +1,318 @@
+//! `mouthpiece export`: a take (retarget/process JSONL) → glTF 2.0 / GLB / CSV keyframes.
+
+use std::fs::File;
+use std::io::{self, BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::{anyhow, Context as _};
+use mouthpiece_export::{
+    CsvWriter, ExportError, GltfLayout, GltfOptions, GltfWriter, ModelUp, MouthRig, RigPoint,
+    TakeFrame, TakeReader,
+};
+
+use crate::exit::bad_input;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The take: JSONL from `mouthpiece retarget` or `mouthpiece process` (`-` for stdin), or a
+    /// recording (.mcap, .oni) to process first.
+    pub input: PathBuf,
+    /// Output format; by default from --out's extension (.gltf, .glb, .csv).
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+    /// Output file. For `gltf` the buffer goes to the same name with `.bin` (see --embed).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Character file (TOML): point names and order, rest pose, and where the mouth sits in
+    /// the model. Without it the names come from the take and the mouth node is the origin.
+    #[arg(long)]
+    pub character: Option<PathBuf>,
+    /// Drop glTF keys that linear interpolation reproduces within TOLERANCE (character units,
+    /// per axis).
+    #[arg(long, value_name = "TOLERANCE", allow_negative_numbers = true)]
+    pub reduce: Option<f64>,
+    /// `gltf` only: embed the buffer in the .gltf as base64 instead of writing a .bin.
+    #[arg(long)]
+    pub embed: bool,
+    /// Up axis of the character's model frame: `y` (glTF's convention, +Y up, front +Z) or
+    /// `z` (Blender's, +Z up, front -Y; converted to glTF's axes on export).
+    #[arg(long, value_enum, default_value = "y")]
+    pub model_up: ModelUpArg,
+    /// glTF only: also animate the take's smoothed mouth outline (`curve`, from `retarget
+    /// --smooth`) as nodes C0, C1, … under a `curve` node.
+    #[arg(long)]
+    pub curve: bool,
+    /// Leave the point nodes empty (no small marker mesh).
+    #[arg(long)]
+    pub no_markers: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModelUpArg {
+    Y,
+    Z,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// glTF 2.0 JSON (+ .bin, or embedded with --embed).
+    Gltf,
+    /// Binary glTF: one file.
+    Glb,
+    /// One row per frame: t, then x, y, z per point.
+    Csv,
+}
+
+impl Format {
+    fn from_extension(path: &Path) -> Option<Self> {
+        match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
+            "gltf" => Some(Self::Gltf),
+            "glb" => Some(Self::Glb),
+            "csv" => Some(Self::Csv),
+            _ => None,
+        }
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let format = match args.format {
+        Some(f) => f,
+        None => Format::from_extension(&args.out).ok_or_else(|| {
+            bad_input(anyhow!(
+                "--format not given and --out {} does not end in .gltf, .glb or .csv",
+                args.out.display()
+            ))
+        })?,
+    };
+    if let Some(tolerance) = args.reduce {
+        if format == Format::Csv {
+            return Err(bad_input(anyhow!(
+                "--reduce applies to glTF keys; CSV keeps one row per frame"
+            )));
+        }
+        if !tolerance.is_finite() || tolerance < 0.0 {
+            return Err(bad_input(ExportError::BadTolerance(tolerance)));
+        }
+    }
+    if args.curve && format == Format::Csv {
+        return Err(bad_input(anyhow!(
+            "--curve applies to glTF; CSV has the points only"
+        )));
+    }
+    if args.embed && format != Format::Gltf {
+        return Err(bad_input(anyhow!("--embed applies to --format gltf only")));
+    }
+
+    let character = args.character.as_deref().map(load_character).transpose()?;
+    let input = open_take(&args.input)?;
+    let total_bytes = input.len;
+    let mut reader = match &character {
+        Some(rig) => TakeReader::with_points(input.reader, input.name, rig.names()),
+        None => TakeReader::new(input.reader, input.name),
+    };
+    let first = reader.next_frame().map_err(export_error)?.ok_or_else(|| {
+        bad_input(ExportError::EmptyTake {
+            source_name: reader.source_name().to_owned(),
+        })
+    })?;
+    let rig = match character {
+        Some(rig) => {
+            if let (Some(take), Some(file)) = (reader.character(), rig.character()) {
+                if take != file {
+                    return Err(bad_input(ExportError::CharacterMismatch {
+                        take: take.to_owned(),
+                        file: file.to_owned(),
+                    }));
+                }
+            }
+            rig
+        }
+        None => rig_from_take(&reader, &first)?,
+    };
+
+    let progress = progress_bar(total_bytes);
+    let mut frames = Frames {
+        first: Some(first),
+        reader,
+        progress: &progress,
+    };
+    match format {
+        Format::Csv => {
+            let mut writer = CsvWriter::create(&rig, &args.out).map_err(export_error)?;
+            while let Some(frame) = frames.next()? {
+                writer.push(&frame).map_err(export_error)?;
+            }
+            progress.set_message("finishing");
+            let summary = writer.finish().map_err(export_error)?;
+            progress.finish_and_clear();
+            eprintln!("wrote {}: {} rows", summary.file.display(), summary.rows);
+        }
+        Format::Gltf | Format::Glb => {
+            let options = GltfOptions {
+                layout: match format {
+                    Format::Glb => GltfLayout::Glb,
+                    _ if args.embed => GltfLayout::Embedded,
+                    _ => GltfLayout::SeparateBin,
+                },
+                model_up: match args.model_up {
+                    ModelUpArg::Y => ModelUp::Y,
+                    ModelUpArg::Z => ModelUp::Z,
+                },
+                reduce: args.reduce,
+                curve: args.curve,
+                markers: !args.no_markers,
+            };
+            let dir = spool_dir(&args.out);
+            let mut writer = GltfWriter::new(rig, options, &dir).map_err(export_error)?;
+            while let Some(frame) = frames.next()? {
+                writer.push(&frame).map_err(export_error)?;
+            }
+            progress.set_message("writing the buffer");
+            let summary = writer.finish(&args.out).map_err(export_error)?;
+            progress.finish_and_clear();
+            let files: Vec<String> = summary
+                .files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect();
+            eprintln!(
+                "wrote {}: {} frames, {} keys{}",
+                files.join(" + "),
+                summary.frames,
+                summary.keys,
+                match args.reduce {
+                    Some(tol) => format!(
+                        ", {} of {} dropped by --reduce {tol} ({:.1} %)",
+                        summary.dropped,
+                        summary.samples,
+                        100.0 * summary.dropped as f64 / summary.samples.max(1) as f64
+                    ),
+                    None => String::new(),
+                }
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The first frame (read early to learn the point names), then the rest of the reader.
+struct Frames<'a, R> {
+    first: Option<TakeFrame>,
+    reader: TakeReader<R>,
+    progress: &'a indicatif::ProgressBar,
+}
+
+impl<R: BufRead> Frames<'_, R> {
+    fn next(&mut self) -> anyhow::Result<Option<TakeFrame>> {
+        if let Some(first) = self.first.take() {
+            return Ok(Some(first));
+        }
+        let frame = self.reader.next_frame().map_err(export_error)?;
+        self.progress.set_position(self.reader.bytes_read());
+        Ok(frame)
+    }
+}
+
+/// The user's mistakes exit 2, the machine's exit 1.
+fn export_error(err: ExportError) -> anyhow::Error {
+    if err.is_bad_input() {
+        bad_input(err)
+    } else {
+        err.into()
+    }
+}
+
+struct TakeInput {
+    name: String,
+    reader: Box<dyn BufRead>,
+    len: Option<u64>,
+}
+
+fn open_take(path: &Path) -> anyhow::Result<TakeInput> {
+    if path.as_os_str() == "-" {
+        return Ok(TakeInput {
+            name: "stdin".into(),
+            reader: Box::new(BufReader::new(io::stdin())),
+            len: None,
+        });
+    }
+    let extension = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if matches!(extension.as_deref(), Some("mcap" | "oni")) {
+        return take_from_recording(path);
+    }
+    let file = File::open(path)
+        .with_context(|| format!("opening the take {}", path.display()))
+        .map_err(bad_input)?;
+    let len = file.metadata().ok().map(|m| m.len());
+    Ok(TakeInput {
+        name: path.display().to_string(),
+        reader: Box::new(BufReader::with_capacity(256 * 1024, file)),
+        len,
+    })
+}
+
+/// A recording becomes a take through the processing pipeline (`mouthpiece process`).
+fn take_from_recording(path: &Path) -> anyhow::Result<TakeInput> {
+    Err(bad_input(anyhow!(
+        "{}: exporting a recording needs the processing pipeline (`mouthpiece process`), which \
+         this build does not have yet; export a take JSONL instead",
+        path.display()
+    )))
+}
+
+/// Without a character file: the take's own names and order, the first frame as rest pose
+/// (the origin for a point it lacks), the mouth at the origin.
+fn rig_from_take<R: BufRead>(
+    reader: &TakeReader<R>,
+    first: &TakeFrame,
+) -> anyhow::Result<MouthRig> {
+    let names = reader.point_names().unwrap_or_default();
+    let points = names
+        .iter()
+        .zip(&first.points)
+        .map(|(name, p)| RigPoint {
+            name: name.clone(),
+            rest: p.unwrap_or([0.0; 3]),
+        })
+        .collect();
+    MouthRig::new(
+        reader.character().map(str::to_owned),
+        points,
+        nalgebra::Isometry3::identity(),
+    )
+    .map_err(bad_input)
+}
+
+fn load_character(path: &Path) -> anyhow::Result<MouthRig> {
+    MouthRig::load_character(path).map_err(export_error)
+}
+
+/// Spool files live next to the output: same disk, not a RAM-backed /tmp.
+fn spool_dir(out: &Path) -> PathBuf {
+    match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// A byte-count bar on stderr when it is a terminal (indicatif draws nothing otherwise).
+fn progress_bar(total: Option<u64>) -> indicatif::ProgressBar {
+    let bar = match total {
+        Some(len) => indicatif::ProgressBar::new(len).with_style(
+            indicatif::ProgressStyle::with_template(
+                "{msg:>12} [{bar:40}] {bytes}/{total_bytes} ({eta})",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        ),
+        None => indicatif::ProgressBar::new_spinner(),
+    };
+    bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+    bar.set_message("reading");
+    bar.enable_steady_tick(Duration::from_millis(200));
+    bar
+}

@@ -1,0 +1,563 @@
+//! `mouthpiece export` end to end, judged by independent tools: Khronos' glTF-Validator
+//! (npm `gltf-validator`), a numpy reader of the written file (`tests/python/check_gltf.py`),
+//! and Blender importing it headless (`tests/blender/sample_gltf.py`).
+//!
+//! External tools come from `scripts/test` (Debian packages `nodejs`, `npm`, `blender`,
+//! `python3-numpy`; the npm package is installed here on first use if it is missing).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+use serde_json::{json, Value};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .unwrap()
+}
+
+fn mouthpiece(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run mouthpiece")
+}
+
+fn export_ok(args: &[&str]) -> String {
+    let out = mouthpiece(&[&["export"], args].concat());
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(
+        out.status.success(),
+        "mouthpiece export {args:?} failed: {stderr}"
+    );
+    stderr
+}
+
+fn python() -> String {
+    std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
+fn run_json(cmd: &mut Command, what: &str) -> Value {
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("{what}: cannot run: {e}"));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{what} failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(stdout.trim())
+        .unwrap_or_else(|e| panic!("{what}: not JSON ({e}): {stdout}"))
+}
+
+/// The Khronos validator, installed into tests/js/node_modules from the committed lock file.
+fn validator_script() -> PathBuf {
+    static READY: OnceLock<PathBuf> = OnceLock::new();
+    READY
+        .get_or_init(|| {
+            let js = repo().join("tests/js");
+            if !js.join("node_modules/gltf-validator/package.json").exists() {
+                let status = Command::new("npm")
+                    .args(["ci", "--silent", "--no-audit", "--no-fund"])
+                    .current_dir(&js)
+                    .status()
+                    .expect("npm (Debian package `npm`, installed by scripts/test)");
+                assert!(status.success(), "npm ci in tests/js failed");
+            }
+            js.join("validate-gltf.js")
+        })
+        .clone()
+}
+
+/// Runs glTF-Validator and insists on a clean report: no errors, warnings, infos or hints.
+fn assert_valid(path: &Path) -> Value {
+    assert_valid_except(path, &[])
+}
+
+/// Like [`assert_valid`], allowing infos with the given codes (and nothing else).
+fn assert_valid_except(path: &Path, allowed_infos: &[&str]) -> Value {
+    let report = run_json(
+        Command::new("node").arg(validator_script()).arg(path),
+        "glTF-Validator",
+    );
+    let issues = &report["issues"];
+    let allowed = |m: &Value| m["severity"] == 2 && allowed_infos.iter().any(|c| m["code"] == *c);
+    let unexpected_infos = issues["messages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|m| !allowed(m))
+        .count();
+    let infos = if allowed_infos.is_empty() {
+        issues["numInfos"].clone()
+    } else {
+        json!(unexpected_infos.min(issues["numInfos"].as_u64().unwrap() as usize))
+    };
+    for (kind, count) in [
+        ("numErrors", &issues["numErrors"]),
+        ("numWarnings", &issues["numWarnings"]),
+        ("numInfos", &infos),
+        ("numHints", &issues["numHints"]),
+    ] {
+        let count = count.clone();
+        assert_eq!(
+            count,
+            0,
+            "{}: validator {kind}: {}",
+            path.display(),
+            serde_json::to_string_pretty(&issues["messages"]).unwrap()
+        );
+    }
+    report
+}
+
+/// A take in `mouthpiece retarget`'s output format: a mouth of `points` points (human-sized,
+/// metres) opening, closing and drifting, with small deterministic jitter, `frames` frames
+/// at about 30 fps with uneven spacing.
+fn write_take(path: &Path, frames: usize, points: usize) -> Vec<(f64, Vec<[f64; 3]>)> {
+    use std::fmt::Write as _;
+    let mut text = String::new();
+    let mut take = Vec::new();
+    let mut t = 0.0;
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut jitter = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    for seq in 0..frames {
+        let open = 0.5 + 0.5 * (2.0 * std::f64::consts::PI * 0.7 * t).sin();
+        let pts: Vec<[f64; 3]> = (0..points)
+            .map(|k| {
+                let a = 2.0 * std::f64::consts::PI * k as f64 / points as f64;
+                [
+                    0.025 * a.cos() * (1.0 - 0.1 * open) + 1e-4 * jitter(),
+                    0.008 * a.sin() * (1.0 + 1.5 * open) + 1e-4 * jitter(),
+                    0.006 * (1.0 - a.cos().abs()) + 0.002 * (3.0 * t + k as f64).sin(),
+                ]
+            })
+            .collect();
+        // Written by hand: point order matters (P2 before P10), a JSON map would sort it.
+        let field = |f: &dyn Fn(usize) -> String| -> String {
+            let entries: Vec<String> = (0..points)
+                .map(|k| format!("\"P{}\": {}", k + 1, f(k)))
+                .collect();
+            format!("{{{}}}", entries.join(", "))
+        };
+        let line = format!(
+            "{{\"t\": {t:?}, \"seq\": {seq}, \"character\": \"human\", \"points\": {}, \"confidence\": {}, \
+             \"head\": {{\"rotation\": [1.0, 0.0, 0.0, 0.0], \"translation\": [0.0, 0.0, 0.6]}}, \
+             \"head_lost\": false, \"curve\": null}}",
+            field(&|k| json!(pts[k]).to_string()),
+            field(&|_| "1.0".to_owned()),
+        );
+        writeln!(text, "{line}").unwrap();
+        take.push((t, pts));
+        t += 1.0 / 30.0 + 0.004 * jitter();
+    }
+    std::fs::write(path, text).unwrap();
+    take
+}
+
+fn check_gltf(take: &Path, gltf: &Path) -> Value {
+    check_gltf_with(take, gltf, &[])
+}
+
+fn check_gltf_with(take: &Path, gltf: &Path, extra: &[&str]) -> Value {
+    let script = repo().join("tests/python/check_gltf.py");
+    run_json(
+        Command::new(python())
+            .arg(script)
+            .arg("--take")
+            .arg(take)
+            .arg("--gltf")
+            .arg(gltf)
+            .args(extra),
+        "check_gltf.py",
+    )
+}
+
+#[test]
+fn every_layout_passes_the_validator_and_reads_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let take = dir.path().join("take.jsonl");
+    write_take(&take, 240, 12);
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
+    let cases: &[(&str, &[&str])] = &[
+        ("take.glb", &[]),
+        ("take.gltf", &[]),
+        ("embedded.gltf", &["--embed"]),
+        ("empties.glb", &["--no-markers"]),
+        ("explicit.glb", &["--format", "glb"]),
+    ];
+    for (name, extra) in cases {
+        let out = dir.path().join(name);
+        let mut args = vec![s(&take), "--out".into(), s(&out)];
+        args.extend(extra.iter().map(|a| a.to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let stderr = export_ok(&args);
+        assert!(stderr.contains("240 frames, 2880 keys"), "{stderr}");
+        // Empties are what --no-markers asks for; the validator notes them (NODE_EMPTY).
+        let allowed: &[&str] = if extra.contains(&"--no-markers") {
+            &["NODE_EMPTY"]
+        } else {
+            &[]
+        };
+        assert_valid_except(&out, allowed);
+        let check = check_gltf(&take, &out);
+        assert_eq!(check["keys"], 2880, "{check}");
+        // Only f32 rounding (values ~2.5 cm, times ~8 s) separates the keys from the take.
+        assert!(
+            check["max_error"].as_f64().unwrap() < 1e-7,
+            "{name}: {check}"
+        );
+        assert_eq!(check["max_key_time_error"], 0.0, "{check}");
+    }
+    assert!(dir.path().join("take.bin").exists());
+    assert!(!dir.path().join("embedded.bin").exists());
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(
+        leftovers.is_empty(),
+        "temporary files left behind: {leftovers:?}"
+    );
+}
+
+#[test]
+fn reduce_drops_keys_within_tolerance() {
+    let dir = tempfile::tempdir().unwrap();
+    let take = dir.path().join("take.jsonl");
+    write_take(&take, 600, 12);
+    for tolerance in [0.0, 1e-4, 5e-4] {
+        let out = dir.path().join(format!("reduced-{tolerance}.glb"));
+        let stderr = export_ok(&[
+            take.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--reduce",
+            &tolerance.to_string(),
+        ]);
+        assert!(stderr.contains("dropped by --reduce"), "{stderr}");
+        assert_valid(&out);
+        let check = check_gltf(&take, &out);
+        let keys = check["keys"].as_u64().unwrap();
+        let error = check["max_error"].as_f64().unwrap();
+        assert!(error <= tolerance + 1e-7, "tolerance {tolerance}: {check}");
+        if tolerance >= 1e-4 {
+            // The jitter is ±5e-5: a tolerance above it must drop most keys.
+            assert!(
+                keys < 7200 / 2,
+                "tolerance {tolerance}: only down to {keys} keys"
+            );
+        }
+        let dropped = 7200 - keys;
+        assert!(
+            stderr.contains(&format!("{dropped} of 7200 dropped")),
+            "{stderr}"
+        );
+    }
+}
+
+#[test]
+fn single_frame_take_is_valid() {
+    let dir = tempfile::tempdir().unwrap();
+    let take = dir.path().join("one.jsonl");
+    write_take(&take, 1, 4);
+    let out = dir.path().join("one.glb");
+    export_ok(&[take.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_valid(&out);
+}
+
+#[test]
+fn csv_has_a_header_and_the_take_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let take_path = dir.path().join("take.jsonl");
+    let take = write_take(&take_path, 50, 12);
+    let out = dir.path().join("take.csv");
+    export_ok(&[take_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(header.len(), 1 + 3 * 12);
+    assert_eq!(&header[..4], ["t", "P1_x", "P1_y", "P1_z"]);
+    assert_eq!(header[36], "P12_z");
+    for ((t, points), line) in take.iter().zip(lines.by_ref()) {
+        let cells: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
+        assert_eq!(cells[0], *t);
+        let flat: Vec<f64> = points.iter().flatten().copied().collect();
+        assert_eq!(&cells[1..], &flat[..]);
+    }
+    assert!(lines.next().is_none());
+}
+
+#[test]
+fn blender_imports_the_glb_and_its_nodes_follow_the_take() {
+    let dir = tempfile::tempdir().unwrap();
+    let take_path = dir.path().join("take.jsonl");
+    let take = write_take(&take_path, 90, 12);
+    let out = dir.path().join("take.glb");
+    export_ok(&[take_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    // Frame times and midpoints between frames (where the keys are interpolated).
+    let probes: Vec<(f64, Vec<[f64; 3]>)> = [0usize, 17, 45, 89]
+        .iter()
+        .map(|&i| take[i].clone())
+        .chain([10usize, 60].iter().map(|&i| {
+            let ((t0, a), (t1, b)) = (&take[i], &take[i + 1]);
+            let mid: Vec<[f64; 3]> = a
+                .iter()
+                .zip(b)
+                .map(|(p, q)| [0, 1, 2].map(|k| 0.5 * (p[k] + q[k])))
+                .collect();
+            (0.5 * (t0 + t1), mid)
+        }))
+        .collect();
+    let result = blender_samples(&out, probes.iter().map(|p| p.0));
+    let width = 0.05;
+    for (t, expected) in &probes {
+        let at = &result["samples"][format!("{t:?}")];
+        for (k, p) in expected.iter().enumerate() {
+            let name = format!("P{}", k + 1);
+            let got = at[&name]
+                .as_array()
+                .unwrap_or_else(|| panic!("{name} at {t}: {at}"));
+            // glTF (x, y, z) is Blender's (x, -z, y).
+            let want = [p[0], -p[2], p[1]];
+            for a in 0..3 {
+                let err = (got[a].as_f64().unwrap() - want[a]).abs();
+                assert!(
+                    err <= 1e-4 * width,
+                    "{name} at t={t} axis {a}: Blender {got:?}, take {want:?}"
+                );
+            }
+        }
+    }
+    assert_eq!(result["objects"]["P1"]["parent"], "mouth");
+}
+
+fn blender_samples(file: &Path, times: impl Iterator<Item = f64>) -> Value {
+    let script = repo().join("tests/blender/sample_gltf.py");
+    let mut cmd = Command::new("blender");
+    cmd.args([
+        "-b",
+        "--factory-startup",
+        "--python-exit-code",
+        "1",
+        "--python",
+    ])
+    .arg(script)
+    .arg("--")
+    .arg(file)
+    .args(times.map(|t| format!("{t:?}")));
+    let out = cmd
+        .output()
+        .expect("blender (Debian package `blender`, installed by scripts/test)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "blender failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let line = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("SAMPLES "))
+        .unwrap_or_else(|| panic!("no SAMPLES line from Blender:\n{stdout}"));
+    serde_json::from_str(line).unwrap()
+}
+
+#[test]
+fn bad_input_is_exit_2_naming_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let take = dir.path().join("take.jsonl");
+    write_take(&take, 5, 12);
+    let mut text = std::fs::read_to_string(&take).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let broken = lines[2].replacen("\"t\": ", "\"t\": -", 1);
+    text = format!("{}\n{}\n{}\n{}\n", lines[0], lines[1], broken, lines[3]);
+    std::fs::write(&take, text).unwrap();
+    let out = dir.path().join("out.glb");
+    let run = |args: &[&str]| {
+        let o = mouthpiece(&[&["export"], args].concat());
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (code, stderr) = run(&[take.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("line 3") && stderr.contains("not a finite time"),
+        "{stderr}"
+    );
+    assert!(!out.exists(), "no partial output");
+
+    let good = dir.path().join("good.jsonl");
+    write_take(&good, 5, 12);
+    let g = good.to_str().unwrap();
+    let wolf = repo()
+        .join("config/characters/wolf.toml")
+        .to_str()
+        .unwrap()
+        .to_owned();
+    for (args, needle) in [
+        (
+            vec![g, "--out", "x.csv", "--reduce", "0.1"],
+            "--reduce applies to glTF",
+        ),
+        (
+            vec![g, "--out", "x.glb", "--reduce", "-1"],
+            "not a finite number",
+        ),
+        (
+            vec![g, "--out", "x.glb", "--embed"],
+            "--embed applies to --format gltf",
+        ),
+        (
+            vec![g, "--out", "x.obj"],
+            "does not end in .gltf, .glb or .csv",
+        ),
+        (
+            vec!["/nonexistent/take.jsonl", "--out", "x.glb"],
+            "opening the take",
+        ),
+        (
+            vec!["session.mcap", "--out", "x.glb"],
+            "processing pipeline",
+        ),
+        (
+            vec![g, "--out", "x.glb", "--character", wolf.as_str()],
+            "made for character `human`, the character file is `wolf`",
+        ),
+        (
+            vec![g, "--out", "x.csv", "--curve"],
+            "--curve applies to glTF",
+        ),
+        (
+            vec![g, "--out", "x.glb", "--curve"],
+            "line 1: no `curve` on this line",
+        ),
+    ] {
+        let (code, stderr) = run(&args);
+        assert_eq!(code, Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    }
+}
+
+/// The real chain: `mouthpiece retarget` puts the example performer on the wolf (modelled
+/// Z-up, head tilted), then export with the character file, `--model-up z` and the curve.
+#[test]
+fn wolf_take_from_retarget_lands_on_the_wolf_model() {
+    use mouthpiece_retarget::Character;
+    let dir = tempfile::tempdir().unwrap();
+    let root = repo();
+    let wolf_toml = root.join("config/characters/wolf.toml");
+    let take = dir.path().join("wolf.jsonl");
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(["retarget", "--character"])
+        .arg(&wolf_toml)
+        .arg("--input")
+        .arg(root.join("tests/data/example-performer.jsonl"))
+        .arg("--out")
+        .arg(&take)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "retarget: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let glb = dir.path().join("wolf.glb");
+    let (t, c, g) = (
+        take.to_str().unwrap(),
+        wolf_toml.to_str().unwrap(),
+        glb.to_str().unwrap(),
+    );
+    let stderr = export_ok(&[
+        t,
+        "--out",
+        g,
+        "--character",
+        c,
+        "--model-up",
+        "z",
+        "--curve",
+    ]);
+    assert!(stderr.contains("120 frames"), "{stderr}");
+    assert_valid(&glb);
+    let check = check_gltf_with(&take, &glb, &["--character", c, "--model-up", "z"]);
+    let character =
+        Character::from_toml_str(&std::fs::read_to_string(&wolf_toml).unwrap()).unwrap();
+    let width = character.mouth_width();
+    assert!(
+        check["max_error"].as_f64().unwrap() < 1e-6 * width,
+        "{check}"
+    );
+    assert!(
+        check["max_curve_error"].as_f64().unwrap() < 1e-6 * width,
+        "{check}"
+    );
+    assert!(check["curve_points"].as_u64().unwrap() > 12, "{check}");
+    // Rest pose through the node hierarchy = the wolf file's model points (glTF axes).
+    assert!(
+        check["max_rest_world_error"].as_f64().unwrap() < 1e-6 * width,
+        "{check}"
+    );
+
+    let gltf = dir.path().join("wolf.gltf");
+    export_ok(&[
+        t,
+        "--out",
+        gltf.to_str().unwrap(),
+        "--character",
+        c,
+        "--model-up",
+        "z",
+        "--reduce",
+        "0.0005",
+    ]);
+    assert_valid(&gltf);
+    let check = check_gltf_with(&take, &gltf, &["--character", c, "--model-up", "z"]);
+    assert!(
+        check["max_error"].as_f64().unwrap() <= 0.0005 + 1e-6,
+        "{check}"
+    );
+
+    // Blender: after import the points sit on the wolf model as the artist built it (Blender
+    // is Z-up like the model), following the take: model = frame origin + axes · point.
+    let frames: Vec<Value> = std::fs::read_to_string(&take)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let probes = [0usize, 40, 77, 119];
+    let result = blender_samples(
+        &glb,
+        probes.iter().map(|&i| frames[i]["t"].as_f64().unwrap()),
+    );
+    for &i in &probes {
+        let t = frames[i]["t"].as_f64().unwrap();
+        let at = &result["samples"][format!("{t:?}")];
+        for name in &character.point_names {
+            let p: Vec<f64> = serde_json::from_value(frames[i]["points"][name].clone()).unwrap();
+            let model = character
+                .frame
+                .to_parent(&nalgebra::Vector3::new(p[0], p[1], p[2]));
+            let got: Vec<f64> = serde_json::from_value(at[name].clone()).unwrap();
+            for a in 0..3 {
+                assert!(
+                    (got[a] - model[a]).abs() <= 1e-4 * width,
+                    "{name} at t={t}: Blender {got:?}, wolf model {model:?}"
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,189 @@
+"""Independent check of a `mouthpiece export` glTF/GLB against the take it came from.
+
+Reads the glTF with nothing but json, struct and numpy (no glTF library, nothing shared with
+the Rust writer), evaluates every point's LINEAR translation channel at every frame time of
+the take, and compares with the take's points. With a character file it also checks that the
+node hierarchy puts each point's rest position where the character file puts it in the model
+(in metres, glTF axes).
+
+    python check_gltf.py --take TAKE.jsonl --gltf OUT.glb [--character C.toml] [--model-up y|z]
+
+Prints one JSON object: counts and the largest errors found (the test judges them).
+"""
+
+import argparse
+import base64
+import json
+import math
+import os
+import struct
+import sys
+import tomllib
+
+import numpy as np
+
+COMPONENT = {5126: ("<f4", 4), 5123: ("<u2", 2), 5125: ("<u4", 4)}
+WIDTH = {"SCALAR": 1, "VEC3": 3, "VEC4": 4}
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+def load(path):
+    data = open(path, "rb").read()
+    if data[:4] == b"glTF":
+        magic, version, length = struct.unpack_from("<4sII", data, 0)
+        assert version == 2 and length == len(data), (version, length, len(data))
+        json_len, json_type = struct.unpack_from("<I4s", data, 12)
+        assert json_type == b"JSON"
+        doc = json.loads(data[20 : 20 + json_len])
+        offset = 20 + json_len
+        bin_len, bin_type = struct.unpack_from("<I4s", data, offset)
+        assert bin_type == b"BIN\0"
+        buffers = [data[offset + 8 : offset + 8 + bin_len]]
+    else:
+        doc = json.loads(data)
+        buffers = []
+        for b in doc["buffers"]:
+            uri = b["uri"]
+            if uri.startswith("data:"):
+                buffers.append(base64.b64decode(uri.split(",", 1)[1]))
+            else:
+                from urllib.parse import unquote
+
+                buffers.append(open(os.path.join(os.path.dirname(path), unquote(uri)), "rb").read())
+    for b, raw in zip(doc["buffers"], buffers):
+        assert len(raw) >= b["byteLength"], "buffer shorter than declared"
+    return doc, buffers
+
+
+def accessor(doc, buffers, index):
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    dtype, size = COMPONENT[acc["componentType"]]
+    width = WIDTH[acc["type"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    count = acc["count"]
+    raw = buffers[view["buffer"]][start : start + count * width * size]
+    values = np.frombuffer(raw, dtype=dtype).reshape(count, width)
+    if "min" in acc:
+        assert np.array_equal(values.min(axis=0), np.array(acc["min"], dtype=dtype)), "accessor min"
+        assert np.array_equal(values.max(axis=0), np.array(acc["max"], dtype=dtype)), "accessor max"
+    return values.astype(np.float64)
+
+
+def quat_matrix(q):
+    x, y, z, w = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def node_matrix(node):
+    m = np.eye(4)
+    s = np.diag(node.get("scale", [1, 1, 1]))
+    r = quat_matrix(node.get("rotation", [0, 0, 0, 1]))
+    m[:3, :3] = r @ s
+    m[:3, 3] = node.get("translation", [0, 0, 0])
+    return m
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--take", required=True)
+    ap.add_argument("--gltf", required=True)
+    ap.add_argument("--character")
+    ap.add_argument("--model-up", default="y", choices=["y", "z"])
+    args = ap.parse_args()
+
+    frames = [json.loads(line) for line in open(args.take) if line.strip()]
+    # Evaluate at the times glTF can hold (f32): the take's times rounded as the exporter must.
+    # That separates value errors from the inherent time rounding (up to 2.4e-7 s at t = 4 s).
+    times = np.array([f["t"] for f in frames]).astype(np.float32).astype(np.float64)
+    doc, buffers = load(args.gltf)
+
+    scene = doc["scenes"][doc.get("scene", 0)]
+    assert len(scene["nodes"]) == 1, "one root node"
+    mouth_index = scene["nodes"][0]
+    mouth = doc["nodes"][mouth_index]
+    assert mouth["name"] == "mouth", mouth.get("name")
+    children = [doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] != "curve"]
+    names = [c["name"] for c in children]
+    curve_groups = [doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] == "curve"]
+
+    if args.character:
+        character = tomllib.load(open(args.character, "rb"))
+        expected_names = list(character["points"].keys())
+    else:
+        expected_names = list(frames[0]["points"].keys())
+    assert names == expected_names, (names, expected_names)
+
+    animation = doc["animations"][0]
+    by_node = {}
+    for ch in animation["channels"]:
+        assert ch["target"]["path"] == "translation"
+        sampler = animation["samplers"][ch["sampler"]]
+        assert sampler.get("interpolation", "LINEAR") == "LINEAR"
+        t = accessor(doc, buffers, sampler["input"])[:, 0]
+        v = accessor(doc, buffers, sampler["output"])
+        by_node[doc["nodes"][ch["target"]["node"]]["name"]] = (t, v)
+
+    max_error = 0.0
+    max_time_error = 0.0
+    keys = 0
+    width = 0.0
+    for name in names:
+        t, v = by_node[name]
+        keys += len(t)
+        assert np.all(np.diff(t) > 0), f"{name}: key times not increasing"
+        expected = np.array([f["points"][name] for f in frames])
+        width = max(width, np.ptp(expected[:, 0]))
+        # Every key sits at one of the take's times (as f32).
+        nearest = np.abs(t[:, None] - times[None, :]).min(axis=1)
+        max_time_error = max(max_time_error, float(nearest.max()))
+        for k in range(3):
+            got = np.interp(times, t, v[:, k])
+            max_error = max(max_error, float(np.abs(got - expected[:, k]).max()))
+
+    curve_error = None
+    if curve_groups:
+        curve_names = [doc["nodes"][i]["name"] for i in curve_groups[0]["children"]]
+        curve_error = 0.0
+        for i, name in enumerate(curve_names):
+            assert name == f"C{i}", name
+            t, v = by_node[name]
+            keys += len(t)
+            expected = np.array([f["curve"]["points"][i] for f in frames])
+            for k in range(3):
+                got = np.interp(times, t, v[:, k])
+                curve_error = max(curve_error, float(np.abs(got - expected[:, k]).max()))
+
+    result = {
+        "frames": len(frames),
+        "curve_points": len(curve_groups[0]["children"]) if curve_groups else 0,
+        "max_curve_error": curve_error,
+        "points": names,
+        "keys": keys,
+        "max_error": max_error,
+        "max_key_time_error": max_time_error,
+    }
+
+    if args.character:
+        scale = UNITS.get(character.get("units", "m"), 1.0)
+        model = np.array([character["points"][n] for n in names], dtype=np.float64) * scale
+        if args.model_up == "z":
+            model = np.stack([model[:, 0], model[:, 2], -model[:, 1]], axis=1)
+        world = node_matrix(mouth)
+        rest_world = np.array(
+            [(world @ np.array(c["translation"] + [1.0]))[:3] for c in children]
+        )
+        result["max_rest_world_error"] = float(np.abs(rest_world - model).max())
+        corners = model[0] - model[len(names) // 2]
+        result["mouth_width_m"] = float(np.linalg.norm(corners))
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
