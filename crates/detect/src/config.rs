@@ -32,11 +32,13 @@ pub struct ColorClass {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Morphology {
-    /// 3x3 closing: fills pinholes that sensor noise punches into a dot. The default, because
-    /// far dots are only 2–3 px across and an opening would erase them.
-    Close,
-    /// 3x3 opening: removes isolated speckle (for noisy, close-up sessions).
+    /// 2x2 opening as a filter: a component survives when some of it survives the opening,
+    /// which removes speckle and thin lines but keeps dots 2–3 px across whole and never joins
+    /// neighbouring dots. The default.
     Open,
+    /// 3x3 closing: fills pinholes that sensor noise punches into a dot, but joins dots that
+    /// are less than a pixel apart (close-up sessions with large dots only).
+    Close,
     None,
 }
 
@@ -78,7 +80,7 @@ impl Default for DetectConfig {
             max_aspect: 4.0,
             depth_search_px: 3,
             depth_range_m: [0.2, 2.5],
-            morphology: Morphology::Close,
+            morphology: Morphology::Open,
             weight_hue_margin: 8,
             classes: default_classes(),
         }

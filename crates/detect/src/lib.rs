@@ -183,9 +183,13 @@ impl Detector {
             hue_luts.push(Mat::from_slice(&hue)?.try_clone()?);
             sat_luts.push(Mat::from_slice(&sat)?.try_clone()?);
         }
-        let cross = |n| imgproc::get_structuring_element_def(imgproc::MORPH_CROSS, Size::new(n, n));
+        let rect = |n| imgproc::get_structuring_element_def(imgproc::MORPH_RECT, Size::new(n, n));
+        let kernel = match config.morphology {
+            Morphology::Close => imgproc::get_structuring_element_def(imgproc::MORPH_CROSS, Size::new(3, 3))?,
+            _ => rect(2)?,
+        };
         Ok(Self {
-            kernel: cross(3)?,
+            kernel,
             dilate_kernel: imgproc::get_structuring_element_def(
                 imgproc::MORPH_RECT,
                 Size::new(3, 3),
@@ -300,24 +304,17 @@ impl Detector {
                 core::bitwise_or_def(&prev, &self.range_mask, &mut self.mask)?;
             }
         }
+        // Opening only decides which components are real (it would shave a 2-px dot's rim,
+        // biasing the centre): components come from the unopened mask and must keep a pixel
+        // through the opening. Closing changes the components themselves.
         let binary = match self.config.morphology {
             Morphology::Close => {
-                imgproc::morphology_ex_def(
-                    &self.mask,
-                    &mut self.morphed,
-                    imgproc::MORPH_CLOSE,
-                    &self.kernel,
-                )?;
+                imgproc::morphology_ex_def(&self.mask, &mut self.morphed, imgproc::MORPH_CLOSE, &self.kernel)?;
                 &self.morphed
             }
             Morphology::Open => {
-                imgproc::morphology_ex_def(
-                    &self.mask,
-                    &mut self.morphed,
-                    imgproc::MORPH_OPEN,
-                    &self.kernel,
-                )?;
-                &self.morphed
+                imgproc::morphology_ex_def(&self.mask, &mut self.morphed, imgproc::MORPH_OPEN, &self.kernel)?;
+                &self.mask
             }
             Morphology::None => &self.mask,
         };
@@ -433,6 +430,15 @@ impl Detector {
                 core::CMP_EQ,
             )?;
             imgproc::dilate_def(&self.comp, &mut self.comp_grown, &self.dilate_kernel)?;
+            if self.config.morphology == Morphology::Open {
+                let opened_local = Mat::roi(&self.morphed, local.to_cv())?;
+                core::min(&opened_local, &self.comp, &mut self.comp_weight)?;
+                if core::count_non_zero(&self.comp_weight)? == 0 {
+                    tracing::trace!(class = class_idx, ?bbox, area, "speckle: nothing left after opening");
+                    out.rejected += 1;
+                    continue;
+                }
+            }
             let weight_local = Mat::roi(&self.weight, local.to_cv())?;
             core::min(&weight_local, &self.comp_grown, &mut self.comp_weight)?;
             let m = imgproc::moments(&self.comp_weight, false)?;
