@@ -185,7 +185,9 @@ impl Detector {
         }
         let rect = |n| imgproc::get_structuring_element_def(imgproc::MORPH_RECT, Size::new(n, n));
         let kernel = match config.morphology {
-            Morphology::Close => imgproc::get_structuring_element_def(imgproc::MORPH_CROSS, Size::new(3, 3))?,
+            Morphology::Close => {
+                imgproc::get_structuring_element_def(imgproc::MORPH_CROSS, Size::new(3, 3))?
+            }
             _ => rect(2)?,
         };
         Ok(Self {
@@ -309,11 +311,21 @@ impl Detector {
         // through the opening. Closing changes the components themselves.
         let binary = match self.config.morphology {
             Morphology::Close => {
-                imgproc::morphology_ex_def(&self.mask, &mut self.morphed, imgproc::MORPH_CLOSE, &self.kernel)?;
+                imgproc::morphology_ex_def(
+                    &self.mask,
+                    &mut self.morphed,
+                    imgproc::MORPH_CLOSE,
+                    &self.kernel,
+                )?;
                 &self.morphed
             }
             Morphology::Open => {
-                imgproc::morphology_ex_def(&self.mask, &mut self.morphed, imgproc::MORPH_OPEN, &self.kernel)?;
+                imgproc::morphology_ex_def(
+                    &self.mask,
+                    &mut self.morphed,
+                    imgproc::MORPH_OPEN,
+                    &self.kernel,
+                )?;
                 &self.mask
             }
             Morphology::None => &self.mask,
@@ -434,7 +446,12 @@ impl Detector {
                 let opened_local = Mat::roi(&self.morphed, local.to_cv())?;
                 core::min(&opened_local, &self.comp, &mut self.comp_weight)?;
                 if core::count_non_zero(&self.comp_weight)? == 0 {
-                    tracing::trace!(class = class_idx, ?bbox, area, "speckle: nothing left after opening");
+                    tracing::trace!(
+                        class = class_idx,
+                        ?bbox,
+                        area,
+                        "speckle: nothing left after opening"
+                    );
                     out.rejected += 1;
                     continue;
                 }

@@ -22,6 +22,8 @@ struct Cli {
 enum Command {
     /// Retarget 3D dot positions (JSONL) onto a character's mouth (JSONL).
     Retarget(cmd::retarget::Args),
+    /// Run the whole pipeline (detect, track, retarget) over a recorded session, offline.
+    Process(cmd::process::Args),
 }
 
 fn main() -> ExitCode {
@@ -29,6 +31,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
+        Command::Process(args) => cmd::process::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

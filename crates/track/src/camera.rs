@@ -80,7 +80,9 @@ pub fn register_depth(depth: &DepthImage, calib: &Calibration, out: &mut DepthIm
             }
             let p = deproject(d, [u as f64, v as f64], raw as f64 * scale);
             let q = calib.depth_to_color.apply([p.x, p.y, p.z]);
-            let Some([x, y]) = project(c, &Vec3::new(q[0], q[1], q[2])) else { continue };
+            let Some([x, y]) = project(c, &Vec3::new(q[0], q[1], q[2])) else {
+                continue;
+            };
             let (xi, yi) = (x.round(), y.round());
             if xi < 0.0 || yi < 0.0 || xi >= c.width as f64 || yi >= c.height as f64 {
                 continue;
@@ -103,13 +105,20 @@ mod tests {
     use mouthpiece_frame::Extrinsics;
 
     fn distorted() -> Intrinsics {
-        Intrinsics { distortion: [0.12, -0.25, 0.001, -0.0015, 0.05], ..Intrinsics::default_vga() }
+        Intrinsics {
+            distortion: [0.12, -0.25, 0.001, -0.0015, 0.05],
+            ..Intrinsics::default_vga()
+        }
     }
 
     #[test]
     fn project_then_deproject_round_trips_with_distortion() {
         let k = distorted();
-        for p in [Vec3::new(0.03, -0.02, 0.6), Vec3::new(-0.2, 0.15, 0.7), Vec3::new(0.0, 0.0, 1.0)] {
+        for p in [
+            Vec3::new(0.03, -0.02, 0.6),
+            Vec3::new(-0.2, 0.15, 0.7),
+            Vec3::new(0.0, 0.0, 1.0),
+        ] {
             let px = project(&k, &p).unwrap();
             let q = deproject(&k, px, p.z);
             assert!((p - q).norm() < 1e-9, "{p:?} vs {q:?}");
@@ -130,8 +139,15 @@ mod tests {
         let k = Intrinsics::default_vga();
         let mut calib = Calibration::registered(k);
         calib.depth_registered = false;
-        calib.depth_to_color = Extrinsics { translation: [0.025, 0.0, 0.0], ..Extrinsics::IDENTITY };
-        let depth = DepthImage { width: 640, height: 480, data: vec![800; 640 * 480] };
+        calib.depth_to_color = Extrinsics {
+            translation: [0.025, 0.0, 0.0],
+            ..Extrinsics::IDENTITY
+        };
+        let depth = DepthImage {
+            width: 640,
+            height: 480,
+            data: vec![800; 640 * 480],
+        };
         let mut out = DepthImage::new(0, 0);
         register_depth(&depth, &calib, &mut out);
         // The shift is fx * b / z = 525 * 0.025 / 0.8 ≈ 16.4 px: the leftmost 16 columns of

@@ -47,20 +47,32 @@ pub enum GeometryFailure {
 /// corner at `D⌊N/2⌋+1`. Forehead dots are ordered from the performer's left to right.
 ///
 /// Returns, per dot (lip dots `D1..DN` then forehead `F1..FK`), the candidate index.
-pub fn label_by_geometry(cands: &[Candidate], layout: PerformerLayout) -> Result<Vec<usize>, GeometryFailure> {
+pub fn label_by_geometry(
+    cands: &[Candidate],
+    layout: PerformerLayout,
+) -> Result<Vec<usize>, GeometryFailure> {
     let (n, k) = (layout.lip_dots, layout.forehead_dots);
-    let mut forehead: Vec<usize> = (0..cands.len()).filter(|&i| cands[i].role == DotRole::Forehead).collect();
-    let mut any: Vec<usize> = (0..cands.len()).filter(|&i| cands[i].role == DotRole::Any).collect();
+    let mut forehead: Vec<usize> = (0..cands.len())
+        .filter(|&i| cands[i].role == DotRole::Forehead)
+        .collect();
+    let mut any: Vec<usize> = (0..cands.len())
+        .filter(|&i| cands[i].role == DotRole::Any)
+        .collect();
     if forehead.len() < k && !any.is_empty() {
         // One paint for lips and forehead: the forehead dots are the highest in the image.
         any.sort_by(|&a, &b| cands[a].pixel[1].total_cmp(&cands[b].pixel[1]));
         let take = (k - forehead.len()).min(any.len());
         forehead.extend(any.drain(..take));
     }
-    let mut lip: Vec<usize> = (0..cands.len()).filter(|&i| cands[i].role == DotRole::Lip).collect();
+    let mut lip: Vec<usize> = (0..cands.len())
+        .filter(|&i| cands[i].role == DotRole::Lip)
+        .collect();
     lip.extend(any);
     if lip.len() != n || forehead.len() != k {
-        return Err(GeometryFailure::Count { lip: lip.len(), forehead: forehead.len() });
+        return Err(GeometryFailure::Count {
+            lip: lip.len(),
+            forehead: forehead.len(),
+        });
     }
 
     // Corners: the lip pair furthest apart.
@@ -79,7 +91,11 @@ pub fn label_by_geometry(cands: &[Candidate], layout: PerformerLayout) -> Result
     let up = forehead_centroid - mid;
     let ab = cands[a].point - cands[b].point;
     // x points to the performer's left; z = x × up must face the camera (towards -mid).
-    let (left, right) = if ab.cross(&up).dot(&-mid) > 0.0 { (a, b) } else { (b, a) };
+    let (left, right) = if ab.cross(&up).dot(&-mid) > 0.0 {
+        (a, b)
+    } else {
+        (b, a)
+    };
     let x = cands[left].point - cands[right].point;
     if x.norm() < 1e-6 {
         return Err(GeometryFailure::Degenerate);
@@ -102,7 +118,10 @@ pub fn label_by_geometry(cands: &[Candidate], layout: PerformerLayout) -> Result
     };
     let start = angle(left);
     let tau = std::f64::consts::TAU;
-    let mut around: Vec<(f64, usize)> = lip.iter().map(|&i| ((angle(i) - start).rem_euclid(tau), i)).collect();
+    let mut around: Vec<(f64, usize)> = lip
+        .iter()
+        .map(|&i| ((angle(i) - start).rem_euclid(tau), i))
+        .collect();
     around.sort_by(|a, b| a.0.total_cmp(&b.0));
     // Rounding can put the left corner at ~2π: it starts the walk by definition.
     if let Some(pos) = around.iter().position(|&(_, i)| i == left) {
@@ -111,8 +130,15 @@ pub fn label_by_geometry(cands: &[Candidate], layout: PerformerLayout) -> Result
     }
     let rc = layout.right_corner();
     if around[rc].1 != right {
-        let upper = around.iter().position(|&(_, i)| i == right).unwrap_or(0).saturating_sub(1);
-        return Err(GeometryFailure::LipSplit { upper, lower: n.saturating_sub(upper + 2) });
+        let upper = around
+            .iter()
+            .position(|&(_, i)| i == right)
+            .unwrap_or(0)
+            .saturating_sub(1);
+        return Err(GeometryFailure::LipSplit {
+            upper,
+            lower: n.saturating_sub(upper + 2),
+        });
     }
     forehead.sort_by(|&p, &q| along(q).total_cmp(&along(p)));
 
@@ -183,7 +209,12 @@ mod tests {
         let centre = Vec3::new(0.01, 0.03, 0.6);
         // Performer's left is +x in the camera; up is -y.
         let lip_point = |angle: f64, open: f64| {
-            centre + Vec3::new(0.025 * angle.cos(), -(0.008 + open) * angle.sin(), -0.004 * angle.sin().abs())
+            centre
+                + Vec3::new(
+                    0.025 * angle.cos(),
+                    -(0.008 + open) * angle.sin(),
+                    -0.004 * angle.sin().abs(),
+                )
         };
         for i in 0..n {
             // D1 at angle 0 (left corner), upper lip angles in (0, π), right corner π, lower (π, 2π).
@@ -192,18 +223,29 @@ mod tests {
         }
         for j in 0..layout.forehead_dots {
             let x = 0.03 - 0.06 * j as f64 / (layout.forehead_dots - 1) as f64;
-            out.push((format!("F{}", j + 1), centre + Vec3::new(x, -0.09 - 0.005 * j as f64, 0.01)));
+            out.push((
+                format!("F{}", j + 1),
+                centre + Vec3::new(x, -0.09 - 0.005 * j as f64, 0.01),
+            ));
         }
         out
     }
 
-    fn to_candidates(dots: &[(String, Vec3)], forehead_role: DotRole, lip_role: DotRole) -> Vec<Candidate> {
+    fn to_candidates(
+        dots: &[(String, Vec3)],
+        forehead_role: DotRole,
+        lip_role: DotRole,
+    ) -> Vec<Candidate> {
         let k = mouthpiece_frame::Intrinsics::default_vga();
         dots.iter()
             .map(|(name, p)| Candidate {
                 pixel: crate::camera::project(&k, p).unwrap(),
                 point: *p,
-                role: if name.starts_with('F') { forehead_role } else { lip_role },
+                role: if name.starts_with('F') {
+                    forehead_role
+                } else {
+                    lip_role
+                },
             })
             .collect()
     }
@@ -212,7 +254,10 @@ mod tests {
     fn geometry_names_every_dot_in_any_order() {
         let layout = PerformerLayout::default();
         let dots = face(layout);
-        for (forehead_role, lip_role) in [(DotRole::Forehead, DotRole::Lip), (DotRole::Any, DotRole::Any)] {
+        for (forehead_role, lip_role) in [
+            (DotRole::Forehead, DotRole::Lip),
+            (DotRole::Any, DotRole::Any),
+        ] {
             let mut cands = to_candidates(&dots, forehead_role, lip_role);
             // Shuffle deterministically.
             cands.reverse();
@@ -229,8 +274,15 @@ mod tests {
             };
             let labels = label_by_geometry(&cands, layout).unwrap();
             for (dot, &cand) in labels.iter().enumerate() {
-                let expected = if dot < 12 { format!("D{}", dot + 1) } else { format!("F{}", dot - 11) };
-                assert_eq!(names[cand], expected, "roles {forehead_role:?}/{lip_role:?}");
+                let expected = if dot < 12 {
+                    format!("D{}", dot + 1)
+                } else {
+                    format!("F{}", dot - 11)
+                };
+                assert_eq!(
+                    names[cand], expected,
+                    "roles {forehead_role:?}/{lip_role:?}"
+                );
             }
         }
     }
@@ -240,14 +292,19 @@ mod tests {
         let layout = PerformerLayout::default();
         let roll = nalgebra::Rotation3::from_axis_angle(&Vec3::z_axis(), 0.5);
         let centre = Vec3::new(0.0, 0.0, 0.6);
-        let dots: Vec<(String, Vec3)> =
-            face(layout).into_iter().map(|(n, p)| (n, roll * (p - centre) + centre)).collect();
+        let dots: Vec<(String, Vec3)> = face(layout)
+            .into_iter()
+            .map(|(n, p)| (n, roll * (p - centre) + centre))
+            .collect();
         let cands = to_candidates(&dots, DotRole::Forehead, DotRole::Lip);
         let labels = label_by_geometry(&cands, layout).unwrap();
         assert_eq!(labels, (0..15).collect::<Vec<_>>());
         assert_eq!(
             label_by_geometry(&cands[1..], layout),
-            Err(GeometryFailure::Count { lip: 11, forehead: 3 })
+            Err(GeometryFailure::Count {
+                lip: 11,
+                forehead: 3
+            })
         );
     }
 
@@ -255,11 +312,19 @@ mod tests {
     fn assignment_leaves_a_missing_dot_missing() {
         let cands: Vec<Candidate> = [[10.0, 10.0], [30.0, 10.0]]
             .iter()
-            .map(|&p| Candidate { pixel: p, point: Vec3::zeros(), role: DotRole::Lip })
+            .map(|&p| Candidate {
+                pixel: p,
+                point: Vec3::zeros(),
+                role: DotRole::Lip,
+            })
             .collect();
         // Three dots predicted 20 px apart; the middle one is not seen. The two seen dots moved
         // 4 px towards the middle: still theirs, and the middle dot stays missing.
-        let preds = [([6.0, 10.0], 8.0, Slot::Lip), ([20.0, 10.0], 8.0, Slot::Lip), ([34.0, 10.0], 8.0, Slot::Lip)];
+        let preds = [
+            ([6.0, 10.0], 8.0, Slot::Lip),
+            ([20.0, 10.0], 8.0, Slot::Lip),
+            ([34.0, 10.0], 8.0, Slot::Lip),
+        ];
         let got = assign(&preds, &cands, &[false, false]);
         assert_eq!(got, vec![Some(0), None, Some(1)]);
     }
@@ -267,13 +332,28 @@ mod tests {
     #[test]
     fn assignment_respects_roles_gates_and_taken() {
         let cands = vec![
-            Candidate { pixel: [0.0, 0.0], point: Vec3::zeros(), role: DotRole::Forehead },
-            Candidate { pixel: [1.0, 0.0], point: Vec3::zeros(), role: DotRole::Lip },
-            Candidate { pixel: [50.0, 0.0], point: Vec3::zeros(), role: DotRole::Lip },
+            Candidate {
+                pixel: [0.0, 0.0],
+                point: Vec3::zeros(),
+                role: DotRole::Forehead,
+            },
+            Candidate {
+                pixel: [1.0, 0.0],
+                point: Vec3::zeros(),
+                role: DotRole::Lip,
+            },
+            Candidate {
+                pixel: [50.0, 0.0],
+                point: Vec3::zeros(),
+                role: DotRole::Lip,
+            },
         ];
         let preds = [([0.0, 0.0], 5.0, Slot::Lip), ([50.0, 30.0], 5.0, Slot::Lip)];
         assert_eq!(assign(&preds, &cands, &[false; 3]), vec![Some(1), None]);
-        assert_eq!(assign(&preds, &cands, &[false, true, false]), vec![None, None]);
+        assert_eq!(
+            assign(&preds, &cands, &[false, true, false]),
+            vec![None, None]
+        );
         let preds = [([0.0, 0.0], 5.0, Slot::Forehead)];
         assert_eq!(assign(&preds, &cands, &[false; 3]), vec![Some(0)]);
     }
@@ -283,9 +363,16 @@ mod tests {
         // Greedy nearest would give dot 0 the candidate at 5 and leave dot 1 far off.
         let cands: Vec<Candidate> = [[5.0, 0.0], [-1.0, 0.0]]
             .iter()
-            .map(|&p| Candidate { pixel: p, point: Vec3::zeros(), role: DotRole::Lip })
+            .map(|&p| Candidate {
+                pixel: p,
+                point: Vec3::zeros(),
+                role: DotRole::Lip,
+            })
             .collect();
         let preds = [([4.0, 0.0], 10.0, Slot::Lip), ([8.0, 0.0], 10.0, Slot::Lip)];
-        assert_eq!(assign(&preds, &cands, &[false, false]), vec![Some(1), Some(0)]);
+        assert_eq!(
+            assign(&preds, &cands, &[false, false]),
+            vec![Some(1), Some(0)]
+        );
     }
 }

@@ -21,6 +21,7 @@
 pub mod camera;
 pub mod depth;
 pub mod labels;
+pub mod pipeline;
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -45,13 +46,23 @@ pub enum TrackError {
     #[error("invalid configuration {key}: {message}")]
     Config { key: String, message: String },
     #[error("dot detection failed")]
-    Detect(#[from] DetectError),
+    Detect(#[source] DetectError),
     #[error("neutral calibration failed")]
     Neutral(#[source] mouthpiece_retarget::Error),
     #[error("head stabilisation failed")]
     Stabilise(#[source] mouthpiece_retarget::Error),
     #[error("frame {seq}: {message}")]
     Frame { seq: u64, message: String },
+}
+
+impl From<DetectError> for TrackError {
+    /// A bad detector setting is a configuration error like any other (the key says where).
+    fn from(e: DetectError) -> Self {
+        match e {
+            DetectError::Config { key, message } => TrackError::Config { key, message },
+            other => TrackError::Detect(other),
+        }
+    }
 }
 
 /// The tracker's settings (`[track]` in a configuration file).
@@ -100,19 +111,27 @@ impl Default for TrackConfig {
             gate_fraction: 0.5,
             lost_after_frames: 15,
             missing_hold_s: 0.5,
-            missing_decay_s: 1.0,
+            missing_decay_s: 0.5,
         }
     }
 }
 
 impl TrackConfig {
     pub fn validate(&self) -> Result<(), TrackError> {
-        let bad = |key: &str, message: &str| Err(TrackError::Config { key: format!("track.{key}"), message: message.into() });
+        let bad = |key: &str, message: &str| {
+            Err(TrackError::Config {
+                key: format!("track.{key}"),
+                message: message.into(),
+            })
+        };
         if self.lip_dots < 4 || self.lip_dots % 2 != 0 {
             return bad("lip_dots", "must be even and at least 4");
         }
         if self.forehead_dots < 3 {
-            return bad("forehead_dots", "at least 3 forehead dots are needed for the head pose");
+            return bad(
+                "forehead_dots",
+                "at least 3 forehead dots are needed for the head pose",
+            );
         }
         for (key, v) in [
             ("calibration_s", self.calibration_s),
@@ -126,7 +145,10 @@ impl TrackConfig {
                 return bad(key, "must be a positive number");
             }
         }
-        for (key, v) in [("missing_hold_s", self.missing_hold_s), ("missing_decay_s", self.missing_decay_s)] {
+        for (key, v) in [
+            ("missing_hold_s", self.missing_hold_s),
+            ("missing_decay_s", self.missing_decay_s),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(key, "must be zero or positive");
             }
@@ -138,7 +160,10 @@ impl TrackConfig {
     }
 
     pub fn layout(&self) -> PerformerLayout {
-        PerformerLayout { lip_dots: self.lip_dots, forehead_dots: self.forehead_dots }
+        PerformerLayout {
+            lip_dots: self.lip_dots,
+            forehead_dots: self.forehead_dots,
+        }
     }
 }
 
@@ -221,12 +246,14 @@ pub struct Tracker {
     stabiliser: Option<Stabiliser>,
     registered: DepthImage,
     depth_buf: Vec<(f64, f64, f64)>,
-    out: TrackedFrame,
+    pub(crate) out: TrackedFrame,
 }
 
 impl std::fmt::Debug for Tracker {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Tracker").field("config", &self.config).finish_non_exhaustive()
+        f.debug_struct("Tracker")
+            .field("config", &self.config)
+            .finish_non_exhaustive()
     }
 }
 
@@ -316,7 +343,9 @@ impl Tracker {
         let scale = calib.depth_scale_m;
 
         let search = self.search_region(frame);
-        let found = self.detector.detect(&frame.color, Some((depth, scale)), k.fx, search)?;
+        let found = self
+            .detector
+            .detect(&frame.color, Some((depth, scale)), k.fx, search)?;
         let mut cands = Vec::with_capacity(found.blobs.len());
         for blob in &found.blobs {
             let z_hint = blob.depth_m.unwrap_or(0.6);
@@ -325,12 +354,30 @@ impl Tracker {
             let z = if role == DotRole::Forehead {
                 // The forehead is smooth: a plane over a wide patch of skin around the dot
                 // averages the sensor noise down, which the head pose needs.
-                depth::depth_by_plane(depth, scale, blob.center, (4.0 * radius_px).max(6.0), self.depth_range, &mut self.depth_buf)
+                depth::depth_by_plane(
+                    depth,
+                    scale,
+                    blob.center,
+                    (4.0 * radius_px).max(6.0),
+                    self.depth_range,
+                    &mut self.depth_buf,
+                )
             } else {
-                depth::depth_at_dot(depth, scale, blob.center, radius_px, self.depth_range, &mut self.depth_buf)
+                depth::depth_at_dot(
+                    depth,
+                    scale,
+                    blob.center,
+                    radius_px,
+                    self.depth_range,
+                    &mut self.depth_buf,
+                )
             };
             if let Some((z, _)) = z {
-                cands.push(Candidate { pixel: blob.center, point: camera::deproject(&k, blob.center, z), role });
+                cands.push(Candidate {
+                    pixel: blob.center,
+                    point: camera::deproject(&k, blob.center, z),
+                    role,
+                });
             }
         }
 
@@ -350,7 +397,11 @@ impl Tracker {
             });
             out.pixels[dot] = p.map(|c| c.pixel);
             out.confidence[dot] = if p.is_some() { 1.0 } else { 0.0 };
-            let slot = if dot < n { &mut out.dots.lip[dot] } else { &mut out.dots.forehead[dot - n] };
+            let slot = if dot < n {
+                &mut out.dots.lip[dot]
+            } else {
+                &mut out.dots.forehead[dot - n]
+            };
             *slot = p.map(|c| c.point);
         }
         let seen = names.iter().filter(|c| c.is_some()).count();
@@ -402,7 +453,11 @@ impl Tracker {
     /// are as many candidates as dots, geometry may fill them in, but only if it agrees with
     /// every name the prediction gave (geometry alone can be fooled by extreme mouth shapes,
     /// prediction alone by fast motion; agreement of both is trusted).
-    fn name_candidates(&mut self, cands: &[Candidate], k: &mouthpiece_frame::Intrinsics) -> Vec<Option<usize>> {
+    fn name_candidates(
+        &mut self,
+        cands: &[Candidate],
+        k: &mouthpiece_frame::Intrinsics,
+    ) -> Vec<Option<usize>> {
         let layout = self.layout;
         let total = layout.lip_dots + layout.forehead_dots;
         let geometry = || match labels::label_by_geometry(cands, layout) {
@@ -423,7 +478,12 @@ impl Tracker {
             return predicted;
         }
         match geometry() {
-            Some(geo) if predicted.iter().zip(&geo).all(|(p, g)| p.is_none_or(|p| p == *g)) => {
+            Some(geo)
+                if predicted
+                    .iter()
+                    .zip(&geo)
+                    .all(|(p, g)| p.is_none_or(|p| p == *g)) =>
+            {
                 geo.into_iter().map(Some).collect()
             }
             _ => predicted,
@@ -434,13 +494,17 @@ impl Tracker {
     /// frame when nothing is named or every few frames while dots are missing.
     fn search_region(&self, frame: &Frame) -> Option<PixelRect> {
         let tracks = self.tracks.as_ref()?;
-        if self.frames_with_missing > 0 && self.frames_with_missing % self.config.full_search_every == 0 {
+        if self.frames_with_missing > 0
+            && self.frames_with_missing % self.config.full_search_every == 0
+        {
             return None;
         }
         let grow = (1u32 << self.frames_with_missing.min(4)) as f64;
         let margin = self.config.roi_margin_px * grow;
         let rect = PixelRect::around(
-            tracks.iter().map(|t| [t.pixel[0] + t.pixel_vel[0], t.pixel[1] + t.pixel_vel[1]]),
+            tracks
+                .iter()
+                .map(|t| [t.pixel[0] + t.pixel_vel[0], t.pixel[1] + t.pixel_vel[1]]),
             margin,
         )?;
         // A region covering most of the image costs as much as the full frame.
@@ -450,7 +514,11 @@ impl Tracker {
 
     /// Names by prediction: forehead first (constant pixel velocity), then the head motion,
     /// then the lip dots (their stabilised position and velocity carried by the head motion).
-    fn assign_by_prediction(&self, cands: &[Candidate], k: &mouthpiece_frame::Intrinsics) -> Vec<Option<usize>> {
+    fn assign_by_prediction(
+        &self,
+        cands: &[Candidate],
+        k: &mouthpiece_frame::Intrinsics,
+    ) -> Vec<Option<usize>> {
         let n = self.layout.lip_dots;
         let tracks = self.tracks.as_ref().expect("called with tracks");
         let mut taken = vec![false; cands.len()];
@@ -465,7 +533,11 @@ impl Tracker {
                 }
             })
             .collect();
-        let forehead = labels::assign(&self.gated(&forehead_preds, &tracks[n..], Slot::Forehead), cands, &taken);
+        let forehead = labels::assign(
+            &self.gated(&forehead_preds, &tracks[n..], Slot::Forehead),
+            cands,
+            &taken,
+        );
         for c in forehead.iter().flatten() {
             taken[*c] = true;
         }
@@ -480,17 +552,30 @@ impl Tracker {
         let lip_preds: Vec<[f64; 2]> = tracks[..n]
             .iter()
             .map(|t| {
-                let q = if t.missing == 0 { t.stab + t.stab_vel } else { t.stab };
+                let q = if t.missing == 0 {
+                    t.stab + t.stab_vel
+                } else {
+                    t.stab
+                };
                 camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
             })
             .collect();
-        let lip = labels::assign(&self.gated(&lip_preds, &tracks[..n], Slot::Lip), cands, &taken);
+        let lip = labels::assign(
+            &self.gated(&lip_preds, &tracks[..n], Slot::Lip),
+            cands,
+            &taken,
+        );
         lip.into_iter().chain(forehead).collect()
     }
 
     /// Gate per prediction: a fraction of the distance to the nearest other prediction of the
     /// group, at least `min_gate_px`, widened a little for dots missing for a while.
-    fn gated(&self, preds: &[[f64; 2]], tracks: &[DotTrack], slot: Slot) -> Vec<([f64; 2], f64, Slot)> {
+    fn gated(
+        &self,
+        preds: &[[f64; 2]],
+        tracks: &[DotTrack],
+        slot: Slot,
+    ) -> Vec<([f64; 2], f64, Slot)> {
         preds
             .iter()
             .enumerate()
@@ -516,14 +601,23 @@ impl Tracker {
                 return;
             }
             // First full naming: this forehead is the reference until calibrated.
-            self.reference_forehead = names[n..].iter().map(|c| cands[c.expect("all seen")].point).collect();
+            self.reference_forehead = names[n..]
+                .iter()
+                .map(|c| cands[c.expect("all seen")].point)
+                .collect();
             self.head = RigidTransform::IDENTITY;
             self.tracks = Some(
                 names
                     .iter()
                     .map(|c| {
                         let c = &cands[c.expect("all seen")];
-                        DotTrack { pixel: c.pixel, pixel_vel: [0.0; 2], stab: c.point, stab_vel: Vec3::zeros(), missing: 0 }
+                        DotTrack {
+                            pixel: c.pixel,
+                            pixel_vel: [0.0; 2],
+                            stab: c.point,
+                            stab_vel: Vec3::zeros(),
+                            missing: 0,
+                        }
                     })
                     .collect(),
             );
@@ -531,7 +625,10 @@ impl Tracker {
             return;
         }
         if self.frames_without_names > self.config.lost_after_frames {
-            tracing::info!(frames = self.frames_without_names, "dots lost; re-acquiring from geometry");
+            tracing::info!(
+                frames = self.frames_without_names,
+                "dots lost; re-acquiring from geometry"
+            );
             self.tracks = None;
             return;
         }
@@ -552,7 +649,8 @@ impl Tracker {
                     let c = &cands[*c];
                     let stab = inverse.apply(&c.point);
                     if track.missing == 0 {
-                        track.pixel_vel = [c.pixel[0] - track.pixel[0], c.pixel[1] - track.pixel[1]];
+                        track.pixel_vel =
+                            [c.pixel[0] - track.pixel[0], c.pixel[1] - track.pixel[1]];
                         track.stab_vel = stab - track.stab;
                     } else {
                         track.pixel_vel = [0.0; 2];
@@ -581,13 +679,22 @@ impl Tracker {
             return Ok(());
         }
         self.window.push_back((t, dots.clone()));
-        let span = |w: &VecDeque<(f64, PerformerDots)>| w.back().map_or(0.0, |b| b.0) - w.front().map_or(0.0, |f| f.0);
+        let span = |w: &VecDeque<(f64, PerformerDots)>| {
+            w.back().map_or(0.0, |b| b.0) - w.front().map_or(0.0, |f| f.0)
+        };
         // Keep just over the calibration span.
-        while self.window.len() > 2 && span(&self.window) - (self.window[1].0 - self.window[0].0) >= self.config.calibration_s {
+        while self.window.len() > 2
+            && span(&self.window) - (self.window[1].0 - self.window[0].0)
+                >= self.config.calibration_s
+        {
             self.window.pop_front();
         }
         // One frame interval short of the span is a full second of frames at any rate.
-        let interval = if self.window.len() > 1 { span(&self.window) / (self.window.len() - 1) as f64 } else { 0.0 };
+        let interval = if self.window.len() > 1 {
+            span(&self.window) / (self.window.len() - 1) as f64
+        } else {
+            0.0
+        };
         if span(&self.window) + interval < self.config.calibration_s - 1e-9 {
             return Ok(());
         }
@@ -605,15 +712,25 @@ impl Tracker {
             "neutral pose taken"
         );
         // Re-base the head motion on the neutral forehead.
-        self.reference_forehead = neutral.forehead_camera.iter().map(|p| p.expect("complete window")).collect();
+        self.reference_forehead = neutral
+            .forehead_camera
+            .iter()
+            .map(|p| p.expect("complete window"))
+            .collect();
         if let Some(tracks) = &mut self.tracks {
-            for (track, p) in tracks.iter_mut().zip(neutral.lip_camera.iter().chain(&self.reference_forehead)) {
+            for (track, p) in tracks
+                .iter_mut()
+                .zip(neutral.lip_camera.iter().chain(&self.reference_forehead))
+            {
                 track.stab = *p;
                 track.stab_vel = Vec3::zeros();
             }
         }
         self.head = RigidTransform::IDENTITY;
-        let missing = MissingDots { hold: self.config.missing_hold_s, decay: self.config.missing_decay_s };
+        let missing = MissingDots {
+            hold: self.config.missing_hold_s,
+            decay: self.config.missing_decay_s,
+        };
         self.stabiliser = Some(Stabiliser::new(neutral, missing).map_err(TrackError::Neutral)?);
         self.calibrating = false;
         self.window.clear();
@@ -626,12 +743,18 @@ impl Tracker {
     fn window_is_still(&self) -> bool {
         let n = self.layout.lip_dots;
         let first = &self.window[0].1;
-        let reference: Vec<Vec3> = first.forehead.iter().map(|p| p.expect("complete")).collect();
+        let reference: Vec<Vec3> = first
+            .forehead
+            .iter()
+            .map(|p| p.expect("complete"))
+            .collect();
         let mut sum = vec![Vec3::zeros(); n];
         let mut sum_sq = vec![0.0; n];
         for (_, d) in &self.window {
             let cur: Vec<Vec3> = d.forehead.iter().map(|p| p.expect("complete")).collect();
-            let Some(h) = kabsch(&cur, &reference) else { return false };
+            let Some(h) = kabsch(&cur, &reference) else {
+                return false;
+            };
             for (i, p) in d.lip.iter().enumerate() {
                 let q = h.apply(&p.expect("complete"));
                 sum[i] += q;
