@@ -74,7 +74,7 @@ impl Default for DetectConfig {
     fn default() -> Self {
         Self {
             dot_radius_m: 0.00225,
-            area_ratio: [0.2, 4.0],
+            area_ratio: [0.2, 8.0],
             min_area_px: 2,
             min_fill_ratio: 0.3,
             max_aspect: 4.0,

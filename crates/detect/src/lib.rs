@@ -23,6 +23,13 @@ use mouthpiece_frame::{ColorImage, DepthImage};
 
 pub use config::{default_classes, ColorClass, DetectConfig, DotRole, Morphology};
 
+/// Sets how many threads OpenCV may use for its image operations (process-wide). The
+/// benchmarks use 1 to measure one core; the daemon leaves OpenCV's default.
+pub fn set_opencv_threads(threads: i32) -> Result<(), DetectError> {
+    core::set_num_threads(threads)?;
+    Ok(())
+}
+
 /// What can go wrong in the detector.
 #[derive(Debug, thiserror::Error)]
 pub enum DetectError {

@@ -239,6 +239,9 @@ pub struct Tracker {
     /// Forehead positions the head motion is measured against (camera frame).
     reference_forehead: Vec<Vec3>,
     head: RigidTransform,
+    /// Lip dots at rest in the reference head pose (first naming, then the neutral pose): the
+    /// shape the neighbour-based prediction keeps offsets from.
+    rest: Vec<Vec3>,
     frames_without_names: u32,
     frames_with_missing: u32,
     calibrating: bool,
@@ -277,6 +280,7 @@ impl Tracker {
             tracks: None,
             reference_forehead: Vec::new(),
             head: RigidTransform::IDENTITY,
+            rest: Vec::new(),
             frames_without_names: 0,
             frames_with_missing: 0,
             calibrating: true,
@@ -473,7 +477,8 @@ impl Tracker {
                 None => vec![None; total],
             };
         }
-        let predicted = self.assign_by_prediction(cands, k);
+        let mut predicted = self.assign_by_prediction(cands, k);
+        self.enforce_lip_order(&mut predicted, cands);
         if predicted.iter().all(Option::is_some) || cands.len() != total {
             return predicted;
         }
@@ -488,6 +493,79 @@ impl Tracker {
             }
             _ => predicted,
         }
+    }
+
+    /// Names that break the walk around the mouth are dropped (missing beats wrong): in the
+    /// neutral mouth frame (head motion removed), the named lip dots must meet in label order
+    /// going round the mouth's origin from the left corner over the upper lip. The longest
+    /// run of names in order is kept, the others become missing.
+    fn enforce_lip_order(&self, names: &mut [Option<usize>], cands: &[Candidate]) {
+        let Some(stab) = &self.stabiliser else { return };
+        let frame = &stab.neutral().frame;
+        let n = self.layout.lip_dots;
+        let inverse = self.head_now(names, cands).inverse();
+        // Angle about the mouth origin, the walk starting at the left corner (or, when it is
+        // not seen, half-way between it and the last lower-lip dot at rest).
+        let tau = std::f64::consts::TAU;
+        let raw = |c: usize| {
+            let q = frame.to_mouth(&inverse.apply(&cands[c].point));
+            q.y.atan2(q.x)
+        };
+        let start = match names[0] {
+            Some(c) => raw(c) - 1e-9,
+            None => {
+                let rest = |i: usize| stab.neutral().lip[i].y.atan2(stab.neutral().lip[i].x);
+                let (last, first) = (rest(n - 1), rest(0));
+                let last = if last > first { last - tau } else { last };
+                (last + first) / 2.0
+            }
+        };
+        let angle = |c: usize| (raw(c) - start).rem_euclid(tau);
+        let found: Vec<(usize, f64)> = (0..n)
+            .filter_map(|i| names[i].map(|c| (i, angle(c))))
+            .collect();
+        if found.len() < 2 {
+            return;
+        }
+        // Longest increasing subsequence of the angles in label order (n is small: O(n²)).
+        let mut best_len = vec![1usize; found.len()];
+        let mut prev = vec![usize::MAX; found.len()];
+        for a in 0..found.len() {
+            for b in 0..a {
+                if found[b].1 < found[a].1 && best_len[b] + 1 > best_len[a] {
+                    best_len[a] = best_len[b] + 1;
+                    prev[a] = b;
+                }
+            }
+        }
+        let mut end = (0..found.len())
+            .max_by_key(|&a| best_len[a])
+            .expect("non-empty");
+        let mut keep = vec![false; found.len()];
+        loop {
+            keep[end] = true;
+            if prev[end] == usize::MAX {
+                break;
+            }
+            end = prev[end];
+        }
+        for (a, &(i, _)) in found.iter().enumerate() {
+            if !keep[a] {
+                tracing::debug!(dot = %PerformerLayout::lip_name(i), "name breaks the order around the mouth; dropped");
+                names[i] = None;
+            }
+        }
+    }
+
+    /// This frame's head motion (reference → now) from the named forehead dots, or the last one.
+    fn head_now(&self, names: &[Option<usize>], cands: &[Candidate]) -> RigidTransform {
+        let n = self.layout.lip_dots;
+        let (from, to): (Vec<Vec3>, Vec<Vec3>) = names[n..]
+            .iter()
+            .enumerate()
+            .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
+            .unzip();
+        kabsch(&from, &to).unwrap_or(self.head)
     }
 
     /// Where to look: around the predicted dots, growing while some are missing; the full
@@ -560,11 +638,55 @@ impl Tracker {
                 camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
             })
             .collect();
-        let lip = labels::assign(
+        let mut lip = labels::assign(
             &self.gated(&lip_preds, &tracks[..n], Slot::Lip),
             cands,
             &taken,
         );
+
+        // Second chance for lip dots still missing: the lips move together (the jaw carries
+        // the whole lower lip), so predict each from its neighbours along the mouth as found
+        // now, keeping its rest offset to them. Only dots with a found neighbour, only blobs
+        // nobody took, same gates.
+        if lip.iter().any(Option::is_none) {
+            for c in lip.iter().flatten() {
+                taken[*c] = true;
+            }
+            let inverse = head.inverse();
+            let mut preds = Vec::new();
+            let mut which = Vec::new();
+            for i in (0..n).filter(|&i| lip[i].is_none()) {
+                let mut sum = Vec3::zeros();
+                let mut count = 0.0;
+                for j in [(i + n - 1) % n, (i + 1) % n] {
+                    if let Some(c) = lip[j] {
+                        let now = inverse.apply(&cands[c].point);
+                        sum += now + (self.rest[i] - self.rest[j]);
+                        count += 1.0;
+                    }
+                }
+                if count > 0.0 {
+                    if let Some(px) = camera::project(k, &head.apply(&(sum / count))) {
+                        preds.push(px);
+                        which.push(i);
+                    }
+                }
+            }
+            if !preds.is_empty() {
+                // Gates from this frame's lip positions (found or predicted).
+                let mut all: Vec<[f64; 2]> = (0..n)
+                    .map(|i| lip[i].map_or(lip_preds[i], |c| cands[c].pixel))
+                    .collect();
+                for (p, &i) in preds.iter().zip(&which) {
+                    all[i] = *p;
+                }
+                let gates = self.gated(&all, &tracks[..n], Slot::Lip);
+                let second: Vec<_> = which.iter().map(|&i| gates[i]).collect();
+                for (&i, c) in which.iter().zip(labels::assign(&second, cands, &taken)) {
+                    lip[i] = c;
+                }
+            }
+        }
         lip.into_iter().chain(forehead).collect()
     }
 
@@ -606,6 +728,10 @@ impl Tracker {
                 .map(|c| cands[c.expect("all seen")].point)
                 .collect();
             self.head = RigidTransform::IDENTITY;
+            self.rest = names[..n]
+                .iter()
+                .map(|c| cands[c.expect("all seen")].point)
+                .collect();
             self.tracks = Some(
                 names
                     .iter()
@@ -727,6 +853,7 @@ impl Tracker {
             }
         }
         self.head = RigidTransform::IDENTITY;
+        self.rest = neutral.lip_camera.clone();
         let missing = MissingDots {
             hold: self.config.missing_hold_s,
             decay: self.config.missing_decay_s,
