@@ -24,6 +24,8 @@ enum Command {
     Retarget(cmd::retarget::Args),
     /// Run the whole pipeline (detect, track, retarget) over a recorded session, offline.
     Process(cmd::process::Args),
+    /// Measure detection, tracking and retargeting on synthetic sessions with ground truth.
+    Evaluate(cmd::evaluate::Args),
 }
 
 fn main() -> ExitCode {
@@ -32,6 +34,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
         Command::Process(args) => cmd::process::run(args),
+        Command::Evaluate(args) => cmd::evaluate::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

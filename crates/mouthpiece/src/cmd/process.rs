@@ -36,6 +36,9 @@ pub struct Args {
     /// Shape smoothing that makes each line's `curve`.
     #[arg(long, value_enum, default_value = "bspline")]
     pub smooth: Smooth,
+    /// Threads OpenCV may use (0: its default). 1 measures one core.
+    #[arg(long, default_value_t = 0)]
+    pub opencv_threads: i32,
 }
 
 /// Loads the `[detect]`/`[track]` configuration (defaults without a file).
@@ -128,6 +131,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         one_euro: None,
     };
     let mut pipeline = Pipeline::new(config, character, settings).map_err(bad_input)?;
+    if args.opencv_threads > 0 {
+        mouthpiece_detect::set_opencv_threads(args.opencv_threads)?;
+    }
     let mut input = Input::open(&args.input)?;
 
     let to_stdout = args.out.as_os_str() == "-";
@@ -162,6 +168,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut frames = 0u64;
     let mut calibrated_at = None;
     let mut frames_with_missing = 0u64;
+    let mut pipeline_ms: Vec<f64> = Vec::new();
     while let Some(frame) = input
         .next_frame()
         .with_context(|| format!("reading {}", args.input.display()))?
@@ -197,9 +204,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bar.finish_and_clear();
     }
     let secs = started.elapsed().as_secs_f64();
+    pipeline_ms.sort_by(f64::total_cmp);
+    let pct = |q: f64| {
+        pipeline_ms
+            .get(((pipeline_ms.len().max(1) - 1) as f64 * q).round() as usize)
+            .copied()
+            .unwrap_or(0.0)
+    };
     tracing::info!(
         frames,
         fps = format!("{:.1}", frames as f64 / secs.max(1e-9)),
+        pipeline_median_ms = format!("{:.3}", pct(0.5)),
+        pipeline_p99_ms = format!("{:.3}", pct(0.99)),
         calibrated_at_s = ?calibrated_at,
         frames_with_missing_dots = frames_with_missing,
         "process done"
