@@ -26,6 +26,8 @@ enum Command {
     Process(cmd::process::Args),
     /// Measure detection, tracking and retargeting on synthetic sessions with ground truth.
     Evaluate(cmd::evaluate::Args),
+    /// Render a synthetic performer (head with painted dots, depth + colour, ground truth) to MCAP.
+    Synth(cmd::synth::Args),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +37,7 @@ fn main() -> ExitCode {
         Command::Retarget(args) => cmd::retarget::run(args),
         Command::Process(args) => cmd::process::run(args),
         Command::Evaluate(args) => cmd::evaluate::run(args),
+        Command::Synth(args) => cmd::synth::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

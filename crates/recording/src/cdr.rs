@@ -38,7 +38,7 @@ pub fn compressed_image_schema() -> String {
 pub fn camera_calibration_schema() -> String {
     format!(
         "builtin_interfaces/Time timestamp\nstring frame_id\nuint32 width\nuint32 height\n\
-         string distortion_model\nfloat64[] D\nfloat64[9] K\nfloat64[9] R\nfloat64[12] P\n{TIME_DEFINITION}"
+         string distortion_model\nfloat64[] d\nfloat64[9] k\nfloat64[9] r\nfloat64[12] p\n{TIME_DEFINITION}"
     )
 }
 

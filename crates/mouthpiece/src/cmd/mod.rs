@@ -3,3 +3,4 @@
 pub mod evaluate;
 pub mod process;
 pub mod retarget;
+pub mod synth;

@@ -1,0 +1,116 @@
+//! `mouthpiece synth` end to end: the file it writes is read by Python's `mcap` package (an
+//! independent reader, `tests/read_session.py`) and by our own reader; bad input exits 2.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use mouthpiece_recording::SessionReader;
+use mouthpiece_synth::{Synth, SynthConfig};
+
+fn mouthpiece() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+}
+
+fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn python() -> String {
+    std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
+#[test]
+fn python_mcap_reads_what_synth_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s.mcap");
+    let status = mouthpiece()
+        .args(["synth", "--out"])
+        .arg(&out)
+        .args(["--seconds", "2", "--seed", "42", "--size", "160x120"])
+        .status()
+        .unwrap();
+    assert!(status.success());
+
+    // What was written: the same config rendered in memory.
+    let config = SynthConfig {
+        seed: 42,
+        seconds: 2.0,
+        camera: SynthConfig::camera_for_size(160, 120),
+        ..SynthConfig::default()
+    };
+    let depth_frame = 47;
+    let (frame, _) = Synth::new(config).unwrap().nth(depth_frame).unwrap();
+    let depth_file = dir.path().join("depth.raw");
+    let bytes: Vec<u8> = frame
+        .depth
+        .data
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    std::fs::write(&depth_file, bytes).unwrap();
+    let expected = serde_json::json!({
+        "frames": 60, "depth_frame": depth_frame, "depth_file": depth_file,
+        "width": 160, "height": 120, "color_format": "jpeg",
+    });
+    let expected_file = dir.path().join("expected.json");
+    std::fs::write(&expected_file, expected.to_string()).unwrap();
+
+    let output = Command::new(python())
+        .arg(repo_root().join("tests/read_session.py"))
+        .arg(&out)
+        .arg(&expected_file)
+        .output()
+        .expect("run Python (set MOUTHPIECE_PYTHON)");
+    assert!(
+        output.status.success(),
+        "read_session.py failed:\n{}\n{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+
+    // And our reader gives back the same depth and the ground truth.
+    let f = SessionReader::open(&out)
+        .unwrap()
+        .nth(depth_frame)
+        .unwrap()
+        .unwrap();
+    assert_eq!(f.frame.depth, frame.depth);
+    assert!(f.ground_truth.is_some());
+}
+
+#[test]
+fn bad_input_exits_2_and_names_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let layout = dir.path().join("layout.toml");
+    std::fs::write(&layout, "lip_dots = 5\n").unwrap();
+    let output = mouthpiece()
+        .args(["synth", "--seconds", "1", "--seed", "1", "--out"])
+        .arg(dir.path().join("x.mcap"))
+        .arg("--layout")
+        .arg(&layout)
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        err.contains("layout.toml") && err.contains("lip_dots"),
+        "{err}"
+    );
+
+    let output = mouthpiece()
+        .args([
+            "synth",
+            "--seconds",
+            "1",
+            "--seed",
+            "1",
+            "--distance",
+            "9",
+            "--out",
+        ])
+        .arg(dir.path().join("x.mcap"))
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("distance"));
+}
