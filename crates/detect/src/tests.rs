@@ -78,7 +78,7 @@ fn flat_depth(w: u32, h: u32, mm: u16) -> DepthImage {
     }
 }
 
-fn nearest<'a>(blobs: &'a [Blob], p: [f64; 2]) -> &'a Blob {
+fn nearest(blobs: &[Blob], p: [f64; 2]) -> &Blob {
     blobs
         .iter()
         .min_by(|a, b| dist(a.center, p).total_cmp(&dist(b.center, p)))

@@ -155,7 +155,7 @@ impl Pipeline {
         {
             let neutral = self.tracker.neutral().expect("neutral taken");
             self.retarget = Some(
-                CharacterRetarget::new(self.character.clone(), neutral, self.settings.clone())
+                CharacterRetarget::new(self.character.clone(), neutral, self.settings)
                     .map_err(TrackError::Neutral)?,
             );
         }

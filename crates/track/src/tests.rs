@@ -287,7 +287,7 @@ fn a_session_without_dots_says_so_and_never_calibrates() {
 fn a_moving_mouth_is_not_taken_as_neutral() {
     let mut tr = tracker();
     for seq in 0..60 {
-        let open = 0.012 * (0.5 - 0.5 * (seq as f64 * 0.9).cos());
+        let open = 0.02 * (0.5 - 0.5 * (seq as f64 * 0.9).cos());
         let out = tr
             .process(&render(seq, &posed(open, &RigidTransform::IDENTITY), &[]))
             .unwrap();

@@ -136,7 +136,7 @@ pub fn evaluate(
         smoothing: ShapeSmoothing::None,
         one_euro: None,
     };
-    let mut pipeline = Pipeline::new(config.clone(), character.clone(), settings.clone())?;
+    let mut pipeline = Pipeline::new(config.clone(), character.clone(), settings)?;
     let layout = config.track.layout();
     let names: Vec<String> = (0..layout.lip_dots)
         .map(PerformerLayout::lip_name)
@@ -182,10 +182,12 @@ pub fn evaluate(
                 acc.push(&gt_dots(g, layout))?;
                 rotations.push(rot(g));
             }
-            head_at_calibration = rotations.last().copied().unwrap_or_else(Matrix3::identity);
+            // The neutral pose averages the window: compare against the window's mean rotation.
+            let mean = rotations.iter().sum::<Matrix3<f64>>() / rotations.len().max(1) as f64;
+            head_at_calibration = nalgebra::Rotation3::from_matrix(&mean).into_inner();
             let cfg = RetargetConfig {
                 missing: Default::default(),
-                character: settings.clone(),
+                character: settings,
             };
             let mut r = Retargeter::new(character.clone(), acc.finish()?, cfg)?;
             // Bring the reference's clock to now.
@@ -282,9 +284,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )));
     }
     println!(
-        "| seed | noise | head motion | frames | visible dots | found & named | wrong | named hidden | 3D RMS (mm) | head RMS (°) | character RMS (% width) |"
+        "| seed | noise | head motion | frames | calibrated at (s) | visible dots | found & named | wrong | named hidden | 3D RMS (mm) | head RMS (°) | character RMS (% width) |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &motion in &args.head_motion {
         for &noise in &args.noise {
             for &seed in &args.seeds {
@@ -305,8 +307,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 };
                 let m = evaluate(synth, &config, &character, 1.0)?;
                 println!(
-                    "| {seed} | {noise:?} | {motion:?} | {} | {} | {:.2} % | {} | {} | {:.2} | {:.2} | {:.2} |",
+                    "| {seed} | {noise:?} | {motion:?} | {} | {} | {} | {:.2} % | {} | {} | {:.2} | {:.2} | {:.2} |",
                     m.frames,
+                    m.calibrated_at.map_or("never".to_string(), |t| format!("{t:.2}")),
                     m.visible,
                     m.found_pct(),
                     m.wrong,
@@ -319,4 +322,84 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A short session rendered now, measured against its ground truth. The thresholds guard
+    /// what the pipeline achieves today (README's table); the targets are stricter and
+    /// not all met yet (docs/detection.md says which).
+    #[test]
+    fn synthetic_session_is_tracked_against_ground_truth() {
+        let character =
+            Character::from_toml_str(include_str!("../../../../config/characters/human.toml"))
+                .unwrap();
+        let synth = SynthConfig {
+            seed: 3,
+            seconds: 4.0,
+            ..SynthConfig::default()
+        };
+        let m = evaluate(synth, &PipelineConfig::default(), &character, 1.0).unwrap();
+        let calibrated = m.calibrated_at.expect("neutral pose taken");
+        assert!(
+            (0.9..1.6).contains(&calibrated),
+            "calibrated at {calibrated} s"
+        );
+        assert!(m.frames >= 89 && m.visible > 1000, "{m:?}");
+        assert!(
+            m.found_pct() > 90.0,
+            "found and named {:.2} %",
+            m.found_pct()
+        );
+        assert!(
+            (m.wrong as f64) < 0.03 * m.visible as f64,
+            "wrongly named {} of {}",
+            m.wrong,
+            m.visible
+        );
+        assert!(m.rms_mm() < 2.5, "3D RMS {:.2} mm", m.rms_mm());
+        assert!(m.head_rms_deg() < 3.0, "head RMS {:.2}°", m.head_rms_deg());
+        assert!(
+            m.char_rms_pct() < 15.0,
+            "character RMS {:.2} % of its width",
+            m.char_rms_pct()
+        );
+    }
+
+    #[test]
+    fn a_session_without_paint_says_so_on_every_frame() {
+        // Dots painted in skin colour: nothing to find; the pipeline must not fail.
+        let character =
+            Character::from_toml_str(include_str!("../../../../config/characters/human.toml"))
+                .unwrap();
+        let layout = mouthpiece_synth::DotLayout {
+            lip_color: [205, 150, 120],
+            forehead_color: [205, 150, 120],
+            ..Default::default()
+        };
+        let mut synth = Synth::new(SynthConfig {
+            seed: 1,
+            seconds: 1.5,
+            layout,
+            ..SynthConfig::default()
+        })
+        .unwrap();
+        let settings = CharacterSettings {
+            smoothing: ShapeSmoothing::None,
+            one_euro: None,
+        };
+        let mut pipeline = Pipeline::new(PipelineConfig::default(), character, settings).unwrap();
+        while let Some((frame, _)) = synth.render_next() {
+            let (line, tracked) = pipeline.process(&frame).unwrap();
+            assert!(tracked.status.calibrating && tracked.status.too_few_dots);
+            assert_eq!(tracked.status.dots_missing.len(), 15);
+            let json = serde_json::to_string(&line).unwrap();
+            assert!(
+                json.contains("\"calibrating\":true") && json.contains("\"D1\":null"),
+                "{json}"
+            );
+        }
+    }
 }

@@ -173,9 +173,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .next_frame()
         .with_context(|| format!("reading {}", args.input.display()))?
     {
+        let tick = Instant::now();
         let (line, tracked) = pipeline
             .process(&frame)
             .with_context(|| format!("frame {}", frame.seq))?;
+        pipeline_ms.push(tick.elapsed().as_secs_f64() * 1e3);
         serde_json::to_writer(&mut out, &line).context("cannot write output")?;
         out.write_all(b"\n").context("cannot write output")?;
         if tracked.status.neutral_taken && calibrated_at.is_none() {
@@ -185,7 +187,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         frames += 1;
         if let Some(bar) = &progress {
             bar.set_position(frames);
-            if frames % 15 == 0 {
+            if frames.is_multiple_of(15) {
                 bar.set_message(if tracked.status.calibrating {
                     "calibrating"
                 } else {
