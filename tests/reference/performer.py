@@ -46,7 +46,10 @@ def rotation(yaw, pitch, roll):
 
 
 def generate(seed, seconds=4.0, fps=30.0, neutral_seconds=1.0, noise=0.0003, head="moderate",
-             dropout=0.02, forehead_dropout=True, outlier=True, lip_count=12):
+             dropout=0.02, forehead_dropout=True, outlier=True, lip_count=12, decimals=6,
+             flag_neutral=True):
+    """The performer's lines (dicts). `decimals=None` keeps full float precision."""
+    rnd = (lambda v: round(float(v), decimals)) if decimals is not None else float
     rng = np.random.default_rng(seed)
     lips = LIPS * rng.uniform(0.85, 1.2) + rng.normal(0, 0.0008, LIPS.shape)
     lips[0] = [abs(lips[0][0]), 0.0, 0.0]
@@ -97,7 +100,7 @@ def generate(seed, seconds=4.0, fps=30.0, neutral_seconds=1.0, noise=0.0003, hea
         points = {}
         for k in range(lip_count):
             seen = neutral or rng.random() > dropout
-            points[f"D{k + 1}"] = [round(float(v), 6) for v in lip_cam[k]] if seen else None
+            points[f"D{k + 1}"] = [rnd(v) for v in lip_cam[k]] if seen else None
         for k in range(3):
             seen = True
             if forehead_dropout and not neutral:
@@ -105,9 +108,9 @@ def generate(seed, seconds=4.0, fps=30.0, neutral_seconds=1.0, noise=0.0003, hea
                     seen = False  # one of three gone: head lost for that frame
                 if k < 2 and lost_start <= i < lost_start + 4:
                     seen = False
-            points[f"F{k + 1}"] = [round(float(v), 6) for v in fh_cam[k]] if seen else None
-        line = {"t": round(t, 6), "points": points}
-        if neutral:
+            points[f"F{k + 1}"] = [rnd(v) for v in fh_cam[k]] if seen else None
+        line = {"t": rnd(t), "points": points}
+        if neutral and flag_neutral:
             line["neutral"] = True
         lines.append(line)
     return lines
@@ -120,9 +123,15 @@ def main():
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--head", choices=["none", "moderate", "strong"], default="moderate")
     ap.add_argument("--noise", type=float, default=0.0003, help="dot noise, metres (sigma)")
+    ap.add_argument("--dropout", type=float, default=0.02, help="lip dot dropout probability")
+    ap.add_argument("--no-forehead-dropout", action="store_true")
+    ap.add_argument("--no-outlier", action="store_true")
+    ap.add_argument("--full-precision", action="store_true", help="do not round to 1 µm")
     ap.add_argument("--out", default="-")
     a = ap.parse_args()
-    lines = generate(a.seed, a.seconds, a.fps, noise=a.noise, head=a.head)
+    lines = generate(a.seed, a.seconds, a.fps, noise=a.noise, head=a.head, dropout=a.dropout,
+                     forehead_dropout=not a.no_forehead_dropout, outlier=not a.no_outlier,
+                     decimals=None if a.full_precision else 6)
     out = sys.stdout if a.out == "-" else open(a.out, "w")
     for line in lines:
         out.write(json.dumps(line, separators=(",", ":")) + "\n")

@@ -28,6 +28,10 @@ enum Command {
     Evaluate(cmd::evaluate::Args),
     /// Render a synthetic performer (head with painted dots, depth + colour, ground truth) to MCAP.
     Synth(cmd::synth::Args),
+    /// Record a source (camera, Dummy device, replay) to MCAP, or an OpenNI2 source to .oni.
+    Record(cmd::record::Args),
+    /// List OpenNI2 devices and V4L2 nodes with their modes and formats.
+    Devices(cmd::devices::Args),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +42,8 @@ fn main() -> ExitCode {
         Command::Process(args) => cmd::process::run(args),
         Command::Evaluate(args) => cmd::evaluate::run(args),
         Command::Synth(args) => cmd::synth::run(args),
+        Command::Record(args) => cmd::record::run(args),
+        Command::Devices(args) => cmd::devices::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

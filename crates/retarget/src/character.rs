@@ -517,3 +517,218 @@ pub fn resample(polyline: &[Vec3], count: usize) -> Option<Vec<Vec3>> {
     *out.last_mut().unwrap() = *polyline.last().unwrap();
     Some(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    const SQUARE: &str = r#"
+name = "square"
+[points]
+P1 = [1.0, 0.0, 0.0]
+P2 = [0.0, 1.0, 0.5]
+P3 = [-1.0, 0.0, 0.0]
+P4 = [0.0, -1.0, 0.5]
+"#;
+
+    fn invalid(src: &str) -> (String, Option<usize>, String) {
+        match Character::from_toml_str(src) {
+            Err(Error::CharacterInvalid { key, line, reason }) => (key, line, reason),
+            Err(Error::CharacterToml { line, source }) => {
+                ("<toml>".into(), line, source.message().to_string())
+            }
+            other => panic!("expected an error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn mouth_frame_points_come_out_unchanged() {
+        let c = Character::from_toml_str(SQUARE).unwrap();
+        assert_eq!(c.point_names, ["P1", "P2", "P3", "P4"]);
+        assert_eq!(c.neutral, c.model_points);
+        assert_eq!(c.mouth_width(), 2.0);
+        assert_eq!(c.driver, [0, 1, 2, 3]);
+    }
+
+    #[test]
+    fn model_frame_is_converted_with_up() {
+        // The square, rotated so its up is model +Z and it faces model -Y, and shifted.
+        let src = r#"
+name = "turned"
+up = [0.3, 0.0, 2.0]   # not orthogonal to the corner line: only its orthogonal part counts
+[points]
+P1 = [11.0, 5.0, 3.0]
+P2 = [10.0, 4.5, 4.0]
+P3 = [9.0, 5.0, 3.0]
+P4 = [10.0, 4.5, 2.0]
+"#;
+        let c = Character::from_toml_str(src).unwrap();
+        let expect = Character::from_toml_str(SQUARE).unwrap().neutral;
+        for (a, b) in c.neutral.iter().zip(&expect) {
+            assert_relative_eq!(a, b, epsilon = 1e-12);
+        }
+    }
+
+    #[test]
+    fn file_order_is_kept() {
+        let src = "name = \"o\"\n[points]\nP3 = [-1, 0, 0]\nP1 = [1, 0, 0]\nP2 = [0, 1, 0]\nP4 = [0, -1, 0]\n";
+        let c = Character::from_toml_str(src).unwrap();
+        assert_eq!(c.point_names, ["P3", "P1", "P2", "P4"]);
+        // Corners are the points driven by D1 and D3 (of 4): P3 and P2 here.
+        assert_relative_eq!(c.neutral[0], Vec3::new(c.mouth_width() / 2.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn map_and_manual_m() {
+        // Top-level keys must come before the tables in TOML.
+        let src = SQUARE.replace(
+            "name = \"square\"\n",
+            "name = \"square\"\nm_mode = \"manual\"\n",
+        ) + "[map]\nD1 = \"P1\"\nD2 = \"P4\"\nD3 = \"P3\"\nD4 = \"P2\"\n"
+            + "[m]\nP1 = [1, 2, 3]\nP2 = [1, 1, 1]\nP3 = [2, 2, 2]\nP4 = [0.5, 0.5, 0.5]\n";
+        let c = Character::from_toml_str(&src).unwrap();
+        assert_eq!(c.driver, [0, 3, 2, 1]);
+        assert_eq!(c.m_mode, MMode::Manual);
+        assert_eq!(c.manual_m.as_ref().unwrap()[0], Vec3::new(1.0, 2.0, 3.0));
+    }
+
+    #[test]
+    fn contour_points_at_equal_arc_length() {
+        let src = r#"
+name = "c"
+[contour]
+points_per_lip = 4
+upper = [[3.0, 0.0, 0.0], [3.0, 3.0, 0.0], [-3.0, 3.0, 0.0], [-3.0, 0.0, 0.0]]
+lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
+"#;
+        let c = Character::from_toml_str(src).unwrap();
+        assert_eq!(c.len(), 6);
+        assert_eq!(c.point_names, ["P1", "P2", "P3", "P4", "P5", "P6"]);
+        // Upper: length 12, a point every 4 along it; lower: length 6, every 2, reversed.
+        let expect = [
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(2.0, 3.0, 0.0),
+            Vec3::new(-2.0, 3.0, 0.0),
+            Vec3::new(-3.0, 0.0, 0.0),
+            Vec3::new(-1.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+        ];
+        for (a, b) in c.neutral.iter().zip(&expect) {
+            assert_relative_eq!(a, b, epsilon = 1e-12);
+        }
+    }
+
+    #[test]
+    fn rejections_name_key_line_and_reason() {
+        let (key, line, reason) =
+            invalid(&SQUARE.replace("name = \"square\"", "name = \"s\"\ncolour = 1"));
+        assert_eq!((key.as_str(), line), ("<toml>", Some(3)));
+        assert!(reason.contains("unknown field `colour`"), "{reason}");
+
+        let (key, line, reason) =
+            invalid(&SQUARE.replace("P2 = [0.0, 1.0, 0.5]", "P2 = [0.0, nan, 0.5]"));
+        assert_eq!((key.as_str(), line), ("points.P2", Some(5)));
+        assert!(reason.contains("non-finite"));
+
+        let (key, line, reason) = invalid(&SQUARE.replace("P4", "P2"));
+        assert_eq!((key.as_str(), line), ("<toml>", Some(7)));
+        assert!(reason.contains("duplicate key"), "{reason}");
+
+        let (key, line, reason) = invalid(&format!("{SQUARE}[map]\nD1 = \"P1\"\nD2 = \"P9\"\n"));
+        assert_eq!((key.as_str(), line), ("map.D2", Some(10)));
+        assert!(reason.contains("no point named `P9`"));
+
+        let (key, _, reason) = invalid(&format!(
+            "{SQUARE}[map]\nD1 = \"P1\"\nD2 = \"P1\"\nD3 = \"P3\"\nD4 = \"P4\"\n"
+        ));
+        assert_eq!(key, "map.D2");
+        assert!(reason.contains("already driven by D1"), "{reason}");
+
+        let (key, _, reason) = invalid(&format!("{SQUARE}[map]\nD1 = \"P1\"\nD5 = \"P2\"\n"));
+        assert_eq!(key, "map.D5");
+        assert!(reason.contains("not a lip dot"));
+
+        let (key, _, reason) = invalid(&format!("{SQUARE}[map]\nD1 = \"P1\"\n"));
+        assert_eq!(key, "map");
+        assert!(reason.contains("driven by no dot"));
+
+        let (key, line, reason) =
+            invalid(&SQUARE.replace("P3 = [-1.0, 0.0, 0.0]", "P3 = [1.0, 0.0, 0.0]"));
+        assert_eq!((key.as_str(), line), ("points", Some(4)));
+        assert!(reason.contains("corners P1 and P3 coincide"), "{reason}");
+
+        let (key, line, reason) =
+            invalid(&SQUARE.replace("name = \"square\"", "name = \"s\"\nup = [-2, 0, 0]"));
+        assert_eq!((key.as_str(), line), ("up", Some(3)));
+        assert!(reason.contains("parallel"));
+
+        let (key, _, _) =
+            invalid(&SQUARE.replace("name = \"square\"", "name = \"s\"\nup = [0, 0, 0]"));
+        assert_eq!(key, "up");
+
+        let (key, _, reason) =
+            invalid(&SQUARE.replace("name = \"square\"", "name = \"s\"\nm_mode = \"manual\""));
+        assert_eq!(key, "m");
+        assert!(reason.contains("needs an [m] table"));
+
+        let (key, _, reason) = invalid(&format!("{SQUARE}[m]\nP1 = [1, 1, 1]\n"));
+        assert_eq!(key, "m");
+        assert!(reason.contains("only read with"));
+
+        let (key, _, reason) = invalid("name = \"x\"\n[points]\nP1 = [1, 0, 0]\nP2 = [-1, 0, 0]\n");
+        assert_eq!(key, "points");
+        assert!(reason.contains("at least 4"));
+
+        let (key, line, _) = invalid("name = \"x\"\n[points]\nP1 = [1, 0]\n");
+        assert_eq!((key.as_str(), line), ("<toml>", Some(3)));
+
+        let (key, _, reason) = invalid("name = \"x\"\n");
+        assert_eq!(key, "points");
+        assert!(reason.contains("missing"));
+
+        let (key, _, reason) = invalid(
+            "name = \"c\"\n[contour]\npoints_per_lip = 4\nupper = [[1, 0, 0], [0, 1, 0], [-1, 0, 0]]\nlower = [[1, 0, 0], [-2, 0, 0]]\n",
+        );
+        assert_eq!(key, "contour.lower");
+        assert!(reason.contains("must start and end"));
+
+        let (key, _, _) = invalid(
+            "name = \"c\"\n[contour]\npoints_per_lip = 2\nupper = [[1, 0, 0], [-1, 0, 0]]\nlower = [[1, 0, 0], [-1, 0, 0]]\n",
+        );
+        assert_eq!(key, "contour.points_per_lip");
+
+        let (key, _, _) = invalid(&format!("{SQUARE}[contour]\npoints_per_lip = 3\nupper = [[1, 0, 0], [-1, 0, 0]]\nlower = [[1, 0, 0], [-1, 0, 0]]\n"));
+        assert_eq!(key, "contour");
+    }
+
+    #[test]
+    fn shipped_characters_load() {
+        for (file, name) in [("human.toml", "human"), ("wolf.toml", "wolf")] {
+            let path = format!(
+                "{}/../../config/characters/{file}",
+                env!("CARGO_MANIFEST_DIR")
+            );
+            let c = Character::from_toml_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+            assert_eq!(c.name, name);
+            assert_eq!(c.len(), 12);
+            assert_eq!(c.units, Some(Units::Metres));
+            // Corners on the x axis, left at +x.
+            assert_relative_eq!(c.neutral[0].x, c.mouth_width() / 2.0, epsilon = 1e-12);
+            assert_relative_eq!(c.neutral[6].x, -c.mouth_width() / 2.0, epsilon = 1e-12);
+            assert!(
+                c.neutral[3].y > 0.0 && c.neutral[9].y < 0.0,
+                "upper lip up, lower down"
+            );
+            assert!(c.neutral[3].z > 0.0, "lips in front of the corners");
+        }
+        let wolf = std::fs::read_to_string(format!(
+            "{}/../../config/characters/wolf.toml",
+            env!("CARGO_MANIFEST_DIR")
+        ))
+        .unwrap();
+        let wolf = Character::from_toml_str(&wolf).unwrap();
+        assert_relative_eq!(wolf.mouth_width(), 0.15, epsilon = 1e-9);
+        assert!(wolf.neutral[3].z > 0.1, "a long muzzle");
+    }
+}

@@ -98,7 +98,7 @@ pub enum Error {
         lip_dots: usize,
     },
     /// A JSONL line is not valid JSON or not of the expected shape.
-    #[error("not a valid line: {source}")]
+    #[error("not a valid input line")]
     Json {
         #[source]
         source: serde_json::Error,
