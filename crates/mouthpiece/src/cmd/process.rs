@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context as _;
-use mouthpiece_frame::Frame;
+use mouthpiece_frame::{Frame, FrameSource};
 use mouthpiece_recording::SessionReader;
 use mouthpiece_retarget::{Character, CharacterSettings, MovingAverageKind, ShapeSmoothing};
 use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
@@ -89,6 +89,7 @@ fn smoothing(smooth: Smooth) -> ShapeSmoothing {
 /// A finite stream of frames from a recorded session.
 pub enum Input {
     Mcap(SessionReader),
+    Oni(Box<dyn FrameSource>),
 }
 
 impl Input {
@@ -105,10 +106,17 @@ impl Input {
                     .map_err(bad_input)?;
                 Ok(Input::Mcap(reader))
             }
-            Some("oni") => Err(bad_input(anyhow::anyhow!(
-                "{}: .oni input needs the OpenNI2 replay source (mouthpiece-capture), not built into this binary yet",
-                path.display()
-            ))),
+            Some("oni") => {
+                // OpenNI2 playback through the capture crate, unpaced (`speed=0`).
+                let spec = format!("replay:{}?speed=0", path.display());
+                let source = mouthpiece_capture::open_source(
+                    &spec,
+                    &mouthpiece_capture::CaptureConfig::default(),
+                )
+                .with_context(|| format!("cannot open session {}", path.display()))
+                .map_err(bad_input)?;
+                Ok(Input::Oni(source))
+            }
             _ => Err(bad_input(anyhow::anyhow!(
                 "{}: unknown session type (expected .mcap or .oni)",
                 path.display()
@@ -119,6 +127,7 @@ impl Input {
     pub fn next_frame(&mut self) -> anyhow::Result<Option<Frame>> {
         match self {
             Input::Mcap(r) => Ok(r.next_frame()?.map(|f| f.frame)),
+            Input::Oni(s) => Ok(s.next_frame()?),
         }
     }
 }
