@@ -22,6 +22,10 @@ struct Cli {
 enum Command {
     /// Retarget 3D dot positions (JSONL) onto a character's mouth (JSONL).
     Retarget(cmd::retarget::Args),
+    /// Run the whole pipeline (detect, track, retarget) over a recorded session, offline.
+    Process(cmd::process::Args),
+    /// Measure detection, tracking and retargeting on synthetic sessions with ground truth.
+    Evaluate(cmd::evaluate::Args),
     /// Render a synthetic performer (head with painted dots, depth + colour, ground truth) to MCAP.
     Synth(cmd::synth::Args),
     /// Record a source (camera, Dummy device, replay) to MCAP, or an OpenNI2 source to .oni.
@@ -37,6 +41,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
+        Command::Process(args) => cmd::process::run(args),
+        Command::Evaluate(args) => cmd::evaluate::run(args),
         Command::Synth(args) => cmd::synth::run(args),
         Command::Record(args) => cmd::record::run(args),
         Command::Devices(args) => cmd::devices::run(args),

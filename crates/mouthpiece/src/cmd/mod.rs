@@ -1,6 +1,8 @@
 //! One module per subcommand.
 
 pub mod devices;
+pub mod evaluate;
+pub mod process;
 pub mod record;
 pub mod export;
 pub mod retarget;

@@ -1,0 +1,571 @@
+//! The dot detector: finds painted dots in a colour image with OpenCV.
+//!
+//! Per colour class ([`ColorClass`], HSV ranges, several hue ranges OR-ed so red can wrap):
+//! threshold (`inRange`), a small morphology step, connected components with statistics,
+//! filters (area for the distance measured in the registered depth image, fill ratio,
+//! aspect, a valid depth reading nearby), and a sub-pixel centre: the image moments of a
+//! per-pixel colour weight (how close the pixel's hue and saturation are to the paint) over
+//! the component grown by one pixel, so rim pixels that mix paint and skin count in
+//! proportion instead of all-or-nothing.
+//!
+//! Speed comes from the search region: [`Detector::detect`] takes a rectangle (the tracker
+//! passes the box around where the dots are predicted) and does all image work inside it;
+//! `None` searches the full frame (start-up and re-acquisition).
+//!
+//! The detector does not name dots; that is the tracker's job (`mouthpiece-track`).
+
+mod config;
+
+use opencv::core::{self, Mat, MatTraitConst, Rect, Scalar, Size, Vec3b, Vector};
+use opencv::imgproc;
+
+use mouthpiece_frame::{ColorImage, DepthImage};
+
+pub use config::{default_classes, ColorClass, DetectConfig, DotRole, Morphology};
+
+/// Sets how many threads OpenCV may use for its image operations (process-wide). The
+/// benchmarks use 1 to measure one core; the daemon leaves OpenCV's default.
+pub fn set_opencv_threads(threads: i32) -> Result<(), DetectError> {
+    core::set_num_threads(threads)?;
+    Ok(())
+}
+
+/// What can go wrong in the detector.
+#[derive(Debug, thiserror::Error)]
+pub enum DetectError {
+    /// A configuration value is wrong; `key` is how it is written in the file.
+    #[error("invalid configuration {key}: {message}")]
+    Config { key: String, message: String },
+    /// The colour and depth images do not fit together (the depth must be on the colour grid).
+    #[error("image size mismatch: {0}")]
+    ImageSize(String),
+    #[error("OpenCV failed")]
+    OpenCv(#[from] opencv::Error),
+}
+
+/// A pixel rectangle (`x`, `y` of the top-left corner, size), in full-frame coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PixelRect {
+    pub x: i32,
+    pub y: i32,
+    pub width: i32,
+    pub height: i32,
+}
+
+impl PixelRect {
+    pub fn full(width: u32, height: u32) -> Self {
+        Self {
+            x: 0,
+            y: 0,
+            width: width as i32,
+            height: height as i32,
+        }
+    }
+
+    /// The smallest rectangle holding every point, grown by `margin` pixels on each side.
+    /// `None` for no points.
+    pub fn around(points: impl IntoIterator<Item = [f64; 2]>, margin: f64) -> Option<Self> {
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for p in points {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        if !lo[0].is_finite() || !hi[0].is_finite() {
+            return None;
+        }
+        let x0 = (lo[0] - margin).floor() as i32;
+        let y0 = (lo[1] - margin).floor() as i32;
+        let x1 = (hi[0] + margin).ceil() as i32;
+        let y1 = (hi[1] + margin).ceil() as i32;
+        Some(Self {
+            x: x0,
+            y: y0,
+            width: x1 - x0 + 1,
+            height: y1 - y0 + 1,
+        })
+    }
+
+    /// This rectangle cut to the image; `None` when nothing is left.
+    pub fn clip(&self, width: u32, height: u32) -> Option<Self> {
+        let x0 = self.x.max(0);
+        let y0 = self.y.max(0);
+        let x1 = (self.x + self.width).min(width as i32);
+        let y1 = (self.y + self.height).min(height as i32);
+        (x1 > x0 && y1 > y0).then_some(Self {
+            x: x0,
+            y: y0,
+            width: x1 - x0,
+            height: y1 - y0,
+        })
+    }
+
+    pub fn area(&self) -> i64 {
+        self.width as i64 * self.height as i64
+    }
+
+    fn to_cv(self) -> Rect {
+        Rect::new(self.x, self.y, self.width, self.height)
+    }
+}
+
+/// One dot candidate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Blob {
+    /// Index into [`DetectConfig::classes`].
+    pub class: usize,
+    /// Sub-pixel centre, full-frame pixel coordinates (pixel centres at integers).
+    pub center: [f64; 2],
+    /// Pixels in the component.
+    pub area: u32,
+    pub bbox: PixelRect,
+    /// Median valid depth (metres) around the blob; `None` when no depth image was given.
+    pub depth_m: Option<f64>,
+}
+
+/// What one call found.
+#[derive(Debug, Clone, Default)]
+pub struct Detections {
+    pub blobs: Vec<Blob>,
+    /// The rectangle actually searched (clipped to the image).
+    pub searched: Option<PixelRect>,
+    /// Components that failed a filter (size, shape, depth); for diagnostics.
+    pub rejected: u32,
+}
+
+/// Why a component was not accepted (counted, logged at TRACE).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Reject {
+    Small,
+    Area,
+    Shape,
+    NoDepth,
+}
+
+/// The detector, with its scratch images kept between frames so a frame allocates nothing
+/// once sizes settle.
+pub struct Detector {
+    config: DetectConfig,
+    /// Per class: 256-entry LUTs turning hue and saturation into a 0–255 weight.
+    hue_luts: Vec<Mat>,
+    sat_luts: Vec<Mat>,
+    kernel: Mat,
+    dilate_kernel: Mat,
+    hsv: Mat,
+    channels: Vector<Mat>,
+    mask: Mat,
+    range_mask: Mat,
+    morphed: Mat,
+    labels: Mat,
+    stats: Mat,
+    centroids: Mat,
+    hue_w: Mat,
+    sat_w: Mat,
+    weight: Mat,
+    comp: Mat,
+    comp_grown: Mat,
+    comp_weight: Mat,
+    depth_buf: Vec<u16>,
+}
+
+impl std::fmt::Debug for Detector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Detector")
+            .field("config", &self.config)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Detector {
+    /// Validates the configuration and prepares the per-class lookup tables.
+    pub fn new(config: DetectConfig) -> Result<Self, DetectError> {
+        config.validate()?;
+        let mut hue_luts = Vec::new();
+        let mut sat_luts = Vec::new();
+        for class in &config.classes {
+            let hue = hue_weight_table(&class.hue, config.weight_hue_margin);
+            let sat = saturation_weight_table(class.saturation);
+            hue_luts.push(Mat::from_slice(&hue)?.try_clone()?);
+            sat_luts.push(Mat::from_slice(&sat)?.try_clone()?);
+        }
+        let rect = |n| imgproc::get_structuring_element_def(imgproc::MORPH_RECT, Size::new(n, n));
+        let kernel = match config.morphology {
+            Morphology::Close => {
+                imgproc::get_structuring_element_def(imgproc::MORPH_CROSS, Size::new(3, 3))?
+            }
+            _ => rect(2)?,
+        };
+        Ok(Self {
+            kernel,
+            dilate_kernel: imgproc::get_structuring_element_def(
+                imgproc::MORPH_RECT,
+                Size::new(3, 3),
+            )?,
+            config,
+            hue_luts,
+            sat_luts,
+            hsv: Mat::default(),
+            channels: Vector::new(),
+            mask: Mat::default(),
+            range_mask: Mat::default(),
+            morphed: Mat::default(),
+            labels: Mat::default(),
+            stats: Mat::default(),
+            centroids: Mat::default(),
+            hue_w: Mat::default(),
+            sat_w: Mat::default(),
+            weight: Mat::default(),
+            comp: Mat::default(),
+            comp_grown: Mat::default(),
+            comp_weight: Mat::default(),
+            depth_buf: Vec::new(),
+        })
+    }
+
+    pub fn config(&self) -> &DetectConfig {
+        &self.config
+    }
+
+    /// Finds dot candidates of every class inside `search` (the full frame when `None`).
+    ///
+    /// `depth` must be on the colour grid (registered), in units of `depth_scale_m` metres;
+    /// without it the depth filter is skipped and the area filter spans the whole
+    /// configured distance range. `fx` is the colour camera's focal length in pixels.
+    pub fn detect(
+        &mut self,
+        color: &ColorImage,
+        depth: Option<(&DepthImage, f64)>,
+        fx: f64,
+        search: Option<PixelRect>,
+    ) -> Result<Detections, DetectError> {
+        let expected_len = color.width as usize * color.height as usize * 3;
+        if color.data.len() != expected_len {
+            return Err(DetectError::ImageSize(format!(
+                "colour image {}x{} holds {} bytes, expected {expected_len}",
+                color.width,
+                color.height,
+                color.data.len()
+            )));
+        }
+        if let Some((d, _)) = depth {
+            if d.width != color.width || d.height != color.height {
+                return Err(DetectError::ImageSize(format!(
+                    "depth {}x{} is not on the colour grid {}x{}",
+                    d.width, d.height, color.width, color.height
+                )));
+            }
+        }
+        let full = PixelRect::full(color.width, color.height);
+        let roi = match search {
+            Some(r) => match r.clip(color.width, color.height) {
+                Some(r) => r,
+                None => return Ok(Detections::default()),
+            },
+            None => full,
+        };
+        let image = Mat::new_rows_cols_with_bytes::<Vec3b>(
+            color.height as i32,
+            color.width as i32,
+            &color.data,
+        )?;
+        let image_roi = Mat::roi(&image, roi.to_cv())?;
+        imgproc::cvt_color_def(&image_roi, &mut self.hsv, imgproc::COLOR_BGR2HSV)?;
+        core::split(&self.hsv, &mut self.channels)?;
+
+        let mut out = Detections {
+            blobs: Vec::new(),
+            searched: Some(roi),
+            rejected: 0,
+        };
+        for class_idx in 0..self.config.classes.len() {
+            self.detect_class(class_idx, roi, depth, fx, &mut out)?;
+        }
+        tracing::trace!(
+            roi = ?roi,
+            found = out.blobs.len(),
+            rejected = out.rejected,
+            "detected"
+        );
+        Ok(out)
+    }
+
+    fn detect_class(
+        &mut self,
+        class_idx: usize,
+        roi: PixelRect,
+        depth: Option<(&DepthImage, f64)>,
+        fx: f64,
+        out: &mut Detections,
+    ) -> Result<(), DetectError> {
+        let class = &self.config.classes[class_idx];
+        let [s_lo, s_hi] = class.saturation;
+        let [v_lo, v_hi] = class.value;
+        for (j, [h_lo, h_hi]) in class.hue.iter().enumerate() {
+            let lower = Scalar::new(*h_lo as f64, s_lo as f64, v_lo as f64, 0.0);
+            let upper = Scalar::new(*h_hi as f64, s_hi as f64, v_hi as f64, 0.0);
+            if j == 0 {
+                core::in_range(&self.hsv, &lower, &upper, &mut self.mask)?;
+            } else {
+                core::in_range(&self.hsv, &lower, &upper, &mut self.range_mask)?;
+                let prev = self.mask.try_clone()?;
+                core::bitwise_or_def(&prev, &self.range_mask, &mut self.mask)?;
+            }
+        }
+        // Opening only decides which components are real (it would shave a 2-px dot's rim,
+        // biasing the centre): components come from the unopened mask and must keep a pixel
+        // through the opening. Closing changes the components themselves.
+        let binary = match self.config.morphology {
+            Morphology::Close => {
+                imgproc::morphology_ex_def(
+                    &self.mask,
+                    &mut self.morphed,
+                    imgproc::MORPH_CLOSE,
+                    &self.kernel,
+                )?;
+                &self.morphed
+            }
+            Morphology::Open => {
+                imgproc::morphology_ex_def(
+                    &self.mask,
+                    &mut self.morphed,
+                    imgproc::MORPH_OPEN,
+                    &self.kernel,
+                )?;
+                &self.mask
+            }
+            Morphology::None => &self.mask,
+        };
+        let n = imgproc::connected_components_with_stats(
+            binary,
+            &mut self.labels,
+            &mut self.stats,
+            &mut self.centroids,
+            8,
+            core::CV_32S,
+        )?;
+        if n <= 1 {
+            return Ok(());
+        }
+
+        // The colour weight over the whole region, computed once per class.
+        core::lut(
+            &self.channels.get(0)?,
+            &self.hue_luts[class_idx],
+            &mut self.hue_w,
+        )?;
+        core::lut(
+            &self.channels.get(1)?,
+            &self.sat_luts[class_idx],
+            &mut self.sat_w,
+        )?;
+        core::multiply(&self.hue_w, &self.sat_w, &mut self.weight, 1.0 / 255.0, -1)?;
+
+        let cfg = &self.config;
+        let (r0, r1) = (cfg.depth_range_m[0], cfg.depth_range_m[1]);
+        for label in 1..n {
+            let area = *self.stats.at_2d::<i32>(label, imgproc::CC_STAT_AREA)? as u32;
+            let bx = *self.stats.at_2d::<i32>(label, imgproc::CC_STAT_LEFT)?;
+            let by = *self.stats.at_2d::<i32>(label, imgproc::CC_STAT_TOP)?;
+            let bw = *self.stats.at_2d::<i32>(label, imgproc::CC_STAT_WIDTH)?;
+            let bh = *self.stats.at_2d::<i32>(label, imgproc::CC_STAT_HEIGHT)?;
+            let bbox = PixelRect {
+                x: bx + roi.x,
+                y: by + roi.y,
+                width: bw,
+                height: bh,
+            };
+
+            let verdict = (|| {
+                if area < cfg.min_area_px {
+                    return Err(Reject::Small);
+                }
+                let fill = area as f64 / (bw as f64 * bh as f64);
+                let aspect = bw.max(bh) as f64 / bw.min(bh) as f64;
+                if fill < cfg.min_fill_ratio || aspect > cfg.max_aspect {
+                    return Err(Reject::Shape);
+                }
+                let depth_m = match depth {
+                    Some((d, scale)) => {
+                        let z = median_depth_near(
+                            d,
+                            scale,
+                            bbox,
+                            cfg.depth_search_px as i32,
+                            [r0, r1],
+                            &mut self.depth_buf,
+                        );
+                        Some(z.ok_or(Reject::NoDepth)?)
+                    }
+                    None => None,
+                };
+                // Expected area of a disc of the paint's radius at that distance (or anywhere
+                // in the plausible range when the distance is unknown).
+                let disc = |z: f64| std::f64::consts::PI * (cfg.dot_radius_m * fx / z).powi(2);
+                let (lo, hi) = match depth_m {
+                    Some(z) => (disc(z) * cfg.area_ratio[0], disc(z) * cfg.area_ratio[1]),
+                    None => (disc(r1) * cfg.area_ratio[0], disc(r0) * cfg.area_ratio[1]),
+                };
+                let area_f = area as f64;
+                // Tiny discs are quantised: never ask for more than the minimum pixel count.
+                if area_f
+                    < lo.min(cfg.min_area_px as f64 * 2.0)
+                        .max(cfg.min_area_px as f64)
+                    || area_f > hi.max(4.0)
+                {
+                    return Err(Reject::Area);
+                }
+                Ok(depth_m)
+            })();
+            let depth_m = match verdict {
+                Ok(z) => z,
+                Err(why) => {
+                    tracing::trace!(class = class_idx, ?bbox, area, ?why, "component rejected");
+                    out.rejected += 1;
+                    continue;
+                }
+            };
+
+            // Sub-pixel centre: colour-weight moments over the component grown by a pixel.
+            let local = PixelRect {
+                x: bx - 1,
+                y: by - 1,
+                width: bw + 2,
+                height: bh + 2,
+            }
+            .clip(roi.width as u32, roi.height as u32)
+            .unwrap_or(PixelRect {
+                x: bx,
+                y: by,
+                width: bw,
+                height: bh,
+            });
+            let labels_local = Mat::roi(&self.labels, local.to_cv())?;
+            core::compare(
+                &labels_local,
+                &Scalar::all(label as f64),
+                &mut self.comp,
+                core::CMP_EQ,
+            )?;
+            imgproc::dilate_def(&self.comp, &mut self.comp_grown, &self.dilate_kernel)?;
+            if self.config.morphology == Morphology::Open {
+                let opened_local = Mat::roi(&self.morphed, local.to_cv())?;
+                core::min(&opened_local, &self.comp, &mut self.comp_weight)?;
+                if core::count_non_zero(&self.comp_weight)? == 0 {
+                    tracing::trace!(
+                        class = class_idx,
+                        ?bbox,
+                        area,
+                        "speckle: nothing left after opening"
+                    );
+                    out.rejected += 1;
+                    continue;
+                }
+            }
+            let weight_local = Mat::roi(&self.weight, local.to_cv())?;
+            core::min(&weight_local, &self.comp_grown, &mut self.comp_weight)?;
+            let m = imgproc::moments(&self.comp_weight, false)?;
+            let center = if m.m00 > 0.0 {
+                [
+                    m.m10 / m.m00 + (local.x + roi.x) as f64,
+                    m.m01 / m.m00 + (local.y + roi.y) as f64,
+                ]
+            } else {
+                let cx = *self.centroids.at_2d::<f64>(label, 0)?;
+                let cy = *self.centroids.at_2d::<f64>(label, 1)?;
+                [cx + roi.x as f64, cy + roi.y as f64]
+            };
+            out.blobs.push(Blob {
+                class: class_idx,
+                center,
+                area,
+                bbox,
+                depth_m,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Median of the valid depth readings (metres, inside `range`) in `bbox` grown by `grow`.
+fn median_depth_near(
+    depth: &DepthImage,
+    scale: f64,
+    bbox: PixelRect,
+    grow: i32,
+    range: [f64; 2],
+    buf: &mut Vec<u16>,
+) -> Option<f64> {
+    let r = PixelRect {
+        x: bbox.x - grow,
+        y: bbox.y - grow,
+        width: bbox.width + 2 * grow,
+        height: bbox.height + 2 * grow,
+    }
+    .clip(depth.width, depth.height)?;
+    let lo = (range[0] / scale).floor().max(1.0) as u32;
+    let hi = (range[1] / scale).ceil().min(u16::MAX as f64) as u32;
+    buf.clear();
+    let w = depth.width as usize;
+    for y in r.y..r.y + r.height {
+        let row =
+            &depth.data[y as usize * w + r.x as usize..y as usize * w + (r.x + r.width) as usize];
+        buf.extend(
+            row.iter()
+                .copied()
+                .filter(|&v| (lo..=hi).contains(&(v as u32))),
+        );
+    }
+    if buf.is_empty() {
+        return None;
+    }
+    let mid = buf.len() / 2;
+    let (_, m, _) = buf.select_nth_unstable(mid);
+    Some(*m as f64 * scale)
+}
+
+/// Hue → weight: 255 over the inner half of each range, falling linearly to 0 at `margin`
+/// hue units beyond its ends (the hue circle wraps at 180).
+fn hue_weight_table(ranges: &[[u8; 2]], margin: u8) -> [u8; 256] {
+    let mut table = [0u8; 256];
+    for (h, slot) in table.iter_mut().enumerate().take(180) {
+        let mut best = 0.0f64;
+        for &[lo, hi] in ranges {
+            let (lo, hi) = (lo as f64, hi.min(179) as f64);
+            let centre = (lo + hi) / 2.0;
+            let core_half = (hi - lo) / 4.0;
+            let outer_half = (hi - lo) / 2.0 + margin as f64;
+            let d = {
+                let d = (h as f64 - centre).abs();
+                d.min(180.0 - d)
+            };
+            let w = if d <= core_half {
+                1.0
+            } else if d >= outer_half {
+                0.0
+            } else {
+                1.0 - (d - core_half) / (outer_half - core_half)
+            };
+            best = best.max(w);
+        }
+        *slot = (best * 255.0).round() as u8;
+    }
+    table
+}
+
+/// Saturation → weight: 0 at half the class's minimum, 255 at the minimum and above (a paint
+/// pixel mixed with skin loses saturation).
+fn saturation_weight_table([lo, _hi]: [u8; 2]) -> [u8; 256] {
+    let mut table = [0u8; 256];
+    let start = lo as f64 / 2.0;
+    let end = (lo as f64).max(start + 1.0);
+    for (s, slot) in table.iter_mut().enumerate() {
+        let w = ((s as f64 - start) / (end - start)).clamp(0.0, 1.0);
+        *slot = (w * 255.0).round() as u8;
+    }
+    table
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,313 @@
+//! Detector tests on images drawn with OpenCV: anti-aliased discs of known colour and
+//! sub-pixel centre on a skin-coloured background.
+
+use opencv::core::{Mat, Point, Scalar, CV_8UC3};
+use opencv::imgproc;
+use opencv::prelude::*;
+
+use super::*;
+
+const SKIN: (f64, f64, f64) = (120.0, 150.0, 205.0); // BGR
+const GREEN: (f64, f64, f64) = (50.0, 175.0, 40.0);
+const BLUE: (f64, f64, f64) = (190.0, 90.0, 30.0);
+const RED: (f64, f64, f64) = (40.0, 30.0, 200.0);
+
+struct Canvas {
+    mat: Mat,
+}
+
+impl Canvas {
+    fn new(w: i32, h: i32) -> Self {
+        let mat = Mat::new_rows_cols_with_default(
+            h,
+            w,
+            CV_8UC3,
+            Scalar::new(SKIN.0, SKIN.1, SKIN.2, 0.0),
+        )
+        .unwrap();
+        Self { mat }
+    }
+
+    /// A filled disc at a sub-pixel centre, each pixel blended by its exact-ish coverage
+    /// (16x16 supersampling), as a camera integrates paint and skin over a pixel.
+    fn disc(&mut self, centre: [f64; 2], radius: f64, bgr: (f64, f64, f64)) {
+        let n = 16;
+        let x0 = (centre[0] - radius - 1.0).floor() as i32;
+        let y0 = (centre[1] - radius - 1.0).floor() as i32;
+        let x1 = (centre[0] + radius + 1.0).ceil() as i32;
+        let y1 = (centre[1] + radius + 1.0).ceil() as i32;
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let mut inside = 0;
+                for sy in 0..n {
+                    for sx in 0..n {
+                        let px = x as f64 - 0.5 + (sx as f64 + 0.5) / n as f64;
+                        let py = y as f64 - 0.5 + (sy as f64 + 0.5) / n as f64;
+                        if (px - centre[0]).powi(2) + (py - centre[1]).powi(2) <= radius * radius {
+                            inside += 1;
+                        }
+                    }
+                }
+                let a = inside as f64 / (n * n) as f64;
+                if a == 0.0 {
+                    continue;
+                }
+                let p = self.mat.at_2d_mut::<opencv::core::Vec3b>(y, x).unwrap();
+                for (k, c) in [bgr.0, bgr.1, bgr.2].into_iter().enumerate() {
+                    p[k] = (a * c + (1.0 - a) * p[k] as f64).round() as u8;
+                }
+            }
+        }
+    }
+
+    fn image(&self) -> ColorImage {
+        let size = self.mat.size().unwrap();
+        ColorImage {
+            width: size.width as u32,
+            height: size.height as u32,
+            data: self.mat.data_bytes().unwrap().to_vec(),
+        }
+    }
+}
+
+fn flat_depth(w: u32, h: u32, mm: u16) -> DepthImage {
+    DepthImage {
+        width: w,
+        height: h,
+        data: vec![mm; (w * h) as usize],
+    }
+}
+
+fn nearest(blobs: &[Blob], p: [f64; 2]) -> &Blob {
+    blobs
+        .iter()
+        .min_by(|a, b| dist(a.center, p).total_cmp(&dist(b.center, p)))
+        .expect("no blobs")
+}
+
+fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+}
+
+#[test]
+fn finds_discs_at_their_sub_pixel_centres() {
+    let mut canvas = Canvas::new(320, 240);
+    // Radius 2 px: the synthetic performer's 2.25 mm dot at 0.6 m with fx = 525.
+    let centres = [
+        [100.3, 80.7],
+        [130.55, 82.2],
+        [160.9, 79.45],
+        [115.25, 120.6],
+    ];
+    for c in centres {
+        canvas.disc(c, 2.0, GREEN);
+    }
+    let forehead = [[120.4, 30.3], [150.7, 28.9]];
+    for c in forehead {
+        canvas.disc(c, 2.0, BLUE);
+    }
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    let depth = flat_depth(320, 240, 600);
+    let found = det
+        .detect(&canvas.image(), Some((&depth, 0.001)), 525.0, None)
+        .unwrap();
+    assert_eq!(found.blobs.len(), 6, "{found:?}");
+    let mut worst: f64 = 0.0;
+    for c in centres {
+        let b = nearest(&found.blobs, c);
+        assert_eq!(det.config().classes[b.class].role, DotRole::Lip);
+        assert_eq!(b.depth_m, Some(0.6));
+        worst = worst.max(dist(b.center, c));
+    }
+    for c in forehead {
+        let b = nearest(&found.blobs, c);
+        assert_eq!(det.config().classes[b.class].role, DotRole::Forehead);
+        worst = worst.max(dist(b.center, c));
+    }
+    // The plain pixel mean of a thresholded 2 px disc is off by up to ~0.5 px.
+    assert!(worst < 0.2, "worst centre error {worst} px");
+}
+
+#[test]
+fn colour_weighting_beats_the_plain_pixel_mean() {
+    // Many sub-pixel positions: the weighted centre must be clearly better on average than
+    // the component's centroid that connected components reports.
+    let cfg = DetectConfig::default();
+    let mut det = Detector::new(cfg).unwrap();
+    let depth = flat_depth(64, 64, 600);
+    let (mut err_weighted, mut err_plain) = (0.0, 0.0);
+    let n = 40;
+    for i in 0..n {
+        let c = [
+            30.0 + (i as f64 * 0.137) % 1.0,
+            31.0 + (i as f64 * 0.291) % 1.0,
+        ];
+        let mut canvas = Canvas::new(64, 64);
+        canvas.disc(c, 2.2, GREEN);
+        let img = canvas.image();
+        let found = det
+            .detect(&img, Some((&depth, 0.001)), 525.0, None)
+            .unwrap();
+        assert_eq!(found.blobs.len(), 1);
+        err_weighted += dist(found.blobs[0].center, c).powi(2);
+        // Plain mean of the thresholded pixels, for comparison.
+        let mut plain = [0.0; 2];
+        let mut count = 0.0;
+        let hsv_ok = |x: u32, y: u32| {
+            let [b, g, r] = img.pixel(x, y);
+            g as i32 - r as i32 > 60 && g as i32 - b as i32 > 40
+        };
+        for y in 0..64 {
+            for x in 0..64 {
+                if hsv_ok(x, y) {
+                    plain[0] += x as f64;
+                    plain[1] += y as f64;
+                    count += 1.0;
+                }
+            }
+        }
+        err_plain += dist([plain[0] / count, plain[1] / count], c).powi(2);
+    }
+    let (rms_w, rms_p) = (
+        (err_weighted / n as f64).sqrt(),
+        (err_plain / n as f64).sqrt(),
+    );
+    assert!(rms_w < 0.15, "weighted RMS {rms_w} px");
+    assert!(rms_w < rms_p, "weighted {rms_w} vs plain {rms_p}");
+}
+
+#[test]
+fn red_wraps_around_the_hue_circle() {
+    let mut canvas = Canvas::new(200, 100);
+    canvas.disc([50.0, 50.0], 3.0, RED);
+    // A slightly magenta red (hue near 175) and a slightly orange one (hue near 3).
+    canvas.disc([100.0, 50.0], 3.0, (70.0, 20.0, 210.0));
+    canvas.disc([150.0, 50.0], 3.0, (10.0, 30.0, 220.0));
+    let cfg = DetectConfig {
+        classes: vec![ColorClass {
+            name: "red".into(),
+            role: DotRole::Any,
+            hue: vec![[0, 8], [168, 179]],
+            saturation: [150, 255],
+            value: [60, 255],
+        }],
+        ..DetectConfig::default()
+    };
+    let mut det = Detector::new(cfg).unwrap();
+    // The skin background (hue ~ 10, saturation ~ 105) must not show up.
+    let found = det.detect(&canvas.image(), None, 525.0, None).unwrap();
+    assert_eq!(found.blobs.len(), 3, "{found:?}");
+}
+
+#[test]
+fn filters_reject_big_thin_and_depthless_blobs() {
+    let mut canvas = Canvas::new(320, 240);
+    canvas.disc([50.0, 50.0], 2.0, GREEN); // a dot
+    canvas.disc([150.0, 60.0], 14.0, GREEN); // a green sticker: far too big at 0.6 m
+    imgproc::line(
+        &mut canvas.mat,
+        Point::new(200, 150),
+        Point::new(260, 152),
+        Scalar::new(GREEN.0, GREEN.1, GREEN.2, 0.0),
+        2,
+        imgproc::LINE_8,
+        0,
+    )
+    .unwrap(); // a thin stripe
+    canvas.disc([80.0, 200.0], 2.0, GREEN); // a dot with no depth around it
+    let mut depth = flat_depth(320, 240, 600);
+    for y in 190..212 {
+        for x in 70..92 {
+            depth.data[y * 320 + x] = 0;
+        }
+    }
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    let found = det
+        .detect(&canvas.image(), Some((&depth, 0.001)), 525.0, None)
+        .unwrap();
+    assert_eq!(found.blobs.len(), 1, "{found:?}");
+    assert!(dist(found.blobs[0].center, [50.0, 50.0]) < 0.3);
+    assert_eq!(found.rejected, 3);
+}
+
+#[test]
+fn search_region_limits_the_work_and_keeps_full_frame_coordinates() {
+    let mut canvas = Canvas::new(320, 240);
+    canvas.disc([40.4, 40.6], 2.0, GREEN);
+    canvas.disc([250.2, 200.8], 2.0, GREEN);
+    let img = canvas.image();
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    let roi = PixelRect::around([[250.0, 200.0]], 10.0);
+    let found = det.detect(&img, None, 525.0, roi).unwrap();
+    assert_eq!(found.blobs.len(), 1);
+    assert!(
+        dist(found.blobs[0].center, [250.2, 200.8]) < 0.2,
+        "{:?}",
+        found.blobs[0]
+    );
+    assert_eq!(found.searched.unwrap().area(), 21 * 21);
+    // A region entirely outside the image finds nothing and does not fail.
+    let off = PixelRect {
+        x: 400,
+        y: 400,
+        width: 10,
+        height: 10,
+    };
+    assert!(det
+        .detect(&img, None, 525.0, Some(off))
+        .unwrap()
+        .blobs
+        .is_empty());
+    // A region that leaves the image is clipped.
+    let edge = PixelRect {
+        x: -20,
+        y: -20,
+        width: 80,
+        height: 80,
+    };
+    let found = det.detect(&img, None, 525.0, Some(edge)).unwrap();
+    assert_eq!(found.blobs.len(), 1);
+    assert_eq!(
+        found.searched.unwrap(),
+        PixelRect {
+            x: 0,
+            y: 0,
+            width: 60,
+            height: 60
+        }
+    );
+}
+
+#[test]
+fn an_image_without_dots_gives_nothing() {
+    let canvas = Canvas::new(160, 120);
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    let found = det.detect(&canvas.image(), None, 525.0, None).unwrap();
+    assert!(found.blobs.is_empty());
+}
+
+#[test]
+fn mismatched_sizes_are_an_error_not_a_panic() {
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    let mut img = ColorImage::new(64, 48);
+    img.data.pop();
+    assert!(matches!(
+        det.detect(&img, None, 525.0, None),
+        Err(DetectError::ImageSize(_))
+    ));
+    let img = ColorImage::new(64, 48);
+    let depth = DepthImage::new(32, 24);
+    assert!(matches!(
+        det.detect(&img, Some((&depth, 0.001)), 525.0, None),
+        Err(DetectError::ImageSize(_))
+    ));
+}
+
+#[test]
+fn hue_table_wraps_and_peaks_inside_the_range() {
+    let t = hue_weight_table(&[[0, 8], [170, 179]], 6);
+    assert_eq!(t[4], 255);
+    assert_eq!(t[175], 255);
+    assert!(t[12] > 0 && t[12] < 255);
+    assert_eq!(t[90], 0);
+}

@@ -1,0 +1,405 @@
+//! `mouthpiece evaluate`: the measuring instrument measured. Renders synthetic sessions
+//! (`mouthpiece-synth`, exact ground truth) in memory, runs the whole pipeline on them and
+//! prints, per session, how well the dots were found, named and placed, the head rotation
+//! error, and how far the character output is from the retarget core fed with the ground
+//! truth itself.
+//!
+//! Definitions (frames from `--skip` seconds on, the neutral second excluded):
+//! - *found & named*: over visible ground-truth dots, the share the tracker reports under
+//!   their own name, at a pixel whose nearest projected true dot is their own (within 8 px);
+//! - *wrong*: dots the tracker reports at a pixel whose nearest projected true dot is another
+//!   one (or none within 8 px); hidden dots reported are counted apart (*named hidden*);
+//! - *3D RMS*: over correctly named visible dots, distance to the true centre;
+//! - *head RMS*: angle between the tracked head rotation and the true one (both relative to
+//!   the pose at calibration);
+//! - *character RMS*: the character points against those the retarget core gives from the
+//!   true dots with the same neutral frames, as a share of the character's mouth width.
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use mouthpiece_retarget::{
+    Character, CharacterSettings, NeutralAccumulator, PerformerDots, PerformerLayout,
+    RetargetConfig, Retargeter, ShapeSmoothing,
+};
+use mouthpiece_synth::{GroundTruth, HeadMotion, NoiseModel, Synth, SynthConfig};
+use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
+use nalgebra::{Matrix3, Vector3};
+
+use crate::cmd::process::{load_character, load_config};
+use crate::exit::bad_input;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Motion {
+    None,
+    Mild,
+    Strong,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Noise {
+    None,
+    Kinect,
+    Realsense,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Seeds of the synthetic sessions.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3")]
+    pub seeds: Vec<u64>,
+    /// Depth noise models.
+    #[arg(long, value_delimiter = ',', default_value = "kinect,realsense")]
+    pub noise: Vec<Noise>,
+    /// Head motions.
+    #[arg(
+        long = "head-motion",
+        value_delimiter = ',',
+        default_value = "mild,strong"
+    )]
+    pub head_motion: Vec<Motion>,
+    /// Length of each session, seconds.
+    #[arg(long, default_value_t = 6.0)]
+    pub seconds: f64,
+    /// Character the output is measured on.
+    #[arg(long, default_value = "config/characters/wolf.toml")]
+    pub character: PathBuf,
+    /// Configuration file (`[detect]`, `[track]`).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+}
+
+/// One session's figures.
+#[derive(Debug, Clone, Default)]
+pub struct Metrics {
+    pub frames: usize,
+    pub visible: usize,
+    pub found_named: usize,
+    pub wrong: usize,
+    pub named_hidden: usize,
+    pub err_sq_sum: f64,
+    pub head_sq_sum: f64,
+    pub head_frames: usize,
+    pub char_sq_sum: f64,
+    pub char_count: usize,
+    pub char_width: f64,
+    pub calibrated_at: Option<f64>,
+}
+
+impl Metrics {
+    pub fn found_pct(&self) -> f64 {
+        100.0 * self.found_named as f64 / self.visible.max(1) as f64
+    }
+    pub fn rms_mm(&self) -> f64 {
+        1e3 * (self.err_sq_sum / self.found_named.max(1) as f64).sqrt()
+    }
+    pub fn head_rms_deg(&self) -> f64 {
+        (self.head_sq_sum / self.head_frames.max(1) as f64)
+            .sqrt()
+            .to_degrees()
+    }
+    pub fn char_rms_pct(&self) -> f64 {
+        100.0 * (self.char_sq_sum / self.char_count.max(1) as f64).sqrt() / self.char_width
+    }
+}
+
+fn v3(a: [f64; 3]) -> Vector3<f64> {
+    Vector3::new(a[0], a[1], a[2])
+}
+
+fn rot(gt: &GroundTruth) -> Matrix3<f64> {
+    let m = gt.head.rotation_matrix();
+    Matrix3::new(
+        m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
+    )
+}
+
+fn gt_dots(gt: &GroundTruth, layout: PerformerLayout) -> PerformerDots {
+    let mut d = PerformerDots::new(layout);
+    for (i, slot) in d.lip.iter_mut().enumerate() {
+        *slot = gt.point(&PerformerLayout::lip_name(i)).map(v3);
+    }
+    for (i, slot) in d.forehead.iter_mut().enumerate() {
+        *slot = gt.point(&PerformerLayout::forehead_name(i)).map(v3);
+    }
+    d
+}
+
+/// Runs the pipeline over one synthetic session and measures it against its ground truth.
+pub fn evaluate(
+    synth: SynthConfig,
+    config: &PipelineConfig,
+    character: &Character,
+    skip_s: f64,
+) -> anyhow::Result<Metrics> {
+    let settings = CharacterSettings {
+        smoothing: ShapeSmoothing::None,
+        one_euro: None,
+    };
+    let mut pipeline = Pipeline::new(config.clone(), character.clone(), settings)?;
+    let layout = config.track.layout();
+    let names: Vec<String> = (0..layout.lip_dots)
+        .map(PerformerLayout::lip_name)
+        .chain((0..layout.forehead_dots).map(PerformerLayout::forehead_name))
+        .collect();
+    let mut synth = Synth::new(synth).context("synthetic performer")?;
+    let mut m = Metrics {
+        char_width: character.mouth_width(),
+        ..Metrics::default()
+    };
+
+    // Ground truth kept for the calibration window (to build the reference retarget from the
+    // same frames the tracker used).
+    let mut history: Vec<(f64, GroundTruth)> = Vec::new();
+    let mut reference: Option<Retargeter> = None;
+    let mut head_at_calibration = Matrix3::identity();
+    while let Some((frame, gt)) = synth.render_next() {
+        if let Ok(dump) = std::env::var("MP_DUMP_SEQ") {
+            if dump.parse::<u64>().ok() == Some(frame.seq) {
+                let mut ppm =
+                    format!("P6 {} {} 255\n", frame.color.width, frame.color.height).into_bytes();
+                ppm.extend(frame.color.data.chunks(3).flat_map(|c| [c[2], c[1], c[0]]));
+                std::fs::write("/tmp/dump.ppm", ppm)?;
+                let d: Vec<u8> = frame
+                    .depth
+                    .data
+                    .iter()
+                    .flat_map(|v| v.to_le_bytes())
+                    .collect();
+                std::fs::write("/tmp/dump.depth", d)?;
+            }
+        }
+        let (line, tracked) = pipeline.process(&frame)?;
+        let t = tracked.t;
+        history.push((t, gt.clone()));
+        if tracked.status.neutral_taken {
+            m.calibrated_at = Some(t);
+            let neutral_s = config.track.calibration_s;
+            let mut acc = NeutralAccumulator::new(layout);
+            let mut rotations = Vec::new();
+            for (ht, g) in history.iter().filter(|(ht, _)| *ht >= t - neutral_s - 1e-6) {
+                let _ = ht;
+                acc.push(&gt_dots(g, layout))?;
+                rotations.push(rot(g));
+            }
+            // The neutral pose averages the window: compare against the window's mean rotation.
+            let mean = rotations.iter().sum::<Matrix3<f64>>() / rotations.len().max(1) as f64;
+            head_at_calibration = nalgebra::Rotation3::from_matrix(&mean).into_inner();
+            let cfg = RetargetConfig {
+                missing: Default::default(),
+                character: settings,
+            };
+            let mut r = Retargeter::new(character.clone(), acc.finish()?, cfg)?;
+            // Bring the reference's clock to now.
+            r.step(t, &gt_dots(&gt, layout))?;
+            reference = Some(r);
+        }
+        if t < skip_s {
+            continue;
+        }
+        m.frames += 1;
+        let points: Vec<Option<Vector3<f64>>> = tracked
+            .dots
+            .lip
+            .iter()
+            .chain(&tracked.dots.forehead)
+            .copied()
+            .collect();
+        let truth: Vec<Vector3<f64>> = names
+            .iter()
+            .map(|n| v3(gt.point(n).expect("every dot has truth")))
+            .collect();
+        let truth_px: Vec<Option<[f64; 2]>> = truth
+            .iter()
+            .map(|q| mouthpiece_track::camera::project(&frame.calibration.color, q))
+            .collect();
+        for (i, name) in names.iter().enumerate() {
+            let visible = gt.is_visible(name);
+            if visible {
+                m.visible += 1;
+            }
+            let Some(p) = points[i] else {
+                if visible {
+                    tracing::debug!(t, dot = %name, "visible dot not found");
+                }
+                continue;
+            };
+            // Naming is judged in the image (which blob got the name); how far the 3D point
+            // is from the truth is the 3D error, reported apart.
+            let px = tracked.pixels[i].expect("a named dot has a pixel");
+            let (nearest, dist_px) = truth_px
+                .iter()
+                .enumerate()
+                .filter_map(|(j, q)| {
+                    q.map(|q| (j, ((px[0] - q[0]).powi(2) + (px[1] - q[1]).powi(2)).sqrt()))
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .expect("dots");
+            if nearest != i || dist_px > 8.0 {
+                m.wrong += 1;
+                tracing::debug!(t, dot = %name, nearest = %names[nearest], dist_px, "wrongly named");
+            } else if visible {
+                let dist = (p - truth[i]).norm();
+                m.found_named += 1;
+                m.err_sq_sum += dist * dist;
+                if dist > 0.006 {
+                    tracing::debug!(t, dot = %name, dist_mm = dist * 1e3, "far from its true position");
+                }
+            } else {
+                m.named_hidden += 1;
+            }
+        }
+        if let Some(s) = &tracked.stabilised {
+            let truth_rel = rot(&gt) * head_at_calibration.transpose();
+            let diff = s.head.rotation.transpose() * truth_rel;
+            let angle = ((diff.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos();
+            m.head_sq_sum += angle * angle;
+            m.head_frames += 1;
+        }
+        if let Some(r) = &mut reference {
+            let ours: Vec<[f64; 3]> = line.retarget.points.0.iter().map(|(_, p)| *p).collect();
+            let out = r.step(t, &gt_dots(&gt, layout))?;
+            for (k, (a, b)) in ours.iter().zip(&out.character.points).enumerate() {
+                let d2 = (v3(*a) - b).norm_squared();
+                tracing::trace!(
+                    t,
+                    point = k,
+                    diff = d2.sqrt(),
+                    "character point against reference"
+                );
+                m.char_sq_sum += d2;
+                m.char_count += 1;
+            }
+        }
+    }
+    Ok(m)
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = load_config(args.config.as_deref())?;
+    let character = load_character(&args.character)?;
+    if !(args.seconds > 2.0 && args.seconds.is_finite()) {
+        return Err(bad_input(anyhow::anyhow!(
+            "--seconds must be more than 2 (the neutral pose takes the first 1.5 s)"
+        )));
+    }
+    println!(
+        "| seed | noise | head motion | frames | calibrated at (s) | visible dots | found & named | wrong | named hidden | 3D RMS (mm) | head RMS (°) | character RMS (% width) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for &motion in &args.head_motion {
+        for &noise in &args.noise {
+            for &seed in &args.seeds {
+                let synth = SynthConfig {
+                    seed,
+                    seconds: args.seconds,
+                    head_motion: match motion {
+                        Motion::None => HeadMotion::None,
+                        Motion::Mild => HeadMotion::Mild,
+                        Motion::Strong => HeadMotion::Strong,
+                    },
+                    noise: match noise {
+                        Noise::None => NoiseModel::None,
+                        Noise::Kinect => NoiseModel::Kinect,
+                        Noise::Realsense => NoiseModel::Realsense,
+                    },
+                    ..SynthConfig::default()
+                };
+                let m = evaluate(synth, &config, &character, 1.0)?;
+                println!(
+                    "| {seed} | {noise:?} | {motion:?} | {} | {} | {} | {:.2} % | {} | {} | {:.2} | {:.2} | {:.2} |",
+                    m.frames,
+                    m.calibrated_at.map_or("never".to_string(), |t| format!("{t:.2}")),
+                    m.visible,
+                    m.found_pct(),
+                    m.wrong,
+                    m.named_hidden,
+                    m.rms_mm(),
+                    m.head_rms_deg(),
+                    m.char_rms_pct()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A short session rendered now, measured against its ground truth. The thresholds guard
+    /// what the pipeline achieves today (README's table); the targets are stricter and
+    /// not all met yet (docs/detection.md says which).
+    #[test]
+    fn synthetic_session_is_tracked_against_ground_truth() {
+        let character =
+            Character::from_toml_str(include_str!("../../../../config/characters/human.toml"))
+                .unwrap();
+        let synth = SynthConfig {
+            seed: 3,
+            seconds: 4.0,
+            ..SynthConfig::default()
+        };
+        let m = evaluate(synth, &PipelineConfig::default(), &character, 1.0).unwrap();
+        let calibrated = m.calibrated_at.expect("neutral pose taken");
+        assert!(
+            (0.9..1.6).contains(&calibrated),
+            "calibrated at {calibrated} s"
+        );
+        assert!(m.frames >= 89 && m.visible > 1000, "{m:?}");
+        assert!(
+            m.found_pct() > 90.0,
+            "found and named {:.2} %",
+            m.found_pct()
+        );
+        assert!(
+            (m.wrong as f64) < 0.03 * m.visible as f64,
+            "wrongly named {} of {}",
+            m.wrong,
+            m.visible
+        );
+        assert!(m.rms_mm() < 2.5, "3D RMS {:.2} mm", m.rms_mm());
+        assert!(m.head_rms_deg() < 3.0, "head RMS {:.2}°", m.head_rms_deg());
+        assert!(
+            m.char_rms_pct() < 15.0,
+            "character RMS {:.2} % of its width",
+            m.char_rms_pct()
+        );
+    }
+
+    #[test]
+    fn a_session_without_paint_says_so_on_every_frame() {
+        // Dots painted in skin colour: nothing to find; the pipeline must not fail.
+        let character =
+            Character::from_toml_str(include_str!("../../../../config/characters/human.toml"))
+                .unwrap();
+        let layout = mouthpiece_synth::DotLayout {
+            lip_color: [205, 150, 120],
+            forehead_color: [205, 150, 120],
+            ..Default::default()
+        };
+        let mut synth = Synth::new(SynthConfig {
+            seed: 1,
+            seconds: 1.5,
+            layout,
+            ..SynthConfig::default()
+        })
+        .unwrap();
+        let settings = CharacterSettings {
+            smoothing: ShapeSmoothing::None,
+            one_euro: None,
+        };
+        let mut pipeline = Pipeline::new(PipelineConfig::default(), character, settings).unwrap();
+        while let Some((frame, _)) = synth.render_next() {
+            let (line, tracked) = pipeline.process(&frame).unwrap();
+            assert!(tracked.status.calibrating && tracked.status.too_few_dots);
+            assert_eq!(tracked.status.dots_missing.len(), 15);
+            let json = serde_json::to_string(&line).unwrap();
+            assert!(
+                json.contains("\"calibrating\":true") && json.contains("\"D1\":null"),
+                "{json}"
+            );
+        }
+    }
+}

@@ -1,0 +1,241 @@
+//! `mouthpiece process`: a recorded session → character mouth points (JSONL), offline.
+//!
+//! The whole pipeline (detect, track, calibrate, retarget) on every frame of the input, as
+//! fast as the machine goes (unpaced). One output line per input frame: the `retarget` output
+//! fields, plus `performer` (tracked dots, camera frame, metres, `null` when not seen),
+//! `status` (calibrating, head_lost, dots_missing, no_dots, too_few_dots, …) and
+//! `frame {seq, device_ts_us}`. A progress line on stderr when stderr is a terminal.
+
+use std::fs::File;
+use std::io::{self, BufWriter, IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context as _;
+use mouthpiece_frame::{Frame, FrameSource};
+use mouthpiece_recording::SessionReader;
+use mouthpiece_retarget::{Character, CharacterSettings, MovingAverageKind, ShapeSmoothing};
+use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
+
+use crate::cmd::retarget::Smooth;
+use crate::exit::bad_input;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Recorded session: `.mcap` (mouthpiece's format) or `.oni` (OpenNI2).
+    pub input: PathBuf,
+    /// Character file (TOML).
+    #[arg(long)]
+    pub character: PathBuf,
+    /// Configuration file (TOML): its `[detect]` and `[track]` tables are used.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Output JSONL, `-` for stdout.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Shape smoothing that makes each line's `curve`.
+    #[arg(long, value_enum, default_value = "bspline")]
+    pub smooth: Smooth,
+    /// Threads OpenCV may use (0: its default). 1 measures one core.
+    #[arg(long, default_value_t = 0)]
+    pub opencv_threads: i32,
+}
+
+/// Loads the `[detect]`/`[track]` configuration (defaults without a file).
+pub fn load_config(path: Option<&Path>) -> anyhow::Result<PipelineConfig> {
+    let Some(path) = path else {
+        return Ok(PipelineConfig::default());
+    };
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read configuration {}", path.display()))
+        .map_err(bad_input)?;
+    PipelineConfig::from_toml_str(&text)
+        .with_context(|| format!("configuration {}", path.display()))
+        .map_err(bad_input)
+}
+
+/// Loads a character file.
+pub fn load_character(path: &Path) -> anyhow::Result<Character> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read character file {}", path.display()))
+        .map_err(bad_input)?;
+    Character::from_toml_str(&text)
+        .with_context(|| format!("character file {}", path.display()))
+        .map_err(bad_input)
+}
+
+fn smoothing(smooth: Smooth) -> ShapeSmoothing {
+    match smooth {
+        Smooth::None => ShapeSmoothing::None,
+        Smooth::Ma => ShapeSmoothing::MovingAverage {
+            kind: MovingAverageKind::Plain,
+            radius: 1,
+        },
+        Smooth::MaWeighted => ShapeSmoothing::MovingAverage {
+            kind: MovingAverageKind::Weighted,
+            radius: 1,
+        },
+        Smooth::MaExp => ShapeSmoothing::MovingAverage {
+            kind: MovingAverageKind::Exponential { alpha: 0.5 },
+            radius: 1,
+        },
+        Smooth::Sg5 => ShapeSmoothing::SavitzkyGolay5,
+        Smooth::Bspline => ShapeSmoothing::BSpline {
+            samples_per_span: 8,
+        },
+    }
+}
+
+/// A finite stream of frames from a recorded session.
+pub enum Input {
+    Mcap(SessionReader),
+    Oni(Box<dyn FrameSource>),
+}
+
+impl Input {
+    /// Opens a session by its file extension.
+    pub fn open(path: &Path) -> anyhow::Result<Self> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("mcap") => {
+                let reader = SessionReader::open(path)
+                    .with_context(|| format!("cannot open session {}", path.display()))
+                    .map_err(bad_input)?;
+                Ok(Input::Mcap(reader))
+            }
+            Some("oni") => {
+                // OpenNI2 playback through the capture crate, unpaced (`speed=0`).
+                let spec = format!("replay:{}?speed=0", path.display());
+                let source = mouthpiece_capture::open_source(
+                    &spec,
+                    &mouthpiece_capture::CaptureConfig::default(),
+                )
+                .with_context(|| format!("cannot open session {}", path.display()))
+                .map_err(bad_input)?;
+                Ok(Input::Oni(source))
+            }
+            _ => Err(bad_input(anyhow::anyhow!(
+                "{}: unknown session type (expected .mcap or .oni)",
+                path.display()
+            ))),
+        }
+    }
+
+    pub fn next_frame(&mut self) -> anyhow::Result<Option<Frame>> {
+        match self {
+            Input::Mcap(r) => Ok(r.next_frame()?.map(|f| f.frame)),
+            Input::Oni(s) => Ok(s.next_frame()?),
+        }
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = load_config(args.config.as_deref())?;
+    let character = load_character(&args.character)?;
+    let settings = CharacterSettings {
+        smoothing: smoothing(args.smooth),
+        one_euro: None,
+    };
+    let mut pipeline = Pipeline::new(config, character, settings).map_err(bad_input)?;
+    if args.opencv_threads > 0 {
+        mouthpiece_detect::set_opencv_threads(args.opencv_threads)?;
+    }
+    let mut input = Input::open(&args.input)?;
+
+    let to_stdout = args.out.as_os_str() == "-";
+    // A file is written beside its destination and renamed into place only when complete.
+    let (mut out, temp): (Box<dyn Write>, Option<tempfile::NamedTempFile>) = if to_stdout {
+        (Box::new(BufWriter::new(io::stdout().lock())), None)
+    } else {
+        let dir = args
+            .out
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let temp = tempfile::NamedTempFile::new_in(dir)
+            .with_context(|| format!("cannot create output in {}", dir.display()))
+            .map_err(bad_input)?;
+        let file: File = temp.reopen().context("cannot open the temporary output")?;
+        (Box::new(BufWriter::new(file)), Some(temp))
+    };
+
+    let progress = io::stderr().is_terminal().then(|| {
+        let bar = indicatif::ProgressBar::new_spinner();
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{spinner} {pos} frames  {per_sec}  {elapsed}  {msg}",
+            )
+            .expect("valid template"),
+        );
+        bar
+    });
+
+    let started = Instant::now();
+    let mut frames = 0u64;
+    let mut calibrated_at = None;
+    let mut frames_with_missing = 0u64;
+    let mut pipeline_ms: Vec<f64> = Vec::new();
+    while let Some(frame) = input
+        .next_frame()
+        .with_context(|| format!("reading {}", args.input.display()))?
+    {
+        let tick = Instant::now();
+        let (line, tracked) = pipeline
+            .process(&frame)
+            .with_context(|| format!("frame {}", frame.seq))?;
+        pipeline_ms.push(tick.elapsed().as_secs_f64() * 1e3);
+        serde_json::to_writer(&mut out, &line).context("cannot write output")?;
+        out.write_all(b"\n").context("cannot write output")?;
+        if tracked.status.neutral_taken && calibrated_at.is_none() {
+            calibrated_at = Some(tracked.t);
+        }
+        frames_with_missing += !tracked.status.dots_missing.is_empty() as u64;
+        frames += 1;
+        if let Some(bar) = &progress {
+            bar.set_position(frames);
+            if frames.is_multiple_of(15) {
+                bar.set_message(if tracked.status.calibrating {
+                    "calibrating"
+                } else {
+                    "tracking"
+                });
+            }
+        }
+    }
+    out.flush().context("cannot write output")?;
+    drop(out);
+    if let Some(temp) = temp {
+        temp.persist(&args.out)
+            .with_context(|| format!("cannot write {}", args.out.display()))?;
+    }
+    if let Some(bar) = progress {
+        bar.finish_and_clear();
+    }
+    let secs = started.elapsed().as_secs_f64();
+    pipeline_ms.sort_by(f64::total_cmp);
+    let pct = |q: f64| {
+        pipeline_ms
+            .get(((pipeline_ms.len().max(1) - 1) as f64 * q).round() as usize)
+            .copied()
+            .unwrap_or(0.0)
+    };
+    tracing::info!(
+        frames,
+        fps = format!("{:.1}", frames as f64 / secs.max(1e-9)),
+        pipeline_median_ms = format!("{:.3}", pct(0.5)),
+        pipeline_p99_ms = format!("{:.3}", pct(0.99)),
+        calibrated_at_s = ?calibrated_at,
+        frames_with_missing_dots = frames_with_missing,
+        "process done"
+    );
+    if calibrated_at.is_none() && frames > 0 {
+        tracing::warn!(
+            "no neutral pose was taken: the session never showed every dot with a still, closed mouth \
+             for a second (see each line's status)"
+        );
+    }
+    Ok(())
+}

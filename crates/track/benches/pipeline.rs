@@ -1,0 +1,118 @@
+//! Detect + track + retarget per frame, on the synthetic performer's frames (kinect noise,
+//! mild head motion), at 640x480 and 1280x720, OpenCV on one thread.
+//!
+//! `cargo bench -p mouthpiece-track --bench pipeline`. Besides criterion's report, prints the
+//! median and 99th percentile of single-frame times over the rendered session.
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use mouthpiece_frame::Frame;
+use mouthpiece_retarget::{Character, CharacterSettings, ShapeSmoothing};
+use mouthpiece_synth::{Synth, SynthConfig};
+use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
+
+const WOLF: &str = include_str!("../../../config/characters/wolf.toml");
+
+fn frames(width: u32, height: u32, seconds: f64) -> Vec<Frame> {
+    let config = SynthConfig {
+        seed: 7,
+        seconds,
+        camera: SynthConfig::camera_for_size(width, height),
+        ..SynthConfig::default()
+    };
+    let mut synth = Synth::new(config).expect("synth");
+    std::iter::from_fn(|| synth.render_next().map(|(f, _)| f)).collect()
+}
+
+fn pipeline() -> Pipeline {
+    let character = Character::from_toml_str(WOLF).expect("wolf");
+    let settings = CharacterSettings {
+        smoothing: ShapeSmoothing::BSpline {
+            samples_per_span: 8,
+        },
+        one_euro: None,
+    };
+    Pipeline::new(PipelineConfig::default(), character, settings).expect("pipeline")
+}
+
+/// Cycles through the frames forever, shifting timestamps so that time keeps increasing.
+struct Cycle {
+    frames: Vec<Frame>,
+    next: usize,
+    offset_us: u64,
+    span_us: u64,
+}
+
+impl Cycle {
+    fn new(frames: Vec<Frame>) -> Self {
+        let span_us = frames.last().unwrap().device_ts_us + 33_333;
+        Self {
+            frames,
+            next: 0,
+            offset_us: 0,
+            span_us,
+        }
+    }
+    fn next(&mut self) -> &Frame {
+        if self.next == self.frames.len() {
+            self.next = 0;
+            self.offset_us += self.span_us;
+            for f in &mut self.frames {
+                f.device_ts_us += self.span_us;
+            }
+        }
+        self.next += 1;
+        &self.frames[self.next - 1]
+    }
+}
+
+fn bench_size(c: &mut Criterion, width: u32, height: u32) {
+    let mut cycle = Cycle::new(frames(width, height, 6.0));
+    let mut p = pipeline();
+    // Warm up past the neutral calibration.
+    for _ in 0..60 {
+        let f = cycle.next().clone();
+        p.process(&f).expect("process");
+    }
+    c.bench_function(&format!("detect+track+retarget {width}x{height}"), |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                let frame = cycle.next();
+                let start = Instant::now();
+                black_box(p.process(frame).expect("process").0.frame);
+                total += start.elapsed();
+            }
+            total
+        })
+    });
+    // Percentiles over two passes of the session.
+    let mut times: Vec<f64> = (0..2 * cycle.frames.len())
+        .map(|_| {
+            let frame = cycle.next();
+            let start = Instant::now();
+            black_box(p.process(frame).expect("process").0.frame);
+            start.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    let pct = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
+    println!(
+        "{width}x{height}: per frame median {:.3} ms, p99 {:.3} ms, max {:.3} ms over {} frames",
+        pct(0.5),
+        pct(0.99),
+        pct(1.0),
+        times.len()
+    );
+}
+
+fn benches(c: &mut Criterion) {
+    mouthpiece_detect::set_opencv_threads(1).expect("opencv threads");
+    bench_size(c, 640, 480);
+    bench_size(c, 1280, 720);
+}
+
+criterion_group!(pipeline_benches, benches);
+criterion_main!(pipeline_benches);

@@ -1,0 +1,172 @@
+//! Depth at a dot: the median of the valid readings in a small disc around the centre (away
+//! from the paint's rim, where colour and depth edges disagree), or, when the centre has too
+//! few readings, a least-squares plane through the valid readings around it, evaluated at the
+//! centre.
+
+use mouthpiece_frame::DepthImage;
+use nalgebra::{Matrix3, Vector3};
+
+/// How a depth value was obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DepthMethod {
+    Median,
+    PlaneFit,
+}
+
+/// Depth (metres) at sub-pixel `center` of a dot of `radius_px`; readings outside `range`
+/// (metres) are ignored. `None` when there are too few readings to say.
+pub fn depth_at_dot(
+    depth: &DepthImage,
+    scale: f64,
+    center: [f64; 2],
+    radius_px: f64,
+    range: [f64; 2],
+    buf: &mut Vec<(f64, f64, f64)>,
+) -> Option<(f64, DepthMethod)> {
+    let lo = (range[0] / scale).max(1.0);
+    let hi = range[1] / scale;
+    // Inner disc: 60 % of the paint's radius, at least the pixel and its 4-neighbours.
+    let inner = (0.6 * radius_px).max(1.0);
+    collect(depth, center, inner, lo, hi, buf);
+    let disc_pixels = std::f64::consts::PI * inner * inner;
+    if buf.len() >= 3 && buf.len() as f64 >= 0.5 * disc_pixels {
+        let mut zs: Vec<f64> = buf.iter().map(|s| s.2).collect();
+        let mid = zs.len() / 2;
+        zs.select_nth_unstable_by(mid, f64::total_cmp);
+        let median = if zs.len() % 2 == 1 {
+            zs[mid]
+        } else {
+            let below = zs[..mid].iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            (below + zs[mid]) / 2.0
+        };
+        return Some((median * scale, DepthMethod::Median));
+    }
+    depth_by_plane(depth, scale, center, (2.5 * radius_px).max(4.0), range, buf)
+}
+
+/// Depth (metres) at `center` from a least-squares plane through the valid readings within
+/// `radius` pixels, after dropping readings far from their median (another surface behind or
+/// in front, e.g. the mouth interior next to a lip dot). For smooth skin (the forehead) over
+/// a wide radius this averages the sensor noise down far better than a median.
+pub fn depth_by_plane(
+    depth: &DepthImage,
+    scale: f64,
+    center: [f64; 2],
+    radius: f64,
+    range: [f64; 2],
+    buf: &mut Vec<(f64, f64, f64)>,
+) -> Option<(f64, DepthMethod)> {
+    let lo = (range[0] / scale).max(1.0);
+    let hi = range[1] / scale;
+    collect(depth, center, radius, lo, hi, buf);
+    if buf.len() < 6 {
+        return None;
+    }
+    let mut zs: Vec<f64> = buf.iter().map(|s| s.2).collect();
+    let mid = zs.len() / 2;
+    let median = *zs.select_nth_unstable_by(mid, f64::total_cmp).1;
+    // 15 mm: a lip's curvature across a few pixels is far less; a step to another surface is more.
+    let tol = 0.015 / scale;
+    buf.retain(|s| (s.2 - median).abs() <= tol);
+    if buf.len() < 6 {
+        return None;
+    }
+    let mut ata = Matrix3::zeros();
+    let mut atb = Vector3::zeros();
+    for &(dx, dy, z) in buf.iter() {
+        let a = Vector3::new(1.0, dx, dy);
+        ata += a * a.transpose();
+        atb += a * z;
+    }
+    // A degenerate spread (all readings on one line) cannot fix a plane.
+    let solution = ata.cholesky()?.solve(&atb);
+    let z = solution[0];
+    (z >= lo && z <= hi).then_some((z * scale, DepthMethod::PlaneFit))
+}
+
+/// Valid readings within `radius` of `center`, as (dx, dy, raw depth).
+fn collect(
+    depth: &DepthImage,
+    center: [f64; 2],
+    radius: f64,
+    lo: f64,
+    hi: f64,
+    buf: &mut Vec<(f64, f64, f64)>,
+) {
+    buf.clear();
+    let x0 = ((center[0] - radius).floor().max(0.0)) as i64;
+    let y0 = ((center[1] - radius).floor().max(0.0)) as i64;
+    let x1 = ((center[0] + radius).ceil() as i64).min(depth.width as i64 - 1);
+    let y1 = ((center[1] + radius).ceil() as i64).min(depth.height as i64 - 1);
+    let r2 = radius * radius;
+    for y in y0..=y1 {
+        let dy = y as f64 - center[1];
+        let row = y as usize * depth.width as usize;
+        for x in x0..=x1 {
+            let dx = x as f64 - center[0];
+            if dx * dx + dy * dy > r2 {
+                continue;
+            }
+            let v = depth.data[row + x as usize] as f64;
+            if v >= lo && v <= hi {
+                buf.push((dx, dy, v));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plane(w: u32, h: u32, f: impl Fn(f64, f64) -> f64) -> DepthImage {
+        let mut d = DepthImage::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                d.data[(y * w + x) as usize] = f(x as f64, y as f64).round() as u16;
+            }
+        }
+        d
+    }
+
+    #[test]
+    fn median_ignores_a_few_outliers() {
+        let mut d = plane(40, 40, |_, _| 600.0);
+        d.data[20 * 40 + 20] = 900; // a flying pixel at the centre
+        let mut buf = Vec::new();
+        let (z, how) = depth_at_dot(&d, 0.001, [20.2, 19.8], 2.5, [0.2, 2.0], &mut buf).unwrap();
+        assert_eq!(how, DepthMethod::Median);
+        assert!((z - 0.6).abs() < 1e-9, "{z}");
+    }
+
+    #[test]
+    fn plane_fit_fills_a_hole_at_the_centre() {
+        // A tilted surface z = 600 + 2 (x - 20) + 1 (y - 20) mm with a hole over the dot.
+        let mut d = plane(40, 40, |x, y| 600.0 + 2.0 * (x - 20.0) + (y - 20.0));
+        for y in 17..=23 {
+            for x in 17..=23 {
+                if (x as f64 - 20.0).powi(2) + (y as f64 - 20.0).powi(2) <= 4.0 {
+                    d.data[y * 40 + x] = 0;
+                }
+            }
+        }
+        let mut buf = Vec::new();
+        let (z, how) = depth_at_dot(&d, 0.001, [20.0, 20.0], 2.0, [0.2, 2.0], &mut buf).unwrap();
+        assert_eq!(how, DepthMethod::PlaneFit);
+        assert!((z - 0.6).abs() < 0.0005, "{z}");
+    }
+
+    #[test]
+    fn no_readings_no_depth() {
+        let d = DepthImage::new(40, 40);
+        let mut buf = Vec::new();
+        assert!(depth_at_dot(&d, 0.001, [20.0, 20.0], 2.0, [0.2, 2.0], &mut buf).is_none());
+    }
+
+    #[test]
+    fn readings_at_the_image_edge_do_not_panic() {
+        let d = plane(10, 10, |_, _| 500.0);
+        let mut buf = Vec::new();
+        assert!(depth_at_dot(&d, 0.001, [0.0, 9.0], 3.0, [0.2, 2.0], &mut buf).is_some());
+    }
+}

@@ -1,0 +1,925 @@
+//! From frames to named 3D dots: the tracker.
+//!
+//! Per frame ([`Tracker::process`]):
+//! 1. depth onto the colour grid when the source did not register it ([`camera::register_depth`]);
+//! 2. the detector (`mouthpiece-detect`) searches the region around the predicted dots, or
+//!    the full frame when dots were lost;
+//! 3. each blob's depth ([`depth::depth_at_dot`]: median of an inner disc, plane fit when
+//!    the centre has no reading), undistorted and deprojected into the camera frame;
+//! 4. names: from 3D geometry when every dot is seen ([`labels::label_by_geometry`]),
+//!    otherwise by optimal assignment (Hungarian, [`labels::assign`]) to predictions: the
+//!    forehead by constant pixel velocity, then the head motion from the forehead (Kabsch),
+//!    then each lip dot's last head-stabilised position plus its velocity, carried by that
+//!    head motion and projected. Gated: a dot with nothing near its prediction is missing
+//!    (confidence 0), never given a neighbour's blob;
+//! 5. neutral calibration (method.md §3) once the mouth has been still for
+//!    [`TrackConfig::calibration_s`] (again on [`Tracker::calibrate`]), then head pose and
+//!    stabilised lip dots every frame through the retarget core's [`Stabiliser`] (§4).
+//!
+//! Everything is on the caller's thread; no queues. `process` allocates little once warm.
+
+pub mod camera;
+pub mod depth;
+pub mod labels;
+pub mod pipeline;
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use mouthpiece_detect::{DetectConfig, DetectError, Detector, DotRole, PixelRect};
+use mouthpiece_frame::{Calibration, DepthImage, Frame};
+use mouthpiece_retarget::kabsch::kabsch;
+use mouthpiece_retarget::{
+    MissingDots, NeutralAccumulator, NeutralPose, PerformerDots, PerformerLayout, RigidTransform,
+    StabilisedFrame, Stabiliser,
+};
+use serde::{Deserialize, Serialize};
+
+use labels::{Candidate, Slot};
+
+/// The retarget core's vector type (metres, camera frame unless said otherwise).
+pub type Vec3 = nalgebra::Vector3<f64>;
+
+/// What can go wrong in the tracker.
+#[derive(Debug, thiserror::Error)]
+pub enum TrackError {
+    #[error("invalid configuration {key}: {message}")]
+    Config { key: String, message: String },
+    #[error("dot detection failed")]
+    Detect(#[source] DetectError),
+    #[error("neutral calibration failed")]
+    Neutral(#[source] mouthpiece_retarget::Error),
+    #[error("head stabilisation failed")]
+    Stabilise(#[source] mouthpiece_retarget::Error),
+    #[error("frame {seq}: {message}")]
+    Frame { seq: u64, message: String },
+}
+
+impl From<DetectError> for TrackError {
+    /// A bad detector setting is a configuration error like any other (the key says where).
+    fn from(e: DetectError) -> Self {
+        match e {
+            DetectError::Config { key, message } => TrackError::Config { key, message },
+            other => TrackError::Detect(other),
+        }
+    }
+}
+
+/// The tracker's settings (`[track]` in a configuration file).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackConfig {
+    /// Lip dots `D1..DN` (even, at least 4).
+    pub lip_dots: usize,
+    /// Forehead dots `F1..FK` (at least 3).
+    pub forehead_dots: usize,
+    /// How long the mouth must be still and closed before the neutral pose is taken, seconds.
+    pub calibration_s: f64,
+    /// Largest RMS wobble (75th percentile over the lip dots) of the head-stabilised lip dots
+    /// over the calibration window, metres, for the mouth to count as still. Depth noise
+    /// alone gives about 4 mm on the synthetic performer with Kinect-like noise; speech moves
+    /// the lips by 5–20 mm.
+    pub still_tolerance_m: f64,
+    /// Largest mouth opening (middle of upper to middle of lower lip) as a fraction of the
+    /// mouth width for the mouth to count as closed.
+    pub max_opening_ratio: f64,
+    /// Margin around the predicted dots for the search region, pixels.
+    pub roi_margin_px: f64,
+    /// While dots are missing, search the full frame every this many frames.
+    pub full_search_every: u32,
+    /// Smallest gate (pixels) around a prediction.
+    pub min_gate_px: f64,
+    /// Gate as a fraction of the distance to the nearest other predicted dot.
+    pub gate_fraction: f64,
+    /// After this many frames with no dot named, forget the names and re-acquire from geometry.
+    pub lost_after_frames: u32,
+    /// How long a missing lip dot keeps its last value, then decays to neutral (seconds);
+    /// passed to the retarget core.
+    pub missing_hold_s: f64,
+    pub missing_decay_s: f64,
+}
+
+impl Default for TrackConfig {
+    fn default() -> Self {
+        Self {
+            lip_dots: 12,
+            forehead_dots: 3,
+            calibration_s: 1.0,
+            still_tolerance_m: 0.006,
+            max_opening_ratio: 0.6,
+            roi_margin_px: 20.0,
+            full_search_every: 8,
+            min_gate_px: 2.5,
+            gate_fraction: 0.5,
+            lost_after_frames: 15,
+            missing_hold_s: 0.5,
+            missing_decay_s: 0.5,
+        }
+    }
+}
+
+impl TrackConfig {
+    pub fn validate(&self) -> Result<(), TrackError> {
+        let bad = |key: &str, message: &str| {
+            Err(TrackError::Config {
+                key: format!("track.{key}"),
+                message: message.into(),
+            })
+        };
+        if self.lip_dots < 4 || !self.lip_dots.is_multiple_of(2) {
+            return bad("lip_dots", "must be even and at least 4");
+        }
+        if self.forehead_dots < 3 {
+            return bad(
+                "forehead_dots",
+                "at least 3 forehead dots are needed for the head pose",
+            );
+        }
+        for (key, v) in [
+            ("calibration_s", self.calibration_s),
+            ("still_tolerance_m", self.still_tolerance_m),
+            ("max_opening_ratio", self.max_opening_ratio),
+            ("roi_margin_px", self.roi_margin_px),
+            ("min_gate_px", self.min_gate_px),
+            ("gate_fraction", self.gate_fraction),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(key, "must be a positive number");
+            }
+        }
+        for (key, v) in [
+            ("missing_hold_s", self.missing_hold_s),
+            ("missing_decay_s", self.missing_decay_s),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(key, "must be zero or positive");
+            }
+        }
+        if self.full_search_every == 0 {
+            return bad("full_search_every", "must be at least 1");
+        }
+        Ok(())
+    }
+
+    pub fn layout(&self) -> PerformerLayout {
+        PerformerLayout {
+            lip_dots: self.lip_dots,
+            forehead_dots: self.forehead_dots,
+        }
+    }
+}
+
+/// Per-frame status flags.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Status {
+    /// No neutral pose yet (or a requested recalibration is collecting frames).
+    pub calibrating: bool,
+    /// Fewer than 3 forehead dots: the head pose is the last good one.
+    pub head_lost: bool,
+    /// Names of dots not seen in this frame.
+    pub dots_missing: Vec<String>,
+    /// No dot candidate of any colour class was found (no paint, wrong colours, no face).
+    pub no_dots: bool,
+    /// Fewer candidates than the layout needs (and no names from earlier frames to go on).
+    pub too_few_dots: bool,
+    /// Candidates found that no dot took (stray paint, other objects of a paint colour).
+    pub unassigned_blobs: usize,
+    /// The neutral pose was (re)taken on this frame.
+    pub neutral_taken: bool,
+}
+
+/// One frame's result.
+#[derive(Debug, Clone)]
+pub struct TrackedFrame {
+    pub seq: u64,
+    pub device_ts_us: u64,
+    /// Seconds since the first frame.
+    pub t: f64,
+    /// Named dots in the camera frame (metres), `None` when not seen.
+    pub dots: PerformerDots,
+    /// Per dot (lip dots, then forehead): pixel centre in the colour image.
+    pub pixels: Vec<Option<[f64; 2]>>,
+    /// Per dot (lip dots, then forehead): 1 seen, 0 missing.
+    pub confidence: Vec<f64>,
+    /// Head pose and lip dots in the neutral mouth frame, once calibrated.
+    pub stabilised: Option<StabilisedFrame>,
+    pub status: Status,
+}
+
+impl TrackedFrame {
+    /// The dot names in output order: `D1..DN`, then `F1..FK`.
+    pub fn names(layout: PerformerLayout) -> Vec<String> {
+        (0..layout.lip_dots)
+            .map(PerformerLayout::lip_name)
+            .chain((0..layout.forehead_dots).map(PerformerLayout::forehead_name))
+            .collect()
+    }
+}
+
+#[derive(Debug, Clone)]
+struct DotTrack {
+    pixel: [f64; 2],
+    pixel_vel: [f64; 2],
+    /// Last position carried back into the reference head pose (`H⁻¹ p`).
+    stab: Vec3,
+    stab_vel: Vec3,
+    /// Frames since last seen (0 = seen in the last frame).
+    missing: u32,
+}
+
+/// The tracker: owns the detector, the names, and the calibration.
+pub struct Tracker {
+    config: TrackConfig,
+    layout: PerformerLayout,
+    detector: Detector,
+    dot_radius_m: f64,
+    depth_range: [f64; 2],
+    roles: Vec<DotRole>,
+    /// First frame's device timestamp.
+    t0: Option<u64>,
+    tracks: Option<Vec<DotTrack>>,
+    /// Forehead positions the head motion is measured against (camera frame).
+    reference_forehead: Vec<Vec3>,
+    head: RigidTransform,
+    /// Lip dots at rest in the reference head pose (first naming, then the neutral pose): the
+    /// shape the neighbour-based prediction keeps offsets from.
+    rest: Vec<Vec3>,
+    frames_without_names: u32,
+    frames_with_missing: u32,
+    calibrating: bool,
+    window: VecDeque<(f64, PerformerDots)>,
+    stabiliser: Option<Stabiliser>,
+    registered: DepthImage,
+    depth_buf: Vec<(f64, f64, f64)>,
+    pub(crate) out: TrackedFrame,
+}
+
+impl std::fmt::Debug for Tracker {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Tracker")
+            .field("config", &self.config)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Tracker {
+    /// Validates both configurations.
+    pub fn new(detect: DetectConfig, config: TrackConfig) -> Result<Self, TrackError> {
+        config.validate()?;
+        let layout = config.layout();
+        let dot_radius_m = detect.dot_radius_m;
+        let depth_range = detect.depth_range_m;
+        let roles = detect.classes.iter().map(|c| c.role).collect();
+        let detector = Detector::new(detect)?;
+        let n = layout.lip_dots + layout.forehead_dots;
+        Ok(Self {
+            layout,
+            detector,
+            dot_radius_m,
+            depth_range,
+            roles,
+            t0: None,
+            tracks: None,
+            reference_forehead: Vec::new(),
+            head: RigidTransform::IDENTITY,
+            rest: Vec::new(),
+            frames_without_names: 0,
+            frames_with_missing: 0,
+            calibrating: true,
+            window: VecDeque::new(),
+            stabiliser: None,
+            registered: DepthImage::new(0, 0),
+            depth_buf: Vec::new(),
+            out: TrackedFrame {
+                seq: 0,
+                device_ts_us: 0,
+                t: 0.0,
+                dots: PerformerDots::new(layout),
+                pixels: vec![None; n],
+                confidence: vec![0.0; n],
+                stabilised: None,
+                status: Status::default(),
+            },
+            config,
+        })
+    }
+
+    pub fn layout(&self) -> PerformerLayout {
+        self.layout
+    }
+
+    pub fn config(&self) -> &TrackConfig {
+        &self.config
+    }
+
+    /// The neutral pose, once calibrated.
+    pub fn neutral(&self) -> Option<&NeutralPose> {
+        self.stabiliser.as_ref().map(|s| s.neutral())
+    }
+
+    /// Asks for a new neutral calibration: the next [`TrackConfig::calibration_s`] of still,
+    /// closed mouth become the neutral pose. The old one stays in use until then.
+    pub fn calibrate(&mut self) {
+        tracing::info!("neutral calibration requested");
+        self.calibrating = true;
+        self.window.clear();
+    }
+
+    /// Tracks one frame.
+    pub fn process(&mut self, frame: &Frame) -> Result<&TrackedFrame, TrackError> {
+        let t0 = *self.t0.get_or_insert(frame.device_ts_us);
+        let t = frame.device_ts_us.saturating_sub(t0) as f64 * 1e-6;
+        let calib: &Arc<Calibration> = &frame.calibration;
+        let k = calib.color;
+        if frame.color.width != k.width || frame.color.height != k.height {
+            return Err(TrackError::Frame {
+                seq: frame.seq,
+                message: format!(
+                    "colour image is {}x{} but its calibration says {}x{}",
+                    frame.color.width, frame.color.height, k.width, k.height
+                ),
+            });
+        }
+        let depth = if calib.depth_registered {
+            &frame.depth
+        } else {
+            camera::register_depth(&frame.depth, calib, &mut self.registered);
+            &self.registered
+        };
+        let scale = calib.depth_scale_m;
+
+        let search = self.search_region(frame);
+        let found = self
+            .detector
+            .detect(&frame.color, Some((depth, scale)), k.fx, search)?;
+        let mut cands = Vec::with_capacity(found.blobs.len());
+        for blob in &found.blobs {
+            let z_hint = blob.depth_m.unwrap_or(0.6);
+            let radius_px = self.dot_radius_m * k.fx / z_hint;
+            let role = self.roles[blob.class];
+            let z = if role == DotRole::Forehead {
+                // The forehead is smooth: a plane over a wide patch of skin around the dot
+                // averages the sensor noise down, which the head pose needs.
+                depth::depth_by_plane(
+                    depth,
+                    scale,
+                    blob.center,
+                    (4.0 * radius_px).max(6.0),
+                    self.depth_range,
+                    &mut self.depth_buf,
+                )
+            } else {
+                depth::depth_at_dot(
+                    depth,
+                    scale,
+                    blob.center,
+                    radius_px,
+                    self.depth_range,
+                    &mut self.depth_buf,
+                )
+            };
+            if let Some((z, _)) = z {
+                cands.push(Candidate {
+                    pixel: blob.center,
+                    point: camera::deproject(&k, blob.center, z),
+                    role,
+                });
+            }
+        }
+
+        let n = self.layout.lip_dots;
+        let names = self.name_candidates(&cands, &k);
+        // Fill the output.
+        let out = &mut self.out;
+        out.seq = frame.seq;
+        out.device_ts_us = frame.device_ts_us;
+        out.t = t;
+        out.dots.clear();
+        let mut used = vec![false; cands.len()];
+        for (dot, name) in names.iter().enumerate() {
+            let p = name.map(|c| {
+                used[c] = true;
+                &cands[c]
+            });
+            out.pixels[dot] = p.map(|c| c.pixel);
+            out.confidence[dot] = if p.is_some() { 1.0 } else { 0.0 };
+            let slot = if dot < n {
+                &mut out.dots.lip[dot]
+            } else {
+                &mut out.dots.forehead[dot - n]
+            };
+            *slot = p.map(|c| c.point);
+        }
+        let seen = names.iter().filter(|c| c.is_some()).count();
+        out.status = Status {
+            calibrating: false,
+            head_lost: false,
+            dots_missing: names
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.is_none())
+                .map(|(i, _)| dot_name(self.layout, i))
+                .collect(),
+            no_dots: found.blobs.is_empty(),
+            too_few_dots: self.tracks.is_none() && cands.len() < names.len(),
+            unassigned_blobs: used.iter().filter(|u| !**u).count(),
+            neutral_taken: false,
+        };
+        if seen == 0 {
+            self.frames_without_names += 1;
+        } else {
+            self.frames_without_names = 0;
+        }
+        if seen < names.len() {
+            self.frames_with_missing += 1;
+        } else {
+            self.frames_with_missing = 0;
+        }
+
+        self.update_tracks(&names, &cands);
+        self.update_calibration(t)?;
+        let out = &mut self.out;
+        out.stabilised = None;
+        if let Some(stab) = &mut self.stabiliser {
+            let s = stab.step(t, &out.dots).map_err(TrackError::Stabilise)?;
+            out.status.head_lost = s.head_lost;
+            out.stabilised = Some(s.clone());
+        } else {
+            out.status.head_lost = out.dots.forehead.iter().flatten().count() < 3;
+        }
+        out.status.calibrating = self.calibrating;
+        tracing::trace!(seq = frame.seq, seen, candidates = cands.len(), "tracked");
+        Ok(&self.out)
+    }
+
+    /// Names for this frame's candidates, per dot (lip dots, then forehead).
+    ///
+    /// Without names from earlier frames: from geometry alone (start-up, re-acquisition).
+    /// With them: by prediction and assignment; when that leaves dots missing although there
+    /// are as many candidates as dots, geometry may fill them in, but only if it agrees with
+    /// every name the prediction gave (geometry alone can be fooled by extreme mouth shapes,
+    /// prediction alone by fast motion; agreement of both is trusted).
+    fn name_candidates(
+        &mut self,
+        cands: &[Candidate],
+        k: &mouthpiece_frame::Intrinsics,
+    ) -> Vec<Option<usize>> {
+        let layout = self.layout;
+        let total = layout.lip_dots + layout.forehead_dots;
+        let geometry = || match labels::label_by_geometry(cands, layout) {
+            Ok(names) => Some(names),
+            Err(why) => {
+                tracing::trace!(?why, candidates = cands.len(), "no names from geometry");
+                None
+            }
+        };
+        if self.tracks.is_none() {
+            return match geometry() {
+                Some(names) => names.into_iter().map(Some).collect(),
+                None => vec![None; total],
+            };
+        }
+        let mut predicted = self.assign_by_prediction(cands, k);
+        self.enforce_lip_order(&mut predicted, cands);
+        if predicted.iter().all(Option::is_some) || cands.len() != total {
+            return predicted;
+        }
+        match geometry() {
+            Some(geo)
+                if predicted
+                    .iter()
+                    .zip(&geo)
+                    .all(|(p, g)| p.is_none_or(|p| p == *g)) =>
+            {
+                geo.into_iter().map(Some).collect()
+            }
+            _ => predicted,
+        }
+    }
+
+    /// Names that break the walk around the mouth are dropped (missing beats wrong): in the
+    /// neutral mouth frame (head motion removed), the named lip dots must meet in label order
+    /// going round the mouth's origin from the left corner over the upper lip. The longest
+    /// run of names in order is kept, the others become missing.
+    fn enforce_lip_order(&self, names: &mut [Option<usize>], cands: &[Candidate]) {
+        let Some(stab) = &self.stabiliser else { return };
+        let frame = &stab.neutral().frame;
+        let n = self.layout.lip_dots;
+        let inverse = self.head_now(names, cands).inverse();
+        // Angle about the mouth origin, the walk starting at the left corner (or, when it is
+        // not seen, half-way between it and the last lower-lip dot at rest).
+        let tau = std::f64::consts::TAU;
+        let raw = |c: usize| {
+            let q = frame.to_mouth(&inverse.apply(&cands[c].point));
+            q.y.atan2(q.x)
+        };
+        let start = match names[0] {
+            Some(c) => raw(c) - 1e-9,
+            None => {
+                let rest = |i: usize| stab.neutral().lip[i].y.atan2(stab.neutral().lip[i].x);
+                let (last, first) = (rest(n - 1), rest(0));
+                let last = if last > first { last - tau } else { last };
+                (last + first) / 2.0
+            }
+        };
+        let angle = |c: usize| (raw(c) - start).rem_euclid(tau);
+        let found: Vec<(usize, f64)> = (0..n)
+            .filter_map(|i| names[i].map(|c| (i, angle(c))))
+            .collect();
+        if found.len() < 2 {
+            return;
+        }
+        // Longest increasing subsequence of the angles in label order (n is small: O(n²)).
+        let mut best_len = vec![1usize; found.len()];
+        let mut prev = vec![usize::MAX; found.len()];
+        for a in 0..found.len() {
+            for b in 0..a {
+                if found[b].1 < found[a].1 && best_len[b] + 1 > best_len[a] {
+                    best_len[a] = best_len[b] + 1;
+                    prev[a] = b;
+                }
+            }
+        }
+        let mut end = (0..found.len())
+            .max_by_key(|&a| best_len[a])
+            .expect("non-empty");
+        let mut keep = vec![false; found.len()];
+        loop {
+            keep[end] = true;
+            if prev[end] == usize::MAX {
+                break;
+            }
+            end = prev[end];
+        }
+        for (a, &(i, _)) in found.iter().enumerate() {
+            if !keep[a] {
+                tracing::debug!(dot = %PerformerLayout::lip_name(i), "name breaks the order around the mouth; dropped");
+                names[i] = None;
+            }
+        }
+    }
+
+    /// This frame's head motion (reference → now) from the named forehead dots, or the last one.
+    fn head_now(&self, names: &[Option<usize>], cands: &[Candidate]) -> RigidTransform {
+        let n = self.layout.lip_dots;
+        let (from, to): (Vec<Vec3>, Vec<Vec3>) = names[n..]
+            .iter()
+            .enumerate()
+            .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
+            .unzip();
+        kabsch(&from, &to).unwrap_or(self.head)
+    }
+
+    /// Where to look: around the predicted dots, growing while some are missing; the full
+    /// frame when nothing is named or every few frames while dots are missing.
+    fn search_region(&self, frame: &Frame) -> Option<PixelRect> {
+        let tracks = self.tracks.as_ref()?;
+        if self.frames_with_missing > 0
+            && self
+                .frames_with_missing
+                .is_multiple_of(self.config.full_search_every)
+        {
+            return None;
+        }
+        let grow = (1u32 << self.frames_with_missing.min(4)) as f64;
+        let margin = self.config.roi_margin_px * grow;
+        let rect = PixelRect::around(
+            tracks
+                .iter()
+                .map(|t| [t.pixel[0] + t.pixel_vel[0], t.pixel[1] + t.pixel_vel[1]]),
+            margin,
+        )?;
+        // A region covering most of the image costs as much as the full frame.
+        let full = frame.color.width as i64 * frame.color.height as i64;
+        (rect.area() < full / 2).then_some(rect)
+    }
+
+    /// Names by prediction: forehead first (constant pixel velocity), then the head motion,
+    /// then the lip dots (their stabilised position and velocity carried by the head motion).
+    fn assign_by_prediction(
+        &self,
+        cands: &[Candidate],
+        k: &mouthpiece_frame::Intrinsics,
+    ) -> Vec<Option<usize>> {
+        let n = self.layout.lip_dots;
+        let tracks = self.tracks.as_ref().expect("called with tracks");
+        let mut taken = vec![false; cands.len()];
+
+        let forehead_preds: Vec<[f64; 2]> = tracks[n..]
+            .iter()
+            .map(|t| {
+                if t.missing == 0 {
+                    [t.pixel[0] + t.pixel_vel[0], t.pixel[1] + t.pixel_vel[1]]
+                } else {
+                    camera::project(k, &self.head.apply(&t.stab)).unwrap_or(t.pixel)
+                }
+            })
+            .collect();
+        let forehead = labels::assign(
+            &self.gated(&forehead_preds, &tracks[n..], Slot::Forehead),
+            cands,
+            &taken,
+        );
+        for c in forehead.iter().flatten() {
+            taken[*c] = true;
+        }
+        // Head motion from the named forehead dots, against the reference forehead.
+        let (from, to): (Vec<Vec3>, Vec<Vec3>) = forehead
+            .iter()
+            .enumerate()
+            .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
+            .unzip();
+        let head = kabsch(&from, &to).unwrap_or(self.head);
+
+        let lip_preds: Vec<[f64; 2]> = tracks[..n]
+            .iter()
+            .map(|t| {
+                let q = if t.missing == 0 {
+                    t.stab + t.stab_vel
+                } else {
+                    t.stab
+                };
+                camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
+            })
+            .collect();
+        let mut lip = labels::assign(
+            &self.gated(&lip_preds, &tracks[..n], Slot::Lip),
+            cands,
+            &taken,
+        );
+
+        // Second chance for lip dots still missing: the lips move together (the jaw carries
+        // the whole lower lip), so predict each from its neighbours along the mouth as found
+        // now, keeping its rest offset to them. Only dots with a found neighbour, only blobs
+        // nobody took, same gates.
+        if lip.iter().any(Option::is_none) {
+            for c in lip.iter().flatten() {
+                taken[*c] = true;
+            }
+            let inverse = head.inverse();
+            let mut preds = Vec::new();
+            let mut which = Vec::new();
+            for i in (0..n).filter(|&i| lip[i].is_none()) {
+                let mut sum = Vec3::zeros();
+                let mut count = 0.0;
+                for j in [(i + n - 1) % n, (i + 1) % n] {
+                    if let Some(c) = lip[j] {
+                        let now = inverse.apply(&cands[c].point);
+                        sum += now + (self.rest[i] - self.rest[j]);
+                        count += 1.0;
+                    }
+                }
+                if count > 0.0 {
+                    if let Some(px) = camera::project(k, &head.apply(&(sum / count))) {
+                        preds.push(px);
+                        which.push(i);
+                    }
+                }
+            }
+            if !preds.is_empty() {
+                // Gates from this frame's lip positions (found or predicted).
+                let mut all: Vec<[f64; 2]> = (0..n)
+                    .map(|i| lip[i].map_or(lip_preds[i], |c| cands[c].pixel))
+                    .collect();
+                for (p, &i) in preds.iter().zip(&which) {
+                    all[i] = *p;
+                }
+                let gates = self.gated(&all, &tracks[..n], Slot::Lip);
+                let second: Vec<_> = which.iter().map(|&i| gates[i]).collect();
+                for (&i, c) in which.iter().zip(labels::assign(&second, cands, &taken)) {
+                    lip[i] = c;
+                }
+            }
+        }
+        lip.into_iter().chain(forehead).collect()
+    }
+
+    /// Gate per prediction: a fraction of the distance to the nearest other prediction of the
+    /// group, at least `min_gate_px`, widened a little for dots missing for a while.
+    fn gated(
+        &self,
+        preds: &[[f64; 2]],
+        tracks: &[DotTrack],
+        slot: Slot,
+    ) -> Vec<([f64; 2], f64, Slot)> {
+        preds
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let nearest = preds
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != i)
+                    .map(|(_, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt())
+                    .fold(f64::INFINITY, f64::min);
+                let base = (self.config.gate_fraction * nearest).max(self.config.min_gate_px);
+                let widen = 1.0 + 0.05 * tracks[i].missing.min(10) as f64;
+                (*p, base * widen, slot)
+            })
+            .collect()
+    }
+
+    fn update_tracks(&mut self, names: &[Option<usize>], cands: &[Candidate]) {
+        let n = self.layout.lip_dots;
+        let all_seen = names.iter().all(|c| c.is_some());
+        if self.tracks.is_none() {
+            if !all_seen {
+                return;
+            }
+            // First full naming: this forehead is the reference until calibrated.
+            self.reference_forehead = names[n..]
+                .iter()
+                .map(|c| cands[c.expect("all seen")].point)
+                .collect();
+            self.head = RigidTransform::IDENTITY;
+            self.rest = names[..n]
+                .iter()
+                .map(|c| cands[c.expect("all seen")].point)
+                .collect();
+            self.tracks = Some(
+                names
+                    .iter()
+                    .map(|c| {
+                        let c = &cands[c.expect("all seen")];
+                        DotTrack {
+                            pixel: c.pixel,
+                            pixel_vel: [0.0; 2],
+                            stab: c.point,
+                            stab_vel: Vec3::zeros(),
+                            missing: 0,
+                        }
+                    })
+                    .collect(),
+            );
+            tracing::info!("all dots named from geometry; tracking");
+            return;
+        }
+        if self.frames_without_names > self.config.lost_after_frames {
+            tracing::info!(
+                frames = self.frames_without_names,
+                "dots lost; re-acquiring from geometry"
+            );
+            self.tracks = None;
+            return;
+        }
+        // Head motion from this frame's forehead against the reference.
+        let (from, to): (Vec<Vec3>, Vec<Vec3>) = names[n..]
+            .iter()
+            .enumerate()
+            .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
+            .unzip();
+        if let Some(h) = kabsch(&from, &to) {
+            self.head = h;
+        }
+        let inverse = self.head.inverse();
+        let tracks = self.tracks.as_mut().expect("checked");
+        for (track, name) in tracks.iter_mut().zip(names) {
+            match name {
+                Some(c) => {
+                    let c = &cands[*c];
+                    let stab = inverse.apply(&c.point);
+                    if track.missing == 0 {
+                        track.pixel_vel =
+                            [c.pixel[0] - track.pixel[0], c.pixel[1] - track.pixel[1]];
+                        track.stab_vel = stab - track.stab;
+                    } else {
+                        track.pixel_vel = [0.0; 2];
+                        track.stab_vel = Vec3::zeros();
+                    }
+                    track.pixel = c.pixel;
+                    track.stab = stab;
+                    track.missing = 0;
+                }
+                None => track.missing = track.missing.saturating_add(1),
+            }
+        }
+    }
+
+    /// Collects fully seen frames while calibrating; takes the neutral pose once the window
+    /// spans `calibration_s` of a still, closed mouth.
+    fn update_calibration(&mut self, t: f64) -> Result<(), TrackError> {
+        if !self.calibrating {
+            return Ok(());
+        }
+        let dots = &self.out.dots;
+        let complete = dots.lip.iter().chain(&dots.forehead).all(|d| d.is_some());
+        if !complete {
+            // The window must be continuous.
+            self.window.clear();
+            return Ok(());
+        }
+        self.window.push_back((t, dots.clone()));
+        let span = |w: &VecDeque<(f64, PerformerDots)>| {
+            w.back().map_or(0.0, |b| b.0) - w.front().map_or(0.0, |f| f.0)
+        };
+        // Keep just over the calibration span.
+        while self.window.len() > 2
+            && span(&self.window) - (self.window[1].0 - self.window[0].0)
+                >= self.config.calibration_s
+        {
+            self.window.pop_front();
+        }
+        // One frame interval short of the span is a full second of frames at any rate.
+        let interval = if self.window.len() > 1 {
+            span(&self.window) / (self.window.len() - 1) as f64
+        } else {
+            0.0
+        };
+        if span(&self.window) + interval < self.config.calibration_s - 1e-9 {
+            return Ok(());
+        }
+        if !self.window_is_still() {
+            return Ok(());
+        }
+        let mut acc = NeutralAccumulator::new(self.layout);
+        for (_, d) in &self.window {
+            acc.push(d).map_err(TrackError::Neutral)?;
+        }
+        let neutral = acc.finish().map_err(TrackError::Neutral)?;
+        tracing::info!(
+            frames = neutral.frames,
+            mouth_width_mm = neutral.mouth_width() * 1e3,
+            "neutral pose taken"
+        );
+        // Re-base the head motion on the neutral forehead.
+        self.reference_forehead = neutral
+            .forehead_camera
+            .iter()
+            .map(|p| p.expect("complete window"))
+            .collect();
+        if let Some(tracks) = &mut self.tracks {
+            for (track, p) in tracks
+                .iter_mut()
+                .zip(neutral.lip_camera.iter().chain(&self.reference_forehead))
+            {
+                track.stab = *p;
+                track.stab_vel = Vec3::zeros();
+            }
+        }
+        self.head = RigidTransform::IDENTITY;
+        self.rest = neutral.lip_camera.clone();
+        let missing = MissingDots {
+            hold: self.config.missing_hold_s,
+            decay: self.config.missing_decay_s,
+        };
+        self.stabiliser = Some(Stabiliser::new(neutral, missing).map_err(TrackError::Neutral)?);
+        self.calibrating = false;
+        self.window.clear();
+        self.out.status.neutral_taken = true;
+        Ok(())
+    }
+
+    /// Whether the lips, with head motion removed, stayed within the tolerance over the
+    /// window, and the mouth is closed.
+    fn window_is_still(&self) -> bool {
+        let n = self.layout.lip_dots;
+        let first = &self.window[0].1;
+        let reference: Vec<Vec3> = first
+            .forehead
+            .iter()
+            .map(|p| p.expect("complete"))
+            .collect();
+        let mut sum = vec![Vec3::zeros(); n];
+        let mut sum_sq = vec![0.0; n];
+        for (_, d) in &self.window {
+            let cur: Vec<Vec3> = d.forehead.iter().map(|p| p.expect("complete")).collect();
+            let Some(h) = kabsch(&cur, &reference) else {
+                return false;
+            };
+            for (i, p) in d.lip.iter().enumerate() {
+                let q = h.apply(&p.expect("complete"));
+                sum[i] += q;
+                sum_sq[i] += q.norm_squared();
+            }
+        }
+        let m = self.window.len() as f64;
+        // One noisy dot (a mouth corner on a steep surface) must not block calibration; speech
+        // moves most dots: judge the 75th percentile of the per-dot wobble.
+        let mut wobble: Vec<f64> = (0..n)
+            .map(|i| {
+                let mean = sum[i] / m;
+                (sum_sq[i] / m - mean.norm_squared()).max(0.0).sqrt()
+            })
+            .collect();
+        wobble.sort_by(f64::total_cmp);
+        let worst = wobble[(3 * (n - 1)) / 4];
+        let lip = |i: usize| first.lip[i].expect("complete");
+        let width = (lip(self.layout.left_corner()) - lip(self.layout.right_corner())).norm();
+        let upper_mid = lip(self.layout.right_corner() / 2);
+        let lower_mid = lip((n + self.layout.right_corner()) / 2);
+        let opening = (upper_mid - lower_mid).norm() / width.max(1e-9);
+        tracing::trace!(worst_rms_mm = worst * 1e3, opening, "calibration window");
+        worst <= self.config.still_tolerance_m && opening <= self.config.max_opening_ratio
+    }
+}
+
+fn dot_name(layout: PerformerLayout, i: usize) -> String {
+    if i < layout.lip_dots {
+        PerformerLayout::lip_name(i)
+    } else {
+        PerformerLayout::forehead_name(i - layout.lip_dots)
+    }
+}
+
+#[cfg(test)]
+mod tests;

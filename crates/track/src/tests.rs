@@ -1,0 +1,325 @@
+//! Tracker tests on frames drawn with OpenCV: the dots of a simple face (12 lip dots on an
+//! ellipse, 3 forehead dots), painted as discs on skin, with a depth image that holds each
+//! dot's depth. The synthetic performer's sessions (`mouthpiece-synth`) test the full
+//! pipeline in `tests/` and the evaluation; these check the tracker's logic in isolation.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use mouthpiece_frame::{Calibration, ColorImage, DepthImage, Frame, Intrinsics};
+use nalgebra::Rotation3;
+use opencv::core::{Mat, Point, Scalar, CV_16UC1, CV_8UC3};
+use opencv::imgproc;
+use opencv::prelude::*;
+
+use super::*;
+
+const SKIN: Scalar = Scalar::new(120.0, 150.0, 205.0, 0.0);
+const GREEN: Scalar = Scalar::new(50.0, 175.0, 40.0, 0.0);
+const BLUE: Scalar = Scalar::new(190.0, 90.0, 30.0, 0.0);
+
+/// The face at rest, camera frame: mouth 50 mm wide and 28 mm high at 0.6 m, forehead 90 mm
+/// above.
+fn neutral_face() -> Vec<Vec3> {
+    let centre = Vec3::new(0.01, 0.03, 0.6);
+    let mut out = Vec::new();
+    for i in 0..12 {
+        let a = std::f64::consts::PI * i as f64 / 6.0;
+        out.push(centre + Vec3::new(0.025 * a.cos(), -0.014 * a.sin(), -0.004 * a.sin().abs()));
+    }
+    for j in 0..3 {
+        // A triangle: the middle dot higher and further back, so the head pose is well posed.
+        let up = if j == 1 { 0.025 } else { 0.0 };
+        out.push(centre + Vec3::new(0.03 - 0.03 * j as f64, -0.09 - up, 0.01 + up / 3.0));
+    }
+    out
+}
+
+/// The face with the jaw open by `open` metres (lower lip moves down) and the head moved by
+/// `head` (about the mouth centre).
+fn posed(open: f64, head: &RigidTransform) -> Vec<Vec3> {
+    neutral_face()
+        .into_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let lower = (7..12).contains(&i);
+            let p = if lower {
+                p + Vec3::new(0.0, open, 0.0)
+            } else {
+                p
+            };
+            head.apply(&p)
+        })
+        .collect()
+}
+
+fn head(yaw_deg: f64, pitch_deg: f64, shift: Vec3) -> RigidTransform {
+    let pivot = Vec3::new(0.01, 0.0, 0.65);
+    let r = Rotation3::from_euler_angles(pitch_deg.to_radians(), yaw_deg.to_radians(), 0.0)
+        .into_inner();
+    RigidTransform {
+        rotation: r,
+        translation: pivot - r * pivot + shift,
+    }
+}
+
+fn render(seq: u64, points: &[Vec3], hidden: &[usize]) -> Frame {
+    let k = Intrinsics::default_vga();
+    let mut color = Mat::new_rows_cols_with_default(480, 640, CV_8UC3, SKIN).unwrap();
+    let mut depth =
+        Mat::new_rows_cols_with_default(480, 640, CV_16UC1, Scalar::all(650.0)).unwrap();
+    // The forehead is a plane through its three dots, depth per pixel (so that whole-mm
+    // rounding averages out over a neighbourhood, as sensor noise does).
+    let (f0, f1, f2) = (points[12], points[13], points[14]);
+    let normal = (f1 - f0).cross(&(f2 - f0)).normalize();
+    let ys: Vec<f64> = points[12..]
+        .iter()
+        .map(|p| camera::project(&k, p).unwrap()[1])
+        .collect();
+    let (y_lo, y_hi) = (
+        ys.iter().copied().fold(f64::INFINITY, f64::min) - 25.0,
+        ys.iter().copied().fold(0.0, f64::max) + 25.0,
+    );
+    for v in (y_lo.max(0.0) as i32)..(y_hi.min(479.0) as i32) {
+        for u in 0..640 {
+            let ray = Vec3::new((u as f64 - k.cx) / k.fx, (v as f64 - k.cy) / k.fy, 1.0);
+            let z = normal.dot(&f0) / normal.dot(&ray);
+            *depth.at_2d_mut::<u16>(v, u).unwrap() = (z * 1000.0).round() as u16;
+        }
+    }
+    for (i, p) in points.iter().enumerate() {
+        let px = camera::project(&k, p).unwrap();
+        let s = 256.0;
+        let c = Point::new((px[0] * s).round() as i32, (px[1] * s).round() as i32);
+        let r = 0.00225 * k.fx / p.z;
+        if i < 12 {
+            imgproc::circle(
+                &mut depth,
+                c,
+                ((r + 3.0) * s) as i32,
+                Scalar::all(p.z * 1000.0),
+                -1,
+                imgproc::LINE_8,
+                8,
+            )
+            .unwrap();
+        }
+        if hidden.contains(&i) {
+            continue;
+        }
+        let paint = if i < 12 { GREEN } else { BLUE };
+        imgproc::circle(
+            &mut color,
+            c,
+            (r * s) as i32,
+            paint,
+            -1,
+            imgproc::LINE_AA,
+            8,
+        )
+        .unwrap();
+    }
+    Frame {
+        seq,
+        device_ts_us: 1_000_000 + seq * 33_333,
+        host_rx: Instant::now(),
+        wall_clock: None,
+        color: ColorImage {
+            width: 640,
+            height: 480,
+            data: color.data_bytes().unwrap().to_vec(),
+        },
+        depth: DepthImage {
+            width: 640,
+            height: 480,
+            data: depth.data_typed::<u16>().unwrap().to_vec(),
+        },
+        calibration: Arc::new(Calibration::registered(k)),
+    }
+}
+
+fn tracker() -> Tracker {
+    Tracker::new(DetectConfig::default(), TrackConfig::default()).unwrap()
+}
+
+fn assert_named_correctly(out: &TrackedFrame, truth: &[Vec3], hidden: &[usize], tol_m: f64) {
+    let all: Vec<Option<Vec3>> = out
+        .dots
+        .lip
+        .iter()
+        .chain(&out.dots.forehead)
+        .copied()
+        .collect();
+    for (i, (got, want)) in all.iter().zip(truth).enumerate() {
+        match got {
+            Some(p) => {
+                assert!(
+                    !hidden.contains(&i),
+                    "frame {}: hidden dot {i} was named",
+                    out.seq
+                );
+                assert!(
+                    (p - want).norm() < tol_m,
+                    "frame {}: dot {i} at {p:?}, truth {want:?}",
+                    out.seq
+                );
+            }
+            None => assert!(
+                hidden.contains(&i),
+                "frame {}: dot {i} missing, status {:?}",
+                out.seq,
+                out.status
+            ),
+        }
+    }
+}
+
+#[test]
+fn calibrates_after_a_still_second_then_tracks_head_and_mouth() {
+    let mut tr = tracker();
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    let mut seq = 0;
+    let mut calibrated_at = None;
+    for _ in 0..40 {
+        let out = tr.process(&render(seq, &still, &[])).unwrap();
+        assert_named_correctly(out, &still, &[], 0.0015);
+        if out.status.neutral_taken {
+            calibrated_at = Some(out.t);
+        }
+        seq += 1;
+    }
+    let t = calibrated_at.expect("calibrated");
+    assert!((0.99..1.1).contains(&t), "calibrated at {t}");
+    // Speech with head motion: yaw and pitch sweep, jaw opens and closes.
+    let (mut worst_angle, mut sum_sq): (f64, f64) = (0.0, 0.0);
+    for i in 0..90 {
+        let phase = i as f64 / 90.0 * std::f64::consts::TAU;
+        let h = head(
+            12.0 * phase.sin(),
+            6.0 * (2.0 * phase).sin(),
+            Vec3::new(0.01 * phase.sin(), 0.0, 0.0),
+        );
+        let open = 0.008 * (0.5 - 0.5 * (4.0 * phase).cos());
+        let truth = posed(open, &h);
+        let out = tr.process(&render(seq, &truth, &[])).unwrap();
+        assert!(!out.status.calibrating);
+        assert_named_correctly(out, &truth, &[], 0.0015);
+        let s = out.stabilised.as_ref().unwrap();
+        let err = ((s.head.rotation.transpose() * h.rotation).trace() - 1.0)
+            .mul_add(0.5, 0.0)
+            .clamp(-1.0, 1.0)
+            .acos();
+        worst_angle = worst_angle.max(err.to_degrees());
+        sum_sq += err.to_degrees().powi(2);
+        seq += 1;
+    }
+    // Depth is whole millimetres here: over the forehead triangle's 25 mm height that alone
+    // tilts the pose by up to ~1°.
+    let rms = (sum_sq / 90.0).sqrt();
+    assert!(
+        rms < 0.7 && worst_angle < 1.5,
+        "head rotation RMS {rms}°, worst {worst_angle}°"
+    );
+}
+
+#[test]
+fn a_hidden_dot_is_missing_never_renamed_and_comes_back() {
+    let mut tr = tracker();
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    for seq in 0..35 {
+        tr.process(&render(seq, &still, &[])).unwrap();
+    }
+    // D3 disappears for 15 frames while the mouth opens (its neighbours move towards it).
+    for seq in 35..80 {
+        let open = 0.006 * ((seq - 35) as f64 / 45.0);
+        let h = head((seq - 35) as f64 * 0.2, 0.0, Vec3::zeros());
+        let truth = posed(open, &h);
+        let hidden: &[usize] = if (40..55).contains(&seq) { &[2] } else { &[] };
+        let out = tr.process(&render(seq, &truth, hidden)).unwrap();
+        assert_named_correctly(out, &truth, hidden, 0.0015);
+        if !hidden.is_empty() {
+            assert_eq!(out.status.dots_missing, vec!["D3".to_string()]);
+            assert_eq!(out.confidence[2], 0.0);
+        }
+    }
+}
+
+#[test]
+fn labels_recover_after_the_face_leaves_the_picture() {
+    let mut tr = tracker();
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    for seq in 0..35 {
+        tr.process(&render(seq, &still, &[])).unwrap();
+    }
+    let all: Vec<usize> = (0..15).collect();
+    for seq in 35..60 {
+        let out = tr.process(&render(seq, &still, &all)).unwrap();
+        assert!(out.status.no_dots);
+        assert_eq!(out.status.dots_missing.len(), 15);
+    }
+    // Back, somewhere else.
+    let moved = posed(0.0, &head(5.0, 0.0, Vec3::new(-0.05, 0.02, 0.0)));
+    let out = tr.process(&render(60, &moved, &[])).unwrap();
+    assert_named_correctly(out, &moved, &[], 0.0015);
+}
+
+#[test]
+fn a_session_without_dots_says_so_and_never_calibrates() {
+    let mut tr = tracker();
+    for seq in 0..40 {
+        let out = tr
+            .process(&render(seq, &neutral_face(), &(0..15).collect::<Vec<_>>()))
+            .unwrap();
+        assert!(out.status.no_dots && out.status.calibrating && out.status.too_few_dots);
+        assert!(out.stabilised.is_none());
+    }
+    // Too few: the forehead only.
+    let mut tr = tracker();
+    for seq in 0..40 {
+        let out = tr
+            .process(&render(seq, &neutral_face(), &(0..12).collect::<Vec<_>>()))
+            .unwrap();
+        assert!(!out.status.no_dots && out.status.too_few_dots && out.status.calibrating);
+    }
+}
+
+#[test]
+fn a_moving_mouth_is_not_taken_as_neutral() {
+    let mut tr = tracker();
+    for seq in 0..60 {
+        let open = 0.02 * (0.5 - 0.5 * (seq as f64 * 0.9).cos());
+        let out = tr
+            .process(&render(seq, &posed(open, &RigidTransform::IDENTITY), &[]))
+            .unwrap();
+        assert!(
+            out.status.calibrating,
+            "calibrated on a moving mouth at frame {seq}"
+        );
+    }
+    // Still from now on: calibrates one second later, and `calibrate()` starts over.
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    let mut taken = 0;
+    for seq in 60..100 {
+        taken += tr
+            .process(&render(seq, &still, &[]))
+            .unwrap()
+            .status
+            .neutral_taken as u32;
+    }
+    assert_eq!(taken, 1);
+    tr.calibrate();
+    let out = tr.process(&render(100, &still, &[])).unwrap();
+    assert!(out.status.calibrating && out.stabilised.is_some());
+}
+
+#[test]
+fn bad_configuration_names_the_key() {
+    let cfg = TrackConfig {
+        lip_dots: 5,
+        ..TrackConfig::default()
+    };
+    let err = Tracker::new(DetectConfig::default(), cfg)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("track.lip_dots"), "{err}");
+}
