@@ -39,7 +39,15 @@ impl Intrinsics {
 
     /// A distortion-free camera.
     pub fn ideal(width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> Self {
-        Self { width, height, fx, fy, cx, cy, distortion: [0.0; 5] }
+        Self {
+            width,
+            height,
+            fx,
+            fy,
+            cx,
+            cy,
+            distortion: [0.0; 5],
+        }
     }
 
     /// Intrinsics from horizontal and vertical fields of view (radians), as OpenNI2 devices
@@ -47,7 +55,14 @@ impl Intrinsics {
     pub fn from_fov(width: u32, height: u32, hfov: f64, vfov: f64) -> Self {
         let fx = width as f64 / 2.0 / (hfov / 2.0).tan();
         let fy = height as f64 / 2.0 / (vfov / 2.0).tan();
-        Self::ideal(width, height, fx, fy, (width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0)
+        Self::ideal(
+            width,
+            height,
+            fx,
+            fy,
+            (width as f64 - 1.0) / 2.0,
+            (height as f64 - 1.0) / 2.0,
+        )
     }
 
     pub fn has_distortion(&self) -> bool {
@@ -60,12 +75,19 @@ impl Intrinsics {
         if p[2] <= 0.0 {
             return None;
         }
-        Some([self.fx * p[0] / p[2] + self.cx, self.fy * p[1] / p[2] + self.cy])
+        Some([
+            self.fx * p[0] / p[2] + self.cx,
+            self.fy * p[1] / p[2] + self.cy,
+        ])
     }
 
     /// Back-projects an undistorted pixel at depth `z` (metres) into the camera frame.
     pub fn deproject_ideal(&self, px: [f64; 2], z: f64) -> [f64; 3] {
-        [(px[0] - self.cx) / self.fx * z, (px[1] - self.cy) / self.fy * z, z]
+        [
+            (px[0] - self.cx) / self.fx * z,
+            (px[1] - self.cy) / self.fy * z,
+            z,
+        ]
     }
 }
 
@@ -144,7 +166,11 @@ pub struct ColorImage {
 
 impl ColorImage {
     pub fn new(width: u32, height: u32) -> Self {
-        Self { width, height, data: vec![0; width as usize * height as usize * 3] }
+        Self {
+            width,
+            height,
+            data: vec![0; width as usize * height as usize * 3],
+        }
     }
 
     pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
@@ -164,7 +190,11 @@ pub struct DepthImage {
 
 impl DepthImage {
     pub fn new(width: u32, height: u32) -> Self {
-        Self { width, height, data: vec![0; width as usize * height as usize] }
+        Self {
+            width,
+            height,
+            data: vec![0; width as usize * height as usize],
+        }
     }
 
     pub fn at(&self, x: u32, y: u32) -> u16 {
@@ -240,7 +270,10 @@ pub enum SourceError {
 impl SourceError {
     /// True when reopening the source later may succeed (a live device that went away).
     pub fn is_retryable(&self) -> bool {
-        matches!(self, SourceError::Disconnected { .. } | SourceError::Open { .. })
+        matches!(
+            self,
+            SourceError::Disconnected { .. } | SourceError::Open { .. }
+        )
     }
 }
 
