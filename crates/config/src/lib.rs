@@ -488,17 +488,15 @@ impl std::str::FromStr for Slate {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TimecodeConfig {
-    /// `23.976`, `24`, `25`, `29.97` (non-drop), `29.97df`, `30`, `50`, `59.94`, `59.94df`, `60`.
+    /// `23.976`, `24`, `25`, `29.97df`, `30`, `48`, `50`, `59.94df`, `60` (the server's rates:
+    /// 29.97 and 59.94 are drop-frame, as recorders count them). Time of day, UTC.
     pub rate: TimecodeRateName,
-    /// Time-of-day timecode is UTC plus this many minutes (your audio recorder's zone).
-    pub utc_offset_minutes: i32,
 }
 
 impl Default for TimecodeConfig {
     fn default() -> Self {
         TimecodeConfig {
             rate: TimecodeRateName("30".to_owned()),
-            utc_offset_minutes: 0,
         }
     }
 }
@@ -509,8 +507,8 @@ impl Default for TimecodeConfig {
 pub struct TimecodeRateName(pub String);
 
 impl TimecodeRateName {
-    pub const ALLOWED: [&'static str; 10] = [
-        "23.976", "24", "25", "29.97", "29.97df", "30", "50", "59.94", "59.94df", "60",
+    pub const ALLOWED: [&'static str; 9] = [
+        "23.976", "24", "25", "29.97df", "30", "48", "50", "59.94df", "60",
     ];
 }
 
@@ -656,15 +654,6 @@ impl Config {
             return Err(fail(
                 "takes.queue_frames",
                 "expected at least 1 frame, got 0".into(),
-            ));
-        }
-        if !(-14 * 60..=14 * 60).contains(&self.timecode.utc_offset_minutes) {
-            return Err(fail(
-                "timecode.utc_offset_minutes",
-                format!(
-                    "expected -840 to 840 minutes, got {}",
-                    self.timecode.utc_offset_minutes
-                ),
             ));
         }
         for (i, file) in self.characters.files.iter().enumerate() {

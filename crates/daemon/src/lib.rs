@@ -1,0 +1,19 @@
+//! The daemon's machinery, behind `mouthpiece run`.
+//!
+//! # Layout
+//! - [`source`]: the source thread: opens the source, feeds the [`slot`], reopens a lost
+//!   source with [`backoff`];
+//! - [`slot`]: the latest-frame slot between the source thread and processing (newest wins);
+//! - [`notify`]: systemd's notify protocol (READY, STATUS, WATCHDOG, STOPPING);
+//! - [`throttle`]: repeated warnings at most once per interval;
+//! - [`logging`]: journald-friendly `tracing` set-up.
+//!
+//! Threads: the source thread, the processing thread, one take-writer thread while a take
+//! records, and the async server's runtime. Only bounded queues connect them.
+
+pub mod backoff;
+pub mod logging;
+pub mod notify;
+pub mod slot;
+pub mod source;
+pub mod throttle;
