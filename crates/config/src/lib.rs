@@ -570,7 +570,7 @@ impl Config {
         };
         config.validate(text, &file)?;
         let base = path.parent().map(Path::to_owned).unwrap_or_default();
-        config.resolve_paths(&base);
+        config.resolve_paths(&base, state_directory().as_deref());
         config.server.tokens = config.read_tokens(text, &file)?;
         Ok(config)
     }
@@ -667,7 +667,12 @@ impl Config {
         Ok(())
     }
 
-    fn resolve_paths(&mut self, base: &Path) {
+    /// `state_dir`: systemd's `$STATE_DIRECTORY`, where a relative takes folder goes (the
+    /// config directory is read-only under `ProtectSystem=strict`).
+    fn resolve_paths(&mut self, base: &Path, state_dir: Option<&Path>) {
+        if let (true, Some(state_dir)) = (self.takes.folder.is_relative(), state_dir) {
+            self.takes.folder = state_dir.join(&self.takes.folder);
+        }
         let join = |p: &mut PathBuf| {
             if p.is_relative() && !base.as_os_str().is_empty() {
                 *p = base.join(&*p);
@@ -754,6 +759,29 @@ impl Config {
             })
     }
 
+    /// File, line and column of `key` (dotted path), for errors found by later checks (a
+    /// character file that does not load, a detector setting out of range).
+    pub fn locate(&self, key: &str) -> Location {
+        match &self.origin {
+            Origin::Embedded => Location {
+                file: self.origin.describe(),
+                line: 0,
+                column: 0,
+                key: Some(key.to_owned()),
+            },
+            Origin::File { path, text } => {
+                let (line, column) =
+                    span_of_key(text, key).map_or((0, 0), |span| line_col(text, span.start));
+                Location {
+                    file: path.display().to_string(),
+                    line,
+                    column,
+                    key: Some(key.to_owned()),
+                }
+            }
+        }
+    }
+
     /// The config as the user would see it, tokens hidden: for `check-config` and the log.
     pub fn summary(&self) -> String {
         let characters = if self.characters.files.is_empty() {
@@ -801,6 +829,13 @@ impl TokenRef {
         }
         Ok(Secret(value))
     }
+}
+
+/// The first of systemd's `$STATE_DIRECTORY` entries (colon-separated), if set.
+fn state_directory() -> Option<PathBuf> {
+    let dirs = std::env::var_os("STATE_DIRECTORY")?;
+    let first = dirs.to_str()?.split(':').next()?.to_owned();
+    (!first.is_empty()).then(|| PathBuf::from(first))
 }
 
 fn invalid(text: &str, file: &str, span: Option<Range<usize>>, message: String) -> ConfigError {

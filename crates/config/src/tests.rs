@@ -181,3 +181,20 @@ fn detect_section_is_parsed_with_file_lines() {
         DetectConfig::default()
     );
 }
+
+#[test]
+fn a_relative_takes_folder_goes_to_the_state_directory_under_systemd() {
+    let mut config = Config::default();
+    config.resolve_paths(
+        Path::new("/etc/mouthpiece"),
+        Some(Path::new("/var/lib/mouthpiece")),
+    );
+    assert_eq!(config.takes.folder, Path::new("/var/lib/mouthpiece/takes"));
+    let mut config = Config::default();
+    config.takes.folder = PathBuf::from("/srv/takes");
+    config.resolve_paths(
+        Path::new("/etc/mouthpiece"),
+        Some(Path::new("/var/lib/mouthpiece")),
+    );
+    assert_eq!(config.takes.folder, Path::new("/srv/takes"));
+}

@@ -22,6 +22,8 @@ struct Cli {
 enum Command {
     /// Retarget 3D dot positions (JSONL) onto a character's mouth (JSONL).
     Retarget(cmd::retarget::Args),
+    /// Validate a daemon configuration file and exit (0 valid, 2 invalid).
+    CheckConfig(cmd::check_config::Args),
 }
 
 fn main() -> ExitCode {
@@ -29,6 +31,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
+        Command::CheckConfig(args) => cmd::check_config::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -37,12 +40,8 @@ fn main() -> ExitCode {
 }
 
 /// Logs go to stderr (stdout may carry data, e.g. `retarget --out -`). `RUST_LOG` filters;
-/// the default is INFO for mouthpiece's own crates.
+/// the default is INFO. journald-friendly: no colours unless stderr is a terminal, no
+/// timestamps under systemd (see `mouthpiece_daemon::logging`).
 fn init_logging() {
-    use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .init();
+    mouthpiece_daemon::logging::init();
 }
