@@ -19,8 +19,8 @@
 //! as [`Secret`], whose `Debug` and `Display` never show the value.
 //!
 //! The `[detect]` section belongs to the detector (issue 5); it is kept as written and parsed
-//! into the detector's own config type with [`Config::detect_section`], which keeps the file's
-//! line numbers in its errors.
+//! into the detector's own config type with [`Config::extract`], which keeps the file's
+//! line numbers in its errors; so is `[track]` (labels, neutral calibration seconds).
 
 use std::fmt;
 use std::net::SocketAddr;
@@ -148,13 +148,15 @@ pub struct Config {
     pub source: SourceConfig,
     pub server: ServerConfig,
     pub characters: CharactersConfig,
-    pub calibration: CalibrationConfig,
     pub takes: TakesConfig,
     pub timecode: TimecodeConfig,
     pub logging: LoggingConfig,
-    /// The detector's section (issue 5), parsed by [`Config::detect_section`].
+    /// The detector's section (issue 5), parsed by [`Config::extract`].
     pub detect: toml::Table,
-    /// Where this configuration came from, with its text (for [`Config::detect_section`]).
+    /// The tracker's section (issue 5: labels, calibration seconds), parsed by
+    /// [`Config::extract`].
+    pub track: toml::Table,
+    /// Where this configuration came from, with its text (for [`Config::extract`]).
     #[serde(skip)]
     pub origin: Origin,
 }
@@ -165,11 +167,11 @@ impl Default for Config {
             source: SourceConfig::default(),
             server: ServerConfig::default(),
             characters: CharactersConfig::default(),
-            calibration: CalibrationConfig::default(),
             takes: TakesConfig::default(),
             timecode: TimecodeConfig::default(),
             logging: LoggingConfig::default(),
             detect: toml::Table::new(),
+            track: toml::Table::new(),
             origin: Origin::Embedded,
         }
     }
@@ -400,25 +402,6 @@ pub struct CharactersConfig {
 impl Default for CharactersConfig {
     fn default() -> Self {
         CharactersConfig { files: Vec::new() }
-    }
-}
-
-/// `[calibration]`: the neutral pose.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct CalibrationConfig {
-    /// Seconds of still, closed mouth averaged into the neutral pose.
-    pub seconds: PositiveSeconds,
-    /// Calibrate automatically at start (and after the source comes back).
-    pub auto: bool,
-}
-
-impl Default for CalibrationConfig {
-    fn default() -> Self {
-        CalibrationConfig {
-            seconds: PositiveSeconds(1.0),
-            auto: true,
-        }
     }
 }
 
@@ -735,28 +718,21 @@ impl Config {
         })
     }
 
-    /// Parses the `[detect]` section into the detector's config type `T`, from the file's own
-    /// text so errors keep the file's line numbers. A missing section gives `T::default()`.
-    pub fn detect_section<T: DeserializeOwned + Default>(&self) -> Result<T, ConfigError> {
+    /// Deserializes the file's text once more into `T`: a struct of the caller's that reads
+    /// only the sections it owns (`[detect]`, `[track]`) and ignores the others, with the
+    /// file's own line numbers in errors. The embedded default gives `T::default()`.
+    pub fn extract<T: DeserializeOwned + Default>(&self) -> Result<T, ConfigError> {
         let Origin::File { path, text } = &self.origin else {
             return Ok(T::default());
         };
-        // Only `detect` is read; the other sections were validated by `Config::parse`.
-        #[derive(Deserialize)]
-        struct OnlyDetect<T> {
-            #[serde(default)]
-            detect: T,
-        }
-        toml::from_str::<OnlyDetect<T>>(text)
-            .map(|only| only.detect)
-            .map_err(|err| {
-                invalid(
-                    text,
-                    &path.display().to_string(),
-                    err.span(),
-                    err.message().trim_end().to_owned(),
-                )
-            })
+        toml::from_str::<T>(text).map_err(|err| {
+            invalid(
+                text,
+                &path.display().to_string(),
+                err.span(),
+                err.message().trim_end().to_owned(),
+            )
+        })
     }
 
     /// File, line and column of `key` (dotted path), for errors found by later checks (a

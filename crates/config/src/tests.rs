@@ -74,8 +74,8 @@ fn bad_value_names_key_and_expectation() {
 
 #[test]
 fn wrong_type_names_key() {
-    let err = parse("[calibration]\nauto = \"yes\"\n").unwrap_err();
-    assert_eq!(err.key(), Some("calibration.auto"), "{err}");
+    let err = parse("[takes]\nrecord_at_start = \"yes\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("takes.record_at_start"), "{err}");
     assert!(err.to_string().contains(":2:"), "{err}");
 }
 
@@ -160,25 +160,30 @@ fn relative_paths_resolve_against_the_config_directory() {
 }
 
 #[test]
-fn detect_section_is_parsed_with_file_lines() {
+fn owned_sections_are_extracted_with_file_lines() {
     #[derive(Debug, Default, Deserialize, PartialEq)]
     #[serde(deny_unknown_fields)]
     struct DetectConfig {
         #[serde(default)]
         min_area: u32,
     }
+    #[derive(Debug, Default, Deserialize, PartialEq)]
+    struct Sections {
+        #[serde(default)]
+        detect: DetectConfig,
+    }
     let config = parse("[detect]\nmin_area = 7\n").unwrap();
     assert_eq!(
-        config.detect_section::<DetectConfig>().unwrap(),
+        config.extract::<Sections>().unwrap().detect,
         DetectConfig { min_area: 7 }
     );
     let config = parse("[logging]\nlevel = \"debug\"\n\n[detect]\nmin_aera = 7\n").unwrap();
-    let err = config.detect_section::<DetectConfig>().unwrap_err();
+    let err = config.extract::<Sections>().unwrap_err();
     assert_eq!(err.key(), Some("detect.min_aera"), "{err}");
     assert!(err.to_string().contains(":5:"), "{err}");
     assert_eq!(
-        Config::default().detect_section::<DetectConfig>().unwrap(),
-        DetectConfig::default()
+        Config::default().extract::<Sections>().unwrap(),
+        Sections::default()
     );
 }
 

@@ -21,6 +21,17 @@ pub fn check(config: &Config) -> Result<(), CheckError> {
             message,
         });
     }
+    let listen = config.server.listen.0;
+    if !listen.ip().is_loopback()
+        && (config.server.tokens.read.is_none() || config.server.tokens.control.is_none())
+    {
+        return Err(CheckError::Invalid {
+            location: location(config, "server.listen"),
+            message: format!(
+                "{listen} is reachable from the network: set server.read_token and server.control_token"
+            ),
+        });
+    }
     Ok(())
 }
 

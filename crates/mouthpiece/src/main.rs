@@ -24,6 +24,8 @@ enum Command {
     Retarget(cmd::retarget::Args),
     /// Validate a daemon configuration file and exit (0 valid, 2 invalid).
     CheckConfig(cmd::check_config::Args),
+    /// Run the daemon: source → detect → track → retarget → WebSocket server, with takes.
+    Run(cmd::run::Args),
 }
 
 fn main() -> ExitCode {
@@ -32,6 +34,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
         Command::CheckConfig(args) => cmd::check_config::run(args),
+        Command::Run(args) => cmd::run::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
