@@ -1,0 +1,137 @@
+//! The ground-truth message of synthetic sessions (`/groundtruth/points`).
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+/// The rigid motion carrying the neutral head onto the current one:
+/// `current = R · neutral + t`, camera frame, metres (method §10).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeadPose {
+    /// Unit quaternion `[w, x, y, z]`.
+    pub rotation: [f64; 4],
+    /// Metres.
+    pub translation: [f64; 3],
+}
+
+impl HeadPose {
+    pub const IDENTITY: HeadPose = HeadPose {
+        rotation: [1.0, 0.0, 0.0, 0.0],
+        translation: [0.0; 3],
+    };
+
+    /// Applies the pose to a point of the neutral head.
+    pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
+        let m = self.rotation_matrix();
+        let t = self.translation;
+        [
+            m[0][0] * p[0] + m[0][1] * p[1] + m[0][2] * p[2] + t[0],
+            m[1][0] * p[0] + m[1][1] * p[1] + m[1][2] * p[2] + t[1],
+            m[2][0] * p[0] + m[2][1] * p[1] + m[2][2] * p[2] + t[2],
+        ]
+    }
+
+    /// Row-major rotation matrix of the (normalised) quaternion.
+    pub fn rotation_matrix(&self) -> [[f64; 3]; 3] {
+        let [w, x, y, z] = self.rotation;
+        let n = (w * w + x * x + y * y + z * z).sqrt();
+        let (w, x, y, z) = (w / n, x / n, y / n, z / n);
+        [
+            [
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y - w * z),
+                2.0 * (x * z + w * y),
+            ],
+            [
+                2.0 * (x * y + w * z),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z - w * x),
+            ],
+            [
+                2.0 * (x * z - w * y),
+                2.0 * (y * z + w * x),
+                1.0 - 2.0 * (x * x + y * y),
+            ],
+        ]
+    }
+}
+
+/// One frame's exact truth: every dot's centre (hidden dots too), whether it is visible, and
+/// the head pose. JSON exactly as `/groundtruth/points` carries it:
+/// `{"t": s, "points": {"D1": [x, y, z], …}, "visible": {"D1": true, …}, "head": {…}}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GroundTruth {
+    /// Seconds since the start of the session.
+    pub t: f64,
+    /// Dot centres, camera frame, metres, keyed by dot name (`D1`…, `F1`…).
+    pub points: BTreeMap<String, [f64; 3]>,
+    /// Whether the dot's centre is seen by the colour camera (not occluded, facing it).
+    pub visible: BTreeMap<String, bool>,
+    pub head: HeadPose,
+}
+
+impl GroundTruth {
+    pub fn point(&self, name: &str) -> Option<[f64; 3]> {
+        self.points.get(name).copied()
+    }
+
+    pub fn is_visible(&self, name: &str) -> bool {
+        self.visible.get(name).copied().unwrap_or(false)
+    }
+
+    /// JSON Schema of the message (stored as the channel's `jsonschema` schema).
+    pub fn json_schema() -> &'static str {
+        r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "mouthpiece.GroundTruth",
+  "description": "Exact dot centres (camera frame, metres), visibility and head pose of a synthetic frame",
+  "type": "object",
+  "required": ["t", "points", "visible", "head"],
+  "properties": {
+    "t": {"type": "number", "description": "seconds since the start of the session"},
+    "points": {"type": "object", "additionalProperties": {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3}},
+    "visible": {"type": "object", "additionalProperties": {"type": "boolean"}},
+    "head": {
+      "type": "object",
+      "required": ["rotation", "translation"],
+      "properties": {
+        "rotation": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4, "description": "unit quaternion [w, x, y, z], neutral head to current"},
+        "translation": {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3, "description": "metres, camera frame"}
+      }
+    }
+  }
+}"#
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quaternion_rotates_like_its_matrix() {
+        // 90° about z: x → y.
+        let h = 0.5f64.sqrt();
+        let pose = HeadPose {
+            rotation: [h, 0.0, 0.0, h],
+            translation: [0.0, 0.0, 1.0],
+        };
+        let p = pose.apply([1.0, 0.0, 0.0]);
+        assert!((p[0]).abs() < 1e-12 && (p[1] - 1.0).abs() < 1e-12 && (p[2] - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn json_has_the_documented_shape() {
+        let gt = GroundTruth {
+            t: 0.5,
+            points: [("D1".to_string(), [0.1, 0.2, 0.6])].into(),
+            visible: [("D1".to_string(), true)].into(),
+            head: HeadPose::IDENTITY,
+        };
+        let v: serde_json::Value = serde_json::to_value(&gt).unwrap();
+        assert_eq!(v["points"]["D1"][2], 0.6);
+        assert_eq!(v["visible"]["D1"], true);
+        assert_eq!(v["head"]["rotation"][0], 1.0);
+        let _: serde_json::Value = serde_json::from_str(GroundTruth::json_schema()).unwrap();
+    }
+}
