@@ -17,4 +17,5 @@ pub mod logging;
 pub mod notify;
 pub mod slot;
 pub mod source;
+pub mod takes;
 pub mod throttle;

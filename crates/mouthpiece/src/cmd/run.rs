@@ -46,7 +46,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             )));
         }
     }
-    let overrides = Overrides { listen: args.listen, source: args.source.clone() };
+    let overrides = Overrides {
+        listen: args.listen,
+        source: args.source.clone(),
+    };
     mouthpiece_daemon::daemon::apply_overrides(&mut config, &overrides);
     let options = RunOptions {
         config_path: args.config.clone(),
@@ -67,9 +70,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 fn embedded_default() -> Config {
     let mut config = Config::embedded();
     if let Some(path) = config.source.spec.replay_path() {
-        let built_from = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(path);
+        let built_from = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../..")
+            .join(path);
         if !Path::new(path).exists() && built_from.exists() {
-            let query = config.source.spec.as_str().split_once('?').map(|(_, q)| q.to_owned());
+            let query = config
+                .source
+                .spec
+                .as_str()
+                .split_once('?')
+                .map(|(_, q)| q.to_owned());
             let resolved = built_from.canonicalize().unwrap_or(built_from);
             let spec = match query {
                 Some(q) => format!("replay:{}?{q}", resolved.display()),
