@@ -21,6 +21,9 @@ pub fn check(config: &Config) -> Result<(), CheckError> {
             message,
         });
     }
+    crate::characters::load(config)?;
+    crate::daemon::server_config(config)?;
+    crate::daemon::timecode_rate(config)?;
     let listen = config.server.listen.0;
     if !listen.ip().is_loopback()
         && (config.server.tokens.read.is_none() || config.server.tokens.control.is_none())

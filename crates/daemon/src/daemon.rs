@@ -74,30 +74,49 @@ pub struct Overrides {
 
 /// The server's settings from the config (tokens checked for the server's rules).
 pub fn server_config(config: &Config) -> Result<ServerConfig, CheckError> {
-    let token = |key: &str, secret: Option<&mouthpiece_config::Secret>| -> Result<Option<Token>, CheckError> {
+    let token = |key: &str,
+                 secret: Option<&mouthpiece_config::Secret>|
+     -> Result<Option<Token>, CheckError> {
         secret
             .map(|s| Token::new(s.expose()))
             .transpose()
-            .map_err(|e| CheckError::Invalid { location: config.locate(key), message: e.to_string() })
+            .map_err(|e| CheckError::Invalid {
+                location: config.locate(key),
+                message: e.to_string(),
+            })
     };
     Ok(ServerConfig {
         name: "mouthpiece".into(),
         read_token: token("server.read_token", config.server.tokens.read.as_ref())?,
-        control_token: token("server.control_token", config.server.tokens.control.as_ref())?,
+        control_token: token(
+            "server.control_token",
+            config.server.tokens.control.as_ref(),
+        )?,
         allowed_origins: config.server.allowed_origins.clone(),
-        limits: Limits { max_clients: config.server.max_clients as usize, ..Limits::default() },
+        limits: Limits {
+            max_clients: config.server.max_clients as usize,
+            ..Limits::default()
+        },
         tls: match (&config.server.tls_cert, &config.server.tls_key) {
-            (Some(cert), Some(key)) => Some(TlsFiles { cert: cert.clone(), key: key.clone() }),
+            (Some(cert), Some(key)) => Some(TlsFiles {
+                cert: cert.clone(),
+                key: key.clone(),
+            }),
             _ => None,
         },
     })
 }
 
 pub fn timecode_rate(config: &Config) -> Result<TimecodeRate, CheckError> {
-    config.timecode.rate.0.parse::<TimecodeRate>().map_err(|e| CheckError::Invalid {
-        location: config.locate("timecode.rate"),
-        message: e.to_string(),
-    })
+    config
+        .timecode
+        .rate
+        .0
+        .parse::<TimecodeRate>()
+        .map_err(|e| CheckError::Invalid {
+            location: config.locate("timecode.rate"),
+            message: e.to_string(),
+        })
 }
 
 /// Runs the daemon until SIGTERM or SIGINT.
@@ -115,7 +134,14 @@ pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Resul
         .enable_all()
         .build()
         .map_err(DaemonError::Runtime)?;
-    let result = runtime.block_on(serve(config, factory, options, processor, server_config, rate));
+    let result = runtime.block_on(serve(
+        config,
+        factory,
+        options,
+        processor,
+        server_config,
+        rate,
+    ));
     // Threads still blocked in a source's read must not hold up the exit.
     runtime.shutdown_timeout(Duration::from_millis(200));
     result
@@ -137,15 +163,29 @@ async fn serve<F: Factory>(
     let listener = tokio::net::TcpListener::bind(addr)
         .await
         .map_err(|source| DaemonError::Bind { addr, source })?;
-    let local = listener.local_addr().map_err(|source| DaemonError::Bind { addr, source })?;
-    let (hub, control) = Hub::new(&HubConfig { timecode_rate: rate, ..HubConfig::default() });
+    let local = listener
+        .local_addr()
+        .map_err(|source| DaemonError::Bind { addr, source })?;
+    let (hub, control) = Hub::new(&HubConfig {
+        timecode_rate: rate,
+        ..HubConfig::default()
+    });
 
     let spec = config.source.spec.as_str().to_owned();
     let shared = SourceShared::new();
-    let backoff = Backoff::new(config.source.retry_initial_s.duration(), config.source.retry_max_s.duration());
+    let backoff = Backoff::new(
+        config.source.retry_initial_s.duration(),
+        config.source.retry_max_s.duration(),
+    );
     let throttle = config.logging.throttle_s.duration();
-    let source_thread = source::spawn(factory.opener(&spec), spec.clone(), shared.clone(), backoff, throttle)
-        .map_err(DaemonError::Runtime)?;
+    let source_thread = source::spawn(
+        factory.opener(&spec),
+        spec.clone(),
+        shared.clone(),
+        backoff,
+        throttle,
+    )
+    .map_err(DaemonError::Runtime)?;
 
     let (commands_tx, commands_rx) = crossbeam_channel::bounded(8);
     let epoch = Instant::now();
@@ -179,13 +219,21 @@ async fn serve<F: Factory>(
     if let Some((slate, take)) = options.record.clone() {
         let _ = commands_tx.try_send(Command::RecordStart { slate, take });
     } else if config.takes.record_at_start {
-        let _ = commands_tx.try_send(Command::RecordStart { slate: config.takes.slate.0.clone(), take: None });
+        let _ = commands_tx.try_send(Command::RecordStart {
+            slate: config.takes.slate.0.clone(),
+            take: None,
+        });
     }
 
     let (shutdown_tx, shutdown_rx) = tokio::sync::oneshot::channel::<()>();
-    let mut server = tokio::spawn(mouthpiece_server::run(listener, server_config, hub.clone(), async {
-        let _ = shutdown_rx.await;
-    }));
+    let mut server = tokio::spawn(mouthpiece_server::run(
+        listener,
+        server_config,
+        hub.clone(),
+        async {
+            let _ = shutdown_rx.await;
+        },
+    ));
     tracing::info!(%local, "mouthpiece running: viewer at http://{local}/");
     let _ = notifier.ready(&format!("serving on {local}, source {spec}"));
 
@@ -194,7 +242,10 @@ async fn serve<F: Factory>(
     let mut sighup = signal(SignalKind::hangup()).map_err(DaemonError::Runtime)?;
     let mut sigusr1 = signal(SignalKind::user_defined1()).map_err(DaemonError::Runtime)?;
     let mut sigusr2 = signal(SignalKind::user_defined2()).map_err(DaemonError::Runtime)?;
-    let watchdog_every = notifier.watchdog_timeout().map(|t| t / 2).unwrap_or(Duration::from_secs(5));
+    let watchdog_every = notifier
+        .watchdog_timeout()
+        .map(|t| t / 2)
+        .unwrap_or(Duration::from_secs(5));
     let mut tick = tokio::time::interval(watchdog_every.min(Duration::from_secs(5)));
     let mut current = config;
     let mut last_status = String::new();
@@ -249,18 +300,26 @@ async fn serve<F: Factory>(
     stop.store(true, Ordering::Release);
     shared.stop();
     let joined = tokio::task::spawn_blocking(move || processing.join());
-    if tokio::time::timeout(Duration::from_millis(1500), joined).await.is_err() {
+    if tokio::time::timeout(Duration::from_millis(1500), joined)
+        .await
+        .is_err()
+    {
         tracing::error!("processing thread did not stop within 1.5 s");
     }
     let _ = shutdown_tx.send(());
     let server_result = match server_result {
         Some(r) => Some(r),
-        None => tokio::time::timeout(Duration::from_millis(400), &mut server).await.ok(),
+        None => tokio::time::timeout(Duration::from_millis(400), &mut server)
+            .await
+            .ok(),
     };
     if source_thread.is_finished() {
         let _ = source_thread.join();
     }
-    tracing::info!(elapsed_ms = stopping.elapsed().as_millis() as u64, "stopped");
+    tracing::info!(
+        elapsed_ms = stopping.elapsed().as_millis() as u64,
+        "stopped"
+    );
     match server_result {
         Some(Ok(Err(e))) => Err(e.into()),
         _ => Ok(()),
@@ -273,7 +332,11 @@ fn status_line(shared: &SourceShared, hub: &Hub) -> String {
         SourceState::Up(info) => format!("source up ({})", info.description),
         SourceState::Down { reason, .. } => format!("source down: {reason}"),
     };
-    format!("{source}; {} clients; {} frames", hub.clients(), hub.frames_published())
+    format!(
+        "{source}; {} clients; {} frames",
+        hub.clients(),
+        hub.frames_published()
+    )
 }
 
 /// Loads the config again (same file, same CLI overrides) and validates everything a reload
@@ -293,7 +356,10 @@ fn reload<F: Factory>(
     let payload = factory.reload(&config)?;
     for (what, changed) in [
         ("source", config.source != current.source),
-        ("server.listen", config.server.listen != current.server.listen),
+        (
+            "server.listen",
+            config.server.listen != current.server.listen,
+        ),
         ("takes", config.takes != current.takes),
         ("timecode", config.timecode != current.timecode),
     ] {

@@ -12,10 +12,21 @@
 //! records, and the async server's runtime. Only bounded queues connect them.
 
 pub mod backoff;
+pub mod characters;
 pub mod check;
+pub mod daemon;
+pub mod interim;
 pub mod logging;
 pub mod notify;
+pub mod pipeline;
 pub mod slot;
 pub mod source;
 pub mod takes;
 pub mod throttle;
+
+pub use daemon::{run, DaemonError, RunOptions};
+
+/// Runs the daemon with the pipeline this build has (see [`interim`]).
+pub fn run_live(config: mouthpiece_config::Config, options: RunOptions) -> Result<(), DaemonError> {
+    run(config, interim::InterimFactory, options)
+}

@@ -16,8 +16,8 @@ use std::time::{Duration, Instant, SystemTime};
 use crossbeam_channel::Receiver;
 use mouthpiece_frame::Frame;
 use mouthpiece_server::{
-    ControlCommand, ControlFailure, ControlReceiver, ControlRequest, Hub, Recording, SourceState as WireSourceState,
-    StreamFrame, StreamInfo, Timecode, TimecodeRate,
+    ControlCommand, ControlFailure, ControlReceiver, ControlRequest, Hub, Recording,
+    SourceState as WireSourceState, StreamFrame, StreamInfo, Timecode, TimecodeRate,
 };
 use serde_json::json;
 
@@ -77,7 +77,10 @@ pub trait Processor: Send {
 pub enum Command {
     /// A validated new configuration for the processor (see [`Processor::reload`]).
     Reload(Box<dyn std::any::Any + Send>),
-    RecordStart { slate: String, take: Option<u32> },
+    RecordStart {
+        slate: String,
+        take: Option<u32>,
+    },
     RecordStop,
 }
 
@@ -99,8 +102,13 @@ pub struct Context {
 }
 
 /// Starts the processing thread.
-pub fn spawn<P: Processor + 'static>(processor: P, ctx: Context) -> std::io::Result<JoinHandle<()>> {
-    std::thread::Builder::new().name("mouthpiece-process".into()).spawn(move || run(processor, ctx))
+pub fn spawn<P: Processor + 'static>(
+    processor: P,
+    ctx: Context,
+) -> std::io::Result<JoinHandle<()>> {
+    std::thread::Builder::new()
+        .name("mouthpiece-process".into())
+        .spawn(move || run(processor, ctx))
 }
 
 fn run<P: Processor>(mut processor: P, mut ctx: Context) {
@@ -113,7 +121,8 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
     let mut frames = 0u64;
     tracing::info!("processing thread started");
     loop {
-        ctx.heartbeat.store(ctx.epoch.elapsed().as_millis() as u64, Ordering::Relaxed);
+        ctx.heartbeat
+            .store(ctx.epoch.elapsed().as_millis() as u64, Ordering::Relaxed);
         if ctx.stop.load(Ordering::Acquire) {
             break;
         }
@@ -132,9 +141,13 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
                 let wall_us = crate::takes::unix_us(wall);
                 processor.process(&frame, &mut out);
                 if processor.take_info_changed() {
-                    ctx.hub.set_info(processor.stream_info(frame_rate, &ctx.spec));
+                    ctx.hub
+                        .set_info(processor.stream_info(frame_rate, &ctx.spec));
                 }
-                out.stream.t = frame.host_rx.saturating_duration_since(ctx.epoch).as_secs_f64();
+                out.stream.t = frame
+                    .host_rx
+                    .saturating_duration_since(ctx.epoch)
+                    .as_secs_f64();
                 out.stream.capture_us = frame.device_ts_us;
                 out.stream.wall_us = Some(wall_us);
                 out.stream.processing = Some(started.elapsed());
@@ -148,7 +161,14 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
                 }
                 if ctx.takes.is_recording() {
                     let info = ctx.hub.info();
-                    let derived = derive(processor.performer_names(), &info, &out, seq, wall_us, ctx.timecode_rate);
+                    let derived = derive(
+                        processor.performer_names(),
+                        &info,
+                        &out,
+                        seq,
+                        wall_us,
+                        ctx.timecode_rate,
+                    );
                     ctx.takes.push(Arc::new(frame), Box::new(derived));
                 }
             }
@@ -193,22 +213,35 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
             announce_take_end(&ctx.hub, &ended);
         }
     }
-    tracing::info!(frames, overwritten = ctx.source.frames.overwritten(), "processing thread stopped");
+    tracing::info!(
+        frames,
+        overwritten = ctx.source.frames.overwritten(),
+        "processing thread stopped"
+    );
 }
 
-fn publish_source_state<P: Processor>(ctx: &Context, processor: &P, state: &SourceState, frame_rate: &mut f64) {
+fn publish_source_state<P: Processor>(
+    ctx: &Context,
+    processor: &P,
+    state: &SourceState,
+    frame_rate: &mut f64,
+) {
     match state {
         SourceState::Starting => {}
         SourceState::Up(info) => {
             *frame_rate = info.fps;
-            ctx.hub.set_info(processor.stream_info(info.fps, &info.spec));
+            ctx.hub
+                .set_info(processor.stream_info(info.fps, &info.spec));
             ctx.hub.update_status(|s| {
                 s.source = WireSourceState::Up;
                 s.message = None;
             });
         }
         SourceState::Down { reason, retry_in } => {
-            let message = format!("source down: {reason}; retrying in {:.1} s", retry_in.as_secs_f64());
+            let message = format!(
+                "source down: {reason}; retrying in {:.1} s",
+                retry_in.as_secs_f64()
+            );
             ctx.hub.update_status(|s| {
                 s.source = WireSourceState::Down;
                 s.message = Some(message);
@@ -237,11 +270,17 @@ fn handle_control<P: Processor>(processor: &mut P, ctx: &mut Context, request: C
     request.reply(outcome);
 }
 
-fn handle_command<P: Processor>(processor: &mut P, ctx: &mut Context, command: Command, frame_rate: f64) {
+fn handle_command<P: Processor>(
+    processor: &mut P,
+    ctx: &mut Context,
+    command: Command,
+    frame_rate: f64,
+) {
     match command {
         Command::Reload(update) => match processor.reload(update) {
             Ok(()) => {
-                ctx.hub.set_info(processor.stream_info(frame_rate, &ctx.spec));
+                ctx.hub
+                    .set_info(processor.stream_info(frame_rate, &ctx.spec));
                 tracing::info!("configuration reloaded");
             }
             Err(e) => tracing::error!("reload rejected, old configuration kept: {e}"),
@@ -259,14 +298,28 @@ fn handle_command<P: Processor>(processor: &mut P, ctx: &mut Context, command: C
     }
 }
 
-fn start_take(ctx: &mut Context, slate: &str, take: Option<u32>) -> Result<serde_json::Value, String> {
-    let info = ctx.takes.start(slate, take, &ctx.spec).map_err(|e| crate::source::error_chain(&e))?;
+fn start_take(
+    ctx: &mut Context,
+    slate: &str,
+    take: Option<u32>,
+) -> Result<serde_json::Value, String> {
+    let info = ctx
+        .takes
+        .start(slate, take, &ctx.spec)
+        .map_err(|e| crate::source::error_chain(&e))?;
     let file = info.path.display().to_string();
-    let recording = Recording { slate: info.slate.clone(), take: info.take, file: Some(file.clone()) };
+    let recording = Recording {
+        slate: info.slate.clone(),
+        take: info.take,
+        file: Some(file.clone()),
+    };
     let reply = json!({ "slate": info.slate, "take": info.take, "file": file });
     ctx.hub.update_status(|s| {
         s.recording = Some(recording);
-        if s.message.as_deref().is_some_and(|m| m.starts_with("take stopped")) {
+        if s.message
+            .as_deref()
+            .is_some_and(|m| m.starts_with("take stopped"))
+        {
             s.message = None;
         }
     });
@@ -277,7 +330,10 @@ fn stop_take(ctx: &mut Context) -> Result<serde_json::Value, String> {
     let ended = ctx.takes.stop().map_err(|e| e.to_string())?;
     announce_take_end(&ctx.hub, &ended);
     if let Some(error) = &ended.error {
-        return Err(format!("take {} ended with an error: {error}", ended.info.path.display()));
+        return Err(format!(
+            "take {} ended with an error: {error}",
+            ended.info.path.display()
+        ));
     }
     Ok(json!({
         "slate": ended.info.slate,
@@ -321,7 +377,11 @@ fn derive(
         t: stream.t,
         wall_us,
         timecode: Timecode::from_unix_micros(wall_us, rate).to_string(),
-        performer: names.iter().cloned().zip(out.performer_camera.iter().copied()).collect(),
+        performer: names
+            .iter()
+            .cloned()
+            .zip(out.performer_camera.iter().copied())
+            .collect(),
         stabilised,
         head: HeadRecord {
             rotation: stream.head.rotation,
@@ -332,7 +392,11 @@ fn derive(
             .characters
             .iter()
             .map(|c| {
-                let point_names = info.characters.iter().find(|i| i.name == c.name).map(|i| i.points.clone());
+                let point_names = info
+                    .characters
+                    .iter()
+                    .find(|i| i.name == c.name)
+                    .map(|i| i.points.clone());
                 CharacterRecord {
                     name: c.name.clone(),
                     points: c
@@ -340,7 +404,10 @@ fn derive(
                         .iter()
                         .enumerate()
                         .map(|(i, p)| {
-                            let name = point_names.as_ref().and_then(|n| n.get(i).cloned()).unwrap_or_else(|| format!("P{}", i + 1));
+                            let name = point_names
+                                .as_ref()
+                                .and_then(|n| n.get(i).cloned())
+                                .unwrap_or_else(|| format!("P{}", i + 1));
                             (name, *p)
                         })
                         .collect(),

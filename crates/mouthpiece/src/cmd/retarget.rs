@@ -1,6 +1,43 @@
 //! `mouthpiece retarget`: 3D dots (JSONL) → character mouth points (JSONL).
+//!
+//! Neutral pose: the lines flagged `"neutral": true`, else the first line.
+//! - Input from a file: two passes. The first validates every line (JSON, dot names, finite
+//!   numbers, time order) and collects the neutral lines wherever they are; the second writes
+//!   the output. A bad line is reported before anything is written.
+//! - Input from stdin: one pass. The neutral lines must come first (they are the only lines
+//!   held in memory); output streams line by line, flushed per line. A bad line stops the run
+//!   with exit code 2 after the lines before it were written, each of them complete.
+//!
+//! Output to a file goes to a temporary file beside it, renamed into place only on success.
 
-use std::path::PathBuf;
+use std::fs::File;
+use std::io::{self, BufRead, BufReader, BufWriter, Seek, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use mouthpiece_retarget::jsonl::{InputLine, OutputLine};
+use mouthpiece_retarget::{
+    Character, CharacterSettings, MissingDots, MovingAverageKind, NeutralAccumulator,
+    OneEuroParams, PerformerDots, PerformerLayout, RetargetConfig, Retargeter, ShapeSmoothing,
+};
+
+use crate::exit::bad_input;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Smooth {
+    /// No curve (`"curve": null`).
+    None,
+    /// Plain moving average over `--ma-radius` neighbours each side.
+    Ma,
+    /// Triangular-weighted moving average.
+    MaWeighted,
+    /// Exponentially weighted moving average (`--ma-alpha` per step).
+    MaExp,
+    /// Savitzky–Golay, 5-point quadratic.
+    Sg5,
+    /// Closed uniform cubic B-spline, `--samples-per-span` samples per point.
+    Bspline,
+}
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -13,8 +50,519 @@ pub struct Args {
     /// Output JSONL, `-` for stdout.
     #[arg(long)]
     pub out: PathBuf,
+    /// Shape smoothing that makes each line's `curve`.
+    #[arg(long, value_enum, default_value = "bspline")]
+    pub smooth: Smooth,
+    /// Moving average: neighbours on each side.
+    #[arg(long, default_value_t = 1)]
+    pub ma_radius: usize,
+    /// Exponential moving average: weight factor per step along the loop, in (0, 1].
+    #[arg(long, default_value_t = 0.5)]
+    pub ma_alpha: f64,
+    /// B-spline: curve samples per span (per character point).
+    #[arg(long, default_value_t = 8)]
+    pub samples_per_span: usize,
+    /// Temporal One Euro filter on the output points: `MINCUTOFF,BETA` (Hz, s/unit).
+    /// Off unless given.
+    #[arg(long, value_name = "MINCUTOFF,BETA", value_parser = parse_one_euro)]
+    pub one_euro: Option<OneEuroParams>,
+    /// Seconds a missing lip dot keeps its last value (confidence 0).
+    #[arg(long, default_value_t = 0.5)]
+    pub hold: f64,
+    /// Seconds over which a missing dot then returns to neutral.
+    #[arg(long, default_value_t = 0.5)]
+    pub decay: f64,
 }
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("retarget is being built (issue 2)")
+fn parse_one_euro(s: &str) -> Result<OneEuroParams, String> {
+    let (a, b) = s
+        .split_once(',')
+        .ok_or("expected MINCUTOFF,BETA, e.g. 1.0,0.007")?;
+    let min_cutoff: f64 = a
+        .trim()
+        .parse()
+        .map_err(|e| format!("MINCUTOFF `{a}`: {e}"))?;
+    let beta: f64 = b.trim().parse().map_err(|e| format!("BETA `{b}`: {e}"))?;
+    OneEuroParams::new(min_cutoff, beta).map_err(|e| e.to_string())
+}
+
+impl Args {
+    fn config(&self) -> anyhow::Result<RetargetConfig> {
+        let smoothing = match self.smooth {
+            Smooth::None => ShapeSmoothing::None,
+            Smooth::Ma => ShapeSmoothing::MovingAverage {
+                kind: MovingAverageKind::Plain,
+                radius: self.ma_radius,
+            },
+            Smooth::MaWeighted => ShapeSmoothing::MovingAverage {
+                kind: MovingAverageKind::Weighted,
+                radius: self.ma_radius,
+            },
+            Smooth::MaExp => ShapeSmoothing::MovingAverage {
+                kind: MovingAverageKind::Exponential {
+                    alpha: self.ma_alpha,
+                },
+                radius: self.ma_radius,
+            },
+            Smooth::Sg5 => ShapeSmoothing::SavitzkyGolay5,
+            Smooth::Bspline => ShapeSmoothing::BSpline {
+                samples_per_span: self.samples_per_span,
+            },
+        };
+        smoothing.validate().map_err(bad_input)?;
+        Ok(RetargetConfig {
+            missing: MissingDots {
+                hold: self.hold,
+                decay: self.decay,
+            },
+            character: CharacterSettings {
+                smoothing,
+                one_euro: self.one_euro,
+            },
+        })
+    }
+}
+
+fn is_dash(p: &Path) -> bool {
+    p.as_os_str() == "-"
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = args.config()?;
+    let character_src = std::fs::read_to_string(&args.character)
+        .with_context(|| format!("cannot read character file {}", args.character.display()))
+        .map_err(bad_input)?;
+    let character = Character::from_toml_str(&character_src)
+        .with_context(|| format!("character file {}", args.character.display()))
+        .map_err(bad_input)?;
+    tracing::info!(character = %character.name, points = character.len(), "character loaded");
+
+    let input_name = if is_dash(&args.input) {
+        "stdin".to_string()
+    } else {
+        args.input.display().to_string()
+    };
+    let result = if is_dash(&args.input) {
+        let stdin = io::stdin().lock();
+        let mut out = Output::open(&args.out, true)?;
+        let written = retarget_stream(stdin, &input_name, character, config, &mut out);
+        written.and_then(|n| out.finish().map(|()| n))
+    } else {
+        let file = File::open(&args.input)
+            .with_context(|| format!("cannot open input {}", args.input.display()))
+            .map_err(bad_input)?;
+        let mut reader = BufReader::new(file);
+        let neutral = scan(&mut reader, &input_name, character.len())?;
+        reader
+            .rewind()
+            .with_context(|| format!("cannot rewind {input_name}"))?;
+        let mut out = Output::open(&args.out, false)?;
+        let written = retarget_file(reader, &input_name, character, config, neutral, &mut out);
+        written.and_then(|n| out.finish().map(|()| n))
+    };
+    match result {
+        Ok(lines) => {
+            tracing::info!(lines, "retarget done");
+            Ok(())
+        }
+        Err(e) if is_broken_pipe(&e) => Ok(()),
+        Err(e) => Err(e),
+    }
+}
+
+/// A reader downstream went away (`| head`): stop quietly, like other Unix tools.
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        let kind = c
+            .downcast_ref::<io::Error>()
+            .map(io::Error::kind)
+            .or_else(|| {
+                c.downcast_ref::<serde_json::Error>()
+                    .and_then(|j| j.io_error_kind())
+            });
+        kind == Some(io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// Checks each line as it is read: JSON shape, dot names, finite numbers, time order.
+struct LineChecker<'a> {
+    input_name: &'a str,
+    lip_dots: usize,
+    previous_t: Option<f64>,
+    scratch: PerformerDots,
+}
+
+impl<'a> LineChecker<'a> {
+    fn new(input_name: &'a str, lip_dots: usize) -> Self {
+        Self {
+            input_name,
+            lip_dots,
+            previous_t: None,
+            scratch: PerformerDots::default(),
+        }
+    }
+
+    fn at(&self, line_no: usize) -> String {
+        format!("{} line {line_no}", self.input_name)
+    }
+
+    /// The parsed line, or `None` for a blank line.
+    fn check(&mut self, line_no: usize, text: &str) -> anyhow::Result<Option<InputLine>> {
+        if text.trim().is_empty() {
+            return Ok(None);
+        }
+        let line = InputLine::parse(text)
+            .with_context(|| self.at(line_no))
+            .map_err(bad_input)?;
+        let layout = PerformerLayout {
+            lip_dots: self.lip_dots,
+            forehead_dots: line.forehead_count(),
+        };
+        line.dots_into(layout, &mut self.scratch)
+            .with_context(|| self.at(line_no))
+            .map_err(bad_input)?;
+        if let Some(previous) = self.previous_t {
+            if line.t < previous {
+                return Err(bad_input(
+                    anyhow::Error::new(mouthpiece_retarget::Error::TimeBackwards {
+                        previous,
+                        t: line.t,
+                    })
+                    .context(self.at(line_no)),
+                ));
+            }
+        }
+        self.previous_t = Some(line.t);
+        Ok(Some(line))
+    }
+}
+
+/// Reads lines, counting them (1-based) and reusing one buffer.
+struct Lines<R> {
+    reader: R,
+    buf: String,
+    line_no: usize,
+}
+
+impl<R: BufRead> Lines<R> {
+    fn new(reader: R) -> Self {
+        Self {
+            reader,
+            buf: String::new(),
+            line_no: 0,
+        }
+    }
+
+    fn next_line(&mut self, input_name: &str) -> anyhow::Result<Option<(usize, &str)>> {
+        self.buf.clear();
+        let n = self
+            .reader
+            .read_line(&mut self.buf)
+            .with_context(|| format!("{input_name} line {}", self.line_no + 1))
+            .map_err(bad_input)?;
+        if n == 0 {
+            return Ok(None);
+        }
+        self.line_no += 1;
+        Ok(Some((
+            self.line_no,
+            self.buf.trim_end_matches(['\n', '\r']),
+        )))
+    }
+}
+
+/// The neutral lines found by a pass over the input.
+struct NeutralLines {
+    lines: Vec<InputLine>,
+    /// Line numbers, for messages.
+    first: usize,
+    last: usize,
+    flagged: bool,
+}
+
+impl NeutralLines {
+    fn describe(&self, input_name: &str) -> String {
+        let how = if self.flagged {
+            "flagged \"neutral\": true"
+        } else {
+            "the first line"
+        };
+        if self.first == self.last {
+            format!("neutral pose from {input_name} line {} ({how})", self.first)
+        } else {
+            format!(
+                "neutral pose from {input_name} lines {}..{} ({how})",
+                self.first, self.last
+            )
+        }
+    }
+
+    fn build(
+        &self,
+        input_name: &str,
+        character: Character,
+        config: RetargetConfig,
+    ) -> anyhow::Result<(Retargeter, PerformerLayout)> {
+        let lip_dots = character.len();
+        let forehead_dots = self
+            .lines
+            .iter()
+            .map(InputLine::forehead_count)
+            .max()
+            .unwrap_or(0);
+        let layout = PerformerLayout {
+            lip_dots,
+            forehead_dots,
+        };
+        let mut acc = NeutralAccumulator::new(layout);
+        let mut dots = PerformerDots::new(layout);
+        for line in &self.lines {
+            line.dots_into(layout, &mut dots).map_err(bad_input)?;
+            acc.push(&dots).map_err(bad_input)?;
+        }
+        let context = || self.describe(input_name);
+        let neutral = acc.finish().with_context(context).map_err(bad_input)?;
+        tracing::info!(
+            frames = neutral.frames,
+            width_m = neutral.mouth_width(),
+            "neutral pose"
+        );
+        let retargeter = Retargeter::new(character, neutral, config)
+            .with_context(context)
+            .map_err(bad_input)?;
+        Ok((retargeter, layout))
+    }
+}
+
+/// First pass over a file: validates every line, collects the neutral ones.
+fn scan<R: BufRead>(reader: R, input_name: &str, lip_dots: usize) -> anyhow::Result<NeutralLines> {
+    let mut checker = LineChecker::new(input_name, lip_dots);
+    let mut lines = Lines::new(reader);
+    let mut flagged = NeutralLines {
+        lines: Vec::new(),
+        first: 0,
+        last: 0,
+        flagged: true,
+    };
+    let mut first = None;
+    while let Some((line_no, text)) = lines.next_line(input_name)? {
+        let Some(line) = checker.check(line_no, text)? else {
+            continue;
+        };
+        if line.neutral {
+            if flagged.lines.is_empty() {
+                flagged.first = line_no;
+            }
+            flagged.last = line_no;
+            flagged.lines.push(line);
+        } else if first.is_none() && flagged.lines.is_empty() {
+            first = Some((line_no, line));
+        }
+    }
+    if !flagged.lines.is_empty() {
+        return Ok(flagged);
+    }
+    match first {
+        Some((line_no, line)) => Ok(NeutralLines {
+            lines: vec![line],
+            first: line_no,
+            last: line_no,
+            flagged: false,
+        }),
+        None => Err(bad_input(anyhow::anyhow!("{input_name} has no lines"))),
+    }
+}
+
+/// Second pass over a validated file: one output line per input line.
+fn retarget_file<R: BufRead>(
+    reader: R,
+    input_name: &str,
+    character: Character,
+    config: RetargetConfig,
+    neutral: NeutralLines,
+    out: &mut Output,
+) -> anyhow::Result<u64> {
+    let mut line_out = OutputLine::for_character(&character, &config.character.smoothing);
+    let (mut retargeter, layout) = neutral.build(input_name, character, config)?;
+    drop(neutral);
+    let mut checker = LineChecker::new(input_name, layout.lip_dots);
+    let mut dots = PerformerDots::new(layout);
+    let mut lines = Lines::new(reader);
+    let mut seq = 0;
+    while let Some((line_no, text)) = lines.next_line(input_name)? {
+        let Some(line) = checker.check(line_no, text)? else {
+            continue;
+        };
+        emit(
+            &mut retargeter,
+            &line,
+            layout,
+            &mut dots,
+            &mut line_out,
+            seq,
+            out,
+        )
+        .with_context(|| format!("{input_name} line {line_no}"))?;
+        seq += 1;
+    }
+    Ok(seq)
+}
+
+/// Single pass over a stream: the leading neutral block is buffered, the rest streams.
+fn retarget_stream<R: BufRead>(
+    reader: R,
+    input_name: &str,
+    character: Character,
+    config: RetargetConfig,
+    out: &mut Output,
+) -> anyhow::Result<u64> {
+    let mut line_out = OutputLine::for_character(&character, &config.character.smoothing);
+    let mut checker = LineChecker::new(input_name, character.len());
+    let mut lines = Lines::new(reader);
+    let mut pending = NeutralLines {
+        lines: Vec::new(),
+        first: 0,
+        last: 0,
+        flagged: true,
+    };
+    let mut pending_numbers = Vec::new();
+    let mut character = Some(character);
+    let mut state: Option<(Retargeter, PerformerLayout, PerformerDots)> = None;
+    let mut seq = 0;
+    loop {
+        let next = lines.next_line(input_name)?;
+        let line = match next {
+            Some((line_no, text)) => match checker.check(line_no, text)? {
+                Some(line) => Some((line_no, line)),
+                None => continue,
+            },
+            None => None,
+        };
+        if state.is_none() {
+            // Still in the neutral block?
+            if let Some((line_no, l)) = &line {
+                if l.neutral {
+                    if pending.lines.is_empty() {
+                        pending.first = *line_no;
+                    }
+                    pending.last = *line_no;
+                    pending.lines.push(l.clone());
+                    pending_numbers.push(*line_no);
+                    continue;
+                }
+            }
+            if pending.lines.is_empty() {
+                // No flagged block: the first line is the neutral pose (and is output too).
+                let Some((line_no, l)) = &line else {
+                    return Err(bad_input(anyhow::anyhow!("{input_name} has no lines")));
+                };
+                pending = NeutralLines {
+                    lines: vec![l.clone()],
+                    first: *line_no,
+                    last: *line_no,
+                    flagged: false,
+                };
+            }
+            let (retargeter, layout) =
+                pending.build(input_name, character.take().expect("built once"), config)?;
+            let mut s = (retargeter, layout, PerformerDots::new(layout));
+            if pending.flagged {
+                for (l, &line_no) in pending.lines.iter().zip(&pending_numbers) {
+                    emit(&mut s.0, l, s.1, &mut s.2, &mut line_out, seq, out)
+                        .with_context(|| format!("{input_name} line {line_no}"))?;
+                    seq += 1;
+                }
+            }
+            pending = NeutralLines {
+                lines: Vec::new(),
+                first: 0,
+                last: 0,
+                flagged: true,
+            };
+            pending_numbers = Vec::new();
+            state = Some(s);
+        }
+        let Some((line_no, l)) = line else { break };
+        if l.neutral {
+            return Err(bad_input(anyhow::anyhow!(
+                "{input_name} line {line_no}: a \"neutral\" line after the neutral block; on \
+                 stdin the neutral lines must come first (give the input as a file to allow \
+                 neutral lines anywhere)"
+            )));
+        }
+        let (retargeter, layout, dots) = state.as_mut().expect("set above");
+        emit(retargeter, &l, *layout, dots, &mut line_out, seq, out)
+            .with_context(|| format!("{input_name} line {line_no}"))?;
+        seq += 1;
+    }
+    Ok(seq)
+}
+
+fn emit(
+    retargeter: &mut Retargeter,
+    line: &InputLine,
+    layout: PerformerLayout,
+    dots: &mut PerformerDots,
+    line_out: &mut OutputLine,
+    seq: u64,
+    out: &mut Output,
+) -> anyhow::Result<()> {
+    line.dots_into(layout, dots).map_err(bad_input)?;
+    let result = retargeter.step(line.t, dots).map_err(bad_input)?;
+    line_out.update(seq, &result);
+    out.write_line(line_out)
+}
+
+/// Where the output goes: stdout, or a temporary file renamed into place by `finish`.
+struct Output {
+    writer: BufWriter<Box<dyn Write>>,
+    temp: Option<(tempfile::TempPath, PathBuf)>,
+    flush_each_line: bool,
+}
+
+impl Output {
+    fn open(path: &Path, streaming: bool) -> anyhow::Result<Self> {
+        if is_dash(path) {
+            return Ok(Self {
+                writer: BufWriter::new(Box::new(io::stdout())),
+                temp: None,
+                flush_each_line: streaming,
+            });
+        }
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        let temp = tempfile::Builder::new()
+            .prefix(".mouthpiece-retarget-")
+            .suffix(".jsonl.tmp")
+            .tempfile_in(dir)
+            .with_context(|| format!("cannot create output in {}", dir.display()))
+            .map_err(bad_input)?;
+        let (file, temp_path) = temp.into_parts();
+        Ok(Self {
+            writer: BufWriter::new(Box::new(file)),
+            temp: Some((temp_path, path.to_path_buf())),
+            flush_each_line: false,
+        })
+    }
+
+    fn write_line(&mut self, line: &OutputLine) -> anyhow::Result<()> {
+        serde_json::to_writer(&mut self.writer, line).context("writing output")?;
+        self.writer.write_all(b"\n").context("writing output")?;
+        if self.flush_each_line {
+            self.writer.flush().context("writing output")?;
+        }
+        Ok(())
+    }
+
+    fn finish(mut self) -> anyhow::Result<()> {
+        self.writer.flush().context("writing output")?;
+        if let Some((temp, dest)) = self.temp.take() {
+            temp.persist(&dest).with_context(|| {
+                format!("cannot move the output into place at {}", dest.display())
+            })?;
+        }
+        Ok(())
+    }
 }

@@ -1,0 +1,734 @@
+//! Character files (method.md §7): a character's neutral mouth points, where its mouth frame
+//! is, which performer dot drives which point, and how the deformation `M` is chosen.
+//!
+//! The format is documented in `docs/retarget.md`. Parsing is strict: unknown keys, non-finite
+//! numbers, duplicate names, a map naming points that do not exist, coincident corners and an
+//! `up` parallel to the corner line are errors naming the key, the line and the reason.
+
+use std::ops::Range;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::error::line_of;
+use crate::layout::{parse_dot_name, DotId, PerformerLayout};
+use crate::named::Named;
+use crate::{Error, MouthFrame, Vec3};
+
+/// How the deformation parameters `M` are chosen (method.md §5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MMode {
+    /// Per point and axis `P/D` where that is safe, the axis extent ratio otherwise.
+    #[default]
+    PerPoint,
+    /// Every point uses the axis extent ratios.
+    PerAxis,
+    /// Values given in the file's `[m]` table.
+    Manual,
+}
+
+/// Units of a character's coordinates, when the file says (`units`). Export uses them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+pub enum Units {
+    /// Metres.
+    #[serde(rename = "m")]
+    Metres,
+    /// Centimetres.
+    #[serde(rename = "cm")]
+    Centimetres,
+    /// Millimetres.
+    #[serde(rename = "mm")]
+    Millimetres,
+}
+
+impl Units {
+    /// Metres per unit.
+    pub fn metres_per_unit(self) -> f64 {
+        match self {
+            Units::Metres => 1.0,
+            Units::Centimetres => 0.01,
+            Units::Millimetres => 0.001,
+        }
+    }
+}
+
+/// A character ready for retargeting.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Character {
+    /// The character's name (`name`), used on the wire.
+    pub name: String,
+    /// Units of its coordinates, if given.
+    pub units: Option<Units>,
+    /// Point names in order around the mouth (the file's order, or `P1..PN` from contours).
+    pub point_names: Vec<String>,
+    /// The neutral points as given (model frame, or already a mouth frame).
+    pub model_points: Vec<Vec3>,
+    /// The mouth frame within the model frame (method.md §2).
+    pub frame: MouthFrame,
+    /// `P⁰`: the neutral points in the mouth frame.
+    pub neutral: Vec<Vec3>,
+    /// For each point, the 0-based index of the performer lip dot that drives it.
+    pub driver: Vec<usize>,
+    /// How `M` is chosen.
+    pub m_mode: MMode,
+    /// With `MMode::Manual`: `M` per point, in point order.
+    pub manual_m: Option<Vec<Vec3>>,
+}
+
+/// The character's "up" in its model frame when the file gives none.
+pub const DEFAULT_UP: [f64; 3] = [0.0, 1.0, 0.0];
+
+impl Character {
+    /// Builds a character from its parts. `driver[n]` is the lip dot driving point `n`; it must
+    /// be a permutation of `0..N`. The left corner is the point driven by `D1`, the right
+    /// corner the one driven by `D⌊N/2⌋+1`.
+    pub fn new(
+        name: impl Into<String>,
+        point_names: Vec<String>,
+        model_points: Vec<Vec3>,
+        up: Vec3,
+        driver: Vec<usize>,
+        m_mode: MMode,
+        manual_m: Option<Vec<Vec3>>,
+    ) -> Result<Self, Error> {
+        let n = model_points.len();
+        let bad = |key: &str, reason: String| Error::CharacterInvalid {
+            key: key.to_string(),
+            line: None,
+            reason,
+        };
+        if n < 4 {
+            return Err(bad(
+                "points",
+                format!("a mouth needs at least 4 points, got {n}"),
+            ));
+        }
+        if point_names.len() != n || driver.len() != n {
+            return Err(bad(
+                "points",
+                "names, points and drivers differ in number".into(),
+            ));
+        }
+        let mut seen = vec![false; n];
+        for &d in &driver {
+            if d >= n || std::mem::replace(&mut seen[d], true) {
+                return Err(bad(
+                    "map",
+                    "each lip dot must drive exactly one point".into(),
+                ));
+            }
+        }
+        if m_mode == MMode::Manual && manual_m.as_ref().map(Vec::len) != Some(n) {
+            return Err(bad("m", "manual mode needs a value for every point".into()));
+        }
+        let layout = PerformerLayout {
+            lip_dots: n,
+            forehead_dots: 0,
+        };
+        let left = driver
+            .iter()
+            .position(|&d| d == layout.left_corner())
+            .expect("permutation");
+        let right = driver
+            .iter()
+            .position(|&d| d == layout.right_corner())
+            .expect("permutation");
+        let frame =
+            MouthFrame::from_corners(model_points[left], model_points[right], up).map_err(|e| {
+                match e {
+                    Error::CoincidentCorners { .. } => Error::CoincidentCorners {
+                        left: point_names[left].clone(),
+                        right: point_names[right].clone(),
+                    },
+                    other => other,
+                }
+            })?;
+        let neutral = model_points.iter().map(|p| frame.to_mouth(p)).collect();
+        Ok(Self {
+            name: name.into(),
+            units: None,
+            point_names,
+            model_points,
+            frame,
+            neutral,
+            driver,
+            m_mode,
+            manual_m,
+        })
+    }
+
+    /// Parses and validates a character file.
+    pub fn from_toml_str(src: &str) -> Result<Self, Error> {
+        let raw: RawCharacter = toml::from_str(src).map_err(|source| Error::CharacterToml {
+            line: source.span().map(|s| line_of(src, s.start)),
+            source,
+        })?;
+        raw.validate(src)
+    }
+
+    /// Number of points (and of performer lip dots it expects).
+    pub fn len(&self) -> usize {
+        self.neutral.len()
+    }
+
+    /// Always false: a character has at least 4 points.
+    pub fn is_empty(&self) -> bool {
+        self.neutral.is_empty()
+    }
+
+    /// Corner-to-corner width of the mouth, character units.
+    pub fn mouth_width(&self) -> f64 {
+        self.frame.width
+    }
+
+    /// The performer layout this character expects (its lip dot count; 3 forehead dots).
+    pub fn performer_layout(&self) -> PerformerLayout {
+        PerformerLayout {
+            lip_dots: self.len(),
+            forehead_dots: 3,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCharacter {
+    name: Spanned<String>,
+    units: Option<Units>,
+    points: Option<Spanned<Named<Spanned<[f64; 3]>>>>,
+    up: Option<Spanned<[f64; 3]>>,
+    map: Option<Spanned<Named<Spanned<String>>>>,
+    m_mode: Option<MMode>,
+    m: Option<Spanned<Named<Spanned<[f64; 3]>>>>,
+    contour: Option<Spanned<RawContour>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawContour {
+    upper: Spanned<Vec<[f64; 3]>>,
+    lower: Spanned<Vec<[f64; 3]>>,
+    points_per_lip: Spanned<usize>,
+}
+
+struct Checker<'a> {
+    src: &'a str,
+}
+
+impl Checker<'_> {
+    fn err(
+        &self,
+        key: impl Into<String>,
+        span: Option<Range<usize>>,
+        reason: impl Into<String>,
+    ) -> Error {
+        Error::CharacterInvalid {
+            key: key.into(),
+            line: span.map(|s| line_of(self.src, s.start)),
+            reason: reason.into(),
+        }
+    }
+
+    fn finite(&self, key: &str, v: &Spanned<[f64; 3]>) -> Result<Vec3, Error> {
+        let a = v.get_ref();
+        if a.iter().all(|c| c.is_finite()) {
+            Ok(Vec3::new(a[0], a[1], a[2]))
+        } else {
+            Err(self.err(key, Some(v.span()), format!("non-finite number in {a:?}")))
+        }
+    }
+}
+
+impl RawCharacter {
+    fn validate(self, src: &str) -> Result<Character, Error> {
+        let c = Checker { src };
+        let name = self.name.get_ref().trim().to_string();
+        if name.is_empty() {
+            return Err(c.err("name", Some(self.name.span()), "must not be empty"));
+        }
+
+        let (point_names, points, spans): (Vec<String>, Vec<Vec3>, Vec<Option<Range<usize>>>) =
+            match (&self.points, &self.contour) {
+                (Some(_), Some(contour)) => {
+                    return Err(c.err(
+                        "contour",
+                        Some(contour.span()),
+                        "give either [points] or [contour], not both",
+                    ))
+                }
+                (None, None) => {
+                    return Err(c.err("points", None, "missing: give [points] or [contour]"))
+                }
+                (Some(points), None) => {
+                    let mut names = Vec::new();
+                    let mut values = Vec::new();
+                    let mut spans = Vec::new();
+                    for (pname, v) in points.get_ref().iter() {
+                        let key = format!("points.{pname}");
+                        if pname.is_empty() {
+                            return Err(c.err(
+                                key,
+                                Some(v.span()),
+                                "point names must not be empty",
+                            ));
+                        }
+                        if names.iter().any(|n: &String| n == pname) {
+                            return Err(c.err(key, Some(v.span()), "duplicate point name"));
+                        }
+                        values.push(c.finite(&key, v)?);
+                        names.push(pname.to_string());
+                        spans.push(Some(v.span()));
+                    }
+                    if names.len() < 4 {
+                        return Err(c.err(
+                            "points",
+                            Some(points.span()),
+                            format!("a mouth needs at least 4 points, got {}", names.len()),
+                        ));
+                    }
+                    (names, values, spans)
+                }
+                (None, Some(contour)) => {
+                    let pts = contour_points(&c, contour)?;
+                    let names = (1..=pts.len()).map(|i| format!("P{i}")).collect();
+                    let spans = vec![Some(contour.span()); pts.len()];
+                    (names, pts, spans)
+                }
+            };
+        let n = points.len();
+
+        let up = match &self.up {
+            Some(up) => {
+                let v = c.finite("up", up)?;
+                if v.norm() == 0.0 {
+                    return Err(c.err("up", Some(up.span()), "must not be the zero vector"));
+                }
+                v
+            }
+            None => Vec3::from(DEFAULT_UP),
+        };
+
+        let driver = match &self.map {
+            None => (0..n).collect(),
+            Some(map) => {
+                let mut driver = vec![usize::MAX; n];
+                for (dot, target) in map.get_ref().iter() {
+                    let key = format!("map.{dot}");
+                    let lip = match parse_dot_name(dot) {
+                        Some(DotId::Lip(i)) if i < n => i,
+                        _ => {
+                            return Err(c.err(
+                                key,
+                                Some(target.span()),
+                                format!("`{dot}` is not a lip dot of this layout (D1..D{n})"),
+                            ))
+                        }
+                    };
+                    let Some(p) = point_names.iter().position(|pn| pn == target.get_ref()) else {
+                        return Err(c.err(
+                            key,
+                            Some(target.span()),
+                            format!("no point named `{}` in this character", target.get_ref()),
+                        ));
+                    };
+                    if driver[p] != usize::MAX {
+                        return Err(c.err(
+                            key,
+                            Some(target.span()),
+                            format!(
+                                "point `{}` is already driven by D{}",
+                                target.get_ref(),
+                                driver[p] + 1
+                            ),
+                        ));
+                    }
+                    driver[p] = lip;
+                }
+                if let Some(p) = driver.iter().position(|&d| d == usize::MAX) {
+                    return Err(c.err(
+                        "map",
+                        Some(map.span()),
+                        format!(
+                            "point `{}` is driven by no dot; map every point",
+                            point_names[p]
+                        ),
+                    ));
+                }
+                driver
+            }
+        };
+
+        let m_mode = self.m_mode.unwrap_or_default();
+        let manual_m = match (&self.m, m_mode) {
+            (Some(m), MMode::Manual) => {
+                let mut values = vec![None; n];
+                for (pname, v) in m.get_ref().iter() {
+                    let key = format!("m.{pname}");
+                    let Some(p) = point_names.iter().position(|pn| pn == pname) else {
+                        return Err(c.err(
+                            key,
+                            Some(v.span()),
+                            format!("no point named `{pname}` in this character"),
+                        ));
+                    };
+                    values[p] = Some(c.finite(&key, v)?);
+                }
+                let mut out = Vec::with_capacity(n);
+                for (p, v) in values.into_iter().enumerate() {
+                    out.push(v.ok_or_else(|| {
+                        c.err(
+                            "m",
+                            Some(m.span()),
+                            format!("no value for point `{}`", point_names[p]),
+                        )
+                    })?);
+                }
+                Some(out)
+            }
+            (None, MMode::Manual) => {
+                return Err(c.err("m", None, "m_mode = \"manual\" needs an [m] table"))
+            }
+            (Some(m), _) => {
+                return Err(c.err(
+                    "m",
+                    Some(m.span()),
+                    "[m] is only read with m_mode = \"manual\"",
+                ))
+            }
+            (None, _) => None,
+        };
+
+        let names_for_errors = point_names.clone();
+        let mut character = Character::new(name, point_names, points, up, driver, m_mode, manual_m)
+            .map_err(|e| match e {
+                Error::CoincidentCorners { ref left, .. } => {
+                    let at = names_for_errors.iter().position(|n| n == left).unwrap_or(0);
+                    c.err("points", spans[at].clone(), e.to_string())
+                }
+                Error::UpParallelToCorners => c.err(
+                    "up",
+                    self.up.as_ref().map(|u| u.span()),
+                    "is parallel to the line through the mouth corners",
+                ),
+                other => other,
+            })?;
+        character.units = self.units;
+        Ok(character)
+    }
+}
+
+/// Places `points_per_lip` points (corners included) at equal arc length along each contour
+/// and orders them like the performer's dots: left corner, upper lip left to right, right
+/// corner, lower lip right to left.
+fn contour_points(c: &Checker<'_>, contour: &Spanned<RawContour>) -> Result<Vec<Vec3>, Error> {
+    let contour = contour.get_ref();
+    let k = *contour.points_per_lip.get_ref();
+    if k < 3 {
+        return Err(c.err(
+            "contour.points_per_lip",
+            Some(contour.points_per_lip.span()),
+            format!("must be at least 3 (two corners and one lip point), got {k}"),
+        ));
+    }
+    let polyline = |key: &str, line: &Spanned<Vec<[f64; 3]>>| -> Result<Vec<Vec3>, Error> {
+        let pts = line.get_ref();
+        if pts.len() < 2 {
+            return Err(c.err(
+                key,
+                Some(line.span()),
+                "needs at least 2 points, corner to corner",
+            ));
+        }
+        let mut out = Vec::with_capacity(pts.len());
+        for a in pts {
+            if !a.iter().all(|v| v.is_finite()) {
+                return Err(c.err(
+                    key,
+                    Some(line.span()),
+                    format!("non-finite number in {a:?}"),
+                ));
+            }
+            out.push(Vec3::new(a[0], a[1], a[2]));
+        }
+        Ok(out)
+    };
+    let upper = polyline("contour.upper", &contour.upper)?;
+    let lower = polyline("contour.lower", &contour.lower)?;
+    let scale = upper
+        .iter()
+        .chain(&lower)
+        .map(|p| p.norm())
+        .fold(1.0, f64::max);
+    let same = |a: &Vec3, b: &Vec3| (a - b).norm() <= 1e-9 * scale;
+    if !same(&upper[0], &lower[0]) || !same(upper.last().unwrap(), lower.last().unwrap()) {
+        return Err(c.err(
+            "contour.lower",
+            Some(contour.lower.span()),
+            "must start and end where contour.upper does (left corner first, right corner last)",
+        ));
+    }
+    let up = resample(&upper, k).ok_or_else(|| {
+        c.err(
+            "contour.upper",
+            Some(contour.upper.span()),
+            "has zero length",
+        )
+    })?;
+    let low = resample(&lower, k).ok_or_else(|| {
+        c.err(
+            "contour.lower",
+            Some(contour.lower.span()),
+            "has zero length",
+        )
+    })?;
+    let mut out = up;
+    out.extend(low[1..k - 1].iter().rev());
+    Ok(out)
+}
+
+/// `count` points at equal arc-length intervals along a polyline, both ends included.
+/// `None` for a polyline of zero length.
+pub fn resample(polyline: &[Vec3], count: usize) -> Option<Vec<Vec3>> {
+    let mut cumulative = Vec::with_capacity(polyline.len());
+    cumulative.push(0.0);
+    for w in polyline.windows(2) {
+        cumulative.push(cumulative.last().unwrap() + (w[1] - w[0]).norm());
+    }
+    let total = *cumulative.last().unwrap();
+    if total.is_nan() || total <= 0.0 || count < 2 {
+        return None;
+    }
+    let mut out = Vec::with_capacity(count);
+    let mut seg = 0;
+    for i in 0..count {
+        let s = total * i as f64 / (count - 1) as f64;
+        while seg + 2 < cumulative.len() && cumulative[seg + 1] < s {
+            seg += 1;
+        }
+        let len = cumulative[seg + 1] - cumulative[seg];
+        let u = if len > 0.0 {
+            ((s - cumulative[seg]) / len).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        out.push(polyline[seg] + (polyline[seg + 1] - polyline[seg]) * u);
+    }
+    *out.last_mut().unwrap() = *polyline.last().unwrap();
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    const SQUARE: &str = r#"
+name = "square"
+[points]
+P1 = [1.0, 0.0, 0.0]
+P2 = [0.0, 1.0, 0.5]
+P3 = [-1.0, 0.0, 0.0]
+P4 = [0.0, -1.0, 0.5]
+"#;
+
+    fn invalid(src: &str) -> (String, Option<usize>, String) {
+        match Character::from_toml_str(src) {
+            Err(Error::CharacterInvalid { key, line, reason }) => (key, line, reason),
+            Err(Error::CharacterToml { line, source }) => {
+                ("<toml>".into(), line, source.message().to_string())
+            }
+            other => panic!("expected an error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn mouth_frame_points_come_out_unchanged() {
+        let c = Character::from_toml_str(SQUARE).unwrap();
+        assert_eq!(c.point_names, ["P1", "P2", "P3", "P4"]);
+        assert_eq!(c.neutral, c.model_points);
+        assert_eq!(c.mouth_width(), 2.0);
+        assert_eq!(c.driver, [0, 1, 2, 3]);
+    }
+
+    #[test]
+    fn model_frame_is_converted_with_up() {
+        // The square, rotated so its up is model +Z and it faces model -Y, and shifted.
+        let src = r#"
+name = "turned"
+up = [0.3, 0.0, 2.0]   # not orthogonal to the corner line: only its orthogonal part counts
+[points]
+P1 = [11.0, 5.0, 3.0]
+P2 = [10.0, 4.5, 4.0]
+P3 = [9.0, 5.0, 3.0]
+P4 = [10.0, 4.5, 2.0]
+"#;
+        let c = Character::from_toml_str(src).unwrap();
+        let expect = Character::from_toml_str(SQUARE).unwrap().neutral;
+        for (a, b) in c.neutral.iter().zip(&expect) {
+            assert_relative_eq!(a, b, epsilon = 1e-12);
+        }
+    }
+
+    #[test]
+    fn file_order_is_kept() {
+        let src = "name = \"o\"\n[points]\nP3 = [-1, 0, 0]\nP1 = [1, 0, 0]\nP2 = [0, 1, 0]\nP4 = [0, -1, 0]\n";
+        let c = Character::from_toml_str(src).unwrap();
+        assert_eq!(c.point_names, ["P3", "P1", "P2", "P4"]);
+        // Corners are the points driven by D1 and D3 (of 4): P3 and P2 here.
+        assert_relative_eq!(c.neutral[0], Vec3::new(c.mouth_width() / 2.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn map_and_manual_m() {
+        // Top-level keys must come before the tables in TOML.
+        let src = SQUARE.replace(
+            "name = \"square\"\n",
+            "name = \"square\"\nm_mode = \"manual\"\n",
+        ) + "[map]\nD1 = \"P1\"\nD2 = \"P4\"\nD3 = \"P3\"\nD4 = \"P2\"\n"
+            + "[m]\nP1 = [1, 2, 3]\nP2 = [1, 1, 1]\nP3 = [2, 2, 2]\nP4 = [0.5, 0.5, 0.5]\n";
+        let c = Character::from_toml_str(&src).unwrap();
+        assert_eq!(c.driver, [0, 3, 2, 1]);
+        assert_eq!(c.m_mode, MMode::Manual);
+        assert_eq!(c.manual_m.as_ref().unwrap()[0], Vec3::new(1.0, 2.0, 3.0));
+    }
+
+    #[test]
+    fn contour_points_at_equal_arc_length() {
+        let src = r#"
+name = "c"
+[contour]
+points_per_lip = 4
+upper = [[3.0, 0.0, 0.0], [3.0, 3.0, 0.0], [-3.0, 3.0, 0.0], [-3.0, 0.0, 0.0]]
+lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
+"#;
+        let c = Character::from_toml_str(src).unwrap();
+        assert_eq!(c.len(), 6);
+        assert_eq!(c.point_names, ["P1", "P2", "P3", "P4", "P5", "P6"]);
+        // Upper: length 12, a point every 4 along it; lower: length 6, every 2, reversed.
+        let expect = [
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(2.0, 3.0, 0.0),
+            Vec3::new(-2.0, 3.0, 0.0),
+            Vec3::new(-3.0, 0.0, 0.0),
+            Vec3::new(-1.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+        ];
+        for (a, b) in c.neutral.iter().zip(&expect) {
+            assert_relative_eq!(a, b, epsilon = 1e-12);
+        }
+    }
+
+    #[test]
+    fn rejections_name_key_line_and_reason() {
+        let (key, line, reason) =
+            invalid(&SQUARE.replace("name = \"square\"", "name = \"s\"\ncolour = 1"));
+        assert_eq!((key.as_str(), line), ("<toml>", Some(3)));
+        assert!(reason.contains("unknown field `colour`"), "{reason}");
+
+        let (key, line, reason) =
+            invalid(&SQUARE.replace("P2 = [0.0, 1.0, 0.5]", "P2 = [0.0, nan, 0.5]"));
+        assert_eq!((key.as_str(), line), ("points.P2", Some(5)));
+        assert!(reason.contains("non-finite"));
+
+        let (key, line, reason) = invalid(&SQUARE.replace("P4", "P2"));
+        assert_eq!((key.as_str(), line), ("<toml>", Some(7)));
+        assert!(reason.contains("duplicate key"), "{reason}");
+
+        let (key, line, reason) = invalid(&format!("{SQUARE}[map]\nD1 = \"P1\"\nD2 = \"P9\"\n"));
+        assert_eq!((key.as_str(), line), ("map.D2", Some(10)));
+        assert!(reason.contains("no point named `P9`"));
+
+        let (key, _, reason) = invalid(&format!(
+            "{SQUARE}[map]\nD1 = \"P1\"\nD2 = \"P1\"\nD3 = \"P3\"\nD4 = \"P4\"\n"
+        ));
+        assert_eq!(key, "map.D2");
+        assert!(reason.contains("already driven by D1"), "{reason}");
+
+        let (key, _, reason) = invalid(&format!("{SQUARE}[map]\nD1 = \"P1\"\nD5 = \"P2\"\n"));
+        assert_eq!(key, "map.D5");
+        assert!(reason.contains("not a lip dot"));
+
+        let (key, _, reason) = invalid(&format!("{SQUARE}[map]\nD1 = \"P1\"\n"));
+        assert_eq!(key, "map");
+        assert!(reason.contains("driven by no dot"));
+
+        let (key, line, reason) =
+            invalid(&SQUARE.replace("P3 = [-1.0, 0.0, 0.0]", "P3 = [1.0, 0.0, 0.0]"));
+        assert_eq!((key.as_str(), line), ("points", Some(4)));
+        assert!(reason.contains("corners P1 and P3 coincide"), "{reason}");
+
+        let (key, line, reason) =
+            invalid(&SQUARE.replace("name = \"square\"", "name = \"s\"\nup = [-2, 0, 0]"));
+        assert_eq!((key.as_str(), line), ("up", Some(3)));
+        assert!(reason.contains("parallel"));
+
+        let (key, _, _) =
+            invalid(&SQUARE.replace("name = \"square\"", "name = \"s\"\nup = [0, 0, 0]"));
+        assert_eq!(key, "up");
+
+        let (key, _, reason) =
+            invalid(&SQUARE.replace("name = \"square\"", "name = \"s\"\nm_mode = \"manual\""));
+        assert_eq!(key, "m");
+        assert!(reason.contains("needs an [m] table"));
+
+        let (key, _, reason) = invalid(&format!("{SQUARE}[m]\nP1 = [1, 1, 1]\n"));
+        assert_eq!(key, "m");
+        assert!(reason.contains("only read with"));
+
+        let (key, _, reason) = invalid("name = \"x\"\n[points]\nP1 = [1, 0, 0]\nP2 = [-1, 0, 0]\n");
+        assert_eq!(key, "points");
+        assert!(reason.contains("at least 4"));
+
+        let (key, line, _) = invalid("name = \"x\"\n[points]\nP1 = [1, 0]\n");
+        assert_eq!((key.as_str(), line), ("<toml>", Some(3)));
+
+        let (key, _, reason) = invalid("name = \"x\"\n");
+        assert_eq!(key, "points");
+        assert!(reason.contains("missing"));
+
+        let (key, _, reason) = invalid(
+            "name = \"c\"\n[contour]\npoints_per_lip = 4\nupper = [[1, 0, 0], [0, 1, 0], [-1, 0, 0]]\nlower = [[1, 0, 0], [-2, 0, 0]]\n",
+        );
+        assert_eq!(key, "contour.lower");
+        assert!(reason.contains("must start and end"));
+
+        let (key, _, _) = invalid(
+            "name = \"c\"\n[contour]\npoints_per_lip = 2\nupper = [[1, 0, 0], [-1, 0, 0]]\nlower = [[1, 0, 0], [-1, 0, 0]]\n",
+        );
+        assert_eq!(key, "contour.points_per_lip");
+
+        let (key, _, _) = invalid(&format!("{SQUARE}[contour]\npoints_per_lip = 3\nupper = [[1, 0, 0], [-1, 0, 0]]\nlower = [[1, 0, 0], [-1, 0, 0]]\n"));
+        assert_eq!(key, "contour");
+    }
+
+    #[test]
+    fn shipped_characters_load() {
+        for (file, name) in [("human.toml", "human"), ("wolf.toml", "wolf")] {
+            let path = format!(
+                "{}/../../config/characters/{file}",
+                env!("CARGO_MANIFEST_DIR")
+            );
+            let c = Character::from_toml_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+            assert_eq!(c.name, name);
+            assert_eq!(c.len(), 12);
+            assert_eq!(c.units, Some(Units::Metres));
+            // Corners on the x axis, left at +x.
+            assert_relative_eq!(c.neutral[0].x, c.mouth_width() / 2.0, epsilon = 1e-12);
+            assert_relative_eq!(c.neutral[6].x, -c.mouth_width() / 2.0, epsilon = 1e-12);
+            assert!(
+                c.neutral[3].y > 0.0 && c.neutral[9].y < 0.0,
+                "upper lip up, lower down"
+            );
+            assert!(c.neutral[3].z > 0.0, "lips in front of the corners");
+        }
+        let wolf = std::fs::read_to_string(format!(
+            "{}/../../config/characters/wolf.toml",
+            env!("CARGO_MANIFEST_DIR")
+        ))
+        .unwrap();
+        let wolf = Character::from_toml_str(&wolf).unwrap();
+        assert_relative_eq!(wolf.mouth_width(), 0.15, epsilon = 1e-9);
+        assert!(wolf.neutral[3].z > 0.1, "a long muzzle");
+    }
+}

@@ -1,0 +1,199 @@
+//! Line formats of `mouthpiece retarget` (one JSON object per line; `docs/retarget.md`).
+//!
+//! [`InputLine`]: raw 3D dots in the camera frame. [`OutputLine`]: one character's mouth per
+//! time step; `process` extends it (flatten it into a larger struct) and `export` reads it.
+
+use serde::{Deserialize, Serialize};
+
+use crate::layout::{parse_dot_name, DotId, PerformerDots, PerformerLayout};
+use crate::retarget::RetargetOutput;
+use crate::smooth::ShapeSmoothing;
+use crate::{Character, Error, Named, Vec3};
+
+/// One input line: `{"t": 0.033, "points": {"D1": [x, y, z], …, "F3": null}, "neutral": true}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InputLine {
+    /// Seconds since the start of the stream.
+    pub t: f64,
+    /// Dot name → camera-frame position (metres), `null` when not seen. A dot left out is
+    /// not seen either.
+    pub points: Named<Option<[f64; 3]>>,
+    /// Whether this line belongs to the neutral pose.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub neutral: bool,
+}
+
+impl InputLine {
+    /// Parses one line.
+    pub fn parse(line: &str) -> Result<Self, Error> {
+        serde_json::from_str(line).map_err(|source| Error::Json { source })
+    }
+
+    /// The highest forehead dot index named (1-based count), to size a layout.
+    pub fn forehead_count(&self) -> usize {
+        self.points
+            .iter()
+            .filter_map(|(name, _)| match parse_dot_name(name) {
+                Some(DotId::Forehead(i)) => Some(i + 1),
+                _ => None,
+            })
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// Writes the line's dots into `dots` (resized to the layout). Errors on a name that is not
+    /// a dot name, a lip dot the layout does not have, a dot given twice, or a non-finite
+    /// coordinate or timestamp. Forehead dots beyond the layout are checked and then ignored:
+    /// they have no neutral reference to align with.
+    pub fn dots_into(
+        &self,
+        layout: PerformerLayout,
+        dots: &mut PerformerDots,
+    ) -> Result<(), Error> {
+        if !self.t.is_finite() {
+            return Err(Error::NonFiniteTime { t: self.t });
+        }
+        dots.lip.resize(layout.lip_dots, None);
+        dots.forehead.resize(layout.forehead_dots, None);
+        dots.clear();
+        let mut given = [0u64; 4];
+        for (name, value) in self.points.iter() {
+            let unknown = || Error::UnknownDot {
+                name: name.to_string(),
+                lip_dots: layout.lip_dots,
+            };
+            let id = parse_dot_name(name).ok_or_else(unknown)?;
+            let bit = match id {
+                DotId::Lip(i) if i < layout.lip_dots => i,
+                DotId::Forehead(i) if i < layout.forehead_dots => layout.lip_dots + i,
+                DotId::Forehead(_) => {
+                    if value.is_some_and(|a| !a.iter().all(|c| c.is_finite())) {
+                        return Err(Error::NonFinite {
+                            dot: name.to_string(),
+                        });
+                    }
+                    continue;
+                }
+                DotId::Lip(_) => return Err(unknown()),
+            };
+            if bit < 256 {
+                if given[bit / 64] & (1 << (bit % 64)) != 0 {
+                    return Err(Error::DuplicateDot {
+                        name: name.to_string(),
+                    });
+                }
+                given[bit / 64] |= 1 << (bit % 64);
+            }
+            let slot = dots.slot_mut(id).ok_or_else(unknown)?;
+            if let Some(a) = value {
+                if !a.iter().all(|c| c.is_finite()) {
+                    return Err(Error::NonFinite {
+                        dot: name.to_string(),
+                    });
+                }
+                *slot = Some(Vec3::new(a[0], a[1], a[2]));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Head pose on the wire (method.md §10): `current = R · neutral + t`, camera frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeadPose {
+    /// Unit quaternion `[w, x, y, z]`, `w ≥ 0`.
+    pub rotation: [f64; 4],
+    /// Translation, metres.
+    pub translation: [f64; 3],
+}
+
+/// The smoothed mouth outline of one step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Curve {
+    /// How it was made: `ma`, `ma-weighted`, `ma-exp`, `sg5`, `bspline`.
+    pub method: String,
+    /// Always true: the last point joins the first.
+    pub closed: bool,
+    /// Curve points, character mouth frame and units.
+    pub points: Vec<[f64; 3]>,
+}
+
+/// One output line (field order as written):
+/// `{"t", "seq", "character", "points", "confidence", "head", "head_lost", "curve"}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OutputLine {
+    /// The input line's timestamp.
+    pub t: f64,
+    /// 0-based index of the line in the stream.
+    pub seq: u64,
+    /// Character name.
+    pub character: String,
+    /// Point name → position in the character's mouth frame and units, in point order.
+    pub points: Named<[f64; 3]>,
+    /// Point name → confidence (1 seen, 0 held or decaying).
+    pub confidence: Named<f64>,
+    /// Head pose of the performer.
+    pub head: HeadPose,
+    /// The head pose is the last good one (fewer than 3 forehead dots usable).
+    #[serde(default)]
+    pub head_lost: bool,
+    /// The smoothed curve, `null` without shape smoothing.
+    #[serde(default)]
+    pub curve: Option<Curve>,
+}
+
+fn arr(v: &Vec3) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+impl OutputLine {
+    /// A line for `character`, with its point names allocated once; fill it with
+    /// [`OutputLine::update`] every step.
+    pub fn for_character(character: &Character, smoothing: &ShapeSmoothing) -> Self {
+        let names = &character.point_names;
+        Self {
+            t: 0.0,
+            seq: 0,
+            character: character.name.clone(),
+            points: Named(names.iter().map(|n| (n.clone(), [0.0; 3])).collect()),
+            confidence: Named(names.iter().map(|n| (n.clone(), 0.0)).collect()),
+            head: HeadPose {
+                rotation: [1.0, 0.0, 0.0, 0.0],
+                translation: [0.0; 3],
+            },
+            head_lost: false,
+            curve: match smoothing {
+                ShapeSmoothing::None => None,
+                s => Some(Curve {
+                    method: s.name().to_string(),
+                    closed: true,
+                    points: Vec::with_capacity(s.curve_len(names.len())),
+                }),
+            },
+        }
+    }
+
+    /// Overwrites the values with one step's output (no allocation once the curve buffer has
+    /// grown).
+    pub fn update(&mut self, seq: u64, out: &RetargetOutput<'_>) {
+        let c = out.character;
+        self.t = c.t;
+        self.seq = seq;
+        for ((_, dst), p) in self.points.0.iter_mut().zip(&c.points) {
+            *dst = arr(p);
+        }
+        for ((_, dst), &w) in self.confidence.0.iter_mut().zip(&c.confidence) {
+            *dst = w;
+        }
+        let head = &out.performer.head;
+        self.head = HeadPose {
+            rotation: head.quaternion_wxyz(),
+            translation: arr(&head.translation),
+        };
+        self.head_lost = out.performer.head_lost;
+        if let Some(curve) = &mut self.curve {
+            curve.points.clear();
+            curve.points.extend(c.curve.iter().map(arr));
+        }
+    }
+}

@@ -1,0 +1,561 @@
+//! The hub: the handle the processing loop publishes through, and the control path back.
+//!
+//! [`Hub::publish`] never blocks and never waits for a client: it stamps the frame with the
+//! next `seq` and its timecode, copies it into a recycled slot and puts it into a
+//! fixed-size ring ([`tokio::sync::broadcast`]). Each client reads the ring at its own pace;
+//! a client that falls more than the ring's length behind loses the oldest frames and is
+//! told how many (`status` with `lagged`). In steady state publishing does not allocate:
+//! slots are reused once every client has let go of them.
+//!
+//! Control requests (calibrate, record) travel the other way through a small bounded queue
+//! ([`ControlReceiver`]); each carries a one-shot reply slot that the daemon fills with
+//! [`ControlRequest::reply`].
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
+
+use crate::metrics::Metrics;
+use crate::timecode::{Timecode, TimecodeRate};
+
+/// Head pose of one frame (method §10): current = R · neutral + t, camera frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeadPose {
+    /// Unit quaternion `[w, x, y, z]`.
+    pub rotation: [f64; 4],
+    /// Translation, metres.
+    pub translation: [f64; 3],
+    /// Fewer than three forehead dots were seen: the pose is the last good one.
+    pub lost: bool,
+}
+
+impl Default for HeadPose {
+    fn default() -> Self {
+        Self {
+            rotation: [1.0, 0.0, 0.0, 0.0],
+            translation: [0.0; 3],
+            lost: false,
+        }
+    }
+}
+
+/// One character's mouth in one frame.
+#[derive(Debug, PartialEq, Default, Serialize, Deserialize)]
+pub struct CharacterFrame {
+    /// The character's name, as in [`CharacterInfo::name`].
+    pub name: String,
+    /// Points in the character's mouth frame, in the order of [`CharacterInfo::points`].
+    pub points: Vec<[f32; 3]>,
+    /// Per point, 0 (missing, last value held) ..= 1.
+    pub confidence: Vec<f32>,
+    /// The smoothed closed curve through the points (method §8), if the daemon computes it.
+    pub curve: Option<Vec<[f32; 3]>>,
+}
+
+/// The performer's lip dots in one frame: head motion removed, performer mouth frame, metres.
+#[derive(Debug, PartialEq, Default, Serialize, Deserialize)]
+pub struct PerformerFrame {
+    /// Points `D1..Dn`.
+    pub points: Vec<[f32; 3]>,
+    /// Per point, 0 ..= 1.
+    pub confidence: Vec<f32>,
+}
+
+/// What the daemon publishes per processed frame. `seq` and the timecode are added by the hub.
+///
+/// Keep one value and refill it each frame: [`Hub::publish`] copies it with `clone_from`,
+/// which reuses the slot's buffers.
+#[derive(Debug, PartialEq, Default)]
+pub struct StreamFrame {
+    /// Seconds since the start of the stream.
+    pub t: f64,
+    /// Capture clock of the source, microseconds.
+    pub capture_us: u64,
+    /// Host wall-clock time of capture, Unix microseconds (live sources).
+    pub wall_us: Option<i64>,
+    /// Head pose.
+    pub head: HeadPose,
+    /// One entry per character being driven.
+    pub characters: Vec<CharacterFrame>,
+    /// The performer's dots (sent to clients that ask for `performer`).
+    pub performer: Option<PerformerFrame>,
+    /// Time the pipeline spent on this frame (feeds the `/metrics` histogram).
+    pub processing: Option<Duration>,
+}
+
+// Hand-written `clone_from`s reuse the destination's buffers, so that publishing into a
+// recycled slot does not allocate once the slot has seen a frame of the same shape.
+impl Clone for CharacterFrame {
+    fn clone(&self) -> Self {
+        Self {
+            name: self.name.clone(),
+            points: self.points.clone(),
+            confidence: self.confidence.clone(),
+            curve: self.curve.clone(),
+        }
+    }
+    fn clone_from(&mut self, other: &Self) {
+        self.name.clone_from(&other.name);
+        self.points.clone_from(&other.points);
+        self.confidence.clone_from(&other.confidence);
+        clone_option_from(&mut self.curve, &other.curve);
+    }
+}
+
+impl Clone for PerformerFrame {
+    fn clone(&self) -> Self {
+        Self {
+            points: self.points.clone(),
+            confidence: self.confidence.clone(),
+        }
+    }
+    fn clone_from(&mut self, other: &Self) {
+        self.points.clone_from(&other.points);
+        self.confidence.clone_from(&other.confidence);
+    }
+}
+
+impl Clone for StreamFrame {
+    fn clone(&self) -> Self {
+        Self {
+            t: self.t,
+            capture_us: self.capture_us,
+            wall_us: self.wall_us,
+            head: self.head.clone(),
+            characters: self.characters.clone(),
+            performer: self.performer.clone(),
+            processing: self.processing,
+        }
+    }
+    fn clone_from(&mut self, other: &Self) {
+        self.t = other.t;
+        self.capture_us = other.capture_us;
+        self.wall_us = other.wall_us;
+        self.head.clone_from(&other.head);
+        // Vec::clone_from calls the elements' clone_from for the common prefix.
+        self.characters.clone_from(&other.characters);
+        clone_option_from(&mut self.performer, &other.performer);
+        self.processing = other.processing;
+    }
+}
+
+fn clone_option_from<T: Clone>(dst: &mut Option<T>, src: &Option<T>) {
+    match (dst.as_mut(), src) {
+        (Some(d), Some(s)) => d.clone_from(s),
+        _ => dst.clone_from(src),
+    }
+}
+
+/// A frame as the server holds it: the daemon's data plus stream position and timecode.
+#[derive(Debug, Clone, Default)]
+pub struct PublishedFrame {
+    /// Counts every frame of the stream from 0; a gap means the client lost frames.
+    pub seq: u64,
+    /// SMPTE timecode of `wall_us` (or of `t` when there is no wall clock).
+    pub timecode: Timecode,
+    /// When it was published, for the fan-out latency histogram.
+    pub published_at: Option<Instant>,
+    /// The frame.
+    pub frame: StreamFrame,
+    /// JSON text for subscriptions to all characters, indexed by (curve, performer):
+    /// serialized once per frame by the first client that needs it, shared by the rest.
+    pub(crate) json_cache: [std::sync::OnceLock<tokio_tungstenite::tungstenite::Utf8Bytes>; 4],
+}
+
+/// A character as described in `hello`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct CharacterInfo {
+    /// Name used in `subscribe` and `frame`.
+    pub name: String,
+    /// Point names, in frame order (`P1`..`P12` by default).
+    pub points: Vec<String>,
+    /// Neutral points `P_n^0` in the character's mouth frame, its own units.
+    pub neutral: Vec<[f32; 3]>,
+    /// The deformation parameters `M_n` (per point, per axis) the daemon chose.
+    pub m: Vec<[f32; 3]>,
+    /// How `M` was chosen: `per-point`, `per-axis` or `manual`.
+    pub m_mode: String,
+    /// Units of the points (the character file's).
+    pub units: String,
+}
+
+/// The stream's description, sent in `hello`; the daemon sets it at start and on reload.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct StreamInfo {
+    /// Characters being driven.
+    pub characters: Vec<CharacterInfo>,
+    /// Names of the performer's lip dots (`D1`..`D12`), in `performer.points` order.
+    pub performer_points: Vec<String>,
+    /// Nominal frame rate of the source, frames per second.
+    pub frame_rate: f64,
+    /// Where frames come from (free text: `replay recordings/demo.mcap`, `openni2 ...`).
+    pub source: String,
+}
+
+/// The take being recorded.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Recording {
+    /// Slate (scene) name.
+    pub slate: String,
+    /// Take number.
+    pub take: u32,
+    /// File being written, if the daemon tells.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+}
+
+/// Whether frames are flowing from the source.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SourceState {
+    /// Frames are coming.
+    #[default]
+    Up,
+    /// The camera is absent or failed; the daemon retries.
+    Down,
+}
+
+impl SourceState {
+    /// `up` or `down`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Up => "up",
+            Self::Down => "down",
+        }
+    }
+}
+
+/// Daemon state shown to every client (`status`); clients get it on connect and on change.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Status {
+    /// Source up or down.
+    pub source: SourceState,
+    /// Neutral calibration running.
+    pub calibrating: bool,
+    /// Take being recorded.
+    pub recording: Option<Recording>,
+    /// Free text (why the source is down, disk full, ...).
+    pub message: Option<String>,
+}
+
+/// A control action requested by a client.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ControlCommand {
+    /// Take a new neutral calibration, averaging for `duration` (daemon default when `None`).
+    Calibrate {
+        /// Averaging time.
+        duration: Option<Duration>,
+    },
+    /// Start recording a take.
+    RecordStart {
+        /// Slate name (validated: letters, digits, space, `-`, `_`, `.`; at most 64).
+        slate: Option<String>,
+        /// Take number; the daemon picks the next when `None`.
+        take: Option<u32>,
+    },
+    /// Stop the current take.
+    RecordStop,
+}
+
+/// Why the daemon refused or failed a control request; the client gets it as an `error`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlFailure {
+    /// Shown to the client.
+    pub message: String,
+}
+
+impl ControlFailure {
+    /// A failure with this message.
+    pub fn new(message: impl Into<String>) -> Self {
+        Self {
+            message: message.into(),
+        }
+    }
+}
+
+/// The daemon's answer to a control request: details on success (sent as `result.detail`).
+pub type ControlOutcome = Result<serde_json::Value, ControlFailure>;
+
+/// One control request from a client, waiting for the daemon's answer.
+#[derive(Debug)]
+pub struct ControlRequest {
+    /// What to do.
+    pub command: ControlCommand,
+    /// Who asked (peer address), for logs.
+    pub client: String,
+    reply: oneshot::Sender<ControlOutcome>,
+}
+
+impl ControlRequest {
+    /// Answers the client. Never blocks; a client that went away is ignored.
+    pub fn reply(self, outcome: ControlOutcome) {
+        let _ = self.reply.send(outcome);
+    }
+}
+
+/// The daemon's end of the control queue.
+#[derive(Debug)]
+pub struct ControlReceiver {
+    rx: mpsc::Receiver<ControlRequest>,
+}
+
+impl ControlReceiver {
+    /// The next request if one is waiting; never blocks (for the processing loop).
+    pub fn try_recv(&mut self) -> Option<ControlRequest> {
+        self.rx.try_recv().ok()
+    }
+
+    /// Waits for the next request (outside a tokio runtime); `None` when the hub is gone.
+    pub fn blocking_recv(&mut self) -> Option<ControlRequest> {
+        self.rx.blocking_recv()
+    }
+
+    /// Waits for the next request; `None` when the hub is gone.
+    pub async fn recv(&mut self) -> Option<ControlRequest> {
+        self.rx.recv().await
+    }
+}
+
+/// Sizes of the hub's queues.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HubConfig {
+    /// Frames each client may be behind before it loses the oldest (the ring's length).
+    pub client_queue_frames: usize,
+    /// Control requests waiting for the daemon before clients get `busy`.
+    pub control_queue: usize,
+    /// Rate of the `timecode` field.
+    pub timecode_rate: TimecodeRate,
+}
+
+impl Default for HubConfig {
+    fn default() -> Self {
+        Self {
+            client_queue_frames: 128,
+            control_queue: 16,
+            timecode_rate: TimecodeRate::default(),
+        }
+    }
+}
+
+/// The handle the daemon holds: cheap to clone, usable from any thread.
+#[derive(Debug, Clone)]
+pub struct Hub {
+    pub(crate) inner: Arc<HubInner>,
+}
+
+#[derive(Debug)]
+pub(crate) struct HubInner {
+    pub(crate) frames: broadcast::Sender<Arc<PublishedFrame>>,
+    pub(crate) status: watch::Sender<Status>,
+    pub(crate) info: watch::Sender<Arc<StreamInfo>>,
+    pub(crate) control: mpsc::Sender<ControlRequest>,
+    pub(crate) metrics: Metrics,
+    pub(crate) timecode_rate: TimecodeRate,
+    next_seq: AtomicU64,
+    /// Recycled frame slots; a slot is reused once nobody else holds it.
+    pool: Mutex<Vec<Arc<PublishedFrame>>>,
+    pool_size: usize,
+}
+
+impl Hub {
+    /// A hub and the daemon's end of its control queue.
+    pub fn new(config: &HubConfig) -> (Hub, ControlReceiver) {
+        let capacity = config.client_queue_frames.max(1);
+        let (frames, _) = broadcast::channel(capacity);
+        let (control, rx) = mpsc::channel(config.control_queue.max(1));
+        let hub = Hub {
+            inner: Arc::new(HubInner {
+                frames,
+                status: watch::Sender::new(Status::default()),
+                info: watch::Sender::new(Arc::new(StreamInfo::default())),
+                control,
+                metrics: Metrics::default(),
+                timecode_rate: config.timecode_rate,
+                next_seq: AtomicU64::new(0),
+                pool: Mutex::new(Vec::new()),
+                // The ring's slots plus frames in flight in client tasks.
+                pool_size: capacity + 64,
+            }),
+        };
+        (hub, ControlReceiver { rx })
+    }
+
+    /// Publishes one frame to every subscribed client and returns its `seq`.
+    ///
+    /// Never blocks and never waits for a client; call it from the processing thread.
+    pub fn publish(&self, frame: &StreamFrame) -> u64 {
+        let inner = &self.inner;
+        let seq = inner.next_seq.fetch_add(1, Ordering::Relaxed);
+        let timecode = match frame.wall_us {
+            Some(wall) => Timecode::from_unix_micros(wall, inner.timecode_rate),
+            None => {
+                Timecode::from_micros_of_day((frame.t.max(0.0) * 1e6) as u64, inner.timecode_rate)
+            }
+        };
+        let mut slot = self.take_slot();
+        {
+            // take_slot only returns slots nobody else holds.
+            let published = Arc::make_mut(&mut slot);
+            published.seq = seq;
+            published.timecode = timecode;
+            published.published_at = Some(Instant::now());
+            published.frame.clone_from(frame);
+            for cached in &mut published.json_cache {
+                cached.take();
+            }
+        }
+        inner.metrics.frames_in.fetch_add(1, Ordering::Relaxed);
+        if let Some(p) = frame.processing {
+            inner.metrics.processing.observe(p.as_secs_f64());
+        }
+        // No receivers is fine: nobody is subscribed.
+        let _ = inner.frames.send(slot.clone());
+        self.return_slot(slot);
+        tracing::trace!(seq, "published frame");
+        seq
+    }
+
+    fn take_slot(&self) -> Arc<PublishedFrame> {
+        let mut pool = self.inner.pool.lock().unwrap_or_else(|e| e.into_inner());
+        // Oldest first: the slot most likely to have been released by every client.
+        if let Some(i) = pool.iter().position(|s| Arc::strong_count(s) == 1) {
+            return pool.remove(i);
+        }
+        Arc::new(PublishedFrame::default())
+    }
+
+    fn return_slot(&self, slot: Arc<PublishedFrame>) {
+        let mut pool = self.inner.pool.lock().unwrap_or_else(|e| e.into_inner());
+        if pool.len() < self.inner.pool_size {
+            pool.push(slot);
+        }
+    }
+
+    /// Replaces the daemon status shown to clients (sent to each client on change).
+    pub fn set_status(&self, status: Status) {
+        self.inner.status.send_if_modified(|s| {
+            let changed = *s != status;
+            *s = status;
+            changed
+        });
+    }
+
+    /// Changes part of the status in place.
+    pub fn update_status(&self, change: impl FnOnce(&mut Status)) {
+        self.inner.status.send_if_modified(|s| {
+            let before = s.clone();
+            change(s);
+            *s != before
+        });
+    }
+
+    /// The current status.
+    pub fn status(&self) -> Status {
+        self.inner.status.borrow().clone()
+    }
+
+    /// Sets the stream description; connected clients get a new `hello`.
+    pub fn set_info(&self, info: StreamInfo) {
+        self.inner.info.send_replace(Arc::new(info));
+    }
+
+    /// The current stream description.
+    pub fn info(&self) -> Arc<StreamInfo> {
+        self.inner.info.borrow().clone()
+    }
+
+    /// Frames published so far.
+    pub fn frames_published(&self) -> u64 {
+        self.inner.next_seq.load(Ordering::Relaxed)
+    }
+
+    /// Clients currently connected (WebSocket sessions).
+    pub fn clients(&self) -> u64 {
+        self.inner.metrics.clients.load(Ordering::Relaxed)
+    }
+
+    /// Prometheus text of the server's metrics (what `/metrics` serves).
+    pub fn metrics_text(&self) -> String {
+        self.inner.metrics.render()
+    }
+
+    /// Queues a control request for the daemon; the answer comes back on the returned slot.
+    pub(crate) fn request_control(
+        &self,
+        command: ControlCommand,
+        client: String,
+    ) -> Result<oneshot::Receiver<ControlOutcome>, ControlQueueError> {
+        let (reply, rx) = oneshot::channel();
+        self.inner
+            .control
+            .try_send(ControlRequest {
+                command,
+                client,
+                reply,
+            })
+            .map_err(|e| match e {
+                mpsc::error::TrySendError::Full(_) => ControlQueueError::Full,
+                mpsc::error::TrySendError::Closed(_) => ControlQueueError::NoDaemon,
+            })?;
+        Ok(rx)
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ControlQueueError {
+    Full,
+    NoDaemon,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn publish_numbers_frames_and_recycles_slots() {
+        let (hub, _control) = Hub::new(&HubConfig {
+            client_queue_frames: 4,
+            ..HubConfig::default()
+        });
+        let mut rx = hub.inner.frames.subscribe();
+        let mut frame = StreamFrame {
+            t: 1.0,
+            ..StreamFrame::default()
+        };
+        for i in 0..3 {
+            frame.t = f64::from(i);
+            assert_eq!(hub.publish(&frame), u64::from(i as u32));
+        }
+        for i in 0..3u64 {
+            let f = rx.try_recv().unwrap();
+            assert_eq!(f.seq, i);
+            assert_eq!(f.frame.t, i as f64);
+        }
+        drop(rx);
+        // With no receiver holding them, slots come back and are reused.
+        for _ in 0..100 {
+            hub.publish(&frame);
+        }
+        assert!(hub.inner.pool.lock().unwrap().len() <= 4 + 64 + 1);
+    }
+
+    #[test]
+    fn a_lagging_receiver_loses_the_oldest_and_learns_how_many() {
+        let (hub, _control) = Hub::new(&HubConfig {
+            client_queue_frames: 4,
+            ..HubConfig::default()
+        });
+        let mut rx = hub.inner.frames.subscribe();
+        for _ in 0..10 {
+            hub.publish(&StreamFrame::default());
+        }
+        assert!(matches!(
+            rx.try_recv(),
+            Err(broadcast::error::TryRecvError::Lagged(6))
+        ));
+        assert_eq!(rx.try_recv().unwrap().seq, 6);
+    }
+}

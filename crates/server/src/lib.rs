@@ -1,0 +1,87 @@
+//! mouthpiece's streaming server: WebSocket protocol `mouthpiece.v1`, a Foxglove bridge
+//! (`foxglove.websocket.v1`), the live viewer page, `/healthz` and `/metrics`, all on one
+//! port.
+//!
+//! # Using it from the daemon
+//!
+//! ```no_run
+//! use mouthpiece_server::{run, Hub, HubConfig, ServerConfig, StreamFrame, StreamInfo, Status};
+//!
+//! # async fn demo() -> Result<(), mouthpiece_server::ServerError> {
+//! let (hub, mut control) = Hub::new(&HubConfig::default());
+//! hub.set_info(StreamInfo { frame_rate: 30.0, ..StreamInfo::default() });
+//! let listener = tokio::net::TcpListener::bind("127.0.0.1:9870").await.map_err(|source| {
+//!     mouthpiece_server::ServerError::Io { context: "binding 127.0.0.1:9870".into(), source }
+//! })?;
+//! let server = tokio::spawn(run(listener, ServerConfig::default(), hub.clone(), async {
+//!     let _ = tokio::signal::ctrl_c().await;
+//! }));
+//!
+//! // On the processing thread (never blocks, never waits for a client):
+//! let mut frame = StreamFrame::default();
+//! frame.t = 0.033;
+//! hub.publish(&frame);
+//! hub.update_status(|s| s.calibrating = true);
+//!
+//! // Control requests from clients, answered from the processing thread:
+//! while let Some(request) = control.try_recv() {
+//!     // match request.command { ... }
+//!     request.reply(Ok(serde_json::json!({"ok": true})));
+//! }
+//! # server.await.ok(); Ok(()) }
+//! ```
+//!
+//! - [`Hub::publish`] stamps `seq` (every published frame counts) and the SMPTE timecode,
+//!   and puts the frame into a ring every client reads at its own pace. Publishing never
+//!   blocks; a client that falls [`HubConfig::client_queue_frames`] behind loses the oldest
+//!   frames and is told (`status` with `lagged`); one that loses more than
+//!   [`Limits::max_dropped_frames`] within [`Limits::lag_window`], or whose socket stays
+//!   blocked for [`Limits::write_timeout`], is closed with a reason.
+//! - [`Hub::set_status`] / [`Hub::update_status`]: source up/down, calibrating, recording;
+//!   sent to every client on change.
+//! - [`Hub::set_info`]: characters (point names, neutral points, `M`), performer point
+//!   names, frame rate; sent as `hello` (again on change, e.g. after a config reload).
+//! - [`ControlReceiver`]: `calibrate` and `record` requests from clients holding the control
+//!   token, in a bounded queue ([`HubConfig::control_queue`]; when full, clients get
+//!   `busy`). Answer each with [`ControlRequest::reply`]: `Ok(detail)` reaches the client as
+//!   `result`, `Err(ControlFailure)` as `error` (`control_failed`). Unanswered requests
+//!   time out after [`Limits::control_timeout`].
+//! - [`run`] serves until its `shutdown` future completes, then closes clients with 1001.
+//!
+//! The wire protocol is in `docs/protocol.md` with JSON Schemas in `docs/schemas/`.
+//!
+//! # Layout
+//!
+//! - [`protocol`]: message types, parsing of client messages, the binary frame encoder.
+//! - [`hub`]: [`Hub`], frames, status, stream info, the control queue.
+//! - `server`: accept loop, TLS, the first HTTP request (page, health, metrics, upgrade,
+//!   tokens, origin).
+//! - `session`: one `mouthpiece.v1` client (reader task + writer loop).
+//! - `foxglove`: one `foxglove.websocket.v1` client.
+//! - [`metrics`]: counters and histograms for `/metrics`.
+//! - [`timecode`]: SMPTE time-of-day timecode.
+//! - [`loadgen`]: the load tool behind `mouthpiece-loadgen` and the load tests.
+
+pub mod config;
+mod error;
+mod foxglove;
+pub mod http;
+pub mod hub;
+pub mod loadgen;
+pub mod metrics;
+pub mod protocol;
+mod server;
+mod session;
+pub mod timecode;
+mod tls;
+
+pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
+pub use error::ServerError;
+pub use foxglove::{FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL, PERFORMER_CHANNEL};
+pub use hub::{
+    CharacterFrame, CharacterInfo, ControlCommand, ControlFailure, ControlOutcome, ControlReceiver,
+    ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,
+    StreamFrame, StreamInfo,
+};
+pub use server::run;
+pub use timecode::{Timecode, TimecodeRate};

@@ -1,0 +1,614 @@
+//! The wire protocol `mouthpiece.v1`: message types (serde) and the binary `frame` layout.
+//!
+//! Every text message is a JSON object with a `type` field. `docs/protocol.md` is the
+//! human-readable description and `docs/schemas/*.json` the JSON Schemas; the tests check
+//! real server output against those schemas, so this module and the docs cannot drift apart.
+
+use serde::{Deserialize, Serialize};
+
+use crate::hub::{HeadPose, PublishedFrame, StreamInfo};
+use crate::timecode::Timecode;
+
+/// The subprotocol name negotiated in `Sec-WebSocket-Protocol`.
+pub const SUBPROTOCOL: &str = "mouthpiece.v1";
+/// The Foxglove WebSocket subprotocol the server also speaks.
+pub const FOXGLOVE_SUBPROTOCOL: &str = "foxglove.websocket.v1";
+/// Prefix of the `Sec-WebSocket-Protocol` entry that carries an access token.
+pub const TOKEN_PROTOCOL_PREFIX: &str = "mouthpiece.token.";
+/// Magic bytes at the start of a binary `frame`.
+pub const BINARY_MAGIC: &[u8; 4] = b"MPF1";
+/// Version of the binary `frame` layout.
+pub const BINARY_VERSION: u16 = 1;
+/// Size of the fixed binary header, before the character blocks.
+pub const BINARY_HEADER_LEN: usize = 76;
+
+/// A request id chosen by the client: echoed in the `result` or `error` that answers it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum RequestId {
+    /// A numeric id.
+    Number(i64),
+    /// A string id.
+    Text(String),
+}
+
+/// Messages a client sends.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ClientMessage {
+    /// Start (or change) the stream of frames this client receives.
+    Subscribe(Subscribe),
+    /// Ask the daemon to take a new neutral calibration.
+    Calibrate {
+        /// Echoed in the answer.
+        #[serde(default)]
+        id: Option<RequestId>,
+        /// How long to average the neutral pose, seconds (the daemon's default when absent).
+        #[serde(default)]
+        duration_s: Option<f64>,
+    },
+    /// Start or stop recording a take.
+    Record {
+        /// Echoed in the answer.
+        #[serde(default)]
+        id: Option<RequestId>,
+        /// `start` or `stop`.
+        action: RecordAction,
+        /// Slate name (scene), start only.
+        #[serde(default)]
+        slate: Option<String>,
+        /// Take number, start only (the daemon picks the next one when absent).
+        #[serde(default)]
+        take: Option<u32>,
+    },
+    /// Liveness check; answered with `pong`.
+    Ping {
+        /// Echoed in the `pong`.
+        #[serde(default)]
+        id: Option<RequestId>,
+    },
+}
+
+/// `record` actions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RecordAction {
+    /// Start a take.
+    Start,
+    /// Stop the current take.
+    Stop,
+}
+
+/// Optional parts of a frame, sent only when subscribed to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OptionalField {
+    /// The smoothed closed curve through each character's points.
+    Curve,
+    /// The performer's lip dots (head motion removed, performer mouth frame).
+    Performer,
+}
+
+/// Frame encoding of a subscription.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrameFormat {
+    /// JSON text messages (the default).
+    #[default]
+    Json,
+    /// The little-endian binary layout (see `docs/protocol.md`).
+    Binary,
+}
+
+/// The `subscribe` request.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Subscribe {
+    /// Echoed in the `result`.
+    #[serde(default)]
+    pub id: Option<RequestId>,
+    /// Characters to receive, by name; absent or empty means all.
+    #[serde(default)]
+    pub characters: Option<Vec<String>>,
+    /// Optional fields to include.
+    #[serde(default)]
+    pub fields: Vec<OptionalField>,
+    /// Maximum frames per second; the server skips frames to stay at or under it.
+    #[serde(default)]
+    pub max_rate: Option<f64>,
+    /// `json` (default) or `binary`.
+    #[serde(default)]
+    pub format: FrameFormat,
+}
+
+/// Error codes of the `error` message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorCode {
+    /// The text was not valid JSON.
+    BadJson,
+    /// The message's `type` is missing or not one the server knows.
+    UnknownType,
+    /// A known message with missing or wrongly typed fields, or values out of range.
+    BadRequest,
+    /// Binary messages from clients are not part of the protocol.
+    UnsupportedBinary,
+    /// The connection's token does not allow this action.
+    Forbidden,
+    /// Too many messages per second: this one was ignored.
+    RateLimited,
+    /// The daemon's control queue is full; try again.
+    Busy,
+    /// The daemon did not answer the control request in time.
+    Timeout,
+    /// No daemon is listening for control requests.
+    Unavailable,
+    /// The daemon refused or failed the control request (message says why).
+    ControlFailed,
+}
+
+/// The `error` message.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ErrorMessage {
+    /// Machine-readable code.
+    pub code: ErrorCode,
+    /// What went wrong, for people.
+    pub message: String,
+    /// The id of the request this answers, when it had one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub id: Option<RequestId>,
+}
+
+/// Server-to-client messages other than `frame` (which is serialized from a [`FrameView`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerMessage<'a> {
+    /// First message on every connection, and again when the stream's description changes.
+    Hello(HelloMessage<'a>),
+    /// Source and session state, or how many frames this client lost.
+    Status(StatusMessage<'a>),
+    /// A request could not be served.
+    Error(ErrorMessage),
+    /// A request succeeded.
+    Result(ResultMessage),
+    /// Answer to `ping`.
+    Pong {
+        /// The ping's id.
+        #[serde(skip_serializing_if = "Option::is_none")]
+        id: Option<RequestId>,
+        /// Server wall-clock time, Unix microseconds.
+        server_wall_us: i64,
+    },
+}
+
+/// The `hello` message.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HelloMessage<'a> {
+    /// Always `mouthpiece.v1`.
+    pub protocol: &'static str,
+    /// Server name and version.
+    pub server: ServerIdentity,
+    /// Stream description from the daemon.
+    #[serde(flatten)]
+    pub info: &'a StreamInfo,
+    /// SMPTE timecode rate of the `timecode` field.
+    pub timecode_rate: &'a str,
+    /// How the time fields of `frame` are defined.
+    pub clock: ClockDescription,
+    /// What this connection may do: `read` or `control`.
+    pub access: &'static str,
+}
+
+/// Server name and version in `hello`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ServerIdentity {
+    /// Program name.
+    pub name: String,
+    /// Program version.
+    pub version: &'static str,
+}
+
+/// Description of the time fields, in `hello`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClockDescription {
+    /// Meaning of `t`.
+    pub t: &'static str,
+    /// Meaning of `capture_us`.
+    pub capture_us: &'static str,
+    /// Meaning of `wall_us`.
+    pub wall_us: &'static str,
+    /// Meaning of `timecode`.
+    pub timecode: &'static str,
+}
+
+impl Default for ClockDescription {
+    fn default() -> Self {
+        Self {
+            t: "seconds since the start of the stream (float)",
+            capture_us: "capture clock of the source, microseconds (device timestamp)",
+            wall_us: "host wall-clock time when the frame was captured, Unix microseconds (live sources only)",
+            timecode: "SMPTE time-of-day timecode (UTC) of wall_us, else of t, at timecode_rate",
+        }
+    }
+}
+
+/// The `status` message.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StatusMessage<'a> {
+    /// `up` or `down`.
+    pub source: &'a str,
+    /// Whether a neutral calibration is running.
+    pub calibrating: bool,
+    /// The take being recorded, if any.
+    pub recording: Option<&'a crate::hub::Recording>,
+    /// Free text from the daemon (why the source is down, disk full, ...).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub message: Option<&'a str>,
+    /// Frames this client lost since the previous `lagged` notice (only on lag notices).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lagged: Option<u64>,
+}
+
+/// The `result` message: a request succeeded.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ResultMessage {
+    /// The request's id.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub id: Option<RequestId>,
+    /// `subscribe`, `calibrate`, `record`.
+    pub request: &'static str,
+    /// Details from whoever served it (the daemon for control actions).
+    pub detail: serde_json::Value,
+}
+
+/// What one subscription selects from each frame.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FrameSelection {
+    /// Character indices into the frame's `characters` in the order of `StreamInfo`;
+    /// `None` means all.
+    pub characters: Option<Vec<String>>,
+    /// Include each character's `curve`.
+    pub curve: bool,
+    /// Include `performer`.
+    pub performer: bool,
+}
+
+impl FrameSelection {
+    /// Builds the selection from a `subscribe` request.
+    pub fn from_subscribe(sub: &Subscribe) -> Self {
+        Self {
+            characters: sub.characters.clone().filter(|c| !c.is_empty()),
+            curve: sub.fields.contains(&OptionalField::Curve),
+            performer: sub.fields.contains(&OptionalField::Performer),
+        }
+    }
+
+    fn wants(&self, name: &str) -> bool {
+        self.characters
+            .as_ref()
+            .is_none_or(|names| names.iter().any(|n| n == name))
+    }
+}
+
+/// A borrowed view of one published frame as one client sees it; serializes to `frame`.
+#[derive(Debug, Serialize)]
+pub struct FrameView<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    seq: u64,
+    t: f64,
+    capture_us: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    wall_us: Option<i64>,
+    timecode: &'a Timecode,
+    head: &'a HeadPose,
+    characters: Vec<CharacterView<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    performer: Option<&'a crate::hub::PerformerFrame>,
+}
+
+#[derive(Debug, Serialize)]
+struct CharacterView<'a> {
+    name: &'a str,
+    points: &'a [[f32; 3]],
+    confidence: &'a [f32],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    curve: Option<&'a [[f32; 3]]>,
+}
+
+impl<'a> FrameView<'a> {
+    /// The view of `frame` that `selection` asks for.
+    pub fn new(frame: &'a PublishedFrame, selection: &FrameSelection) -> Self {
+        let f = &frame.frame;
+        Self {
+            kind: "frame",
+            seq: frame.seq,
+            t: f.t,
+            capture_us: f.capture_us,
+            wall_us: f.wall_us,
+            timecode: &frame.timecode,
+            head: &f.head,
+            characters: f
+                .characters
+                .iter()
+                .filter(|c| selection.wants(&c.name))
+                .map(|c| CharacterView {
+                    name: &c.name,
+                    points: &c.points,
+                    confidence: &c.confidence,
+                    curve: if selection.curve {
+                        c.curve.as_deref()
+                    } else {
+                        None
+                    },
+                })
+                .collect(),
+            performer: if selection.performer {
+                f.performer.as_ref()
+            } else {
+                None
+            },
+        }
+    }
+
+    /// JSON text of the `frame` message.
+    pub fn to_json(&self) -> String {
+        // Serializing plain numbers and strings cannot fail; NaN becomes null.
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
+/// Encodes the binary form of `frame` (layout in `docs/protocol.md`), appending to `out`.
+///
+/// `character_names` is the `characters` list of the current `hello`: each character block
+/// carries its index in it (`0xFFFF` when the name is not there).
+pub fn encode_binary_frame(
+    frame: &PublishedFrame,
+    selection: &FrameSelection,
+    character_names: &[String],
+    out: &mut Vec<u8>,
+) {
+    let f = &frame.frame;
+    let characters: Vec<_> = f
+        .characters
+        .iter()
+        .filter(|c| selection.wants(&c.name))
+        .collect();
+    let with_curve = selection.curve;
+    let performer = if selection.performer {
+        f.performer.as_ref()
+    } else {
+        None
+    };
+    let mut flags = 0u16;
+    if f.head.lost {
+        flags |= 1;
+    }
+    if with_curve {
+        flags |= 2;
+    }
+    if performer.is_some() {
+        flags |= 4;
+    }
+    if f.wall_us.is_some() {
+        flags |= 8;
+    }
+    out.extend_from_slice(BINARY_MAGIC);
+    out.extend_from_slice(&BINARY_VERSION.to_le_bytes());
+    out.extend_from_slice(&flags.to_le_bytes());
+    out.extend_from_slice(&frame.seq.to_le_bytes());
+    out.extend_from_slice(&f.t.to_le_bytes());
+    out.extend_from_slice(&f.capture_us.to_le_bytes());
+    out.extend_from_slice(&f.wall_us.unwrap_or(0).to_le_bytes());
+    let tc = &frame.timecode;
+    out.extend_from_slice(&[tc.hours, tc.minutes, tc.seconds, tc.frames]);
+    out.extend_from_slice(&(characters.len() as u16).to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
+    for v in f.head.rotation.iter().chain(f.head.translation.iter()) {
+        out.extend_from_slice(&(*v as f32).to_le_bytes());
+    }
+    debug_assert_eq!(out.len() % 4, 0);
+    for c in characters {
+        let index = character_names
+            .iter()
+            .position(|n| *n == c.name)
+            .map_or(u16::MAX, |i| i as u16);
+        out.extend_from_slice(&index.to_le_bytes());
+        out.extend_from_slice(&(c.points.len() as u16).to_le_bytes());
+        push_points(out, &c.points);
+        push_floats(out, &c.confidence, c.points.len());
+        if with_curve {
+            let curve = c.curve.as_deref().unwrap_or(&[]);
+            out.extend_from_slice(&(curve.len() as u16).to_le_bytes());
+            out.extend_from_slice(&0u16.to_le_bytes());
+            push_points(out, curve);
+        }
+    }
+    if let Some(p) = performer {
+        out.extend_from_slice(&(p.points.len() as u16).to_le_bytes());
+        out.extend_from_slice(&0u16.to_le_bytes());
+        push_points(out, &p.points);
+        push_floats(out, &p.confidence, p.points.len());
+    }
+}
+
+fn push_points(out: &mut Vec<u8>, points: &[[f32; 3]]) {
+    for p in points {
+        for v in p {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+}
+
+/// Exactly `n` floats: missing confidences are written as 0.
+fn push_floats(out: &mut Vec<u8>, values: &[f32], n: usize) {
+    for i in 0..n {
+        out.extend_from_slice(&values.get(i).copied().unwrap_or(0.0).to_le_bytes());
+    }
+}
+
+/// Serializes a server message; these contain only strings and numbers, so it cannot fail.
+pub fn to_json(message: &ServerMessage<'_>) -> String {
+    serde_json::to_string(message).unwrap_or_default()
+}
+
+/// Why a client's text could not be understood, mapped onto an `error`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParseFailure {
+    /// The error code.
+    pub code: ErrorCode,
+    /// Human-readable reason (serde's message, with line and column).
+    pub message: String,
+    /// The request id, when the text was JSON with an `id`.
+    pub id: Option<RequestId>,
+}
+
+/// Parses one client text message, telling bad JSON, unknown types and bad fields apart.
+pub fn parse_client_message(text: &str) -> Result<ClientMessage, ParseFailure> {
+    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| ParseFailure {
+        code: ErrorCode::BadJson,
+        message: format!("invalid JSON: {e}"),
+        id: None,
+    })?;
+    let id = value
+        .get("id")
+        .and_then(|v| serde_json::from_value::<RequestId>(v.clone()).ok());
+    let Some(kind) = value.get("type") else {
+        return Err(ParseFailure {
+            code: ErrorCode::UnknownType,
+            message: "message has no \"type\" field".into(),
+            id,
+        });
+    };
+    let known = ["subscribe", "calibrate", "record", "ping"];
+    let kind_name = kind.as_str().unwrap_or_default().to_owned();
+    match kind.as_str() {
+        Some(k) if known.contains(&k) => {}
+        Some(k) => {
+            return Err(ParseFailure {
+                code: ErrorCode::UnknownType,
+                message: format!(
+                    "unknown message type {k:?} (expected one of {})",
+                    known.join(", ")
+                ),
+                id,
+            })
+        }
+        None => {
+            return Err(ParseFailure {
+                code: ErrorCode::UnknownType,
+                message: format!("\"type\" must be a string, got {kind}"),
+                id,
+            })
+        }
+    }
+    let message: ClientMessage = serde_json::from_value(value).map_err(|e| ParseFailure {
+        code: ErrorCode::BadRequest,
+        message: format!("bad {kind_name} message: {e}"),
+        id: id.clone(),
+    })?;
+    validate(&message).map_err(|message| ParseFailure {
+        code: ErrorCode::BadRequest,
+        message,
+        id,
+    })?;
+    Ok(message)
+}
+
+fn validate(message: &ClientMessage) -> Result<(), String> {
+    match message {
+        ClientMessage::Subscribe(sub) => match sub.max_rate {
+            Some(r) if !(r.is_finite() && r > 0.0) => {
+                Err(format!("subscribe: max_rate must be a positive number, got {r}"))
+            }
+            _ => Ok(()),
+        },
+        ClientMessage::Calibrate {
+            duration_s: Some(d),
+            ..
+        } if !(d.is_finite() && *d > 0.0 && *d <= 60.0) => Err(format!(
+            "calibrate: duration_s must be in (0, 60] seconds, got {d}"
+        )),
+        ClientMessage::Record {
+            action: RecordAction::Start,
+            slate: Some(slate),
+            ..
+        } if slate.len() > 64
+            || !slate
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_ .".contains(c)) =>
+        {
+            Err(format!(
+                "record: slate must be at most 64 characters of letters, digits, space, '-', '_', '.', got {slate:?}"
+            ))
+        }
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tells_bad_json_unknown_type_and_bad_fields_apart() {
+        assert_eq!(
+            parse_client_message("{nope").unwrap_err().code,
+            ErrorCode::BadJson
+        );
+        let e = parse_client_message(r#"{"type":"dance","id":7}"#).unwrap_err();
+        assert_eq!(e.code, ErrorCode::UnknownType);
+        assert_eq!(e.id, Some(RequestId::Number(7)));
+        assert_eq!(
+            parse_client_message(r#"{"id":1}"#).unwrap_err().code,
+            ErrorCode::UnknownType
+        );
+        let e = parse_client_message(r#"{"type":"record","id":"a","action":"pause"}"#).unwrap_err();
+        assert_eq!(e.code, ErrorCode::BadRequest);
+        assert_eq!(e.id, Some(RequestId::Text("a".into())));
+        assert_eq!(
+            parse_client_message(r#"{"type":"subscribe","max_rate":-1}"#)
+                .unwrap_err()
+                .code,
+            ErrorCode::BadRequest
+        );
+        assert_eq!(
+            parse_client_message(r#"{"type":"record","action":"start","slate":"../etc"}"#)
+                .unwrap_err()
+                .code,
+            ErrorCode::BadRequest
+        );
+    }
+
+    #[test]
+    fn parses_every_client_message() {
+        let m = parse_client_message(
+            r#"{"type":"subscribe","characters":["wolf"],"fields":["curve"],"max_rate":30,"format":"binary"}"#,
+        )
+        .unwrap();
+        let ClientMessage::Subscribe(sub) = m else {
+            panic!("not a subscribe")
+        };
+        assert_eq!(sub.format, FrameFormat::Binary);
+        assert_eq!(sub.max_rate, Some(30.0));
+        assert!(matches!(
+            parse_client_message(
+                r#"{"type":"record","action":"start","slate":"scene 4","take":2}"#
+            )
+            .unwrap(),
+            ClientMessage::Record {
+                action: RecordAction::Start,
+                take: Some(2),
+                ..
+            }
+        ));
+        assert!(matches!(
+            parse_client_message(r#"{"type":"calibrate","duration_s":1.5}"#).unwrap(),
+            ClientMessage::Calibrate { .. }
+        ));
+        assert!(matches!(
+            parse_client_message(r#"{"type":"ping","id":"x"}"#).unwrap(),
+            ClientMessage::Ping { .. }
+        ));
+    }
+}

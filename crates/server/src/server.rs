@@ -1,0 +1,358 @@
+//! The accept loop and the per-connection front door (TLS, HTTP routing, WebSocket upgrade).
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
+
+use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::watch;
+use tokio::task::JoinSet;
+use tokio_tungstenite::tungstenite::handshake::derive_accept_key;
+use tokio_tungstenite::tungstenite::protocol::{Role, WebSocketConfig};
+use tokio_tungstenite::WebSocketStream;
+use tracing::{debug, info, warn, Instrument};
+
+use crate::config::{Access, ServerConfig};
+use crate::error::ServerError;
+use crate::http::{self, HeadError, Request};
+use crate::hub::Hub;
+use crate::protocol::{FOXGLOVE_SUBPROTOCOL, SUBPROTOCOL, TOKEN_PROTOCOL_PREFIX};
+
+/// The viewer page, bundled in the binary.
+const VIEWER_HTML: &str = include_str!("../assets/viewer.html");
+/// The viewer's script.
+const VIEWER_JS: &str = include_str!("../assets/viewer.js");
+
+/// A byte stream a session runs on: plain TCP or TLS.
+pub(crate) trait Io: AsyncRead + AsyncWrite + Unpin + Send {}
+impl<T: AsyncRead + AsyncWrite + Unpin + Send> Io for T {}
+pub(crate) type BoxedIo = Box<dyn Io>;
+pub(crate) type Ws = WebSocketStream<BoxedIo>;
+
+/// State every connection task shares.
+pub(crate) struct Shared {
+    pub(crate) config: ServerConfig,
+    pub(crate) hub: Hub,
+    pub(crate) shutdown: watch::Receiver<bool>,
+    connections: AtomicUsize,
+    tls: Option<tokio_rustls::TlsAcceptor>,
+}
+
+/// Which protocol a session speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Flavor {
+    Mouthpiece,
+    Foxglove,
+}
+
+/// Serves `listener` until `shutdown` completes; then closes every client (code 1001) and
+/// returns.
+///
+/// Fails before serving when the configuration is unusable: tokens missing on a
+/// non-loopback address, bad limits, unreadable TLS files.
+pub async fn run(
+    listener: TcpListener,
+    config: ServerConfig,
+    hub: Hub,
+    shutdown: impl Future,
+) -> Result<(), ServerError> {
+    let addr = listener.local_addr().map_err(|source| ServerError::Io {
+        context: "reading the listener's address".into(),
+        source,
+    })?;
+    config.validate(addr)?;
+    let tls = match &config.tls {
+        Some(files) => Some(crate::tls::acceptor(files)?),
+        None => None,
+    };
+    let scheme = if tls.is_some() { "wss" } else { "ws" };
+    info!(%addr, "serving {scheme}://{addr}/ (protocols {SUBPROTOCOL}, {FOXGLOVE_SUBPROTOCOL})");
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let shared = Arc::new(Shared {
+        config,
+        hub,
+        shutdown: stop_rx,
+        connections: AtomicUsize::new(0),
+        tls,
+    });
+    let mut tasks = JoinSet::new();
+    tokio::pin!(shutdown);
+    loop {
+        tokio::select! {
+            _ = &mut shutdown => break,
+            Some(_) = tasks.join_next(), if !tasks.is_empty() => {}
+            accepted = listener.accept() => match accepted {
+                Ok((stream, peer)) => {
+                    let open = shared.connections.fetch_add(1, Ordering::Relaxed);
+                    if open >= shared.config.limits.max_connections {
+                        shared.connections.fetch_sub(1, Ordering::Relaxed);
+                        shared.hub.inner.metrics.connections_rejected.fetch_add(1, Ordering::Relaxed);
+                        debug!(%peer, "too many connections: closed");
+                        continue;
+                    }
+                    let shared = shared.clone();
+                    let span = tracing::info_span!("conn", %peer);
+                    tasks.spawn(async move {
+                        let _open = OpenConnection(shared.clone());
+                        handle_connection(&shared, stream, peer).await;
+                    }.instrument(span));
+                }
+                Err(e) => {
+                    // Out of file descriptors and the like: back off rather than spin.
+                    warn!(error = %e, "accept failed");
+                    tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+                }
+            },
+        }
+    }
+    info!("shutting down: closing {} connection(s)", tasks.len());
+    let _ = stop_tx.send(true);
+    let grace = shared.config.limits.shutdown_grace;
+    let drained =
+        tokio::time::timeout(grace, async { while tasks.join_next().await.is_some() {} }).await;
+    if drained.is_err() {
+        tasks.abort_all();
+        while tasks.join_next().await.is_some() {}
+    }
+    Ok(())
+}
+
+/// Counts a TCP connection against `max_connections` until it ends, aborted or not.
+struct OpenConnection(Arc<Shared>);
+
+impl Drop for OpenConnection {
+    fn drop(&mut self) {
+        self.0.connections.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+async fn handle_connection(shared: &Arc<Shared>, tcp: TcpStream, peer: SocketAddr) {
+    let _ = tcp.set_nodelay(true);
+    let limits = &shared.config.limits;
+    let front = async {
+        let mut io: BoxedIo = match &shared.tls {
+            Some(acceptor) => match acceptor.accept(tcp).await {
+                Ok(tls) => Box::new(tls),
+                Err(e) => {
+                    debug!(error = %e, "TLS handshake failed");
+                    return None;
+                }
+            },
+            None => Box::new(tcp),
+        };
+        match http::read_head(&mut io).await {
+            Ok((req, rest)) => Some((io, req, rest)),
+            Err(e) => {
+                let (status, why) = match e {
+                    HeadError::TooLarge => (431, "request head too large".to_owned()),
+                    HeadError::Malformed(m) => (400, format!("malformed HTTP request: {m}")),
+                    HeadError::Closed | HeadError::Io(_) => return None,
+                };
+                debug!(status, why, "bad request head");
+                let _ = http::respond_error(&mut io, status, &why).await;
+                None
+            }
+        }
+    };
+    let Ok(Some((mut io, req, rest))) = tokio::time::timeout(limits.handshake_timeout, front).await
+    else {
+        shared
+            .hub
+            .inner
+            .metrics
+            .connections_rejected
+            .fetch_add(1, Ordering::Relaxed);
+        return;
+    };
+    if req.is_upgrade() {
+        upgrade(shared, io, req, rest, peer).await;
+    } else {
+        shared
+            .hub
+            .inner
+            .metrics
+            .http_requests
+            .fetch_add(1, Ordering::Relaxed);
+        let _ = serve_http(shared, &mut io, &req).await;
+    }
+}
+
+async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io::Result<()> {
+    if req.method != "GET" {
+        return http::respond_error(io, 405, "only GET is served here").await;
+    }
+    match req.path.as_str() {
+        "/" | "/index.html" => {
+            http::respond(io, 200, "text/html; charset=utf-8", VIEWER_HTML.as_bytes()).await
+        }
+        "/viewer.js" => {
+            http::respond(
+                io,
+                200,
+                "text/javascript; charset=utf-8",
+                VIEWER_JS.as_bytes(),
+            )
+            .await
+        }
+        "/healthz" => {
+            let status = shared.hub.status();
+            let body = serde_json::json!({
+                "status": "ok",
+                "source": status.source.as_str(),
+                "clients": shared.hub.clients(),
+                "frames": shared.hub.frames_published(),
+            });
+            http::respond(io, 200, "application/json", body.to_string().as_bytes()).await
+        }
+        "/metrics" => {
+            let text = shared.hub.metrics_text();
+            http::respond(
+                io,
+                200,
+                "text/plain; version=0.0.4; charset=utf-8",
+                text.as_bytes(),
+            )
+            .await
+        }
+        "/ws" => {
+            http::respond_error(
+                io,
+                426,
+                "this is the WebSocket endpoint: connect with a WebSocket client",
+            )
+            .await
+        }
+        _ => http::respond_error(io, 404, "not found (try /, /healthz, /metrics)").await,
+    }
+}
+
+async fn upgrade(
+    shared: &Arc<Shared>,
+    mut io: BoxedIo,
+    req: Request,
+    rest: Vec<u8>,
+    peer: SocketAddr,
+) {
+    let metrics = &shared.hub.inner.metrics;
+    let decision: Result<(Flavor, Option<&str>, Access, String), (u16, String)> = async {
+        if req.method != "GET" {
+            return Err((400, "a WebSocket upgrade must be a GET".into()));
+        }
+        if !req.header_has_token("connection", "upgrade") {
+            return Err((400, "missing \"Connection: Upgrade\"".into()));
+        }
+        if req.header("sec-websocket-version") != Some("13") {
+            return Err((400, "unsupported WebSocket version (need 13)".into()));
+        }
+        let Some(key) = req.header("sec-websocket-key") else {
+            return Err((400, "missing Sec-WebSocket-Key".into()));
+        };
+        if !shared.config.origin_allowed(req.header("origin"), req.header("host")) {
+            return Err((
+                403,
+                format!(
+                    "origin {:?} is not allowed (add it to the server's allowed origins)",
+                    req.header("origin").unwrap_or_default()
+                ),
+            ));
+        }
+        let offered = req.subprotocols();
+        let token_entry = offered
+            .iter()
+            .find_map(|p| p.strip_prefix(TOKEN_PROTOCOL_PREFIX))
+            .map(str::to_owned);
+        let bearer = req
+            .header("authorization")
+            .and_then(|v| v.strip_prefix("Bearer "))
+            .map(|v| v.trim().to_owned());
+        let token = token_entry.or(bearer).or_else(|| req.query_param("token"));
+        let Some(access) = shared.config.access_for(token.as_deref()) else {
+            return Err((
+                401,
+                if token.is_some() {
+                    "wrong token".into()
+                } else {
+                    "a token is required (Sec-WebSocket-Protocol entry mouthpiece.token.<token>, ?token=, or Authorization: Bearer)".into()
+                },
+            ));
+        };
+        let (flavor, selected) = if offered.contains(&SUBPROTOCOL) {
+            (Flavor::Mouthpiece, Some(SUBPROTOCOL))
+        } else if offered.contains(&FOXGLOVE_SUBPROTOCOL) {
+            (Flavor::Foxglove, Some(FOXGLOVE_SUBPROTOCOL))
+        } else if offered.iter().all(|p| p.starts_with(TOKEN_PROTOCOL_PREFIX)) {
+            // No subprotocol asked for: speak mouthpiece.v1 without naming it (RFC 6455 §4.2.2).
+            (Flavor::Mouthpiece, None)
+        } else {
+            return Err((
+                400,
+                format!("no supported subprotocol offered (supported: {SUBPROTOCOL}, {FOXGLOVE_SUBPROTOCOL})"),
+            ));
+        };
+        let clients = metrics.clients.load(Ordering::Relaxed);
+        if clients >= shared.config.limits.max_clients as u64 {
+            return Err((503, format!("server full ({clients} clients)")));
+        }
+        Ok((flavor, selected, access, derive_accept_key(key.as_bytes())))
+    }
+    .await;
+    let (flavor, selected, access, accept) = match decision {
+        Ok(d) => d,
+        Err((status, why)) => {
+            metrics.connections_rejected.fetch_add(1, Ordering::Relaxed);
+            info!(status, why, "WebSocket upgrade refused");
+            let _ = http::respond_error(&mut io, status, &why).await;
+            return;
+        }
+    };
+    let mut response = format!(
+        "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: {accept}\r\n"
+    );
+    if let Some(p) = selected {
+        response.push_str(&format!("Sec-WebSocket-Protocol: {p}\r\n"));
+    }
+    response.push_str("\r\n");
+    if io.write_all(response.as_bytes()).await.is_err() || io.flush().await.is_err() {
+        return;
+    }
+    let limits = &shared.config.limits;
+    let ws_config = WebSocketConfig::default()
+        .max_message_size(Some(limits.max_message_bytes))
+        .max_frame_size(Some(limits.max_message_bytes));
+    let ws = WebSocketStream::from_partially_read(io, rest, Role::Server, Some(ws_config)).await;
+    let _counted = ClientCount::new(shared);
+    metrics.clients_accepted.fetch_add(1, Ordering::Relaxed);
+    info!(?flavor, access = access.as_str(), "client connected");
+    match flavor {
+        Flavor::Mouthpiece => crate::session::run(shared, ws, access, peer).await,
+        Flavor::Foxglove => crate::foxglove::run(shared, ws, peer).await,
+    }
+}
+
+/// Counts a session in the `clients` gauge for as long as it lives, aborted or not.
+struct ClientCount(Arc<Shared>);
+
+impl ClientCount {
+    fn new(shared: &Arc<Shared>) -> Self {
+        shared
+            .hub
+            .inner
+            .metrics
+            .clients
+            .fetch_add(1, Ordering::Relaxed);
+        Self(shared.clone())
+    }
+}
+
+impl Drop for ClientCount {
+    fn drop(&mut self) {
+        self.0
+            .hub
+            .inner
+            .metrics
+            .clients
+            .fetch_sub(1, Ordering::Relaxed);
+    }
+}

@@ -1,0 +1,333 @@
+//! Plain HTTP on the WebSocket port, tokens, origins, client limits and TLS.
+
+mod common;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use common::*;
+use mouthpiece_server::{run, Hub, HubConfig, Limits, ServerConfig, ServerError, TlsFiles, Token};
+use serde_json::json;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+
+#[tokio::test]
+async fn serves_viewer_health_and_metrics_on_the_same_port() {
+    let server = TestServer::start(ServerConfig::default()).await;
+    let (status, body) = http_get(server.addr, "/", "").await;
+    assert_eq!(status, 200);
+    assert!(body.contains("<canvas"), "the viewer page");
+    let (status, body) = http_get(server.addr, "/viewer.js", "").await;
+    assert_eq!(status, 200);
+    assert!(body.contains("mouthpiece.v1"));
+    let (status, body) = http_get(server.addr, "/healthz", "").await;
+    assert_eq!(status, 200);
+    let health: serde_json::Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(health["status"], "ok");
+    server.publish(0);
+    let mut ws = connect_v1(&server.url()).await;
+    next_of_type(&mut ws, "hello").await;
+    let (status, body) = http_get(server.addr, "/metrics", "").await;
+    assert_eq!(status, 200);
+    for line in [
+        "mouthpiece_frames_in_total 1",
+        "mouthpiece_clients 1",
+        "mouthpiece_processing_seconds_count 1",
+        "# TYPE mouthpiece_fanout_latency_seconds histogram",
+        "mouthpiece_frames_dropped_total 0",
+    ] {
+        assert!(
+            body.lines().any(|l| l == line),
+            "missing {line:?} in\n{body}"
+        );
+    }
+    assert_eq!(http_get(server.addr, "/nope", "").await.0, 404);
+    assert_eq!(http_get(server.addr, "/ws", "").await.0, 426);
+    server.stop().await;
+}
+
+#[tokio::test]
+async fn garbage_and_oversized_heads_get_http_errors() {
+    let server = TestServer::start(ServerConfig::default()).await;
+    for (bytes, status) in [
+        (b"\x00\x01\x02garbage\r\n\r\n".to_vec(), 400),
+        (
+            [
+                b"GET / HTTP/1.1\r\nX: ".to_vec(),
+                vec![b'a'; 20_000],
+                b"\r\n\r\n".to_vec(),
+            ]
+            .concat(),
+            431,
+        ),
+        (b"POST /metrics HTTP/1.1\r\nHost: x\r\n\r\n".to_vec(), 405),
+        (
+            b"GET / HTTP/1.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\r\n".to_vec(),
+            400,
+        ),
+    ] {
+        let mut s = TcpStream::connect(server.addr).await.unwrap();
+        let _ = s.write_all(&bytes).await;
+        let mut buf = Vec::new();
+        let _ = tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut buf)).await;
+        assert_eq!(
+            parse_response(&buf).0,
+            status,
+            "{}",
+            String::from_utf8_lossy(&buf)
+        );
+    }
+    server.stop().await;
+}
+
+fn tokens() -> ServerConfig {
+    ServerConfig {
+        read_token: Some(Token::new("read-token-0123456789").unwrap()),
+        control_token: Some(Token::new("control-token-0123456789").unwrap()),
+        ..ServerConfig::default()
+    }
+}
+
+#[tokio::test]
+async fn wrong_or_missing_tokens_are_refused_with_401() {
+    let server = TestServer::start(tokens()).await;
+    for protocols in [
+        vec!["mouthpiece.v1"],
+        vec!["mouthpiece.v1", "mouthpiece.token.read-token-012345678X"],
+        vec!["foxglove.websocket.v1"],
+    ] {
+        let err = connect(&server.url(), &protocols)
+            .await
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("401"), "{protocols:?}: {err}");
+    }
+    let err = connect(&format!("{}?token=nope", server.url()), &["mouthpiece.v1"])
+        .await
+        .unwrap_err();
+    assert!(err.to_string().contains("401"));
+    // Header form, for non-browser clients.
+    let (status, body) = http_get(
+        server.addr,
+        "/",
+        "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n\
+         Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nAuthorization: Bearer wrong\r\n",
+    )
+    .await;
+    assert_eq!(status, 401);
+    assert!(body.contains("wrong token"));
+    let mut ws = connect(
+        &server.url(),
+        &["mouthpiece.v1", "mouthpiece.token.control-token-0123456789"],
+    )
+    .await
+    .unwrap();
+    assert_eq!(next_json(&mut ws).await["access"], "control");
+    server.stop().await;
+}
+
+#[tokio::test]
+async fn foreign_origins_are_refused_and_allowed_ones_accepted() {
+    let config = ServerConfig {
+        allowed_origins: vec!["https://app.foxglove.dev".into()],
+        ..ServerConfig::default()
+    };
+    let server = TestServer::start(config).await;
+    let handshake = |origin: &str| {
+        format!(
+            "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n\
+             Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Protocol: mouthpiece.v1\r\nOrigin: {origin}\r\n"
+        )
+    };
+    let (status, body) = http_get(server.addr, "/", &handshake("http://evil.example")).await;
+    assert_eq!(status, 403);
+    assert!(body.contains("evil.example"));
+    let mut s = TcpStream::connect(server.addr).await.unwrap();
+    s.write_all(
+        format!(
+            "GET / HTTP/1.1\r\nHost: {}\r\n{}\r\n",
+            server.addr,
+            handshake("https://app.foxglove.dev")
+        )
+        .as_bytes(),
+    )
+    .await
+    .unwrap();
+    let mut buf = [0u8; 512];
+    let n = s.read(&mut buf).await.unwrap();
+    let head = String::from_utf8_lossy(&buf[..n]);
+    assert!(head.starts_with("HTTP/1.1 101"), "{head}");
+    assert!(
+        head.contains("Sec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo="),
+        "{head}"
+    );
+    assert!(head.contains("Sec-WebSocket-Protocol: mouthpiece.v1"));
+    // Same origin (the viewer page) is always allowed.
+    let own = format!("http://{}", server.addr);
+    let mut s = TcpStream::connect(server.addr).await.unwrap();
+    s.write_all(
+        format!(
+            "GET / HTTP/1.1\r\nHost: {}\r\n{}\r\n",
+            server.addr,
+            handshake(&own)
+        )
+        .as_bytes(),
+    )
+    .await
+    .unwrap();
+    let n = s.read(&mut buf).await.unwrap();
+    assert!(buf[..n].starts_with(b"HTTP/1.1 101"));
+    server.stop().await;
+}
+
+#[tokio::test]
+async fn clients_beyond_the_limit_get_503_and_others_are_unaffected() {
+    let config = ServerConfig {
+        limits: Limits {
+            max_clients: 2,
+            ..Limits::default()
+        },
+        ..ServerConfig::default()
+    };
+    let server = TestServer::start(config).await;
+    let mut a = connect_v1(&server.url()).await;
+    let mut b = connect_v1(&server.url()).await;
+    next_of_type(&mut a, "hello").await;
+    next_of_type(&mut b, "hello").await;
+    let err = connect_v1_err(&server.url()).await;
+    assert!(err.contains("503"), "{err}");
+    drop(b);
+    // The freed slot is usable again once the server noticed.
+    let mut ok = false;
+    for _ in 0..50 {
+        if connect(&server.url(), &["mouthpiece.v1"]).await.is_ok() {
+            ok = true;
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(ok);
+    send_json(&mut a, json!({"type": "ping"})).await;
+    next_of_type(&mut a, "pong").await;
+    server.stop().await;
+}
+
+async fn connect_v1_err(url: &str) -> String {
+    connect(url, &["mouthpiece.v1"])
+        .await
+        .unwrap_err()
+        .to_string()
+}
+
+#[tokio::test]
+async fn unsupported_subprotocols_are_refused() {
+    let server = TestServer::start(ServerConfig::default()).await;
+    let err = connect(&server.url(), &["mqtt"])
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("400"), "{err}");
+    server.stop().await;
+}
+
+#[tokio::test]
+async fn refuses_to_serve_beyond_loopback_without_tokens() {
+    let listener = tokio::net::TcpListener::bind("0.0.0.0:0").await.unwrap();
+    let (hub, _control) = Hub::new(&HubConfig::default());
+    let result = run(
+        listener,
+        ServerConfig::default(),
+        hub,
+        std::future::pending::<()>(),
+    )
+    .await;
+    let err = result.unwrap_err();
+    assert!(matches!(err, ServerError::TokensRequired { .. }));
+    assert!(err
+        .to_string()
+        .contains("without a read token and a control token"));
+}
+
+#[tokio::test]
+async fn serves_wss_and_https_with_a_configured_certificate() {
+    let dir = tempfile::tempdir().unwrap();
+    let cert = rcgen::generate_simple_self_signed(vec!["localhost".to_owned()]).unwrap();
+    let cert_path = dir.path().join("cert.pem");
+    let key_path = dir.path().join("key.pem");
+    std::fs::write(&cert_path, cert.cert.pem()).unwrap();
+    std::fs::write(&key_path, cert.key_pair.serialize_pem()).unwrap();
+    let config = ServerConfig {
+        tls: Some(TlsFiles {
+            cert: cert_path.clone(),
+            key: key_path.clone(),
+        }),
+        ..ServerConfig::default()
+    };
+    let server = TestServer::start(config).await;
+
+    let mut roots = tokio_rustls::rustls::RootCertStore::empty();
+    roots.add(cert.cert.der().clone()).unwrap();
+    let provider = Arc::new(tokio_rustls::rustls::crypto::ring::default_provider());
+    let client_config = tokio_rustls::rustls::ClientConfig::builder_with_provider(provider)
+        .with_safe_default_protocol_versions()
+        .unwrap()
+        .with_root_certificates(roots)
+        .with_no_client_auth();
+    let connector = tokio_rustls::TlsConnector::from(Arc::new(client_config));
+    let name = tokio_rustls::rustls::pki_types::ServerName::try_from("localhost").unwrap();
+
+    // wss://
+    let tcp = TcpStream::connect(server.addr).await.unwrap();
+    let tls = connector.connect(name.clone(), tcp).await.unwrap();
+    let mut request =
+        tokio_tungstenite::tungstenite::client::IntoClientRequest::into_client_request(format!(
+            "wss://localhost:{}/",
+            server.addr.port()
+        ))
+        .unwrap();
+    request
+        .headers_mut()
+        .insert("Sec-WebSocket-Protocol", "mouthpiece.v1".parse().unwrap());
+    let (mut ws, _) = tokio_tungstenite::client_async(request, tls).await.unwrap();
+    let hello = {
+        use futures_util::StreamExt;
+        let m = tokio::time::timeout(Duration::from_secs(5), ws.next())
+            .await
+            .unwrap()
+            .unwrap()
+            .unwrap();
+        serde_json::from_str::<serde_json::Value>(m.to_text().unwrap()).unwrap()
+    };
+    assert_eq!(hello["type"], "hello");
+
+    // https:// on the same port
+    let tcp = TcpStream::connect(server.addr).await.unwrap();
+    let mut tls = connector.connect(name, tcp).await.unwrap();
+    tls.write_all(b"GET /healthz HTTP/1.1\r\nHost: localhost\r\n\r\n")
+        .await
+        .unwrap();
+    let mut buf = Vec::new();
+    let _ = tls.read_to_end(&mut buf).await;
+    assert_eq!(parse_response(&buf).0, 200);
+
+    // Plain TCP to the TLS port is dropped without disturbing anyone.
+    assert_eq!(http_get(server.addr, "/healthz", "").await.0, 0);
+    server.stop().await;
+
+    // A key that does not match the certificate is a startup error naming both files.
+    let other = rcgen::generate_simple_self_signed(vec!["localhost".to_owned()]).unwrap();
+    std::fs::write(&key_path, other.key_pair.serialize_pem()).unwrap();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let (hub, _c) = Hub::new(&HubConfig::default());
+    let config = ServerConfig {
+        tls: Some(TlsFiles {
+            cert: cert_path,
+            key: key_path,
+        }),
+        ..ServerConfig::default()
+    };
+    let err = run(listener, config, hub, std::future::pending::<()>())
+        .await
+        .unwrap_err();
+    assert!(err.to_string().contains("key.pem"), "{err}");
+}

@@ -1,0 +1,210 @@
+//! Real server messages checked against docs/schemas with Python's `jsonschema` (an
+//! independent validator), and the Python example client run against a live server.
+//! Python: `MOUTHPIECE_PYTHON`, else `python3`; it needs `jsonschema` and `websockets`
+//! (scripts/packages/test-python.txt).
+
+mod common;
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::Command;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
+
+use common::*;
+use futures_util::SinkExt;
+use mouthpiece_server::{ControlCommand, ControlFailure, HubConfig, ServerConfig, Token};
+use serde_json::{json, Value};
+use tokio_tungstenite::tungstenite::Message;
+
+fn python() -> String {
+    std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+#[tokio::test]
+async fn server_messages_match_the_published_schemas() {
+    let config = ServerConfig {
+        read_token: Some(Token::new("read-token-0123456789").unwrap()),
+        control_token: Some(Token::new("control-token-0123456789").unwrap()),
+        ..ServerConfig::default()
+    };
+    let mut server = TestServer::start_with(
+        config,
+        HubConfig {
+            client_queue_frames: 4,
+            ..HubConfig::default()
+        },
+    )
+    .await;
+    let mut control = server.control.take().unwrap();
+    std::thread::spawn(move || {
+        while let Some(r) = control.blocking_recv() {
+            match r.command.clone() {
+                ControlCommand::Calibrate { .. } => r.reply(Ok(json!({"frames": 30}))),
+                ControlCommand::RecordStart { slate, take } => r.reply(Ok(json!({
+                    "file": format!("{}_{}.mcap", slate.unwrap_or_default(), take.unwrap_or(1))
+                }))),
+                ControlCommand::RecordStop => r.reply(Err(ControlFailure::new("not recording"))),
+            }
+        }
+    });
+    let mut log: Vec<Value> = Vec::new();
+    let mut sent = Vec::new();
+    let mut ws = connect(
+        &server.url(),
+        &["mouthpiece.v1", "mouthpiece.token.control-token-0123456789"],
+    )
+    .await
+    .unwrap();
+    let mut client_msgs = vec![
+        json!({"type": "subscribe", "id": 1, "fields": ["curve", "performer"], "max_rate": 120, "format": "json"}),
+        json!({"type": "ping", "id": "p"}),
+        json!({"type": "calibrate", "id": 2, "duration_s": 1.0}),
+        json!({"type": "record", "id": 3, "action": "start", "slate": "scene 4", "take": 2}),
+        json!({"type": "record", "id": 4, "action": "stop"}),
+        json!({"type": "subscribe", "id": 5, "characters": ["ghost"]}),
+    ];
+    for m in &client_msgs {
+        send_json(&mut ws, m.clone()).await;
+        sent.push(m.clone());
+    }
+    ws.send(Message::text("{oops")).await.unwrap();
+    ws.send(Message::text(r#"{"type":"dance"}"#)).await.unwrap();
+    // Expect: hello, status, result(sub), pong, result(calibrate), result(record), error(stop),
+    // error(ghost), error(bad_json), error(unknown_type).
+    let mut want_errors = 4;
+    let mut want_results = 3;
+    let mut pong = false;
+    while want_errors + want_results > 0 || !pong {
+        let v = next_json(&mut ws).await;
+        match v["type"].as_str() {
+            Some("error") => want_errors -= 1,
+            Some("result") => want_results -= 1,
+            Some("pong") => pong = true,
+            _ => {}
+        }
+        log.push(v);
+    }
+    // Frames, a lag notice (burst beyond the 4-frame ring), status changes, a new hello.
+    for i in 0..3 {
+        server.publish(i);
+    }
+    let mut burst = mouthpiece_server::StreamFrame::default();
+    for i in 3..40 {
+        mouthpiece_server::loadgen::synthetic_frame(i, 60.0, &mut burst);
+        burst.wall_us = None;
+        server.hub.publish(&burst);
+    }
+    server.hub.update_status(|s| {
+        s.calibrating = true;
+        s.recording = Some(mouthpiece_server::Recording {
+            slate: "scene 4".into(),
+            take: 2,
+            file: Some("takes/scene 4_2.mcap".into()),
+        });
+    });
+    server
+        .hub
+        .set_info(mouthpiece_server::loadgen::synthetic_info(30.0));
+    let mut frames = 0;
+    let mut lagged = false;
+    while frames < 3 || !lagged {
+        let v = next_json(&mut ws).await;
+        match v["type"].as_str() {
+            Some("frame") => frames += 1,
+            Some("status") if v.get("lagged").is_some() => lagged = true,
+            _ => {}
+        }
+        log.push(v);
+    }
+    // A read-only client's forbidden error and a default (no optional fields) frame.
+    let mut reader = connect(
+        &format!("{}?token=read-token-0123456789", server.url()),
+        &["mouthpiece.v1"],
+    )
+    .await
+    .unwrap();
+    let m = json!({"type": "calibrate"});
+    send_json(&mut reader, m.clone()).await;
+    client_msgs.push(m);
+    log.push(next_of_type(&mut reader, "error").await);
+    let m = json!({"type": "subscribe", "characters": ["wolf"]});
+    send_json(&mut reader, m.clone()).await;
+    client_msgs.push(m);
+    log.push(next_of_type(&mut reader, "result").await);
+    server.publish(100);
+    log.push(next_of_type(&mut reader, "frame").await);
+    server.stop().await;
+
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("messages.jsonl");
+    let mut file = std::fs::File::create(&path).unwrap();
+    for m in &log {
+        writeln!(file, "{}", json!({"dir": "server", "msg": m})).unwrap();
+    }
+    for m in &client_msgs {
+        writeln!(file, "{}", json!({"dir": "client", "msg": m})).unwrap();
+    }
+    drop(file);
+    let out = Command::new(python())
+        .arg(repo().join("crates/server/tests/validate_schemas.py"))
+        .arg(repo().join("docs/schemas"))
+        .arg(&path)
+        .output()
+        .expect("running Python (set MOUTHPIECE_PYTHON)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    println!("{stdout}");
+    assert!(
+        out.status.success(),
+        "schema validation failed:\n{stdout}\n{stderr}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_python_example_client_receives_frames() {
+    let server = TestServer::start(ServerConfig::default()).await;
+    let stop = Arc::new(AtomicBool::new(false));
+    let publisher = mouthpiece_server::loadgen::spawn_publisher(
+        server.hub.clone(),
+        60.0,
+        u64::MAX,
+        stop.clone(),
+    );
+    let url = server.url();
+    let out = tokio::task::spawn_blocking(move || {
+        Command::new(python())
+            .arg(repo().join("examples/client.py"))
+            .args([url.as_str(), "--character", "wolf", "--count", "20"])
+            .output()
+    })
+    .await
+    .unwrap()
+    .expect("running Python (set MOUTHPIECE_PYTHON)");
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let _ = tokio::time::timeout(
+        Duration::from_secs(2),
+        tokio::task::spawn_blocking(move || publisher.join()),
+    )
+    .await;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "client.py failed:\n{stdout}\n{stderr}"
+    );
+    assert!(stdout.starts_with("connected to mouthpiece"), "{stdout}");
+    let frames: Vec<&str> = stdout.lines().filter(|l| l.starts_with("frame ")).collect();
+    assert_eq!(frames.len(), 20, "{stdout}");
+    assert!(
+        frames.iter().all(|l| l.contains(" wolf: 12 points")),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("lost"), "{stdout}");
+    server.stop().await;
+}
