@@ -172,6 +172,8 @@ async fn serve<F: Factory>(
     });
 
     let spec = config.source.spec.as_str().to_owned();
+    // The first `hello` already names the characters.
+    hub.set_info(processor.stream_info(0.0, &spec));
     let shared = SourceShared::new();
     let backoff = Backoff::new(
         config.source.retry_initial_s.duration(),
