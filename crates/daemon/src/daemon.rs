@@ -259,8 +259,9 @@ async fn serve<F: Factory>(
             _ = sighup.recv() => {
                 let _ = notifier.reloading();
                 match reload(&factory, &options, &current) {
-                    Ok((config, payload)) => {
+                    Ok((config, payload, new_server)) => {
                         if commands_tx.try_send(Command::Reload(payload)).is_ok() {
+                            hub.set_tokens(new_server.read_token, new_server.control_token);
                             tracing::info!("SIGHUP: {}", config.summary());
                             current = config;
                         } else {
@@ -347,14 +348,14 @@ fn reload<F: Factory>(
     factory: &F,
     options: &RunOptions,
     current: &Config,
-) -> Result<(Config, Box<dyn std::any::Any + Send>), CheckError> {
+) -> Result<(Config, Box<dyn std::any::Any + Send>, ServerConfig), CheckError> {
     let mut config = match &options.config_path {
         Some(path) => Config::load(path)?,
         None => Config::embedded(),
     };
     apply_overrides(&mut config, &options.overrides);
     crate::check::check(&config)?;
-    server_config(&config)?;
+    let server = server_config(&config)?;
     let payload = factory.reload(&config)?;
     for (what, changed) in [
         ("source", config.source != current.source),
@@ -370,7 +371,7 @@ fn reload<F: Factory>(
         }
     }
     let _ = crate::logging::set_level(&config.logging.level);
-    Ok((config, payload))
+    Ok((config, payload, server))
 }
 
 /// CLI flags win over the file.

@@ -561,3 +561,106 @@ async fn sighup_reloads_characters_without_dropping_clients_and_keeps_the_old_on
     daemon.signal(libc::SIGTERM);
     assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
 }
+
+async fn connect_with_token(
+    port: u16,
+    token: &str,
+) -> Result<Client, tokio_tungstenite::tungstenite::Error> {
+    let mut request = format!("ws://127.0.0.1:{port}/")
+        .into_client_request()
+        .unwrap();
+    request.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        HeaderValue::from_str(&format!("mouthpiece.v1, mouthpiece.token.{token}")).unwrap(),
+    );
+    let (mut ws, _) = tokio_tungstenite::connect_async(request).await?;
+    send(&mut ws, json!({"type": "subscribe"})).await;
+    Ok(ws)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sighup_replaces_tokens_and_connected_clients_stay() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    write_session(&session, 60);
+    let daemon_dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        daemon_dir.path().join("read.token"),
+        "old-read-token-0123456789\n",
+    )
+    .unwrap();
+    std::fs::write(
+        daemon_dir.path().join("control.token"),
+        "old-control-token-0123456789\n",
+    )
+    .unwrap();
+    let mut daemon = Daemon::start(
+        &format!("replay:{}?loop=1", session.display()),
+        "",
+        &[],
+        &[],
+    );
+    // Rewrite the config with tokens in files next to it, then restart on it.
+    let config_path = daemon.dir.path().join("mouthpiece.toml");
+    let text = std::fs::read_to_string(&config_path).unwrap().replace(
+        "[server]\n",
+        &format!(
+            "[server]\nread_token = {{ file = \"{0}/read.token\" }}\ncontrol_token = {{ file = \"{0}/control.token\" }}\n",
+            daemon_dir.path().display()
+        ),
+    );
+    daemon.signal(libc::SIGTERM);
+    daemon.wait_exit(Duration::from_secs(2)).unwrap();
+    let port = daemon.port;
+    let dir_kept = std::mem::replace(&mut daemon.dir, tempfile::tempdir().unwrap());
+    std::fs::write(dir_kept.path().join("mouthpiece.toml"), text).unwrap();
+    let mut daemon = Daemon::start_in(dir_kept, port, &[], &[]);
+
+    assert!(connect_with_token(port, "wrong-token-0123456789")
+        .await
+        .is_err());
+    let mut old_client = connect_with_token(port, "old-read-token-0123456789")
+        .await
+        .unwrap();
+    wait_for(&mut old_client, Duration::from_secs(10), |v| {
+        v["type"] == "frame"
+    })
+    .await;
+
+    std::fs::write(
+        daemon_dir.path().join("read.token"),
+        "new-read-token-0123456789\n",
+    )
+    .unwrap();
+    daemon.signal(libc::SIGHUP);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while connect_with_token(port, "old-read-token-0123456789")
+        .await
+        .is_ok()
+    {
+        assert!(
+            Instant::now() < deadline,
+            "old token still accepted\n{}",
+            daemon.log()
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let mut new_client = connect_with_token(port, "new-read-token-0123456789")
+        .await
+        .unwrap();
+    wait_for(&mut new_client, Duration::from_secs(10), |v| {
+        v["type"] == "frame"
+    })
+    .await;
+    // The client connected with the old token was not dropped.
+    wait_for(&mut old_client, Duration::from_secs(10), |v| {
+        v["type"] == "frame"
+    })
+    .await;
+    assert!(
+        !daemon.log().contains("new-read-token"),
+        "a token was logged"
+    );
+    daemon.signal(libc::SIGTERM);
+    assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
+}
