@@ -22,6 +22,7 @@ pub fn check(config: &Config) -> Result<(), CheckError> {
         });
     }
     crate::characters::load(config)?;
+    crate::capture::check_spec(config)?;
     crate::daemon::server_config(config)?;
     crate::daemon::timecode_rate(config)?;
     let listen = config.server.listen.0;

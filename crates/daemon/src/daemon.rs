@@ -50,8 +50,9 @@ pub trait Factory: Send + Sync + 'static {
     fn processor(&self, config: &Config) -> Result<Self::Processor, CheckError>;
     /// A validated reload for a running processor (characters, colour ranges).
     fn reload(&self, config: &Config) -> Result<Box<dyn std::any::Any + Send>, CheckError>;
-    /// Opens the configured source (called again after every loss).
-    fn opener(&self, spec: &str) -> Opener;
+    /// Opens the configured source (called again after every loss); a live source that
+    /// delivers nothing for `stall_timeout` is reported lost.
+    fn opener(&self, spec: &str, stall_timeout: Duration) -> Opener;
 }
 
 /// Start-up options from the command line.

@@ -1,133 +1,13 @@
-//! Stand-ins used by `mouthpiece run` until the capture (issue 4) and detection (issue 5)
-//! crates land in this branch. Both are real (they read the real demo session and publish
-//! what they have), but neither finds dots: see the report of issue 7.
-//!
-//! - [`ReplaySource`]: `replay:PATH[?loop=1&speed=1.0]` over the recording crate's
-//!   [`SessionReader`], paced at recorded speed.
-//! - [`FramesOnly`]: publishes every frame's timing with the characters at rest and
-//!   confidence 0; no dots, no head pose.
+//! The stand-in processor `mouthpiece run` uses until the detection crates (issue 5) land
+//! in this branch: [`FramesOnly`] publishes every frame's timing with the characters at rest
+//! and confidence 0; it finds no dots and no head pose. Sources are the capture crate's.
 
-use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use mouthpiece_frame::{Frame, FrameSource, SourceError, SourceInfo};
-use mouthpiece_recording::SessionReader;
+use mouthpiece_frame::Frame;
 use mouthpiece_server::{CharacterFrame, CharacterInfo, StreamInfo};
 
 use crate::pipeline::{Output, Processor};
-
-/// An MCAP session replayed at recorded speed (times `speed`), optionally looping.
-pub struct ReplaySource {
-    reader: SessionReader,
-    info: SourceInfo,
-    speed: f64,
-    /// Device time and host time of the first frame paced.
-    origin: Option<(u64, Instant)>,
-    seq: u64,
-}
-
-impl ReplaySource {
-    pub fn open(spec: &str) -> Result<ReplaySource, SourceError> {
-        let rest = spec
-            .strip_prefix("replay:")
-            .ok_or_else(|| SourceError::Open {
-                spec: spec.into(),
-                message: "only replay: sources are available in this build".into(),
-                cause: None,
-            })?;
-        let (path, query) = rest.split_once('?').unwrap_or((rest, ""));
-        let mut looping = false;
-        let mut speed = 1.0;
-        for pair in query.split('&').filter(|p| !p.is_empty()) {
-            match pair.split_once('=') {
-                Some(("loop", v)) => looping = v == "1" || v == "true",
-                Some(("speed", v)) => {
-                    speed = v
-                        .parse::<f64>()
-                        .ok()
-                        .filter(|s| s.is_finite() && *s > 0.0)
-                        .ok_or_else(|| SourceError::Open {
-                            spec: spec.into(),
-                            message: format!("bad speed {v:?}"),
-                            cause: None,
-                        })?
-                }
-                _ => {
-                    return Err(SourceError::Open {
-                        spec: spec.into(),
-                        message: format!("unknown option {pair:?} (loop=1, speed=S)"),
-                        cause: None,
-                    })
-                }
-            }
-        }
-        let path = PathBuf::from(path);
-        let mut reader = SessionReader::open(&path).map_err(|e| SourceError::Open {
-            spec: spec.into(),
-            message: format!("cannot open {}", path.display()),
-            cause: Some(Box::new(e)),
-        })?;
-        reader.set_looping(looping);
-        let (width, height) = reader
-            .calibration()
-            .map(|c| (c.color.width, c.color.height))
-            .unwrap_or((0, 0));
-        let info = SourceInfo {
-            spec: spec.into(),
-            description: format!("replay of {}", path.display()),
-            color_width: width,
-            color_height: height,
-            depth_width: width,
-            depth_height: height,
-            fps: 30.0,
-            live: false,
-        };
-        Ok(ReplaySource {
-            reader,
-            info,
-            speed,
-            origin: None,
-            seq: 0,
-        })
-    }
-}
-
-impl FrameSource for ReplaySource {
-    fn info(&self) -> &SourceInfo {
-        &self.info
-    }
-
-    fn next_frame(&mut self) -> Result<Option<Frame>, SourceError> {
-        let next = self
-            .reader
-            .next_frame()
-            .map_err(|e| SourceError::Disconnected {
-                spec: self.info.spec.clone(),
-                message: "replay failed".into(),
-                cause: Some(Box::new(e)),
-            })?;
-        let Some(session_frame) = next else {
-            return Ok(None);
-        };
-        let mut frame = session_frame.frame;
-        let (ts0, t0) = *self
-            .origin
-            .get_or_insert((frame.device_ts_us, Instant::now()));
-        let due = t0
-            + Duration::from_secs_f64(
-                frame.device_ts_us.saturating_sub(ts0) as f64 * 1e-6 / self.speed,
-            );
-        let now = Instant::now();
-        if due > now {
-            std::thread::sleep(due - now);
-        }
-        frame.seq = self.seq;
-        self.seq += 1;
-        frame.host_rx = Instant::now();
-        frame.wall_clock = None;
-        Ok(Some(frame))
-    }
-}
 
 /// Publishes frames with the characters at rest (confidence 0): no detector in this build.
 pub struct FramesOnly {
@@ -219,7 +99,7 @@ impl Processor for FramesOnly {
     }
 }
 
-/// The factory `mouthpiece run` uses until capture and detection land: [`ReplaySource`] and
+/// The factory `mouthpiece run` uses until detection lands: the capture crate's sources and
 /// [`FramesOnly`] with the configured characters.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct InterimFactory;
@@ -241,8 +121,7 @@ impl crate::daemon::Factory for InterimFactory {
         Ok(Box::new(crate::characters::load(config)?))
     }
 
-    fn opener(&self, spec: &str) -> crate::source::Opener {
-        let spec = spec.to_owned();
-        Box::new(move || ReplaySource::open(&spec).map(|s| Box::new(s) as Box<dyn FrameSource>))
+    fn opener(&self, spec: &str, stall_timeout: Duration) -> crate::source::Opener {
+        crate::capture::opener(spec, stall_timeout)
     }
 }

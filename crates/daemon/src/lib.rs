@@ -12,6 +12,7 @@
 //! records, and the async server's runtime. Only bounded queues connect them.
 
 pub mod backoff;
+pub mod capture;
 pub mod characters;
 pub mod check;
 pub mod daemon;

@@ -26,6 +26,12 @@ enum Command {
     CheckConfig(cmd::check_config::Args),
     /// Run the daemon: source → detect → track → retarget → WebSocket server, with takes.
     Run(cmd::run::Args),
+    /// Render a synthetic performer (head with painted dots, depth + colour, ground truth) to MCAP.
+    Synth(cmd::synth::Args),
+    /// Record a source (camera, Dummy device, replay) to MCAP, or an OpenNI2 source to .oni.
+    Record(cmd::record::Args),
+    /// List OpenNI2 devices and V4L2 nodes with their modes and formats.
+    Devices(cmd::devices::Args),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +41,9 @@ fn main() -> ExitCode {
         Command::Retarget(args) => cmd::retarget::run(args),
         Command::CheckConfig(args) => cmd::check_config::run(args),
         Command::Run(args) => cmd::run::run(args),
+        Command::Synth(args) => cmd::synth::run(args),
+        Command::Record(args) => cmd::record::run(args),
+        Command::Devices(args) => cmd::devices::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,1 +1,295 @@
-//! placeholder
+//! The synthetic performer: a head with painted lip and forehead dots, speaking, seen by a
+//! depth camera, with exact ground truth.
+//!
+//! There is no depth camera on our machines and no public recording of a performer with
+//! painted dots, so mouthpiece renders its own. [`Synth`] is an iterator of
+//! ([`Frame`], [`GroundTruth`]); `mouthpiece synth` writes it to an MCAP session.
+//!
+//! Layout:
+//! - `head`: the analytic head (skull, nose, cheeks, chin, lips with relief, mouth interior,
+//!   teeth) as a Lagrangian surface and its mesh;
+//! - `motion`: speech-like mouth motion and head motion, deterministic per seed;
+//! - `render`: a z-buffer rasteriser over the head's screen box, shading, dots, noise models.
+//!
+//! Conventions: camera frame of OpenCV (x right, y down, z forward, metres); the performer's
+//! left is +x. Dots are named as in method §1 (`D1` left corner, `D2..` upper lip left to right,
+//! …, `F1..F3` forehead).
+//!
+//! Default paint colours (HSV in OpenCV's 0–180 hue scale), chosen far from skin (hue ≈ 10,
+//! low saturation) and lips (hue ≈ 0/180):
+//! - lip dots: [`LIP_DOT_RGB`], green, hue ≈ 66 (rendered: [`LIP_DOT_HUE_RANGE_CV`]);
+//! - forehead dots: [`FOREHEAD_DOT_RGB`], blue, hue ≈ 111 (rendered: [`FOREHEAD_DOT_HUE_RANGE_CV`]).
+
+mod head;
+mod layout;
+mod motion;
+mod render;
+mod rng;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use mouthpiece_frame::{Calibration, Extrinsics, Frame, Intrinsics};
+pub use mouthpiece_recording::{GroundTruth, HeadPose};
+
+pub use layout::{DotLayout, ForeheadDot};
+pub use motion::{HeadState, MouthState};
+
+/// Default lip-dot paint, RGB: a saturated green (OpenCV HSV ≈ (64, 200, 200)).
+pub const LIP_DOT_RGB: [u8; 3] = [40, 200, 70];
+/// Default forehead-dot paint, RGB: a saturated blue (OpenCV HSV ≈ (111, 210, 230)).
+pub const FOREHEAD_DOT_RGB: [u8; 3] = [40, 90, 230];
+/// OpenCV-scale (0–180) hue ranges that contain the default lip-dot paint under the
+/// renderer's lighting and noise (for detector defaults).
+pub const LIP_DOT_HUE_RANGE_CV: (u8, u8) = (40, 85);
+/// OpenCV-scale hue range of the default forehead-dot paint.
+pub const FOREHEAD_DOT_HUE_RANGE_CV: (u8, u8) = (98, 128);
+/// Minimum OpenCV-scale saturation (0–255) of the painted dots as rendered (shading, motion
+/// blur into the lips and sensor noise included).
+pub const DOT_MIN_SATURATION_CV: u8 = 80;
+/// Default dot radius, metres.
+pub const DEFAULT_DOT_RADIUS_M: f64 = 0.00225;
+
+/// How much the head moves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum HeadMotion {
+    /// A perfectly still head.
+    None,
+    /// Yaw within ±10°, pitch ±3°, roll ±2°, ±5 mm.
+    #[default]
+    Mild,
+    /// Yaw ±30°, pitch ±15°, roll ±10°, ±5 cm.
+    Strong,
+}
+
+/// Depth sensor noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum NoiseModel {
+    /// Exact depth (rounded to millimetres).
+    None,
+    /// Structured light (Kinect v1 style): depth quantised in disparity (steps grow with z²),
+    /// σ ≈ 1.5 mm at 0.6 m, missing depth at silhouette edges, on steep and on dark surfaces.
+    #[default]
+    Kinect,
+    /// Active stereo (RealSense style): RMS ≈ 0.5 % of z, speckle holes.
+    Realsense,
+}
+
+/// Everything that decides a synthetic session.
+#[derive(Debug, Clone)]
+pub struct SynthConfig {
+    pub seed: u64,
+    pub fps: f64,
+    /// Length of the session; the iterator ends after `round(seconds * fps)` frames.
+    pub seconds: f64,
+    /// The colour camera. Default: 640x480, fx = fy = 525, cx = 319.5, cy = 239.5, and its
+    /// `distortion` applied when non-zero.
+    pub camera: Intrinsics,
+    /// `None`: depth on the colour pixel grid (registered). `Some`: a separate depth camera
+    /// with these intrinsics, placed by `depth_to_color`.
+    pub depth_camera: Option<(Intrinsics, Extrinsics)>,
+    /// Camera to the mouth (neutral), metres.
+    pub distance_m: f64,
+    pub head_motion: HeadMotion,
+    pub noise: NoiseModel,
+    /// Colour effects: sensor noise, exposure drift, motion blur on fast lip motion, uneven
+    /// light. On by default; tests of pure geometry turn them off.
+    pub colour_effects: bool,
+    /// Still, closed, relaxed mouth at the start (the neutral pose), seconds.
+    pub neutral_seconds: f64,
+    pub layout: DotLayout,
+}
+
+impl Default for SynthConfig {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            fps: 30.0,
+            seconds: 10.0,
+            camera: Intrinsics::default_vga(),
+            depth_camera: None,
+            distance_m: 0.6,
+            head_motion: HeadMotion::Mild,
+            noise: NoiseModel::Kinect,
+            colour_effects: true,
+            neutral_seconds: 1.5,
+            layout: DotLayout::default(),
+        }
+    }
+}
+
+impl SynthConfig {
+    /// The camera for an image size, with the default focal length (525 px at 640 wide, scaled)
+    /// and the principal point at the centre.
+    pub fn camera_for_size(width: u32, height: u32) -> Intrinsics {
+        let f = 525.0 * width as f64 / 640.0;
+        Intrinsics::ideal(
+            width,
+            height,
+            f,
+            f,
+            (width as f64 - 1.0) / 2.0,
+            (height as f64 - 1.0) / 2.0,
+        )
+    }
+
+    fn validate(&self) -> Result<(), SynthError> {
+        let bad = |what: String| Err(SynthError::Config(what));
+        if !(self.fps > 0.0 && self.fps <= 1000.0) {
+            return bad(format!("fps must be in (0, 1000], got {}", self.fps));
+        }
+        if !(self.seconds >= 0.0 && self.seconds.is_finite()) {
+            return bad(format!("seconds must be ≥ 0, got {}", self.seconds));
+        }
+        if !(0.25..=3.0).contains(&self.distance_m) {
+            return bad(format!(
+                "distance must be within 0.25–3 m, got {} m",
+                self.distance_m
+            ));
+        }
+        let c = &self.camera;
+        if c.width < 16 || c.height < 16 || c.width > 8192 || c.height > 8192 {
+            return bad(format!(
+                "image size {}x{} is out of range (16–8192)",
+                c.width, c.height
+            ));
+        }
+        if !(c.fx > 0.0 && c.fy > 0.0) {
+            return bad("focal lengths must be positive".into());
+        }
+        if let Some((d, _)) = &self.depth_camera {
+            if d.width < 16
+                || d.height < 16
+                || d.width > 8192
+                || d.height > 8192
+                || d.fx <= 0.0
+                || d.fy <= 0.0
+            {
+                return bad("depth camera intrinsics out of range".into());
+            }
+        }
+        self.layout.validate().map_err(SynthError::Config)
+    }
+
+    /// The calibration frames carry.
+    pub fn calibration(&self) -> Calibration {
+        match &self.depth_camera {
+            None => Calibration::registered(self.camera),
+            Some((depth, depth_to_color)) => Calibration {
+                color: self.camera,
+                depth: *depth,
+                depth_to_color: *depth_to_color,
+                depth_scale_m: 0.001,
+                depth_registered: false,
+            },
+        }
+    }
+}
+
+/// What can go wrong setting up the synthetic performer.
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    #[error("invalid synthetic performer configuration: {0}")]
+    Config(String),
+    #[error("cannot read dot layout {path}")]
+    LayoutRead {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("dot layout {path} is invalid")]
+    LayoutParse {
+        path: PathBuf,
+        #[source]
+        source: Box<toml::de::Error>,
+    },
+    #[error("dot layout {path}: {what}")]
+    LayoutInvalid { path: PathBuf, what: String },
+}
+
+/// The synthetic performer: an iterator of frames with their ground truth.
+pub struct Synth {
+    config: SynthConfig,
+    calibration: Arc<Calibration>,
+    renderer: render::Renderer,
+    speech: motion::SpeechTrack,
+    head: motion::HeadTrack,
+    next_index: u64,
+    frame_count: u64,
+}
+
+impl Synth {
+    pub fn new(config: SynthConfig) -> Result<Self, SynthError> {
+        config.validate()?;
+        let frame_count = (config.seconds * config.fps).round() as u64;
+        let speech = motion::SpeechTrack::new(config.seed, config.neutral_seconds, config.seconds);
+        let head = motion::HeadTrack::new(config.seed, config.head_motion, config.neutral_seconds);
+        let renderer = render::Renderer::new(&config);
+        tracing::info!(
+            seed = config.seed,
+            frames = frame_count,
+            width = config.camera.width,
+            height = config.camera.height,
+            "synthetic performer ready"
+        );
+        Ok(Self {
+            calibration: Arc::new(config.calibration()),
+            config,
+            renderer,
+            speech,
+            head,
+            next_index: 0,
+            frame_count,
+        })
+    }
+
+    pub fn config(&self) -> &SynthConfig {
+        &self.config
+    }
+
+    /// Frames the iterator yields in total.
+    pub fn frame_count(&self) -> u64 {
+        self.frame_count
+    }
+
+    /// Dot names in order (`D1..Dn`, then the forehead dots).
+    pub fn dot_names(&self) -> Vec<String> {
+        self.renderer.dot_names()
+    }
+
+    /// The mouth and head at time `t` (what frame `t * fps` shows).
+    pub fn state_at(&self, t: f64) -> (MouthState, HeadState) {
+        (self.speech.at(t), self.head.at(t))
+    }
+
+    /// Renders the next frame. Deterministic: frame `i` of a seed is always the same.
+    pub fn render_next(&mut self) -> Option<(Frame, GroundTruth)> {
+        if self.next_index >= self.frame_count {
+            return None;
+        }
+        let i = self.next_index;
+        self.next_index += 1;
+        let t = i as f64 / self.config.fps;
+        let (mouth, head) = self.state_at(t);
+        let out = self.renderer.render(i, t, &mouth, &head);
+        let frame = Frame {
+            seq: i,
+            device_ts_us: (t * 1e6).round() as u64,
+            host_rx: Instant::now(),
+            wall_clock: None,
+            color: out.color,
+            depth: out.depth,
+            calibration: self.calibration.clone(),
+        };
+        tracing::trace!(seq = i, "synthetic frame rendered");
+        Some((frame, out.ground_truth))
+    }
+}
+
+impl Iterator for Synth {
+    type Item = (Frame, GroundTruth);
+    fn next(&mut self) -> Option<Self::Item> {
+        self.render_next()
+    }
+}

@@ -1,0 +1,232 @@
+//! `mouthpiece record`: any source to an MCAP session; an OpenNI2 source (camera, Dummy or
+//! `.oni` replay) also to `.oni` through OpenNI2's own recorder.
+//!
+//! Both run on the caller's thread: pull a pair from the source, write it (MCAP) or let
+//! OpenNI2's recorder take it from the stream (`.oni`), until the time limit (device time),
+//! the end of a replay, or the stop flag (Ctrl-C). A lost source ends the recording with a
+//! readable file and the error.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use mouthpiece_frame::{Frame, FrameSource, SourceError};
+
+use crate::spec::SourceSpec;
+use crate::CaptureConfig;
+
+/// Why a recording failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error(transparent)]
+    Source(#[from] SourceError),
+    #[error("cannot write {path}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    #[error("{path}: unknown output format (expected a .mcap or .oni file name)")]
+    UnknownFormat { path: PathBuf },
+    #[error("{spec} cannot be recorded to .oni: OpenNI2's recorder needs an OpenNI2 source (openni2:… or replay:….oni); record to .mcap instead")]
+    NotOpenNi { spec: String },
+    #[error("{what} support is not built in")]
+    NotBuilt { what: &'static str },
+}
+
+/// When to stop.
+#[derive(Debug, Clone, Default)]
+pub struct RecordLimits {
+    /// Stop after this much device time.
+    pub seconds: Option<f64>,
+    /// Stop when set (Ctrl-C).
+    pub stop: Arc<AtomicBool>,
+}
+
+/// What was recorded.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordSummary {
+    pub frames: u64,
+    /// Device time between the first and last frame, seconds.
+    pub duration_s: f64,
+    pub skipped: u64,
+    /// `.oni` only: nodes that needed the cropping-record fix.
+    pub oni_fixed_nodes: usize,
+    /// The source was lost mid-recording; the file holds what came before.
+    pub lost: Option<String>,
+}
+
+/// Output formats, from the file name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputFormat {
+    Mcap,
+    Oni,
+}
+
+impl OutputFormat {
+    pub fn from_path(path: &Path) -> Result<OutputFormat, RecordError> {
+        match path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref()
+        {
+            Some("mcap") => Ok(OutputFormat::Mcap),
+            Some("oni") => Ok(OutputFormat::Oni),
+            _ => Err(RecordError::UnknownFormat {
+                path: path.to_path_buf(),
+            }),
+        }
+    }
+}
+
+/// Pulls frames until a limit; `write` gets each one. Returns frames, duration, lost.
+fn pump(
+    source: &mut dyn FrameSource,
+    limits: &RecordLimits,
+    mut write: impl FnMut(&Frame) -> Result<(), RecordError>,
+) -> Result<(u64, f64, Option<String>), RecordError> {
+    let mut frames = 0u64;
+    let mut first_ts = None;
+    let mut last_ts = 0u64;
+    loop {
+        if limits.stop.load(Ordering::Relaxed) {
+            tracing::info!("stop requested; closing the recording");
+            break;
+        }
+        let frame = match source.next_frame() {
+            Ok(Some(f)) => f,
+            Ok(None) => break,
+            Err(err @ SourceError::Disconnected { .. }) => {
+                tracing::error!(%err, "source lost; the file keeps what was recorded");
+                let duration = first_ts.map_or(0.0, |f| (last_ts - f) as f64 / 1e6);
+                return Ok((frames, duration, Some(err.to_string())));
+            }
+            Err(err) => return Err(err.into()),
+        };
+        let first = *first_ts.get_or_insert(frame.device_ts_us);
+        if let Some(limit) = limits.seconds {
+            if frame.device_ts_us.saturating_sub(first) as f64 / 1e6 >= limit {
+                break;
+            }
+        }
+        last_ts = frame.device_ts_us;
+        write(&frame)?;
+        frames += 1;
+    }
+    Ok((
+        frames,
+        first_ts.map_or(0.0, |f| (last_ts - f) as f64 / 1e6),
+        None,
+    ))
+}
+
+/// Records `spec` to an MCAP session at `out`. `on_frame` sees every frame written.
+#[cfg(feature = "mcap")]
+pub fn record_mcap(
+    spec: &SourceSpec,
+    config: &CaptureConfig,
+    out: &Path,
+    options: mouthpiece_recording::WriterOptions,
+    limits: &RecordLimits,
+    mut on_frame: impl FnMut(&Frame),
+) -> Result<RecordSummary, RecordError> {
+    let mut source = crate::open_parsed(spec, config)?;
+    let mut writer = mouthpiece_recording::SessionWriter::create(out, options).map_err(|e| {
+        RecordError::Write {
+            path: out.to_path_buf(),
+            source: Box::new(e),
+        }
+    })?;
+    tracing::info!(source = %spec, file = %out.display(), "recording MCAP session");
+    let result = pump(source.as_mut(), limits, |f| {
+        writer.write_frame(f).map_err(|e| RecordError::Write {
+            path: out.to_path_buf(),
+            source: Box::new(e),
+        })?;
+        on_frame(f);
+        Ok(())
+    });
+    let skipped = source.skipped();
+    drop(source);
+    // Close the file whatever happened, so it stays readable.
+    let finished = writer.finish().map_err(|e| RecordError::Write {
+        path: out.to_path_buf(),
+        source: Box::new(e),
+    });
+    let (frames, duration_s, lost) = result?;
+    finished?;
+    Ok(RecordSummary {
+        frames,
+        duration_s,
+        skipped,
+        oni_fixed_nodes: 0,
+        lost,
+    })
+}
+
+#[cfg(not(feature = "mcap"))]
+pub fn record_mcap(
+    _: &SourceSpec,
+    _: &CaptureConfig,
+    _: &Path,
+    _: (),
+    _: &RecordLimits,
+    _: impl FnMut(&Frame),
+) -> Result<RecordSummary, RecordError> {
+    Err(RecordError::NotBuilt { what: "MCAP" })
+}
+
+/// Records an OpenNI2 source to `.oni` with OpenNI2's recorder, then adds the cropping and
+/// field-of-view records OpenNI2's player needs where the source lacked them.
+#[cfg(feature = "openni2")]
+pub fn record_oni(
+    spec: &SourceSpec,
+    config: &CaptureConfig,
+    out: &Path,
+    limits: &RecordLimits,
+    mut on_frame: impl FnMut(&Frame),
+) -> Result<RecordSummary, RecordError> {
+    let is_openni = match spec {
+        SourceSpec::OpenNi2 { .. } => true,
+        SourceSpec::Replay(r) => r
+            .path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("oni")),
+        SourceSpec::V4l2 { .. } => false,
+    };
+    if !is_openni {
+        return Err(RecordError::NotOpenNi {
+            spec: spec.to_string(),
+        });
+    }
+    let (mut source, recording) = crate::openni::OpenNiSource::open_recording(spec, config, out)?;
+    let result = pump(&mut source, limits, |f| {
+        on_frame(f);
+        Ok(())
+    });
+    let skipped = source.skipped();
+    // The recorder first (it holds the streams), then the source's streams and device.
+    let fixed = recording.finish();
+    drop(source);
+    let (frames, duration_s, lost) = result?;
+    let fix = fixed?;
+    Ok(RecordSummary {
+        frames,
+        duration_s,
+        skipped,
+        oni_fixed_nodes: fix.cropping_added.len().max(fix.fov_added.len()),
+        lost,
+    })
+}
+
+#[cfg(not(feature = "openni2"))]
+pub fn record_oni(
+    _: &SourceSpec,
+    _: &CaptureConfig,
+    _: &Path,
+    _: &RecordLimits,
+    _: impl FnMut(&Frame),
+) -> Result<RecordSummary, RecordError> {
+    Err(RecordError::NotBuilt { what: "OpenNI2" })
+}

@@ -1,0 +1,171 @@
+//! `mouthpiece synth`: render a synthetic performer session to an MCAP file.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use mouthpiece_recording::{ColorEncoding, SessionWriter, WriterOptions};
+use mouthpiece_synth::{DotLayout, HeadMotion, NoiseModel, Synth, SynthConfig};
+
+use crate::exit::bad_input;
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum MotionArg {
+    None,
+    Mild,
+    Strong,
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum NoiseArg {
+    None,
+    Kinect,
+    Realsense,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Output session (MCAP).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Length of the session in seconds.
+    #[arg(long)]
+    pub seconds: f64,
+    /// Seed: the same seed gives the same session.
+    #[arg(long)]
+    pub seed: u64,
+    /// Frames per second.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// Image size WIDTHxHEIGHT (colour and depth; focal length 525 px at 640 wide, scaled).
+    #[arg(long, default_value = "640x480", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Camera to the mouth, metres.
+    #[arg(long, default_value_t = 0.6)]
+    pub distance: f64,
+    /// Head motion: none, mild (±10° yaw) or strong (yaw ±30°, pitch ±15°, roll ±10°, ±5 cm).
+    #[arg(long, value_enum, default_value = "mild")]
+    pub head_motion: MotionArg,
+    /// Depth sensor noise model.
+    #[arg(long, value_enum, default_value = "kinect")]
+    pub noise: NoiseArg,
+    /// Dot layout (TOML: lip_dots, radius_mm, lip_color, forehead_color, [[forehead]]).
+    #[arg(long)]
+    pub layout: Option<PathBuf>,
+    /// Lens distortion of the colour camera, OpenCV plumb_bob: K1,K2,P1,P2,K3.
+    #[arg(long, value_parser = parse_distortion)]
+    pub distortion: Option<[f64; 5]>,
+    /// Render depth from a separate depth camera this many millimetres to the colour
+    /// camera's right (a baseline along x) instead of registered to the colour grid.
+    #[arg(long)]
+    pub depth_baseline_mm: Option<f64>,
+    /// Store colour losslessly (bgr8 RawImage, ≈ 20× larger) instead of JPEG.
+    #[arg(long)]
+    pub raw_color: bool,
+    /// JPEG quality of colour frames (1–100).
+    #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
+    pub jpeg_quality: u8,
+    /// Turn off colour sensor effects (noise, exposure drift, motion blur, uneven light).
+    #[arg(long)]
+    pub no_colour_effects: bool,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in {s:?}"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in {s:?}"))?;
+    Ok((w, h))
+}
+
+fn parse_distortion(s: &str) -> Result<[f64; 5], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| {
+            x.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("bad number {x:?} in {s:?}"))
+        })
+        .collect::<Result<_, _>>()?;
+    v.try_into()
+        .map_err(|v: Vec<f64>| format!("expected 5 values K1,K2,P1,P2,K3, got {}", v.len()))
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut config = SynthConfig {
+        seed: args.seed,
+        fps: args.fps,
+        seconds: args.seconds,
+        camera: SynthConfig::camera_for_size(args.size.0, args.size.1),
+        distance_m: args.distance,
+        head_motion: match args.head_motion {
+            MotionArg::None => HeadMotion::None,
+            MotionArg::Mild => HeadMotion::Mild,
+            MotionArg::Strong => HeadMotion::Strong,
+        },
+        noise: match args.noise {
+            NoiseArg::None => NoiseModel::None,
+            NoiseArg::Kinect => NoiseModel::Kinect,
+            NoiseArg::Realsense => NoiseModel::Realsense,
+        },
+        colour_effects: !args.no_colour_effects,
+        ..SynthConfig::default()
+    };
+    if let Some(d) = args.distortion {
+        config.camera.distortion = d;
+    }
+    if let Some(mm) = args.depth_baseline_mm {
+        if !(mm.is_finite() && mm.abs() <= 200.0) {
+            return Err(bad_input(anyhow::anyhow!(
+                "--depth-baseline-mm must be within ±200, got {mm}"
+            )));
+        }
+        let mut depth_to_color = mouthpiece_frame::Extrinsics::IDENTITY;
+        // The depth camera sits `mm` to the colour camera's right: a point at its origin is
+        // at +x in the colour frame.
+        depth_to_color.translation = [mm / 1000.0, 0.0, 0.0];
+        let mut depth = config.camera;
+        depth.distortion = [0.0; 5];
+        config.depth_camera = Some((depth, depth_to_color));
+    }
+    if let Some(path) = &args.layout {
+        config.layout = DotLayout::from_file(path).map_err(bad_input)?;
+    }
+    let mut synth = Synth::new(config).map_err(bad_input)?;
+    let options = WriterOptions {
+        color: if args.raw_color {
+            ColorEncoding::Raw
+        } else {
+            ColorEncoding::Jpeg {
+                quality: args.jpeg_quality,
+            }
+        },
+        ..WriterOptions::default()
+    };
+    let mut writer = SessionWriter::create(&args.out, options)
+        .with_context(|| format!("cannot write the session {}", args.out.display()))?;
+    let started = Instant::now();
+    let total = synth.frame_count();
+    while let Some((frame, truth)) = synth.render_next() {
+        writer.write_frame_with_ground_truth(&frame, Some(&truth))?;
+    }
+    let summary = writer.finish()?;
+    let size = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
+    tracing::info!(
+        out = %args.out.display(),
+        frames = summary.frames,
+        seconds = args.seconds,
+        bytes = size,
+        elapsed_s = format!("{:.2}", started.elapsed().as_secs_f64()),
+        "synthetic session written"
+    );
+    debug_assert_eq!(summary.frames, total);
+    Ok(())
+}

@@ -1,0 +1,168 @@
+//! Where the dots are painted and in which colours (`--layout FILE`, TOML).
+//!
+//! ```toml
+//! lip_dots = 12                 # even, ≥ 4: two corners + the same count on each lip
+//! radius_mm = 2.25              # 2–2.5 mm paint dots
+//! lip_color = [40, 200, 70]     # RGB
+//! forehead_color = [40, 90, 230]
+//! [[forehead]]                  # optional; default F1..F3 below
+//! name = "F1"
+//! x_mm = 30.0                   # performer's left is +x
+//! y_mm = -100.0                 # above the mouth is negative (camera y points down)
+//! ```
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+use crate::SynthError;
+
+/// A forehead dot, placed on the head surface at (x, y) relative to the mouth centre.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForeheadDot {
+    pub name: String,
+    pub x_mm: f64,
+    pub y_mm: f64,
+}
+
+/// The dot layout.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DotLayout {
+    pub lip_dots: usize,
+    pub radius_mm: f64,
+    pub lip_color: [u8; 3],
+    pub forehead_color: [u8; 3],
+    pub forehead: Vec<ForeheadDot>,
+}
+
+impl Default for DotLayout {
+    fn default() -> Self {
+        let dot = |name: &str, x_mm: f64, y_mm: f64| ForeheadDot {
+            name: name.into(),
+            x_mm,
+            y_mm,
+        };
+        Self {
+            lip_dots: 12,
+            radius_mm: crate::DEFAULT_DOT_RADIUS_M * 1000.0,
+            lip_color: crate::LIP_DOT_RGB,
+            forehead_color: crate::FOREHEAD_DOT_RGB,
+            forehead: vec![
+                dot("F1", 30.0, -100.0),
+                dot("F2", 0.0, -118.0),
+                dot("F3", -30.0, -100.0),
+            ],
+        }
+    }
+}
+
+impl DotLayout {
+    /// Reads a TOML layout; missing keys take the defaults.
+    pub fn from_file(path: &Path) -> Result<Self, SynthError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SynthError::LayoutRead {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let layout: DotLayout = toml::from_str(&text).map_err(|e| SynthError::LayoutParse {
+            path: path.to_path_buf(),
+            source: Box::new(e),
+        })?;
+        layout
+            .validate()
+            .map_err(|what| SynthError::LayoutInvalid {
+                path: path.to_path_buf(),
+                what,
+            })?;
+        Ok(layout)
+    }
+
+    pub(crate) fn validate(&self) -> Result<(), String> {
+        if self.lip_dots < 4 || !self.lip_dots.is_multiple_of(2) || self.lip_dots > 40 {
+            return Err(format!(
+                "lip_dots must be even and within 4–40, got {}",
+                self.lip_dots
+            ));
+        }
+        if !(1.0..=4.0).contains(&self.radius_mm) {
+            return Err(format!(
+                "radius_mm must be within 1–4 mm, got {}",
+                self.radius_mm
+            ));
+        }
+        if self.forehead.len() < 3 {
+            return Err(format!(
+                "at least 3 forehead dots are needed, got {}",
+                self.forehead.len()
+            ));
+        }
+        for (i, f) in self.forehead.iter().enumerate() {
+            if !(-60.0..=60.0).contains(&f.x_mm) || !(-150.0..=-70.0).contains(&f.y_mm) {
+                return Err(format!(
+                    "forehead[{i}] ({}): x_mm must be within ±60 and y_mm within -150..-70 (the forehead), got ({}, {})",
+                    f.name, f.x_mm, f.y_mm
+                ));
+            }
+            if f.name.starts_with('D') || self.forehead[..i].iter().any(|g| g.name == f.name) {
+                return Err(format!("forehead[{i}]: name {:?} is taken", f.name));
+            }
+        }
+        // Not collinear: the head pose needs a plane.
+        let p: Vec<[f64; 2]> = self.forehead.iter().map(|f| [f.x_mm, f.y_mm]).collect();
+        let area = p
+            .windows(3)
+            .chain(std::iter::once(&p[..3]))
+            .fold(0.0f64, |m, w| {
+                m.max(
+                    ((w[1][0] - w[0][0]) * (w[2][1] - w[0][1])
+                        - (w[1][1] - w[0][1]) * (w[2][0] - w[0][0]))
+                        .abs(),
+                )
+            });
+        if area < 50.0 {
+            return Err(
+                "forehead dots are (nearly) collinear; the head pose needs them spread".into(),
+            );
+        }
+        Ok(())
+    }
+
+    /// Names in order: D1..Dn, then the forehead dots.
+    pub fn names(&self) -> Vec<String> {
+        (1..=self.lip_dots)
+            .map(|k| format!("D{k}"))
+            .chain(self.forehead.iter().map(|f| f.name.clone()))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_layout_is_valid_and_named_as_in_the_method() {
+        let l = DotLayout::default();
+        l.validate().unwrap();
+        let names = l.names();
+        assert_eq!(names.first().unwrap(), "D1");
+        assert_eq!(names[11], "D12");
+        assert_eq!(&names[12..], ["F1", "F2", "F3"]);
+    }
+
+    #[test]
+    fn bad_layout_files_name_the_problem() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("l.toml");
+        std::fs::write(&p, "lip_dots = 7\n").unwrap();
+        let e = DotLayout::from_file(&p).unwrap_err().to_string();
+        assert!(e.contains("l.toml") && e.contains("lip_dots"), "{e}");
+        std::fs::write(&p, "lip_dot = 8\n").unwrap();
+        let e = DotLayout::from_file(&p).unwrap_err();
+        let chain = format!("{e}: {}", std::error::Error::source(&e).unwrap());
+        assert!(chain.contains("lip_dot"), "{chain}");
+        std::fs::write(&p, "lip_dots = 8\nradius_mm = 2.0\n").unwrap();
+        assert_eq!(DotLayout::from_file(&p).unwrap().lip_dots, 8);
+    }
+}

@@ -1,0 +1,737 @@
+//! Rendering one frame: deform and pose the mesh, rasterise it with a z-buffer (per-pixel
+//! depth, shading, albedo, material coordinates), paint the dots in material space, compose
+//! colour with lighting and sensor effects, and derive depth with a sensor noise model.
+//!
+//! Speed: the mesh is ≈ 50k triangles, nearly all of a pixel or less; buffers are allocated
+//! once; noise uses a precomputed Gaussian table indexed by a per-frame xorshift stream.
+
+use mouthpiece_frame::{ColorImage, DepthImage, Extrinsics, Intrinsics};
+use mouthpiece_recording::{GroundTruth, HeadPose};
+
+use crate::head::{self, Attrs, Geometry};
+use crate::motion::{HeadState, MouthState};
+use crate::rng::{FastRng, GaussTable, Rng};
+use crate::{NoiseModel, SynthConfig};
+
+/// The booth behind the performer: a wall 1.8 m away lined with dark acoustic foam, which
+/// absorbs the sensor's infrared: no depth reading there unless the noise model is `None`.
+const WALL_Z: f32 = 1.8;
+const WALL_RGB: [f32; 3] = [0.22, 0.23, 0.25];
+/// Material coordinates given to surfaces that carry no paint (teeth).
+const NO_MATERIAL: [f32; 2] = [100.0, 100.0];
+
+pub(crate) struct RenderOutput {
+    pub color: ColorImage,
+    pub depth: DepthImage,
+    pub ground_truth: GroundTruth,
+}
+
+struct Dot {
+    name: String,
+    attrs: Attrs,
+    material: [f32; 2],
+    /// Metres per unit of material a and v at the dot.
+    metric: [f32; 2],
+    /// Linear RGB paint.
+    paint: [f32; 3],
+    is_lip: bool,
+}
+
+#[derive(Clone, Copy, Default)]
+struct ScreenVert {
+    x: f32,
+    y: f32,
+    z: f32,
+    shade: f32,
+    facing: f32,
+    albedo: [f32; 3],
+    material: [f32; 2],
+    valid: bool,
+}
+
+/// Per-pixel surface attributes of one camera.
+struct Buffers {
+    w: usize,
+    h: usize,
+    z: Vec<f32>,
+    shade: Vec<f32>,
+    facing: Vec<f32>,
+    albedo: Vec<[f32; 3]>,
+    material: Vec<[f32; 2]>,
+}
+
+impl Buffers {
+    fn new(w: usize, h: usize) -> Self {
+        let n = w * h;
+        Self {
+            w,
+            h,
+            z: vec![f32::INFINITY; n],
+            shade: vec![0.0; n],
+            facing: vec![0.0; n],
+            albedo: vec![[0.0; 3]; n],
+            material: vec![NO_MATERIAL; n],
+        }
+    }
+
+    fn clear(&mut self) {
+        self.z.fill(f32::INFINITY);
+    }
+
+    /// Rasterises front-facing triangles; pixel (i, j) samples the image point (i, j).
+    fn raster(&mut self, verts: &[ScreenVert], tris: &[[u32; 3]]) {
+        let (w, h) = (self.w as i32, self.h as i32);
+        for t in tris {
+            let (a, b, c) = (
+                &verts[t[0] as usize],
+                &verts[t[1] as usize],
+                &verts[t[2] as usize],
+            );
+            if !(a.valid && b.valid && c.valid) {
+                continue;
+            }
+            let area = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+            if area <= 1e-12 {
+                continue; // back face or degenerate
+            }
+            let x0 = a.x.min(b.x).min(c.x).ceil().max(0.0) as i32;
+            let x1 = (a.x.max(b.x).max(c.x).floor() as i32).min(w - 1);
+            let y0 = a.y.min(b.y).min(c.y).ceil().max(0.0) as i32;
+            let y1 = (a.y.max(b.y).max(c.y).floor() as i32).min(h - 1);
+            if x0 > x1 || y0 > y1 {
+                continue;
+            }
+            let inv = 1.0 / area;
+            for py in y0..=y1 {
+                let fy = py as f32;
+                for px in x0..=x1 {
+                    let fx = px as f32;
+                    let w0 = ((c.x - b.x) * (fy - b.y) - (c.y - b.y) * (fx - b.x)) * inv;
+                    let w1 = ((a.x - c.x) * (fy - c.y) - (a.y - c.y) * (fx - c.x)) * inv;
+                    let w2 = 1.0 - w0 - w1;
+                    if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
+                        continue;
+                    }
+                    let z = w0 * a.z + w1 * b.z + w2 * c.z;
+                    let i = py as usize * self.w + px as usize;
+                    if z >= self.z[i] {
+                        continue;
+                    }
+                    self.z[i] = z;
+                    self.shade[i] = w0 * a.shade + w1 * b.shade + w2 * c.shade;
+                    self.facing[i] = w0 * a.facing + w1 * b.facing + w2 * c.facing;
+                    self.albedo[i] = [
+                        w0 * a.albedo[0] + w1 * b.albedo[0] + w2 * c.albedo[0],
+                        w0 * a.albedo[1] + w1 * b.albedo[1] + w2 * c.albedo[1],
+                        w0 * a.albedo[2] + w1 * b.albedo[2] + w2 * c.albedo[2],
+                    ];
+                    self.material[i] = [
+                        w0 * a.material[0] + w1 * b.material[0] + w2 * c.material[0],
+                        w0 * a.material[1] + w1 * b.material[1] + w2 * c.material[1],
+                    ];
+                }
+            }
+        }
+    }
+}
+
+/// A camera the mesh is projected into.
+struct View {
+    k: Intrinsics,
+    /// Colour camera frame → this camera's frame (identity for the colour camera).
+    from_color: Extrinsics,
+}
+
+impl View {
+    fn project(&self, p: [f64; 3]) -> Option<[f64; 2]> {
+        let p = self.from_color.apply(p);
+        if p[2] <= 0.01 {
+            return None;
+        }
+        let (xn, yn) = (p[0] / p[2], p[1] / p[2]);
+        let k = &self.k;
+        let (xd, yd) = if k.has_distortion() {
+            let [k1, k2, p1, p2, k3] = k.distortion;
+            let r2 = xn * xn + yn * yn;
+            let radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
+            (
+                xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn),
+                yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn,
+            )
+        } else {
+            (xn, yn)
+        };
+        Some([k.fx * xd + k.cx, k.fy * yd + k.cy])
+    }
+}
+
+pub(crate) struct Renderer {
+    geo: Geometry,
+    dots: Vec<Dot>,
+    radius_m: f64,
+    distance: f64,
+    noise: NoiseModel,
+    effects: bool,
+    color_view: View,
+    depth_view: Option<View>,
+    pos: Vec<[f64; 3]>,
+    normals: Vec<[f64; 3]>,
+    screen: Vec<ScreenVert>,
+    color_buf: Buffers,
+    depth_buf: Option<Buffers>,
+    light_map: Vec<f32>,
+    gauss: GaussTable,
+    seed: u64,
+    exposure_phase: [f64; 2],
+    clean: Vec<u8>,
+    prev_clean: Vec<u8>,
+    prev_lip_px: Vec<Option<[f64; 2]>>,
+}
+
+fn mul3(m: &[[f64; 3]; 3], p: [f64; 3]) -> [f64; 3] {
+    [
+        m[0][0] * p[0] + m[0][1] * p[1] + m[0][2] * p[2],
+        m[1][0] * p[0] + m[1][1] * p[1] + m[1][2] * p[2],
+        m[2][0] * p[0] + m[2][1] * p[1] + m[2][2] * p[2],
+    ]
+}
+
+fn matmul(a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let mut m = [[0.0; 3]; 3];
+    for (i, row) in m.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = (0..3).map(|k| a[i][k] * b[k][j]).sum();
+        }
+    }
+    m
+}
+
+/// Head rotation: yaw about y, then pitch about x, then roll about z (camera axes).
+fn head_rotation(h: &HeadState) -> [[f64; 3]; 3] {
+    let (sy, cy) = h.yaw.sin_cos();
+    let (sp, cp) = h.pitch.sin_cos();
+    let (sr, cr) = h.roll.sin_cos();
+    let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
+    let rx = [[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]];
+    let rz = [[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]];
+    matmul(&ry, &matmul(&rx, &rz))
+}
+
+fn quaternion(m: &[[f64; 3]; 3]) -> [f64; 4] {
+    let tr = m[0][0] + m[1][1] + m[2][2];
+    let q = if tr > 0.0 {
+        let s = (tr + 1.0).sqrt() * 2.0;
+        [
+            0.25 * s,
+            (m[2][1] - m[1][2]) / s,
+            (m[0][2] - m[2][0]) / s,
+            (m[1][0] - m[0][1]) / s,
+        ]
+    } else if m[0][0] > m[1][1] && m[0][0] > m[2][2] {
+        let s = (1.0 + m[0][0] - m[1][1] - m[2][2]).sqrt() * 2.0;
+        [
+            (m[2][1] - m[1][2]) / s,
+            0.25 * s,
+            (m[0][1] + m[1][0]) / s,
+            (m[0][2] + m[2][0]) / s,
+        ]
+    } else if m[1][1] > m[2][2] {
+        let s = (1.0 + m[1][1] - m[0][0] - m[2][2]).sqrt() * 2.0;
+        [
+            (m[0][2] - m[2][0]) / s,
+            (m[0][1] + m[1][0]) / s,
+            0.25 * s,
+            (m[1][2] + m[2][1]) / s,
+        ]
+    } else {
+        let s = (1.0 + m[2][2] - m[0][0] - m[1][1]).sqrt() * 2.0;
+        [
+            (m[1][0] - m[0][1]) / s,
+            (m[0][2] + m[2][0]) / s,
+            (m[1][2] + m[2][1]) / s,
+            0.25 * s,
+        ]
+    };
+    // Canonical sign: w ≥ 0.
+    if q[0] < 0.0 {
+        [-q[0], -q[1], -q[2], -q[3]]
+    } else {
+        q
+    }
+}
+
+fn invert(e: &Extrinsics) -> Extrinsics {
+    let r = e.rotation;
+    let rt = [
+        [r[0][0], r[1][0], r[2][0]],
+        [r[0][1], r[1][1], r[2][1]],
+        [r[0][2], r[1][2], r[2][2]],
+    ];
+    let t = mul3(&rt, e.translation);
+    Extrinsics {
+        rotation: rt,
+        translation: [-t[0], -t[1], -t[2]],
+    }
+}
+
+impl Renderer {
+    pub fn new(cfg: &SynthConfig) -> Self {
+        let geo = Geometry::new();
+        let layout = &cfg.layout;
+        let lin = |c: [u8; 3]| {
+            [
+                c[0] as f32 / 255.0,
+                c[1] as f32 / 255.0,
+                c[2] as f32 / 255.0,
+            ]
+        };
+        let mut dots = Vec::new();
+        let names = layout.names();
+        let mut materials = head::lip_dot_material(layout.lip_dots, geo.zc);
+        materials.extend(
+            layout
+                .forehead
+                .iter()
+                .map(|f| head::front_material(f.x_mm / 1000.0, f.y_mm / 1000.0)),
+        );
+        for (k, (name, (a, v))) in names.into_iter().zip(materials).enumerate() {
+            let is_lip = k < layout.lip_dots;
+            let (ma, mv) = head::material_metric(a, v, geo.zc);
+            dots.push(Dot {
+                name,
+                attrs: head::attrs_at(a, v, geo.zc),
+                material: [a as f32, v as f32],
+                metric: [ma as f32, mv as f32],
+                paint: lin(if is_lip {
+                    layout.lip_color
+                } else {
+                    layout.forehead_color
+                }),
+                is_lip,
+            });
+        }
+        let (w, h) = (cfg.camera.width as usize, cfg.camera.height as usize);
+        let light_map = (0..w * h)
+            .map(|i| {
+                if !cfg.colour_effects {
+                    return 1.0;
+                }
+                let (x, y) = (
+                    (i % w) as f32 / w as f32 - 0.5,
+                    (i / w) as f32 / h as f32 - 0.5,
+                );
+                // Vignetting and a brighter left side (a key light off to one side).
+                (1.0 - 0.35 * (x * x + y * y)) * (1.0 - 0.16 * x)
+            })
+            .collect();
+        let depth_view = cfg.depth_camera.as_ref().map(|(k, depth_to_color)| View {
+            k: *k,
+            from_color: invert(depth_to_color),
+        });
+        let depth_buf = cfg
+            .depth_camera
+            .as_ref()
+            .map(|(k, _)| Buffers::new(k.width as usize, k.height as usize));
+        let mut rng = Rng::new(cfg.seed ^ 0xe4905);
+        let n = geo.attrs.len();
+        Self {
+            dots,
+            radius_m: layout.radius_mm / 1000.0,
+            distance: cfg.distance_m,
+            noise: cfg.noise,
+            effects: cfg.colour_effects,
+            color_view: View {
+                k: cfg.camera,
+                from_color: Extrinsics::IDENTITY,
+            },
+            depth_view,
+            pos: Vec::with_capacity(n),
+            normals: Vec::with_capacity(n),
+            screen: vec![ScreenVert::default(); n],
+            color_buf: Buffers::new(w, h),
+            depth_buf,
+            light_map,
+            gauss: GaussTable::new(cfg.seed),
+            seed: cfg.seed,
+            exposure_phase: [
+                rng.range(0.0, std::f64::consts::TAU),
+                rng.range(0.0, std::f64::consts::TAU),
+            ],
+            clean: vec![0; w * h * 3],
+            prev_clean: Vec::new(),
+            prev_lip_px: Vec::new(),
+            geo,
+        }
+    }
+
+    pub fn dot_names(&self) -> Vec<String> {
+        self.dots.iter().map(|d| d.name.clone()).collect()
+    }
+
+    pub fn render(
+        &mut self,
+        index: u64,
+        t: f64,
+        mouth: &MouthState,
+        head_state: &HeadState,
+    ) -> RenderOutput {
+        let rot = head_rotation(head_state);
+        let base = [0.0, 0.0, self.distance];
+        let pivot = [
+            head::PIVOT[0] + base[0],
+            head::PIVOT[1] + base[1],
+            head::PIVOT[2] + base[2],
+        ];
+        let tr = head_state.translation;
+        // H frame → camera: p_cam = R (p + base - pivot) + pivot + tr.
+        let to_camera = |p: [f64; 3]| {
+            let q = mul3(
+                &rot,
+                [
+                    p[0] + base[0] - pivot[0],
+                    p[1] + base[1] - pivot[1],
+                    p[2] + base[2] - pivot[2],
+                ],
+            );
+            [
+                q[0] + pivot[0] + tr[0],
+                q[1] + pivot[1] + tr[1],
+                q[2] + pivot[2] + tr[2],
+            ]
+        };
+
+        // Mesh.
+        self.pos.clear();
+        self.pos
+            .extend(self.geo.attrs.iter().map(|a| head::deform(a, mouth)));
+        let mut normals = std::mem::take(&mut self.normals);
+        self.geo.normals(&self.pos, &mut normals);
+        self.normals = normals;
+        let light = {
+            let l = [-0.35f64, -0.45, -0.8];
+            let n = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
+            [l[0] / n, l[1] / n, l[2] / n]
+        };
+        let cam_pos: Vec<[f64; 3]> = self.pos.iter().map(|&p| to_camera(p)).collect();
+        for (i, sv) in self.screen.iter_mut().enumerate() {
+            let p = cam_pos[i];
+            let n = mul3(&rot, self.normals[i]);
+            let dist = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            let facing = -(n[0] * p[0] + n[1] * p[1] + n[2] * p[2]) / dist;
+            let diffuse = (n[0] * light[0] + n[1] * light[1] + n[2] * light[2]).max(0.0);
+            let at = &self.geo.attrs[i];
+            *sv = match self.color_view.project(p) {
+                Some([x, y]) => ScreenVert {
+                    x: x as f32,
+                    y: y as f32,
+                    z: p[2] as f32,
+                    shade: (0.3 + 0.7 * diffuse) as f32,
+                    facing: facing.max(0.0) as f32,
+                    albedo: at.albedo,
+                    material: self.geo.material[i],
+                    valid: true,
+                },
+                None => ScreenVert::default(),
+            };
+        }
+        self.color_buf.clear();
+        self.color_buf.raster(&self.screen, &self.geo.tris);
+
+        // Dots: exact centres, visibility, paint.
+        let mut points = std::collections::BTreeMap::new();
+        let mut visible = std::collections::BTreeMap::new();
+        let mut lip_px = Vec::with_capacity(self.dots.len());
+        let r2 = (self.radius_m * self.radius_m) as f32;
+        for dot in &self.dots {
+            let centre = to_camera(head::deform(&dot.attrs, mouth));
+            points.insert(dot.name.clone(), centre);
+            let px = self.color_view.project(centre);
+            let mut seen = false;
+            if let Some([u, v]) = px {
+                let buf = &mut self.color_buf;
+                let (cu, cv) = (u.round() as i64, v.round() as i64);
+                if cu >= 0 && cv >= 0 && (cu as usize) < buf.w && (cv as usize) < buf.h {
+                    let i = cv as usize * buf.w + cu as usize;
+                    let m = buf.material[i];
+                    let d = ((m[0] - dot.material[0]) * dot.metric[0]).powi(2)
+                        + ((m[1] - dot.material[1]) * dot.metric[1]).powi(2);
+                    // Visible exactly when the surface the camera sees at the centre's pixel
+                    // is this dot's paint: a hidden dot never shows there.
+                    seen = buf.z[i].is_finite() && d <= r2;
+                }
+                // Paint every pixel whose surface is this dot's material.
+                let reach =
+                    (self.radius_m * self.color_view.k.fx / centre[2] * 2.0 + 3.0).ceil() as i64;
+                let (xa, xb) = ((cu - reach).max(0), (cu + reach).min(buf.w as i64 - 1));
+                let (ya, yb) = ((cv - reach).max(0), (cv + reach).min(buf.h as i64 - 1));
+                for y in ya..=yb {
+                    for x in xa..=xb {
+                        let i = y as usize * buf.w + x as usize;
+                        if !buf.z[i].is_finite() {
+                            continue;
+                        }
+                        let m = buf.material[i];
+                        let d = ((m[0] - dot.material[0]) * dot.metric[0]).powi(2)
+                            + ((m[1] - dot.material[1]) * dot.metric[1]).powi(2);
+                        if d <= r2 {
+                            buf.albedo[i] = dot.paint;
+                        }
+                    }
+                }
+            }
+            visible.insert(dot.name.clone(), seen);
+            if dot.is_lip {
+                lip_px.push(px);
+            }
+        }
+
+        let color = self.compose_color(index, t, &lip_px);
+        self.prev_lip_px = lip_px;
+
+        // Depth from the colour camera (registered) or from the depth camera.
+        let depth = match (&self.depth_view, &mut self.depth_buf) {
+            (Some(view), Some(buf)) => {
+                for (i, sv) in self.screen.iter_mut().enumerate() {
+                    let p = view.from_color.apply(cam_pos[i]);
+                    sv.valid = false;
+                    if let Some([x, y]) = view.project(cam_pos[i]) {
+                        sv.x = x as f32;
+                        sv.y = y as f32;
+                        sv.z = p[2] as f32;
+                        let n = view.from_color.rotation;
+                        let nn = mul3(&n, mul3(&rot, self.normals[i]));
+                        let dist = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                        sv.facing =
+                            (-(nn[0] * p[0] + nn[1] * p[1] + nn[2] * p[2]) / dist).max(0.0) as f32;
+                        sv.valid = true;
+                    }
+                }
+                buf.clear();
+                buf.raster(&self.screen, &self.geo.tris);
+                depth_image(buf, self.noise, &self.gauss, self.seed, index, view.k.fx)
+            }
+            _ => depth_image(
+                &self.color_buf,
+                self.noise,
+                &self.gauss,
+                self.seed,
+                index,
+                self.color_view.k.fx,
+            ),
+        };
+
+        let neutral_pivot = pivot;
+        let rp = mul3(&rot, neutral_pivot);
+        let translation = [
+            neutral_pivot[0] + tr[0] - rp[0],
+            neutral_pivot[1] + tr[1] - rp[1],
+            neutral_pivot[2] + tr[2] - rp[2],
+        ];
+        let ground_truth = GroundTruth {
+            t,
+            points,
+            visible,
+            head: HeadPose {
+                rotation: quaternion(&rot),
+                translation,
+            },
+        };
+        RenderOutput {
+            color,
+            depth,
+            ground_truth,
+        }
+    }
+
+    fn compose_color(&mut self, index: u64, t: f64, lip_px: &[Option<[f64; 2]>]) -> ColorImage {
+        let buf = &self.color_buf;
+        let exposure = if self.effects {
+            let tau = std::f64::consts::TAU;
+            (1.0 + 0.05 * (tau * t / 11.0 + self.exposure_phase[0]).sin()
+                + 0.025 * (tau * t / 3.7 + self.exposure_phase[1]).sin()) as f32
+        } else {
+            1.0
+        };
+        for i in 0..buf.w * buf.h {
+            let (rgb, gain) = if buf.z[i].is_finite() {
+                (buf.albedo[i], buf.shade[i])
+            } else {
+                (WALL_RGB, 0.9)
+            };
+            let g = gain * self.light_map[i] * exposure * 255.0;
+            let o = i * 3;
+            self.clean[o] = (rgb[2] * g).clamp(0.0, 255.0) as u8;
+            self.clean[o + 1] = (rgb[1] * g).clamp(0.0, 255.0) as u8;
+            self.clean[o + 2] = (rgb[0] * g).clamp(0.0, 255.0) as u8;
+        }
+        // Motion blur where the lips move fast: the exposure also saw where they just were.
+        if self.effects && self.prev_clean.len() == self.clean.len() {
+            let mut speed: f64 = 0.0;
+            let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+            for (now, before) in lip_px.iter().zip(&self.prev_lip_px) {
+                if let (Some(a), Some(b)) = (now, before) {
+                    speed = speed.max(((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt());
+                    x0 = x0.min(a[0]).min(b[0]);
+                    y0 = y0.min(a[1]).min(b[1]);
+                    x1 = x1.max(a[0]).max(b[0]);
+                    y1 = y1.max(a[1]).max(b[1]);
+                }
+            }
+            let alpha = ((speed - 1.5) / 10.0).clamp(0.0, 0.4) as f32;
+            if alpha > 0.0 {
+                let margin = 12.0;
+                let xa = (x0 - margin).max(0.0) as usize;
+                let xb = ((x1 + margin) as usize).min(buf.w - 1);
+                let ya = (y0 - margin).max(0.0) as usize;
+                let yb = ((y1 + margin) as usize).min(buf.h - 1);
+                for y in ya..=yb {
+                    for o in (y * buf.w + xa) * 3..(y * buf.w + xb + 1) * 3 {
+                        let v = self.clean[o] as f32 * (1.0 - alpha)
+                            + self.prev_clean[o] as f32 * alpha;
+                        self.clean[o] = v.round() as u8;
+                    }
+                }
+            }
+        }
+        let mut out = ColorImage {
+            width: buf.w as u32,
+            height: buf.h as u32,
+            data: self.clean.clone(),
+        };
+        if self.effects {
+            // Sensor noise: read noise plus a shot-noise-like part growing with the signal.
+            let mut rng = FastRng::new(self.seed ^ index.wrapping_mul(0x9e37_79b9) ^ 0xc010);
+            for v in out.data.iter_mut() {
+                let sigma = 1.5 + 0.012 * *v as f32;
+                let n = self.gauss.get(rng.next() >> 20) * sigma;
+                *v = (*v as f32 + n).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        std::mem::swap(&mut self.prev_clean, &mut self.clean);
+        if self.clean.len() != self.prev_clean.len() {
+            self.clean = vec![0; self.prev_clean.len()];
+        }
+        out
+    }
+}
+
+/// Depth in millimetres from a z-buffer, through a sensor model.
+fn depth_image(
+    buf: &Buffers,
+    noise: NoiseModel,
+    gauss: &GaussTable,
+    seed: u64,
+    index: u64,
+    fx: f64,
+) -> DepthImage {
+    let (w, h) = (buf.w, buf.h);
+    let mut out = DepthImage::new(w as u32, h as u32);
+    let mut rng = FastRng::new(seed ^ index.wrapping_mul(0x51_7cc1_b727_220a) ^ 0xde97);
+    let z_at = |i: usize| {
+        if buf.z[i].is_finite() {
+            buf.z[i]
+        } else {
+            WALL_Z
+        }
+    };
+    match noise {
+        NoiseModel::None => {
+            for i in 0..w * h {
+                out.data[i] = (z_at(i) * 1000.0).round() as u16;
+            }
+        }
+        NoiseModel::Kinect => {
+            // Disparity in 1/8 px for a 75 mm baseline at this focal length; σ chosen for
+            // 1.5 mm at 0.6 m.
+            let fb8 = (8.0 * 0.075 * fx) as f32;
+            let sigma_d = 0.0015 * fb8 / (0.6 * 0.6);
+            // The sensor matches correlation windows, so its disparity error is spatially
+            // correlated: a smooth field (Gaussian nodes every 4 px, bilinear between them; the
+            // 1.5 factor restores the per-pixel σ that interpolation averages away) plus a
+            // small independent part.
+            let (gw, gh) = (w / 4 + 2, h / 4 + 2);
+            let field: Vec<f32> = (0..gw * gh)
+                .map(|_| gauss.get(rng.next() >> 20) * sigma_d * 1.5)
+                .collect();
+            for y in 0..h {
+                for x in 0..w {
+                    let i = y * w + x;
+                    let z = z_at(i);
+                    let head = buf.z[i].is_finite();
+                    if !head {
+                        out.data[i] = 0;
+                        continue;
+                    }
+                    let mut drop_p: f32 = 0.0;
+                    {
+                        let f = buf.facing[i];
+                        if f < 0.25 {
+                            drop_p = drop_p.max(0.9 * (1.0 - f / 0.25));
+                        }
+                        let a = buf.albedo[i];
+                        let lum = 0.3 * a[0] + 0.59 * a[1] + 0.11 * a[2];
+                        if lum < 0.2 {
+                            drop_p = drop_p.max(0.85);
+                        }
+                    }
+                    // Silhouette edges: a neighbour much nearer or farther.
+                    let edge = [
+                        (x > 0, i.wrapping_sub(1)),
+                        (x + 1 < w, i + 1),
+                        (y > 0, i.wrapping_sub(w)),
+                        (y + 1 < h, i + w),
+                    ]
+                    .iter()
+                    .any(|&(ok, j)| ok && (z_at(j) - z).abs() > 0.03);
+                    if edge {
+                        drop_p = drop_p.max(0.75);
+                    }
+                    if drop_p > 0.0 && rng.unit() < drop_p {
+                        out.data[i] = 0;
+                        continue;
+                    }
+                    let (gx, fx_) = (x / 4, (x % 4) as f32 / 4.0);
+                    let (gy, fy_) = (y / 4, (y % 4) as f32 / 4.0);
+                    let n00 = field[gy * gw + gx];
+                    let n10 = field[gy * gw + gx + 1];
+                    let n01 = field[(gy + 1) * gw + gx];
+                    let n11 = field[(gy + 1) * gw + gx + 1];
+                    let smooth = (n00 * (1.0 - fx_) + n10 * fx_) * (1.0 - fy_)
+                        + (n01 * (1.0 - fx_) + n11 * fx_) * fy_;
+                    let d = fb8 / z + smooth + gauss.get(rng.next() >> 20) * sigma_d * 0.25;
+                    let q = d.round().max(1.0);
+                    out.data[i] = ((fb8 / q) * 1000.0).round().min(65535.0) as u16;
+                }
+            }
+        }
+        NoiseModel::Realsense => {
+            for i in 0..w * h {
+                if !buf.z[i].is_finite() {
+                    out.data[i] = 0;
+                    continue;
+                }
+                let z = z_at(i);
+                let noisy = z * (1.0 + 0.005 * gauss.get(rng.next() >> 20));
+                out.data[i] = (noisy * 1000.0).round().clamp(0.0, 65535.0) as u16;
+                if buf.facing[i] < 0.15 && rng.unit() < 0.7 {
+                    out.data[i] = 0;
+                }
+            }
+            // Speckle holes: small blobs where stereo matching failed.
+            let holes = (w * h) / 700;
+            for _ in 0..holes {
+                let cx = (rng.next() % w as u64) as i64;
+                let cy = (rng.next() % h as u64) as i64;
+                let r = 1 + (rng.next() % 2) as i64;
+                for y in (cy - r).max(0)..=(cy + r).min(h as i64 - 1) {
+                    for x in (cx - r).max(0)..=(cx + r).min(w as i64 - 1) {
+                        if (x - cx).pow(2) + (y - cy).pow(2) <= r * r {
+                            out.data[y as usize * w + x as usize] = 0;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out
+}
