@@ -182,7 +182,7 @@ async fn serve<F: Factory>(
     );
     let throttle = config.logging.throttle_s.duration();
     let source_thread = source::spawn(
-        factory.opener(&spec),
+        factory.opener(&spec, config.source.stall_timeout_s.duration()),
         spec.clone(),
         shared.clone(),
         backoff,
