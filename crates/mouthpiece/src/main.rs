@@ -26,6 +26,10 @@ enum Command {
     Process(cmd::process::Args),
     /// Measure detection, tracking and retargeting on synthetic sessions with ground truth.
     Evaluate(cmd::evaluate::Args),
+    /// Validate a daemon configuration file and exit (0 valid, 2 invalid).
+    CheckConfig(cmd::check_config::Args),
+    /// Run the daemon: source → detect → track → retarget → WebSocket server, with takes.
+    Run(cmd::run::Args),
     /// Render a synthetic performer (head with painted dots, depth + colour, ground truth) to MCAP.
     Synth(cmd::synth::Args),
     /// Record a source (camera, Dummy device, replay) to MCAP, or an OpenNI2 source to .oni.
@@ -43,6 +47,8 @@ fn main() -> ExitCode {
         Command::Retarget(args) => cmd::retarget::run(args),
         Command::Process(args) => cmd::process::run(args),
         Command::Evaluate(args) => cmd::evaluate::run(args),
+        Command::CheckConfig(args) => cmd::check_config::run(args),
+        Command::Run(args) => cmd::run::run(args),
         Command::Synth(args) => cmd::synth::run(args),
         Command::Record(args) => cmd::record::run(args),
         Command::Devices(args) => cmd::devices::run(args),
@@ -55,12 +61,8 @@ fn main() -> ExitCode {
 }
 
 /// Logs go to stderr (stdout may carry data, e.g. `retarget --out -`). `RUST_LOG` filters;
-/// the default is INFO for mouthpiece's own crates.
+/// the default is INFO. journald-friendly: no colours unless stderr is a terminal, no
+/// timestamps under systemd (see `mouthpiece_daemon::logging`).
 fn init_logging() {
-    use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .init();
+    mouthpiece_daemon::logging::init();
 }

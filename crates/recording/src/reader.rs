@@ -126,7 +126,14 @@ impl MessageReader {
                     return Ok(None);
                 }
                 Some(Ok(event)) => event,
-                Some(Err(mcap::McapError::UnexpectedEof)) => {
+                // A writer killed while a chunk was open leaves that chunk's header with its
+                // placeholder length (the writer patches it when the chunk closes); the mcap
+                // reader reports that as an unexpected end of chunk. At the end of the file it
+                // is the same cut as above.
+                Some(Err(mcap::McapError::UnexpectedEof))
+                | Some(Err(mcap::McapError::UnexpectedEoc))
+                    if at_end_of_file(&self.file, self.bytes_read) =>
+                {
                     self.done = true;
                     self.truncated = true;
                     if std::mem::replace(&mut self.truncation_warned, true) {
@@ -210,6 +217,11 @@ impl MessageReader {
             }
         }
     }
+}
+
+/// True when every byte of the file has been read.
+fn at_end_of_file(file: &File, bytes_read: u64) -> bool {
+    file.metadata().map_or(true, |m| bytes_read >= m.len())
 }
 
 impl Iterator for MessageReader {

@@ -358,6 +358,9 @@ pub(crate) struct HubInner {
     /// Recycled frame slots; a slot is reused once nobody else holds it.
     pool: Mutex<Vec<Arc<PublishedFrame>>>,
     pool_size: usize,
+    /// Tokens set by [`Hub::set_tokens`] (a config reload); they replace the
+    /// `ServerConfig`'s for new connections.
+    tokens: Mutex<Option<(Option<crate::config::Token>, Option<crate::config::Token>)>>,
 }
 
 impl Hub {
@@ -378,6 +381,7 @@ impl Hub {
                 pool: Mutex::new(Vec::new()),
                 // The ring's slots plus frames in flight in client tasks.
                 pool_size: capacity + 64,
+                tokens: Mutex::new(None),
             }),
         };
         (hub, ControlReceiver { rx })
@@ -476,6 +480,35 @@ impl Hub {
     /// Frames published so far.
     pub fn frames_published(&self) -> u64 {
         self.inner.next_seq.load(Ordering::Relaxed)
+    }
+
+    /// Replaces the read and control tokens that new connections must present (the daemon's
+    /// SIGHUP reload). Connected clients keep their access.
+    pub fn set_tokens(
+        &self,
+        read: Option<crate::config::Token>,
+        control: Option<crate::config::Token>,
+    ) {
+        *self.inner.tokens.lock().unwrap_or_else(|e| e.into_inner()) = Some((read, control));
+    }
+
+    /// The access a presented token grants: the tokens of the last [`Hub::set_tokens`], or
+    /// the server configuration's.
+    pub(crate) fn access_for(
+        &self,
+        config: &crate::config::ServerConfig,
+        presented: Option<&str>,
+    ) -> Option<crate::config::Access> {
+        let tokens = self.inner.tokens.lock().unwrap_or_else(|e| e.into_inner());
+        match &*tokens {
+            Some((read, control)) => crate::config::ServerConfig {
+                read_token: read.clone(),
+                control_token: control.clone(),
+                ..crate::config::ServerConfig::default()
+            }
+            .access_for(presented),
+            None => config.access_for(presented),
+        }
     }
 
     /// Clients currently connected (WebSocket sessions).

@@ -274,7 +274,7 @@ async fn upgrade(
             .and_then(|v| v.strip_prefix("Bearer "))
             .map(|v| v.trim().to_owned());
         let token = token_entry.or(bearer).or_else(|| req.query_param("token"));
-        let Some(access) = shared.config.access_for(token.as_deref()) else {
+        let Some(access) = shared.hub.access_for(&shared.config, token.as_deref()) else {
             return Err((
                 401,
                 if token.is_some() {

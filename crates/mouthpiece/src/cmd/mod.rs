@@ -1,9 +1,11 @@
 //! One module per subcommand.
 
+pub mod check_config;
 pub mod devices;
 pub mod evaluate;
 pub mod process;
 pub mod record;
 pub mod export;
 pub mod retarget;
+pub mod run;
 pub mod synth;

@@ -1,0 +1,906 @@
+//! mouthpiece's configuration: one TOML file.
+//!
+//! `config/mouthpiece.toml` in the repository is the documented example with every key and its
+//! default; a system install reads [`SYSTEM_CONFIG_PATH`]. With no file at all the daemon runs
+//! on [`Config::default`] (the embedded default: the demo recording, human and wolf, the server
+//! on 127.0.0.1:9870).
+//!
+//! Validation is strict and happens once, at start (and on every reload): unknown keys, wrong
+//! types and out-of-range values are rejected with an error that names the file, the line and
+//! column, the key (dotted path such as `server.listen`) and what was expected.
+//!
+//! Paths inside a config file (characters, takes folder, token files, TLS files, a `replay:`
+//! source's file) are resolved against the directory that holds the config file, so a config
+//! means the same thing whatever the working directory. The embedded default has no file: its
+//! relative paths are relative to the working directory (the repository root for
+//! `scripts/run`).
+//!
+//! Tokens come from the environment or a file (or, discouraged, the file itself) and are held
+//! as [`Secret`], whose `Debug` and `Display` never show the value.
+//!
+//! The `[detect]` section belongs to the detector (issue 5); it is kept as written and parsed
+//! into the detector's own config type with [`Config::extract`], which keeps the file's
+//! line numbers in its errors; so is `[track]` (labels, neutral calibration seconds).
+
+use std::fmt;
+use std::net::SocketAddr;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::de::DeserializeOwned;
+use serde::Deserialize;
+
+/// Where a system install keeps its configuration.
+pub const SYSTEM_CONFIG_PATH: &str = "/etc/mouthpiece/mouthpiece.toml";
+
+/// The source of the embedded default: the committed demo session, looped at real-time pace.
+pub const DEFAULT_SOURCE_SPEC: &str = "replay:recordings/demo.mcap?loop=1&speed=1.0";
+
+/// The server's default address: loopback only, so no token is required.
+pub const DEFAULT_LISTEN: &str = "127.0.0.1:9870";
+
+/// Why a configuration was rejected.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read config file {path}")]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML, has an unknown key, or a value of the wrong type or range.
+    #[error("{location}: {message}")]
+    Invalid { location: Location, message: String },
+    /// A token's environment variable is unset or its file cannot be read.
+    #[error("{location}: cannot read token for `{key}`")]
+    Token {
+        location: Location,
+        key: String,
+        #[source]
+        source: TokenError,
+    },
+}
+
+impl ConfigError {
+    /// The dotted key the error is about, when it is about one.
+    pub fn key(&self) -> Option<&str> {
+        match self {
+            ConfigError::Read { .. } => None,
+            ConfigError::Invalid { location, .. } => location.key.as_deref(),
+            ConfigError::Token { key, .. } => Some(key),
+        }
+    }
+}
+
+/// Why a token could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum TokenError {
+    #[error("environment variable {0} is not set (or not UTF-8)")]
+    EnvMissing(String),
+    #[error("cannot read token file {path}")]
+    File {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("the token is empty")]
+    Empty,
+}
+
+/// File, line, column and key of a configuration error.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Location {
+    /// The config file, or `<embedded default>` / `<command line>`.
+    pub file: String,
+    /// 1-based; 0 when unknown.
+    pub line: usize,
+    /// 1-based; 0 when unknown.
+    pub column: usize,
+    /// Dotted path of the key, e.g. `server.listen`.
+    pub key: Option<String>,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if self.line > 0 {
+            write!(f, ":{}:{}", self.line, self.column)?;
+        }
+        if let Some(key) = &self.key {
+            write!(f, ": key `{key}`")?;
+        }
+        Ok(())
+    }
+}
+
+/// A value that must never be printed (tokens). `Debug` and `Display` show `***`.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Secret(String);
+
+impl Secret {
+    pub fn new(value: impl Into<String>) -> Self {
+        Secret(value.into())
+    }
+
+    /// The secret itself, for comparison by the server. Never log it.
+    pub fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Debug for Secret {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("Secret(***)")
+    }
+}
+
+impl fmt::Display for Secret {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("***")
+    }
+}
+
+/// The whole configuration. Every section has a default; see `config/mouthpiece.toml`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    pub source: SourceConfig,
+    pub server: ServerConfig,
+    pub characters: CharactersConfig,
+    pub takes: TakesConfig,
+    pub timecode: TimecodeConfig,
+    pub logging: LoggingConfig,
+    /// The detector's section (issue 5), parsed by [`Config::extract`].
+    pub detect: toml::Table,
+    /// The tracker's section (issue 5: labels, calibration seconds), parsed by
+    /// [`Config::extract`].
+    pub track: toml::Table,
+    /// Where this configuration came from, with its text (for [`Config::extract`]).
+    #[serde(skip)]
+    pub origin: Origin,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            source: SourceConfig::default(),
+            server: ServerConfig::default(),
+            characters: CharactersConfig::default(),
+            takes: TakesConfig::default(),
+            timecode: TimecodeConfig::default(),
+            logging: LoggingConfig::default(),
+            detect: toml::Table::new(),
+            track: toml::Table::new(),
+            origin: Origin::Embedded,
+        }
+    }
+}
+
+/// Where a configuration came from. `Debug` leaves the text out: it may hold a token.
+#[derive(Clone, PartialEq, Default)]
+pub enum Origin {
+    /// No file: [`Config::default`].
+    #[default]
+    Embedded,
+    File {
+        path: PathBuf,
+        text: Arc<str>,
+    },
+}
+
+impl fmt::Debug for Origin {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Origin::Embedded => f.write_str("Embedded"),
+            Origin::File { path, .. } => f
+                .debug_struct("File")
+                .field("path", path)
+                .finish_non_exhaustive(),
+        }
+    }
+}
+
+impl Origin {
+    pub fn describe(&self) -> String {
+        match self {
+            Origin::Embedded => "<embedded default>".to_owned(),
+            Origin::File { path, .. } => path.display().to_string(),
+        }
+    }
+}
+
+/// `[source]`: where frames come from, and how a lost source is retried.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SourceConfig {
+    /// `replay:PATH[?loop=1&speed=1.0]`, `openni2:` / `openni2:URI`, `v4l2:COLOUR[+DEPTH]`.
+    pub spec: SourceSpec,
+    /// First wait before reopening a lost source, seconds; doubles up to `retry_max_s`.
+    pub retry_initial_s: PositiveSeconds,
+    pub retry_max_s: PositiveSeconds,
+    /// No frame for this long from an open source: report `source down` to clients.
+    pub stall_timeout_s: PositiveSeconds,
+}
+
+impl Default for SourceConfig {
+    fn default() -> Self {
+        SourceConfig {
+            spec: SourceSpec(DEFAULT_SOURCE_SPEC.to_owned()),
+            retry_initial_s: PositiveSeconds(0.5),
+            retry_max_s: PositiveSeconds(10.0),
+            stall_timeout_s: PositiveSeconds(2.0),
+        }
+    }
+}
+
+/// A source spec string; the scheme is checked here, the rest by the capture crate.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(try_from = "String")]
+pub struct SourceSpec(pub String);
+
+impl SourceSpec {
+    pub const SCHEMES: [&'static str; 3] = ["replay:", "openni2:", "v4l2:"];
+
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// The file of a `replay:` spec, without its query.
+    pub fn replay_path(&self) -> Option<&str> {
+        let rest = self.0.strip_prefix("replay:")?;
+        Some(rest.split_once('?').map_or(rest, |(path, _)| path))
+    }
+}
+
+impl TryFrom<String> for SourceSpec {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        if !Self::SCHEMES.iter().any(|scheme| s.starts_with(scheme)) {
+            return Err(format!(
+                "expected a source spec starting with replay:, openni2: or v4l2:, got {s:?}"
+            ));
+        }
+        if s.starts_with("replay:") && SourceSpec(s.clone()).replay_path() == Some("") {
+            return Err(format!("expected replay:PATH, got {s:?} (no path)"));
+        }
+        Ok(SourceSpec(s))
+    }
+}
+
+impl std::str::FromStr for SourceSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        SourceSpec::try_from(s.to_owned())
+    }
+}
+
+/// A finite number of seconds greater than zero.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(try_from = "f64")]
+pub struct PositiveSeconds(pub f64);
+
+impl PositiveSeconds {
+    pub fn duration(self) -> std::time::Duration {
+        std::time::Duration::from_secs_f64(self.0)
+    }
+}
+
+impl TryFrom<f64> for PositiveSeconds {
+    type Error = String;
+    fn try_from(v: f64) -> Result<Self, String> {
+        if v.is_finite() && v > 0.0 && v <= 86_400.0 {
+            Ok(PositiveSeconds(v))
+        } else {
+            Err(format!(
+                "expected a number of seconds > 0 and <= 86400, got {v}"
+            ))
+        }
+    }
+}
+
+/// `[server]`: the WebSocket/HTTP server (issue 6).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ServerConfig {
+    /// Address and port. Anything but loopback requires both tokens.
+    pub listen: ListenAddr,
+    /// Browser origins allowed to connect (`Origin` header); empty = same host only.
+    pub allowed_origins: Vec<String>,
+    pub max_clients: u32,
+    /// Token to subscribe (read) and to send control requests (calibrate, record).
+    pub read_token: Option<TokenRef>,
+    pub control_token: Option<TokenRef>,
+    /// PEM certificate chain and key; both set = wss/https.
+    pub tls_cert: Option<PathBuf>,
+    pub tls_key: Option<PathBuf>,
+    /// The tokens, read from where `read_token` / `control_token` say.
+    #[serde(skip)]
+    pub tokens: Tokens,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        ServerConfig {
+            listen: ListenAddr(DEFAULT_LISTEN.parse().expect("valid default address")),
+            allowed_origins: Vec::new(),
+            max_clients: 64,
+            read_token: None,
+            control_token: None,
+            tls_cert: None,
+            tls_key: None,
+            tokens: Tokens::default(),
+        }
+    }
+}
+
+/// A socket address `IP:PORT`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(try_from = "String")]
+pub struct ListenAddr(pub SocketAddr);
+
+impl TryFrom<String> for ListenAddr {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        s.parse::<SocketAddr>().map(ListenAddr).map_err(|_| {
+            format!("expected an address like 127.0.0.1:9870 or [::1]:9870, got {s:?}")
+        })
+    }
+}
+
+impl std::str::FromStr for ListenAddr {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        ListenAddr::try_from(s.to_owned())
+    }
+}
+
+/// Where a token comes from: exactly one of `env`, `file` or `value`.
+#[derive(Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TokenRef {
+    /// Name of an environment variable holding the token.
+    pub env: Option<String>,
+    /// A file holding the token (trailing newline ignored), e.g. a systemd credential.
+    pub file: Option<PathBuf>,
+    /// The token itself. Discouraged: config files get copied around.
+    pub value: Option<Secret>,
+}
+
+impl fmt::Debug for TokenRef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("TokenRef")
+            .field("env", &self.env)
+            .field("file", &self.file)
+            .field("value", &self.value.as_ref().map(|_| "***"))
+            .finish()
+    }
+}
+
+impl<'de> Deserialize<'de> for Secret {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        String::deserialize(d).map(Secret)
+    }
+}
+
+/// Tokens as read at load time.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Tokens {
+    pub read: Option<Secret>,
+    pub control: Option<Secret>,
+}
+
+/// `[characters]`: which characters are driven, all at once.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CharactersConfig {
+    /// Character files (TOML, issue 2). Empty = the built-in human and wolf.
+    pub files: Vec<PathBuf>,
+}
+
+#[allow(clippy::derivable_impls)] // spelled out: the default is part of the documented config
+impl Default for CharactersConfig {
+    fn default() -> Self {
+        CharactersConfig { files: Vec::new() }
+    }
+}
+
+/// `[takes]`: recording while live.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TakesConfig {
+    /// Folder for take files; created if missing. Under systemd, `$STATE_DIRECTORY/takes`
+    /// is used when this is left relative and a state directory is given.
+    pub folder: PathBuf,
+    /// Start a take as soon as the daemon runs.
+    pub record_at_start: bool,
+    /// Slate of takes not named by a control message or the command line.
+    pub slate: Slate,
+    /// At most this many seconds of a take are lost on a crash (chunk flush interval).
+    pub flush_s: PositiveSeconds,
+    /// Stop a take when the folder's file system has less free space than this.
+    pub min_free_mb: u64,
+    /// Frames buffered between processing and the take writer before frames are dropped.
+    pub queue_frames: u32,
+}
+
+impl Default for TakesConfig {
+    fn default() -> Self {
+        TakesConfig {
+            folder: PathBuf::from("takes"),
+            record_at_start: false,
+            slate: Slate("take".to_owned()),
+            flush_s: PositiveSeconds(1.0),
+            min_free_mb: 200,
+            queue_frames: 120,
+        }
+    }
+}
+
+/// A slate name: letters, digits, `-`, `_`, `.`, 1 to 64 characters (it becomes a file name).
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(try_from = "String")]
+pub struct Slate(pub String);
+
+impl TryFrom<String> for Slate {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        let ok = !s.is_empty()
+            && s.len() <= 64
+            && !s.starts_with('.')
+            && s.chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
+        if ok {
+            Ok(Slate(s))
+        } else {
+            Err(format!(
+                "expected a slate of 1-64 letters, digits, '-', '_' or '.' (not starting with '.'), got {s:?}"
+            ))
+        }
+    }
+}
+
+impl std::str::FromStr for Slate {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Slate::try_from(s.to_owned())
+    }
+}
+
+/// `[timecode]`: SMPTE timecode stamped on every frame.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TimecodeConfig {
+    /// `23.976`, `24`, `25`, `29.97df`, `30`, `48`, `50`, `59.94df`, `60` (the server's rates:
+    /// 29.97 and 59.94 are drop-frame, as recorders count them). Time of day, UTC.
+    pub rate: TimecodeRateName,
+}
+
+impl Default for TimecodeConfig {
+    fn default() -> Self {
+        TimecodeConfig {
+            rate: TimecodeRateName("30".to_owned()),
+        }
+    }
+}
+
+/// A timecode rate name, checked against [`TimecodeRateName::ALLOWED`].
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
+#[serde(try_from = "String")]
+pub struct TimecodeRateName(pub String);
+
+impl TimecodeRateName {
+    pub const ALLOWED: [&'static str; 9] = [
+        "23.976", "24", "25", "29.97df", "30", "48", "50", "59.94df", "60",
+    ];
+}
+
+impl TryFrom<String> for TimecodeRateName {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        if Self::ALLOWED.contains(&s.as_str()) {
+            Ok(TimecodeRateName(s))
+        } else {
+            Err(format!(
+                "expected one of {}, got {s:?}",
+                Self::ALLOWED.join(", ")
+            ))
+        }
+    }
+}
+
+/// `[logging]`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoggingConfig {
+    /// `tracing` filter (`RUST_LOG` syntax); the `RUST_LOG` variable wins when set.
+    pub level: String,
+    /// A repeated warning is logged at most once per this many seconds (with a count).
+    pub throttle_s: PositiveSeconds,
+}
+
+impl Default for LoggingConfig {
+    fn default() -> Self {
+        LoggingConfig {
+            level: "info".to_owned(),
+            throttle_s: PositiveSeconds(10.0),
+        }
+    }
+}
+
+impl Config {
+    /// Reads, parses and validates a config file, resolves its relative paths and reads its
+    /// tokens.
+    pub fn load(path: &Path) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Config::parse(&text, path)
+    }
+
+    /// Parses and validates `text` as if read from `path` (relative paths resolve against
+    /// `path`'s directory).
+    pub fn parse(text: &str, path: &Path) -> Result<Config, ConfigError> {
+        let file = path.display().to_string();
+        let mut config: Config = toml::from_str(text).map_err(|err| {
+            let span = err.span();
+            invalid(text, &file, span, err.message().trim_end().to_owned())
+        })?;
+        config.origin = Origin::File {
+            path: path.to_owned(),
+            text: Arc::from(text),
+        };
+        config.validate(text, &file)?;
+        let base = path.parent().map(Path::to_owned).unwrap_or_default();
+        config.resolve_paths(&base, state_directory().as_deref());
+        config.server.tokens = config.read_tokens(text, &file)?;
+        Ok(config)
+    }
+
+    /// The embedded default, with tokens from the environment variables the default names
+    /// (none).
+    pub fn embedded() -> Config {
+        Config::default()
+    }
+
+    /// Cross-key checks that serde cannot express.
+    fn validate(&self, text: &str, file: &str) -> Result<(), ConfigError> {
+        let fail = |key: &str, message: String| -> ConfigError {
+            let span = span_of_key(text, key);
+            let mut err = invalid(text, file, span, message);
+            if let ConfigError::Invalid { location, .. } = &mut err {
+                location.key = Some(key.to_owned());
+            }
+            err
+        };
+        if self.source.retry_max_s.0 < self.source.retry_initial_s.0 {
+            return Err(fail(
+                "source.retry_max_s",
+                format!(
+                    "expected a value >= source.retry_initial_s ({}), got {}",
+                    self.source.retry_initial_s.0, self.source.retry_max_s.0
+                ),
+            ));
+        }
+        if self.server.max_clients == 0 {
+            return Err(fail(
+                "server.max_clients",
+                "expected at least 1 client, got 0".into(),
+            ));
+        }
+        if self.server.tls_cert.is_some() != self.server.tls_key.is_some() {
+            // Point at the key that is there; say which one is missing.
+            let (present, missing) = if self.server.tls_cert.is_some() {
+                ("server.tls_cert", "server.tls_key")
+            } else {
+                ("server.tls_key", "server.tls_cert")
+            };
+            return Err(fail(
+                present,
+                format!("expected {missing} too: TLS needs both a certificate and a key"),
+            ));
+        }
+        for (key, token) in [
+            ("server.read_token", &self.server.read_token),
+            ("server.control_token", &self.server.control_token),
+        ] {
+            if let Some(token) = token {
+                let set = [
+                    token.env.is_some(),
+                    token.file.is_some(),
+                    token.value.is_some(),
+                ]
+                .iter()
+                .filter(|set| **set)
+                .count();
+                if set != 1 {
+                    return Err(fail(
+                        key,
+                        "expected exactly one of env, file or value".into(),
+                    ));
+                }
+            }
+        }
+        if !self.server.listen.0.ip().is_loopback()
+            && (self.server.read_token.is_none() || self.server.control_token.is_none())
+        {
+            return Err(fail(
+                "server.listen",
+                format!(
+                    "expected a loopback address, or server.read_token and server.control_token: {} is reachable from the network",
+                    self.server.listen.0
+                ),
+            ));
+        }
+        if self.takes.queue_frames == 0 {
+            return Err(fail(
+                "takes.queue_frames",
+                "expected at least 1 frame, got 0".into(),
+            ));
+        }
+        for (i, file) in self.characters.files.iter().enumerate() {
+            if file.as_os_str().is_empty() {
+                return Err(fail(
+                    &format!("characters.files[{i}]"),
+                    "expected a file path, got \"\"".into(),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// `state_dir`: systemd's `$STATE_DIRECTORY`, where a relative takes folder goes (the
+    /// config directory is read-only under `ProtectSystem=strict`).
+    fn resolve_paths(&mut self, base: &Path, state_dir: Option<&Path>) {
+        if let (true, Some(state_dir)) = (self.takes.folder.is_relative(), state_dir) {
+            self.takes.folder = state_dir.join(&self.takes.folder);
+        }
+        let join = |p: &mut PathBuf| {
+            if p.is_relative() && !base.as_os_str().is_empty() {
+                *p = base.join(&*p);
+            }
+        };
+        self.characters.files.iter_mut().for_each(join);
+        join(&mut self.takes.folder);
+        for token in [&mut self.server.read_token, &mut self.server.control_token]
+            .into_iter()
+            .flatten()
+        {
+            if let Some(file) = &mut token.file {
+                join(file);
+            }
+        }
+        for path in [&mut self.server.tls_cert, &mut self.server.tls_key]
+            .into_iter()
+            .flatten()
+        {
+            join(path);
+        }
+        if let Some(replay) = self.source.spec.replay_path() {
+            let mut path = PathBuf::from(replay);
+            if path.is_relative() && !base.as_os_str().is_empty() {
+                join(&mut path);
+                let query = self
+                    .source
+                    .spec
+                    .0
+                    .split_once('?')
+                    .map(|(_, q)| format!("?{q}"))
+                    .unwrap_or_default();
+                self.source.spec = SourceSpec(format!("replay:{}{query}", path.display()));
+            }
+        }
+    }
+
+    fn read_tokens(&self, text: &str, file: &str) -> Result<Tokens, ConfigError> {
+        let read_one =
+            |key: &str, token: &Option<TokenRef>| -> Result<Option<Secret>, ConfigError> {
+                let Some(token) = token else { return Ok(None) };
+                token.read().map(Some).map_err(|source| {
+                    let span = span_of_key(text, key);
+                    let (line, column) = span.map_or((0, 0), |s| line_col(text, s.start));
+                    ConfigError::Token {
+                        location: Location {
+                            file: file.to_owned(),
+                            line,
+                            column,
+                            key: Some(key.to_owned()),
+                        },
+                        key: key.to_owned(),
+                        source,
+                    }
+                })
+            };
+        Ok(Tokens {
+            read: read_one("server.read_token", &self.server.read_token)?,
+            control: read_one("server.control_token", &self.server.control_token)?,
+        })
+    }
+
+    /// Deserializes the file's text once more into `T`: a struct of the caller's that reads
+    /// only the sections it owns (`[detect]`, `[track]`) and ignores the others, with the
+    /// file's own line numbers in errors. The embedded default gives `T::default()`.
+    pub fn extract<T: DeserializeOwned + Default>(&self) -> Result<T, ConfigError> {
+        let Origin::File { path, text } = &self.origin else {
+            return Ok(T::default());
+        };
+        toml::from_str::<T>(text).map_err(|err| {
+            invalid(
+                text,
+                &path.display().to_string(),
+                err.span(),
+                err.message().trim_end().to_owned(),
+            )
+        })
+    }
+
+    /// File, line and column of `key` (dotted path), for errors found by later checks (a
+    /// character file that does not load, a detector setting out of range).
+    pub fn locate(&self, key: &str) -> Location {
+        match &self.origin {
+            Origin::Embedded => Location {
+                file: self.origin.describe(),
+                line: 0,
+                column: 0,
+                key: Some(key.to_owned()),
+            },
+            Origin::File { path, text } => {
+                let (line, column) =
+                    span_of_key(text, key).map_or((0, 0), |span| line_col(text, span.start));
+                Location {
+                    file: path.display().to_string(),
+                    line,
+                    column,
+                    key: Some(key.to_owned()),
+                }
+            }
+        }
+    }
+
+    /// The config as the user would see it, tokens hidden: for `check-config` and the log.
+    pub fn summary(&self) -> String {
+        let characters = if self.characters.files.is_empty() {
+            "built-in human, wolf".to_owned()
+        } else {
+            self.characters
+                .files
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        format!(
+            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, tokens: read {}, control {}",
+            self.origin.describe(),
+            self.source.spec.0,
+            self.server.listen.0,
+            characters,
+            self.takes.folder.display(),
+            self.timecode.rate.0,
+            if self.server.tokens.read.is_some() { "set" } else { "none" },
+            if self.server.tokens.control.is_some() { "set" } else { "none" },
+        )
+    }
+}
+
+impl TokenRef {
+    /// Reads the token from where it is.
+    pub fn read(&self) -> Result<Secret, TokenError> {
+        let value = if let Some(name) = &self.env {
+            std::env::var(name).map_err(|_| TokenError::EnvMissing(name.clone()))?
+        } else if let Some(path) = &self.file {
+            std::fs::read_to_string(path).map_err(|source| TokenError::File {
+                path: path.clone(),
+                source,
+            })?
+        } else if let Some(value) = &self.value {
+            value.0.clone()
+        } else {
+            String::new()
+        };
+        let value = value.trim_end_matches(['\n', '\r']).to_owned();
+        if value.is_empty() {
+            return Err(TokenError::Empty);
+        }
+        Ok(Secret(value))
+    }
+}
+
+/// The first of systemd's `$STATE_DIRECTORY` entries (colon-separated), if set.
+fn state_directory() -> Option<PathBuf> {
+    let dirs = std::env::var_os("STATE_DIRECTORY")?;
+    let first = dirs.to_str()?.split(':').next()?.to_owned();
+    (!first.is_empty()).then(|| PathBuf::from(first))
+}
+
+fn invalid(text: &str, file: &str, span: Option<Range<usize>>, message: String) -> ConfigError {
+    let (line, column) = span.clone().map_or((0, 0), |s| line_col(text, s.start));
+    let key = span.and_then(|s| key_path_at(text, s));
+    ConfigError::Invalid {
+        location: Location {
+            file: file.to_owned(),
+            line,
+            column,
+            key,
+        },
+        message,
+    }
+}
+
+/// 1-based line and column of a byte offset.
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, column)
+}
+
+/// The dotted path of the deepest key whose key or value covers `span.start`.
+fn key_path_at(text: &str, span: Range<usize>) -> Option<String> {
+    let doc = toml_edit::ImDocument::parse(text).ok()?;
+    let mut best: Option<(String, usize)> = None;
+    visit_table(doc.as_table(), "", &mut |path, key_span, item_span| {
+        let covers = |s: &Option<Range<usize>>| {
+            s.as_ref()
+                .is_some_and(|s| s.start <= span.start && span.start < s.end.max(s.start + 1))
+        };
+        if covers(&key_span) || covers(&item_span) {
+            let width = item_span
+                .as_ref()
+                .or(key_span.as_ref())
+                .map_or(usize::MAX, |s| s.len());
+            if best.as_ref().is_none_or(|(_, w)| width <= *w) {
+                best = Some((path.to_owned(), width));
+            }
+        }
+    });
+    best.map(|(path, _)| path)
+}
+
+/// The span of the key at a dotted path (array indices as `[i]`).
+fn span_of_key(text: &str, key: &str) -> Option<Range<usize>> {
+    let doc = toml_edit::ImDocument::parse(text).ok()?;
+    let wanted = key.split('[').next().unwrap_or(key);
+    let mut found = None;
+    visit_table(doc.as_table(), "", &mut |path, key_span, item_span| {
+        if path == wanted && found.is_none() {
+            found = key_span.or(item_span);
+        }
+    });
+    found
+}
+
+/// Called with a key's dotted path, the key's span and its value's span.
+type KeyVisitor<'a> = dyn FnMut(&str, Option<Range<usize>>, Option<Range<usize>>) + 'a;
+
+fn visit_table(table: &toml_edit::Table, prefix: &str, f: &mut KeyVisitor<'_>) {
+    for (key, item) in table.iter() {
+        let path = if prefix.is_empty() {
+            key.to_owned()
+        } else {
+            format!("{prefix}.{key}")
+        };
+        let key_span = table.key(key).and_then(|k| k.span());
+        f(&path, key_span, item.span());
+        match item {
+            toml_edit::Item::Table(t) => visit_table(t, &path, f),
+            toml_edit::Item::Value(toml_edit::Value::InlineTable(t)) => {
+                for (k, v) in t.iter() {
+                    let sub = format!("{path}.{k}");
+                    f(&sub, t.key(k).and_then(|k| k.span()), v.span());
+                }
+            }
+            toml_edit::Item::ArrayOfTables(tables) => {
+                for t in tables.iter() {
+                    visit_table(t, &path, f);
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

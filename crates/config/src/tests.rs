@@ -1,0 +1,205 @@
+use super::*;
+
+fn parse(text: &str) -> Result<Config, ConfigError> {
+    Config::parse(text, Path::new("/etc/mouthpiece/test.toml"))
+}
+
+fn example_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/mouthpiece.toml")
+}
+
+#[test]
+fn the_documented_example_is_the_default() {
+    let config = Config::load(&example_path()).expect("example config is valid");
+    let mut expected = Config::default();
+    // Paths in a file resolve against its directory.
+    let dir = example_path().parent().unwrap().to_owned();
+    expected.source.spec = SourceSpec(format!(
+        "replay:{}?loop=1&speed=1.0",
+        dir.join("../recordings/demo.mcap").display()
+    ));
+    expected.takes.folder = dir.join("takes");
+    expected.origin = config.origin.clone();
+    assert_eq!(config, expected);
+}
+
+#[test]
+fn an_empty_file_is_the_default() {
+    let config = parse("").unwrap();
+    assert_eq!(config.server.listen.0.to_string(), "127.0.0.1:9870");
+    assert!(config.characters.files.is_empty());
+    assert_eq!(config.timecode.rate.0, "30");
+}
+
+#[test]
+fn unknown_key_names_file_line_and_key() {
+    let err = parse("[server]\nlisten = \"127.0.0.1:1\"\nlistn = \"x\"\n").unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.starts_with("/etc/mouthpiece/test.toml:3:1: key `server.listn`"),
+        "{text}"
+    );
+    assert!(text.contains("unknown field `listn`"), "{text}");
+    assert_eq!(err.key(), Some("server.listn"));
+}
+
+#[test]
+fn bad_value_names_key_and_expectation() {
+    let err = parse("[server]\nmax_clients = 4\nlisten = \"localhost\"\n").unwrap_err();
+    let text = err.to_string();
+    assert!(text.contains(":3:"), "{text}");
+    assert_eq!(err.key(), Some("server.listen"), "{text}");
+    assert!(
+        text.contains("expected an address like 127.0.0.1:9870"),
+        "{text}"
+    );
+
+    let err = parse("[takes]\nflush_s = -1\n").unwrap_err();
+    assert_eq!(err.key(), Some("takes.flush_s"), "{err}");
+    assert!(
+        err.to_string().contains("expected a number of seconds > 0"),
+        "{err}"
+    );
+
+    let err = parse("[timecode]\nrate = \"29.98\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("timecode.rate"), "{err}");
+    assert!(err.to_string().contains("29.97df"), "{err}");
+
+    let err = parse("[source]\nspec = \"camera0\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("source.spec"), "{err}");
+
+    let err = parse("[takes]\nslate = \"../etc\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("takes.slate"), "{err}");
+}
+
+#[test]
+fn wrong_type_names_key() {
+    let err = parse("[takes]\nrecord_at_start = \"yes\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("takes.record_at_start"), "{err}");
+    assert!(err.to_string().contains(":2:"), "{err}");
+}
+
+#[test]
+fn syntax_error_gives_the_line() {
+    let err = parse("[server]\nlisten = \n").unwrap_err();
+    assert!(err.to_string().contains(":2:"), "{err}");
+}
+
+#[test]
+fn cross_key_checks_name_the_key() {
+    let err = parse("[source]\nretry_initial_s = 5.0\nretry_max_s = 1.0\n").unwrap_err();
+    assert_eq!(err.key(), Some("source.retry_max_s"));
+    assert!(err.to_string().contains(":3:"), "{err}");
+
+    let err = parse("[server]\nlisten = \"0.0.0.0:9870\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("server.listen"));
+    assert!(err.to_string().contains("read_token"), "{err}");
+
+    let err = parse("[server]\nread_token = { env = \"A\", file = \"b\" }\n").unwrap_err();
+    assert_eq!(err.key(), Some("server.read_token"), "{err}");
+
+    let err = parse("[server]\ntls_cert = \"c.pem\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("server.tls_cert"), "{err}");
+    assert!(
+        err.to_string().contains("expected server.tls_key too"),
+        "{err}"
+    );
+}
+
+#[test]
+fn tokens_come_from_env_and_file_and_never_print() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("control.token"), "s3cret-control\n").unwrap();
+    // A variable name no other test uses: tests run in parallel in one process.
+    std::env::set_var("MOUTHPIECE_TEST_READ_TOKEN_1", "s3cret-read");
+    let text = "[server]\nlisten = \"0.0.0.0:9870\"\n\
+                read_token = { env = \"MOUTHPIECE_TEST_READ_TOKEN_1\" }\n\
+                control_token = { file = \"control.token\" }\n";
+    let config = Config::parse(text, &dir.path().join("m.toml")).unwrap();
+    assert_eq!(
+        config.server.tokens.read.as_ref().unwrap().expose(),
+        "s3cret-read"
+    );
+    assert_eq!(
+        config.server.tokens.control.as_ref().unwrap().expose(),
+        "s3cret-control"
+    );
+    let shown = format!("{config:?} {}", config.summary());
+    assert!(!shown.contains("s3cret"), "a token leaked: {shown}");
+
+    let literal = parse("[server]\nread_token = { value = \"s3cret-literal\" }\n").unwrap();
+    assert!(!format!("{literal:?}").contains("s3cret"));
+}
+
+#[test]
+fn a_missing_token_names_its_key_and_variable() {
+    let err =
+        parse("[server]\nread_token = { env = \"MOUTHPIECE_TEST_UNSET_TOKEN\" }\n").unwrap_err();
+    assert_eq!(err.key(), Some("server.read_token"));
+    let chain = format!("{err}: {}", std::error::Error::source(&err).unwrap());
+    assert!(
+        chain.contains(":2:") && chain.contains("MOUTHPIECE_TEST_UNSET_TOKEN"),
+        "{chain}"
+    );
+}
+
+#[test]
+fn relative_paths_resolve_against_the_config_directory() {
+    let config = Config::parse(
+        "[characters]\nfiles = [\"chars/wolf.toml\", \"/abs/human.toml\"]\n[source]\nspec = \"replay:s.mcap?loop=1\"\n",
+        Path::new("/srv/booth/m.toml"),
+    )
+    .unwrap();
+    assert_eq!(
+        config.characters.files[0],
+        Path::new("/srv/booth/chars/wolf.toml")
+    );
+    assert_eq!(config.characters.files[1], Path::new("/abs/human.toml"));
+    assert_eq!(config.source.spec.0, "replay:/srv/booth/s.mcap?loop=1");
+    assert_eq!(config.takes.folder, Path::new("/srv/booth/takes"));
+}
+
+#[test]
+fn owned_sections_are_extracted_with_file_lines() {
+    #[derive(Debug, Default, Deserialize, PartialEq)]
+    #[serde(deny_unknown_fields)]
+    struct DetectConfig {
+        #[serde(default)]
+        min_area: u32,
+    }
+    #[derive(Debug, Default, Deserialize, PartialEq)]
+    struct Sections {
+        #[serde(default)]
+        detect: DetectConfig,
+    }
+    let config = parse("[detect]\nmin_area = 7\n").unwrap();
+    assert_eq!(
+        config.extract::<Sections>().unwrap().detect,
+        DetectConfig { min_area: 7 }
+    );
+    let config = parse("[logging]\nlevel = \"debug\"\n\n[detect]\nmin_aera = 7\n").unwrap();
+    let err = config.extract::<Sections>().unwrap_err();
+    assert_eq!(err.key(), Some("detect.min_aera"), "{err}");
+    assert!(err.to_string().contains(":5:"), "{err}");
+    assert_eq!(
+        Config::default().extract::<Sections>().unwrap(),
+        Sections::default()
+    );
+}
+
+#[test]
+fn a_relative_takes_folder_goes_to_the_state_directory_under_systemd() {
+    let mut config = Config::default();
+    config.resolve_paths(
+        Path::new("/etc/mouthpiece"),
+        Some(Path::new("/var/lib/mouthpiece")),
+    );
+    assert_eq!(config.takes.folder, Path::new("/var/lib/mouthpiece/takes"));
+    let mut config = Config::default();
+    config.takes.folder = PathBuf::from("/srv/takes");
+    config.resolve_paths(
+        Path::new("/etc/mouthpiece"),
+        Some(Path::new("/var/lib/mouthpiece")),
+    );
+    assert_eq!(config.takes.folder, Path::new("/srv/takes"));
+}

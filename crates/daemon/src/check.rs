@@ -1,0 +1,46 @@
+//! Checks of a loaded [`Config`] that need more than the config crate knows: the log
+//! filter's syntax, the character files, the detector's section. Run at start, on reload and
+//! by `mouthpiece check-config`.
+
+use mouthpiece_config::{Config, ConfigError, Location};
+
+/// Why a config that parsed is still unusable.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("{location}: {message}")]
+    Invalid { location: Location, message: String },
+}
+
+/// Everything a config must satisfy before the daemon uses it.
+pub fn check(config: &Config) -> Result<(), CheckError> {
+    if let Err(message) = crate::logging::check_level(&config.logging.level) {
+        return Err(CheckError::Invalid {
+            location: location(config, "logging.level"),
+            message,
+        });
+    }
+    crate::characters::load(config)?;
+    crate::capture::check_spec(config)?;
+    crate::daemon::server_config(config)?;
+    crate::daemon::timecode_rate(config)?;
+    let listen = config.server.listen.0;
+    if !listen.ip().is_loopback()
+        && (config.server.tokens.read.is_none() || config.server.tokens.control.is_none())
+    {
+        return Err(CheckError::Invalid {
+            location: location(config, "server.listen"),
+            message: format!(
+                "{listen} is reachable from the network: set server.read_token and server.control_token"
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The file and key, for errors found after parsing (the line is looked up when the file
+/// has one).
+pub(crate) fn location(config: &Config, key: &str) -> Location {
+    config.locate(key)
+}

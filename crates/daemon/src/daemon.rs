@@ -1,0 +1,386 @@
+//! `mouthpiece run`: wires the source thread, the processing thread, the take recorder and the
+//! async server together, and handles signals, sd_notify and the watchdog.
+//!
+//! Threads: `mouthpiece-source` (owns the source), `mouthpiece-process` (processing, takes
+//! control), `mouthpiece-take` (while a take records), and a 2-thread tokio runtime for the
+//! server, the signals and the watchdog. Start-up: validate the config, bind the port, start
+//! the threads, then `READY=1`. Signals: SIGTERM/SIGINT stop (takes closed, clients closed
+//! with 1001, exit 0 within 2 s); SIGHUP reloads characters, tokens and colour ranges;
+//! SIGUSR1 starts a take with the default slate, SIGUSR2 stops it.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use mouthpiece_config::Config;
+use mouthpiece_server::{Hub, HubConfig, Limits, ServerConfig, TimecodeRate, TlsFiles, Token};
+use tokio::signal::unix::{signal, SignalKind};
+
+use crate::backoff::Backoff;
+use crate::check::CheckError;
+use crate::notify::Notifier;
+use crate::pipeline::{self, Command, Processor};
+use crate::source::{self, Opener, SourceShared, SourceState};
+use crate::takes::{TakeSettings, Takes};
+
+/// Why the daemon could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    /// The configuration is unusable (exit code 2).
+    #[error(transparent)]
+    Config(#[from] CheckError),
+    #[error("cannot listen on {addr}")]
+    Bind {
+        addr: std::net::SocketAddr,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cannot start the async runtime or a thread")]
+    Runtime(#[source] std::io::Error),
+    #[error("the server failed")]
+    Server(#[from] mouthpiece_server::ServerError),
+}
+
+/// Builds what the daemon runs from a configuration; called at start and (for the reload
+/// payload) on every SIGHUP.
+pub trait Factory: Send + Sync + 'static {
+    type Processor: Processor + 'static;
+    /// The processor for `config`.
+    fn processor(&self, config: &Config) -> Result<Self::Processor, CheckError>;
+    /// A validated reload for a running processor (characters, colour ranges).
+    fn reload(&self, config: &Config) -> Result<Box<dyn std::any::Any + Send>, CheckError>;
+    /// Opens the configured source (called again after every loss); a live source that
+    /// delivers nothing for `stall_timeout` is reported lost.
+    fn opener(&self, spec: &str, stall_timeout: Duration) -> Opener;
+}
+
+/// Start-up options from the command line.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// The config file, for SIGHUP; `None` for the embedded default.
+    pub config_path: Option<PathBuf>,
+    /// Start a take at once with this slate (and take number).
+    pub record: Option<(String, Option<u32>)>,
+    /// Applied again after each reload (CLI flags override the file).
+    pub overrides: Overrides,
+}
+
+/// Command-line values that override the file.
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    pub listen: Option<std::net::SocketAddr>,
+    pub source: Option<String>,
+}
+
+/// The server's settings from the config (tokens checked for the server's rules).
+pub fn server_config(config: &Config) -> Result<ServerConfig, CheckError> {
+    let token = |key: &str,
+                 secret: Option<&mouthpiece_config::Secret>|
+     -> Result<Option<Token>, CheckError> {
+        secret
+            .map(|s| Token::new(s.expose()))
+            .transpose()
+            .map_err(|e| CheckError::Invalid {
+                location: config.locate(key),
+                message: e.to_string(),
+            })
+    };
+    Ok(ServerConfig {
+        name: "mouthpiece".into(),
+        read_token: token("server.read_token", config.server.tokens.read.as_ref())?,
+        control_token: token(
+            "server.control_token",
+            config.server.tokens.control.as_ref(),
+        )?,
+        allowed_origins: config.server.allowed_origins.clone(),
+        limits: Limits {
+            max_clients: config.server.max_clients as usize,
+            ..Limits::default()
+        },
+        tls: match (&config.server.tls_cert, &config.server.tls_key) {
+            (Some(cert), Some(key)) => Some(TlsFiles {
+                cert: cert.clone(),
+                key: key.clone(),
+            }),
+            _ => None,
+        },
+    })
+}
+
+pub fn timecode_rate(config: &Config) -> Result<TimecodeRate, CheckError> {
+    config
+        .timecode
+        .rate
+        .0
+        .parse::<TimecodeRate>()
+        .map_err(|e| CheckError::Invalid {
+            location: config.locate("timecode.rate"),
+            message: e.to_string(),
+        })
+}
+
+/// Runs the daemon until SIGTERM or SIGINT.
+pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Result<(), DaemonError> {
+    crate::check::check(&config)?;
+    let server_config = server_config(&config)?;
+    let rate = timecode_rate(&config)?;
+    let processor = factory.processor(&config)?;
+    let _ = crate::logging::set_level(&config.logging.level);
+    tracing::info!("{}", config.summary());
+
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .thread_name("mouthpiece-server")
+        .enable_all()
+        .build()
+        .map_err(DaemonError::Runtime)?;
+    let result = runtime.block_on(serve(
+        config,
+        factory,
+        options,
+        processor,
+        server_config,
+        rate,
+    ));
+    // Threads still blocked in a source's read must not hold up the exit.
+    runtime.shutdown_timeout(Duration::from_millis(200));
+    result
+}
+
+async fn serve<F: Factory>(
+    config: Config,
+    factory: F,
+    options: RunOptions,
+    processor: F::Processor,
+    server_config: ServerConfig,
+    rate: TimecodeRate,
+) -> Result<(), DaemonError> {
+    let notifier = Notifier::from_env().unwrap_or_else(|e| {
+        tracing::warn!("NOTIFY_SOCKET unusable, not notifying systemd: {e}");
+        Notifier::disabled()
+    });
+    let addr = config.server.listen.0;
+    let listener = tokio::net::TcpListener::bind(addr)
+        .await
+        .map_err(|source| DaemonError::Bind { addr, source })?;
+    let local = listener
+        .local_addr()
+        .map_err(|source| DaemonError::Bind { addr, source })?;
+    let (hub, control) = Hub::new(&HubConfig {
+        timecode_rate: rate,
+        ..HubConfig::default()
+    });
+
+    let spec = config.source.spec.as_str().to_owned();
+    // The first `hello` already names the characters.
+    hub.set_info(processor.stream_info(0.0, &spec));
+    let shared = SourceShared::new();
+    let backoff = Backoff::new(
+        config.source.retry_initial_s.duration(),
+        config.source.retry_max_s.duration(),
+    );
+    let throttle = config.logging.throttle_s.duration();
+    let source_thread = source::spawn(
+        factory.opener(&spec, config.source.stall_timeout_s.duration()),
+        spec.clone(),
+        shared.clone(),
+        backoff,
+        throttle,
+    )
+    .map_err(DaemonError::Runtime)?;
+
+    let (commands_tx, commands_rx) = crossbeam_channel::bounded(8);
+    let epoch = Instant::now();
+    let heartbeat = Arc::new(AtomicU64::new(0));
+    let stop = Arc::new(AtomicBool::new(false));
+    let takes = Takes::new(TakeSettings {
+        folder: config.takes.folder.clone(),
+        flush: config.takes.flush_s.duration(),
+        min_free_mb: config.takes.min_free_mb,
+        queue_frames: config.takes.queue_frames as usize,
+        timecode_rate: rate.name().to_owned(),
+    });
+    let processing = pipeline::spawn(
+        processor,
+        pipeline::Context {
+            source: shared.clone(),
+            spec: spec.clone(),
+            hub: hub.clone(),
+            control,
+            commands: commands_rx,
+            takes,
+            default_slate: config.takes.slate.0.clone(),
+            timecode_rate: rate,
+            stall_timeout: config.source.stall_timeout_s.duration(),
+            heartbeat: heartbeat.clone(),
+            epoch,
+            stop: stop.clone(),
+        },
+    )
+    .map_err(DaemonError::Runtime)?;
+    if let Some((slate, take)) = options.record.clone() {
+        let _ = commands_tx.try_send(Command::RecordStart { slate, take });
+    } else if config.takes.record_at_start {
+        let _ = commands_tx.try_send(Command::RecordStart {
+            slate: config.takes.slate.0.clone(),
+            take: None,
+        });
+    }
+
+    let (shutdown_tx, shutdown_rx) = tokio::sync::oneshot::channel::<()>();
+    let mut server = tokio::spawn(mouthpiece_server::run(
+        listener,
+        server_config,
+        hub.clone(),
+        async {
+            let _ = shutdown_rx.await;
+        },
+    ));
+    tracing::info!(%local, "mouthpiece running: viewer at http://{local}/");
+    let _ = notifier.ready(&format!("serving on {local}, source {spec}"));
+
+    let mut sigterm = signal(SignalKind::terminate()).map_err(DaemonError::Runtime)?;
+    let mut sigint = signal(SignalKind::interrupt()).map_err(DaemonError::Runtime)?;
+    let mut sighup = signal(SignalKind::hangup()).map_err(DaemonError::Runtime)?;
+    let mut sigusr1 = signal(SignalKind::user_defined1()).map_err(DaemonError::Runtime)?;
+    let mut sigusr2 = signal(SignalKind::user_defined2()).map_err(DaemonError::Runtime)?;
+    let watchdog_every = notifier
+        .watchdog_timeout()
+        .map(|t| t / 2)
+        .unwrap_or(Duration::from_secs(5));
+    let mut tick = tokio::time::interval(watchdog_every.min(Duration::from_secs(5)));
+    let mut current = config;
+    let mut last_status = String::new();
+    let mut server_result = None;
+    loop {
+        tokio::select! {
+            _ = sigterm.recv() => { tracing::info!("SIGTERM: stopping"); break; }
+            _ = sigint.recv() => { tracing::info!("SIGINT: stopping"); break; }
+            _ = sighup.recv() => {
+                let _ = notifier.reloading();
+                match reload(&factory, &options, &current) {
+                    Ok((config, payload, new_server)) => {
+                        if commands_tx.try_send(Command::Reload(payload)).is_ok() {
+                            hub.set_tokens(new_server.read_token, new_server.control_token);
+                            tracing::info!("SIGHUP: {}", config.summary());
+                            current = config;
+                        } else {
+                            tracing::error!("SIGHUP: processing is busy; reload not applied");
+                        }
+                    }
+                    Err(e) => tracing::error!("SIGHUP: new configuration rejected, old one kept: {}", source::error_chain(&e)),
+                }
+                let _ = notifier.reloaded(&status_line(&shared, &hub));
+            }
+            _ = sigusr1.recv() => {
+                let _ = commands_tx.try_send(Command::RecordStart { slate: current.takes.slate.0.clone(), take: None });
+            }
+            _ = sigusr2.recv() => { let _ = commands_tx.try_send(Command::RecordStop); }
+            _ = tick.tick() => {
+                // Ping only while the processing loop turns: a hung pipeline gets restarted.
+                let age = epoch.elapsed().as_millis() as u64 - heartbeat.load(Ordering::Relaxed).min(epoch.elapsed().as_millis() as u64);
+                if Duration::from_millis(age) < watchdog_every {
+                    let _ = notifier.watchdog();
+                } else {
+                    tracing::warn!(stalled_ms = age, "processing thread not turning; withholding watchdog ping");
+                }
+                let status = status_line(&shared, &hub);
+                if status != last_status {
+                    let _ = notifier.status(&status);
+                    last_status = status;
+                }
+            }
+            result = &mut server => {
+                server_result = Some(result);
+                break;
+            }
+        }
+    }
+
+    // Stop: processing first (it closes the take), then the server (clients get 1001).
+    let _ = notifier.stopping();
+    let stopping = Instant::now();
+    stop.store(true, Ordering::Release);
+    shared.stop();
+    let joined = tokio::task::spawn_blocking(move || processing.join());
+    if tokio::time::timeout(Duration::from_millis(1500), joined)
+        .await
+        .is_err()
+    {
+        tracing::error!("processing thread did not stop within 1.5 s");
+    }
+    let _ = shutdown_tx.send(());
+    let server_result = match server_result {
+        Some(r) => Some(r),
+        None => tokio::time::timeout(Duration::from_millis(400), &mut server)
+            .await
+            .ok(),
+    };
+    if source_thread.is_finished() {
+        let _ = source_thread.join();
+    }
+    tracing::info!(
+        elapsed_ms = stopping.elapsed().as_millis() as u64,
+        "stopped"
+    );
+    match server_result {
+        Some(Ok(Err(e))) => Err(e.into()),
+        _ => Ok(()),
+    }
+}
+
+fn status_line(shared: &SourceShared, hub: &Hub) -> String {
+    let source = match shared.state().1 {
+        SourceState::Starting => "source starting".to_owned(),
+        SourceState::Up(info) => format!("source up ({})", info.description),
+        SourceState::Down { reason, .. } => format!("source down: {reason}"),
+    };
+    format!(
+        "{source}; {} clients; {} frames",
+        hub.clients(),
+        hub.frames_published()
+    )
+}
+
+/// Loads the config again (same file, same CLI overrides) and validates everything a reload
+/// changes.
+fn reload<F: Factory>(
+    factory: &F,
+    options: &RunOptions,
+    current: &Config,
+) -> Result<(Config, Box<dyn std::any::Any + Send>, ServerConfig), CheckError> {
+    let mut config = match &options.config_path {
+        Some(path) => Config::load(path)?,
+        None => Config::embedded(),
+    };
+    apply_overrides(&mut config, &options.overrides);
+    crate::check::check(&config)?;
+    let server = server_config(&config)?;
+    let payload = factory.reload(&config)?;
+    for (what, changed) in [
+        ("source", config.source != current.source),
+        (
+            "server.listen",
+            config.server.listen != current.server.listen,
+        ),
+        ("takes", config.takes != current.takes),
+        ("timecode", config.timecode != current.timecode),
+    ] {
+        if changed {
+            tracing::warn!("{what} changed: takes effect after a restart");
+        }
+    }
+    let _ = crate::logging::set_level(&config.logging.level);
+    Ok((config, payload, server))
+}
+
+/// CLI flags win over the file.
+pub fn apply_overrides(config: &mut Config, overrides: &Overrides) {
+    if let Some(listen) = overrides.listen {
+        config.server.listen = mouthpiece_config::ListenAddr(listen);
+    }
+    if let Some(source) = &overrides.source {
+        config.source.spec = mouthpiece_config::SourceSpec(source.clone());
+    }
+}

@@ -1,0 +1,33 @@
+//! The daemon's machinery, behind `mouthpiece run`.
+//!
+//! # Layout
+//! - [`source`]: the source thread: opens the source, feeds the [`slot`], reopens a lost
+//!   source with [`backoff`];
+//! - [`slot`]: the latest-frame slot between the source thread and processing (newest wins);
+//! - [`notify`]: systemd's notify protocol (READY, STATUS, WATCHDOG, STOPPING);
+//! - [`throttle`]: repeated warnings at most once per interval;
+//! - [`logging`]: journald-friendly `tracing` set-up.
+//!
+//! Threads: the source thread, the processing thread, one take-writer thread while a take
+//! records, and the async server's runtime. Only bounded queues connect them.
+
+pub mod backoff;
+pub mod capture;
+pub mod characters;
+pub mod check;
+pub mod daemon;
+pub mod interim;
+pub mod logging;
+pub mod notify;
+pub mod pipeline;
+pub mod slot;
+pub mod source;
+pub mod takes;
+pub mod throttle;
+
+pub use daemon::{run, DaemonError, RunOptions};
+
+/// Runs the daemon with the pipeline this build has (see [`interim`]).
+pub fn run_live(config: mouthpiece_config::Config, options: RunOptions) -> Result<(), DaemonError> {
+    run(config, interim::InterimFactory, options)
+}

@@ -1,0 +1,426 @@
+//! The processing thread: takes the newest frame from the slot, runs the [`Processor`]
+//! (detect → track → retarget, one or several characters), publishes the result to the
+//! server's hub, feeds the take recorder, and answers control requests.
+//!
+//! It never blocks on I/O: the hub's publish is a non-blocking ring write, the take writer
+//! sits behind a bounded queue, control replies are one-shot sends. In steady state, with no
+//! take recording, the path from a new frame to the clients' queues reuses its buffers
+//! ([`Output`] is refilled in place and the hub copies it with `clone_from` into recycled
+//! slots).
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant, SystemTime};
+
+use crossbeam_channel::Receiver;
+use mouthpiece_frame::Frame;
+use mouthpiece_server::{
+    ControlCommand, ControlFailure, ControlReceiver, ControlRequest, Hub, Recording,
+    SourceState as WireSourceState, StreamFrame, StreamInfo, Timecode, TimecodeRate,
+};
+use serde_json::json;
+
+use crate::slot::Taken;
+use crate::source::{SourceShared, SourceState};
+use crate::takes::{CharacterRecord, Derived, HeadRecord, TakeEnded, Takes};
+
+/// Per-frame flags a processor reports besides the stream frame.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Flags {
+    /// No neutral pose yet, or a requested calibration is collecting frames.
+    pub calibrating: bool,
+    /// Fewer than three forehead dots: the head pose is the last good one.
+    pub head_lost: bool,
+    /// Dots not seen in this frame.
+    pub dots_missing: usize,
+    /// No dot of any colour found at all.
+    pub no_dots: bool,
+}
+
+/// What a processor fills per frame; reused from frame to frame.
+#[derive(Debug, Default)]
+pub struct Output {
+    /// Sent to clients (`t`, `capture_us` and `wall_us` are set by the pipeline).
+    pub stream: StreamFrame,
+    /// Tracked dots `D1..`, `F1..` in the camera frame (metres), for takes.
+    pub performer_camera: Vec<Option<[f64; 3]>>,
+    pub flags: Flags,
+}
+
+/// Turns a frame into the stream's per-frame result. The real one is detect + track +
+/// retarget; the trait keeps the daemon independent of how.
+pub trait Processor: Send {
+    /// Processes `frame` into `out`, reusing `out`'s buffers.
+    fn process(&mut self, frame: &Frame, out: &mut Output);
+
+    /// Starts a new neutral calibration.
+    fn calibrate(&mut self, duration: Option<Duration>);
+
+    /// Characters, point names and frame rate for `hello`.
+    fn stream_info(&self, frame_rate: f64, source: &str) -> StreamInfo;
+
+    /// True once after the stream's description changed (characters bound to a new neutral
+    /// pose: new `M`); the pipeline then sends clients a new `hello`.
+    fn take_info_changed(&mut self) -> bool;
+
+    /// Names of [`Output::performer_camera`]'s entries.
+    fn performer_names(&self) -> &[String];
+
+    /// Applies a reloaded configuration (characters, colour ranges); the old one stays on
+    /// error.
+    fn reload(&mut self, update: Box<dyn std::any::Any + Send>) -> Result<(), String>;
+}
+
+/// Requests from the daemon itself (signals, start-up options) to the processing thread.
+#[derive(Debug)]
+pub enum Command {
+    /// A validated new configuration for the processor (see [`Processor::reload`]).
+    Reload(Box<dyn std::any::Any + Send>),
+    RecordStart {
+        slate: String,
+        take: Option<u32>,
+    },
+    RecordStop,
+}
+
+/// Everything the processing thread needs.
+pub struct Context {
+    pub source: Arc<SourceShared>,
+    pub spec: String,
+    pub hub: Hub,
+    pub control: ControlReceiver,
+    pub commands: Receiver<Command>,
+    pub takes: Takes,
+    pub default_slate: String,
+    pub timecode_rate: TimecodeRate,
+    pub stall_timeout: Duration,
+    /// Milliseconds since `epoch` of the loop's last turn: the watchdog's heartbeat.
+    pub heartbeat: Arc<AtomicU64>,
+    pub epoch: Instant,
+    pub stop: Arc<AtomicBool>,
+}
+
+/// Starts the processing thread.
+pub fn spawn<P: Processor + 'static>(
+    processor: P,
+    ctx: Context,
+) -> std::io::Result<JoinHandle<()>> {
+    std::thread::Builder::new()
+        .name("mouthpiece-process".into())
+        .spawn(move || run(processor, ctx))
+}
+
+fn run<P: Processor>(mut processor: P, mut ctx: Context) {
+    let mut out = Output::default();
+    let mut seen_generation = u64::MAX;
+    let mut last_frame: Option<Instant> = None;
+    let mut stalled = false;
+    let mut calibrating = None;
+    let mut frame_rate = 0.0;
+    let mut frames = 0u64;
+    tracing::info!("processing thread started");
+    loop {
+        ctx.heartbeat
+            .store(ctx.epoch.elapsed().as_millis() as u64, Ordering::Relaxed);
+        if ctx.stop.load(Ordering::Acquire) {
+            break;
+        }
+        match ctx.source.frames.take_timeout(Duration::from_millis(50)) {
+            Taken::Value(mut frame) => {
+                let started = Instant::now();
+                frames += 1;
+                last_frame = Some(started);
+                if stalled {
+                    stalled = false;
+                    seen_generation = u64::MAX; // republish the source state
+                }
+                // Wall clock of receipt: what the audio recorder beside us saw at that moment.
+                let wall = SystemTime::now() - frame.host_rx.elapsed();
+                frame.wall_clock = Some(wall);
+                let wall_us = crate::takes::unix_us(wall);
+                processor.process(&frame, &mut out);
+                if processor.take_info_changed() {
+                    ctx.hub
+                        .set_info(processor.stream_info(frame_rate, &ctx.spec));
+                }
+                out.stream.t = frame
+                    .host_rx
+                    .saturating_duration_since(ctx.epoch)
+                    .as_secs_f64();
+                out.stream.capture_us = frame.device_ts_us;
+                out.stream.wall_us = Some(wall_us);
+                out.stream.processing = Some(started.elapsed());
+                let seq = ctx.hub.publish(&out.stream);
+                tracing::trace!(seq, device_ts_us = frame.device_ts_us, "frame processed");
+                if calibrating != Some(out.flags.calibrating) {
+                    calibrating = Some(out.flags.calibrating);
+                    let now = out.flags.calibrating;
+                    ctx.hub.update_status(|s| s.calibrating = now);
+                    tracing::info!(calibrating = now, "calibration state");
+                }
+                if ctx.takes.is_recording() {
+                    let info = ctx.hub.info();
+                    let derived = derive(
+                        processor.performer_names(),
+                        &info,
+                        &out,
+                        seq,
+                        wall_us,
+                        ctx.timecode_rate,
+                    );
+                    ctx.takes.push(Arc::new(frame), Box::new(derived));
+                }
+            }
+            Taken::Empty => {
+                if let (Some(last), false) = (last_frame, stalled) {
+                    if last.elapsed() >= ctx.stall_timeout
+                        && matches!(ctx.source.state().1, SourceState::Up(_))
+                    {
+                        stalled = true;
+                        let message = format!(
+                            "source down: no frame for {:.1} s",
+                            last.elapsed().as_secs_f64()
+                        );
+                        tracing::warn!("{message}");
+                        ctx.hub.update_status(|s| {
+                            s.source = WireSourceState::Down;
+                            s.message = Some(message);
+                        });
+                    }
+                }
+            }
+            Taken::Closed => break,
+        }
+        let generation = ctx.source.generation();
+        if generation != seen_generation && !stalled {
+            seen_generation = generation;
+            let (_, state) = ctx.source.state();
+            publish_source_state(&ctx, &processor, &state, &mut frame_rate);
+        }
+        while let Some(request) = ctx.control.try_recv() {
+            handle_control(&mut processor, &mut ctx, request);
+        }
+        while let Ok(command) = ctx.commands.try_recv() {
+            handle_command(&mut processor, &mut ctx, command, frame_rate);
+        }
+        if let Some(ended) = ctx.takes.poll() {
+            announce_take_end(&ctx.hub, &ended);
+        }
+    }
+    if ctx.takes.is_recording() {
+        if let Ok(ended) = ctx.takes.stop() {
+            announce_take_end(&ctx.hub, &ended);
+        }
+    }
+    tracing::info!(
+        frames,
+        overwritten = ctx.source.frames.overwritten(),
+        "processing thread stopped"
+    );
+}
+
+fn publish_source_state<P: Processor>(
+    ctx: &Context,
+    processor: &P,
+    state: &SourceState,
+    frame_rate: &mut f64,
+) {
+    match state {
+        SourceState::Starting => {}
+        SourceState::Up(info) => {
+            *frame_rate = info.fps;
+            ctx.hub
+                .set_info(processor.stream_info(info.fps, &info.spec));
+            ctx.hub.update_status(|s| {
+                s.source = WireSourceState::Up;
+                s.message = None;
+            });
+        }
+        SourceState::Down { reason, retry_in } => {
+            let message = format!(
+                "source down: {reason}; retrying in {:.1} s",
+                retry_in.as_secs_f64()
+            );
+            ctx.hub.update_status(|s| {
+                s.source = WireSourceState::Down;
+                s.message = Some(message);
+            });
+        }
+    }
+}
+
+fn handle_control<P: Processor>(processor: &mut P, ctx: &mut Context, request: ControlRequest) {
+    tracing::info!(client = %request.client, command = ?request.command, "control request");
+    let outcome = match request.command.clone() {
+        ControlCommand::Calibrate { duration } => {
+            processor.calibrate(duration);
+            ctx.hub.update_status(|s| s.calibrating = true);
+            Ok(json!({ "calibrating": true }))
+        }
+        ControlCommand::RecordStart { slate, take } => {
+            let slate = slate.unwrap_or_else(|| ctx.default_slate.clone());
+            start_take(ctx, &slate, take).map_err(ControlFailure::new)
+        }
+        ControlCommand::RecordStop => stop_take(ctx).map_err(ControlFailure::new),
+    };
+    if let Err(failure) = &outcome {
+        tracing::warn!(client = %request.client, "control request failed: {}", failure.message);
+    }
+    request.reply(outcome);
+}
+
+fn handle_command<P: Processor>(
+    processor: &mut P,
+    ctx: &mut Context,
+    command: Command,
+    frame_rate: f64,
+) {
+    match command {
+        Command::Reload(update) => match processor.reload(update) {
+            Ok(()) => {
+                ctx.hub
+                    .set_info(processor.stream_info(frame_rate, &ctx.spec));
+                tracing::info!("configuration reloaded");
+            }
+            Err(e) => tracing::error!("reload rejected, old configuration kept: {e}"),
+        },
+        Command::RecordStart { slate, take } => {
+            if let Err(e) = start_take(ctx, &slate, take) {
+                tracing::error!("cannot start take: {e}");
+            }
+        }
+        Command::RecordStop => {
+            if let Err(e) = stop_take(ctx) {
+                tracing::warn!("{e}");
+            }
+        }
+    }
+}
+
+fn start_take(
+    ctx: &mut Context,
+    slate: &str,
+    take: Option<u32>,
+) -> Result<serde_json::Value, String> {
+    let info = ctx
+        .takes
+        .start(slate, take, &ctx.spec)
+        .map_err(|e| crate::source::error_chain(&e))?;
+    let file = info.path.display().to_string();
+    let recording = Recording {
+        slate: info.slate.clone(),
+        take: info.take,
+        file: Some(file.clone()),
+    };
+    let reply = json!({ "slate": info.slate, "take": info.take, "file": file });
+    ctx.hub.update_status(|s| {
+        s.recording = Some(recording);
+        if s.message
+            .as_deref()
+            .is_some_and(|m| m.starts_with("take stopped"))
+        {
+            s.message = None;
+        }
+    });
+    Ok(reply)
+}
+
+fn stop_take(ctx: &mut Context) -> Result<serde_json::Value, String> {
+    let ended = ctx.takes.stop().map_err(|e| e.to_string())?;
+    announce_take_end(&ctx.hub, &ended);
+    if let Some(error) = &ended.error {
+        return Err(format!(
+            "take {} ended with an error: {error}",
+            ended.info.path.display()
+        ));
+    }
+    Ok(json!({
+        "slate": ended.info.slate,
+        "take": ended.info.take,
+        "file": ended.info.path.display().to_string(),
+        "frames": ended.frames,
+        "dropped": ended.dropped,
+    }))
+}
+
+fn announce_take_end(hub: &Hub, ended: &TakeEnded) {
+    let message = ended.error.as_ref().map(|e| format!("take stopped: {e}"));
+    hub.update_status(|s| {
+        s.recording = None;
+        if message.is_some() {
+            s.message = message;
+        }
+    });
+}
+
+/// The frame's derived channels for the take (allocates; only while recording).
+fn derive(
+    names: &[String],
+    info: &StreamInfo,
+    out: &Output,
+    seq: u64,
+    wall_us: i64,
+    rate: TimecodeRate,
+) -> Derived {
+    let stream = &out.stream;
+    let stabilised = match &stream.performer {
+        Some(p) => names
+            .iter()
+            .zip(p.points.iter().zip(&p.confidence))
+            .map(|(n, (pt, c))| (n.clone(), pt.map(f64::from), f64::from(*c)))
+            .collect(),
+        None => Vec::new(),
+    };
+    Derived {
+        seq,
+        t: stream.t,
+        wall_us,
+        timecode: Timecode::from_unix_micros(wall_us, rate).to_string(),
+        performer: names
+            .iter()
+            .cloned()
+            .zip(out.performer_camera.iter().copied())
+            .collect(),
+        stabilised,
+        head: HeadRecord {
+            rotation: stream.head.rotation,
+            translation: stream.head.translation,
+            lost: stream.head.lost,
+        },
+        characters: stream
+            .characters
+            .iter()
+            .map(|c| {
+                let point_names = info
+                    .characters
+                    .iter()
+                    .find(|i| i.name == c.name)
+                    .map(|i| i.points.clone());
+                CharacterRecord {
+                    name: c.name.clone(),
+                    points: c
+                        .points
+                        .iter()
+                        .enumerate()
+                        .map(|(i, p)| {
+                            let name = point_names
+                                .as_ref()
+                                .and_then(|n| n.get(i).cloned())
+                                .unwrap_or_else(|| format!("P{}", i + 1));
+                            (name, *p)
+                        })
+                        .collect(),
+                    confidence: c.confidence.clone(),
+                    curve: c.curve.clone(),
+                }
+            })
+            .collect(),
+        status: json!({
+            "calibrating": out.flags.calibrating,
+            "head_lost": out.flags.head_lost,
+            "dots_missing": out.flags.dots_missing,
+            "no_dots": out.flags.no_dots,
+        }),
+    }
+}

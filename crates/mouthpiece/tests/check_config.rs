@@ -1,0 +1,82 @@
+//! `mouthpiece check-config`: exit 0 for a valid file, 2 with the file, line and key for a
+//! bad one.
+
+use std::process::Command;
+
+fn check(text: &str) -> (i32, String, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("mouthpiece.toml");
+    std::fs::write(&path, text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .arg("check-config")
+        .arg(&path)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn the_example_config_is_valid() {
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .arg("check-config")
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../config/mouthpiece.toml"
+        ))
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("ok"));
+}
+
+#[test]
+fn a_bad_key_exits_2_naming_it() {
+    let (code, _, stderr) = check("[source]\nspec = \"replay:x.mcap\"\n\n[takes]\nfoldr = \"t\"\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("mouthpiece.toml:5:1: key `takes.foldr`"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_bad_value_exits_2_naming_key_and_expectation() {
+    let (code, _, stderr) = check("[timecode]\nrate = \"31\"\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains(":2:") && stderr.contains("timecode.rate"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("expected one of"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
+fn a_missing_file_exits_2() {
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(["check-config", "/nonexistent/mouthpiece.toml"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/mouthpiece.toml"));
+}
+
+#[test]
+fn a_token_is_never_printed() {
+    let (code, stdout, stderr) =
+        check("[server]\nread_token = { value = \"very-secret-token-123\" }\n");
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        !stdout.contains("very-secret") && !stderr.contains("very-secret"),
+        "{stdout}{stderr}"
+    );
+}

@@ -1,0 +1,666 @@
+//! `mouthpiece run` end to end: the real binary on a session written at test time, a real
+//! WebSocket client, real signals.
+
+use std::os::unix::net::UnixDatagram;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use futures_util::{SinkExt, StreamExt};
+use mouthpiece_frame::{Calibration, ColorImage, DepthImage, Frame, Intrinsics};
+use mouthpiece_recording::{MessageReader, SessionWriter, WriterOptions};
+use serde_json::{json, Value};
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::http::HeaderValue;
+use tokio_tungstenite::tungstenite::Message;
+
+type Client =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// A short session: `frames` frames at 30 fps, 160x120, a moving gradient.
+fn write_session(path: &Path, frames: u64) {
+    let mut writer = SessionWriter::create(path, WriterOptions::default()).unwrap();
+    let calibration = Arc::new(Calibration::registered(Intrinsics::ideal(
+        160, 120, 131.0, 131.0, 79.5, 59.5,
+    )));
+    for seq in 0..frames {
+        let mut color = ColorImage::new(160, 120);
+        color
+            .data
+            .iter_mut()
+            .enumerate()
+            .for_each(|(i, b)| *b = ((i as u64 + seq * 3) % 251) as u8);
+        let mut depth = DepthImage::new(160, 120);
+        depth.data.iter_mut().for_each(|d| *d = 600);
+        writer
+            .write_frame(&Frame {
+                seq,
+                device_ts_us: seq * 33_333,
+                host_rx: Instant::now(),
+                wall_clock: None,
+                color,
+                depth,
+                calibration: calibration.clone(),
+            })
+            .unwrap();
+    }
+    writer.finish().unwrap();
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+struct Daemon {
+    child: Child,
+    port: u16,
+    dir: tempfile::TempDir,
+    stderr: PathBuf,
+}
+
+impl Daemon {
+    /// Starts `mouthpiece run --config` with `extra` config text after a `[source]` and
+    /// `[takes]` pointing into a temporary directory.
+    fn start(source_spec: &str, extra: &str, args: &[&str], env: &[(&str, &str)]) -> Daemon {
+        let dir = tempfile::tempdir().unwrap();
+        let port = free_port();
+        let config = format!(
+            "[source]\nspec = \"{source_spec}\"\nretry_initial_s = 0.2\nretry_max_s = 0.4\nstall_timeout_s = 1.0\n\
+             [server]\nlisten = \"127.0.0.1:{port}\"\n[takes]\nfolder = \"takes\"\nflush_s = 0.5\nmin_free_mb = 1\n{extra}"
+        );
+        std::fs::write(dir.path().join("mouthpiece.toml"), config).unwrap();
+        Self::start_in(dir, port, args, env)
+    }
+
+    fn start_in(dir: tempfile::TempDir, port: u16, args: &[&str], env: &[(&str, &str)]) -> Daemon {
+        let stderr = dir.path().join("stderr.log");
+        let mut command = Command::new(env!("CARGO_BIN_EXE_mouthpiece"));
+        command
+            .arg("run")
+            .arg("--config")
+            .arg(dir.path().join("mouthpiece.toml"))
+            .args(args)
+            .env("RUST_LOG", "info")
+            .env_remove("NOTIFY_SOCKET")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&stderr).unwrap());
+        for (k, v) in env {
+            command.env(k, v);
+        }
+        let child = command.spawn().unwrap();
+        let daemon = Daemon {
+            child,
+            port,
+            dir,
+            stderr,
+        };
+        daemon.wait_for_port();
+        daemon
+    }
+
+    fn wait_for_port(&self) {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+            assert!(
+                Instant::now() < deadline,
+                "daemon did not listen; stderr:\n{}",
+                self.log()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(&self.stderr).unwrap_or_default()
+    }
+
+    fn signal(&self, signal: i32) {
+        // SAFETY: kill(2) with our own child's pid and a valid signal number.
+        let rc = unsafe { libc::kill(self.child.id() as i32, signal) };
+        assert_eq!(rc, 0);
+    }
+
+    /// Waits for the exit; `None` when it did not exit within `limit`.
+    fn wait_exit(&mut self, limit: Duration) -> Option<std::process::ExitStatus> {
+        let deadline = Instant::now() + limit;
+        loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                return Some(status);
+            }
+            if Instant::now() >= deadline {
+                return None;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    async fn connect(&self) -> Client {
+        let mut request = format!("ws://127.0.0.1:{}/", self.port)
+            .into_client_request()
+            .unwrap();
+        request.headers_mut().insert(
+            "Sec-WebSocket-Protocol",
+            HeaderValue::from_static("mouthpiece.v1"),
+        );
+        let (mut ws, _) = tokio_tungstenite::connect_async(request).await.unwrap();
+        send(&mut ws, json!({"type": "subscribe"})).await;
+        ws
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+async fn send(ws: &mut Client, v: Value) {
+    ws.send(Message::text(v.to_string())).await.unwrap();
+}
+
+/// The next JSON message, failing after `limit`.
+async fn next_json(ws: &mut Client, limit: Duration) -> Value {
+    loop {
+        let m = tokio::time::timeout(limit, ws.next())
+            .await
+            .expect("a message in time")
+            .expect("open")
+            .expect("ok");
+        match m {
+            Message::Text(t) => return serde_json::from_str(&t).unwrap(),
+            Message::Close(f) => panic!("closed: {f:?}"),
+            _ => continue,
+        }
+    }
+}
+
+/// The next message satisfying `pred` within `limit` overall.
+async fn wait_for(ws: &mut Client, limit: Duration, pred: impl Fn(&Value) -> bool) -> Value {
+    let deadline = Instant::now() + limit;
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        assert!(!left.is_zero(), "no matching message within {limit:?}");
+        let v = next_json(ws, left).await;
+        if pred(&v) {
+            return v;
+        }
+    }
+}
+
+fn topics(path: &Path) -> std::collections::BTreeMap<String, usize> {
+    let mut reader = MessageReader::open(path).unwrap();
+    let mut topics = std::collections::BTreeMap::new();
+    while let Some(m) = reader.next_message().unwrap() {
+        *topics.entry(m.topic.to_string()).or_insert(0) += 1;
+    }
+    topics
+}
+
+fn takes_in(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<_> = std::fs::read_dir(dir.join("takes"))
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    files.sort();
+    files
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_receives_frames_and_sigterm_closes_it_with_1001_and_exits_0_within_2_s() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    write_session(&session, 60);
+    let mut daemon = Daemon::start(
+        &format!("replay:{}?loop=1", session.display()),
+        "",
+        &[],
+        &[],
+    );
+    let mut ws = daemon.connect().await;
+    let hello = wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "hello").await;
+    let names: Vec<&str> = hello["characters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["human", "wolf"], "{hello}");
+    let mut seqs = Vec::new();
+    while seqs.len() < 20 {
+        let f = wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await;
+        assert!(
+            f["timecode"].as_str().is_some_and(|tc| tc.len() == 11),
+            "{f}"
+        );
+        assert!(f["wall_us"].as_i64().is_some(), "{f}");
+        seqs.push(f["seq"].as_u64().unwrap());
+    }
+    assert!(seqs.windows(2).all(|w| w[1] > w[0]), "{seqs:?}");
+
+    daemon.signal(libc::SIGTERM);
+    let sent = Instant::now();
+    let code = loop {
+        match tokio::time::timeout(Duration::from_secs(3), ws.next())
+            .await
+            .expect("closed in time")
+        {
+            Some(Ok(Message::Close(Some(frame)))) => break u16::from(frame.code),
+            Some(Ok(_)) => continue,
+            other => panic!("no close frame: {other:?}"),
+        }
+    };
+    assert_eq!(code, 1001);
+    let status = daemon
+        .wait_exit(Duration::from_secs(2))
+        .expect("exit within 2 s of SIGTERM");
+    assert!(status.success(), "{status:?}\n{}", daemon.log());
+    assert!(sent.elapsed() < Duration::from_secs(2));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_take_started_by_a_control_message_holds_every_channel() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    write_session(&session, 60);
+    let mut daemon = Daemon::start(
+        &format!("replay:{}?loop=1", session.display()),
+        "",
+        &[],
+        &[],
+    );
+    let mut ws = daemon.connect().await;
+    wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await;
+    send(
+        &mut ws,
+        json!({"type": "record", "id": 1, "action": "start", "slate": "e2e", "take": 4}),
+    )
+    .await;
+    // The reply and the status telling every client about the take come in either order.
+    let (mut started, mut status_seen) = (None, false);
+    while started.is_none() || !status_seen {
+        let v = next_json(&mut ws, Duration::from_secs(5)).await;
+        match v["type"].as_str() {
+            Some("result") | Some("error") => started = Some(v),
+            Some("status") if v["recording"]["slate"] == "e2e" => status_seen = true,
+            _ => {}
+        }
+    }
+    let started = started.unwrap();
+    assert_eq!(started["type"], "result", "{started}");
+    let file = PathBuf::from(started["detail"]["file"].as_str().unwrap());
+    let name = file.file_name().unwrap().to_str().unwrap().to_owned();
+    assert!(name.starts_with("e2e_T004_"), "{file:?}");
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    send(
+        &mut ws,
+        json!({"type": "record", "id": 2, "action": "stop"}),
+    )
+    .await;
+    let stopped = wait_for(&mut ws, Duration::from_secs(5), |v| {
+        v["type"] == "result" || v["type"] == "error"
+    })
+    .await;
+    assert_eq!(stopped["type"], "result", "{stopped}");
+    let frames = stopped["detail"]["frames"].as_u64().unwrap();
+    assert!(frames >= 30, "{stopped}");
+    let topics = topics(&file);
+    for topic in [
+        "/camera/color",
+        "/camera/depth",
+        "/performer/points",
+        "/head",
+        "/character/human",
+        "/character/wolf",
+    ] {
+        assert_eq!(
+            topics.get(topic).copied(),
+            Some(frames as usize),
+            "{topic}: {topics:?}"
+        );
+    }
+    assert!(topics.contains_key("/camera/calibration"), "{topics:?}");
+    // A second start while recording is refused; stop without a take is an error.
+    send(
+        &mut ws,
+        json!({"type": "record", "id": 3, "action": "stop"}),
+    )
+    .await;
+    let refused = wait_for(&mut ws, Duration::from_secs(5), |v| {
+        v["type"] == "result" || v["type"] == "error"
+    })
+    .await;
+    assert_eq!(refused["type"], "error", "{refused}");
+    daemon.signal(libc::SIGTERM);
+    assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
+}
+
+#[test]
+fn sigkill_during_a_take_leaves_a_readable_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    write_session(&session, 60);
+    let mut daemon = Daemon::start(
+        &format!("replay:{}?loop=1", session.display()),
+        "",
+        &["--record", "crash"],
+        &[],
+    );
+    std::thread::sleep(Duration::from_millis(2500));
+    daemon.signal(libc::SIGKILL);
+    daemon.wait_exit(Duration::from_secs(2)).unwrap();
+    let files = takes_in(daemon.dir.path());
+    assert_eq!(files.len(), 1, "{files:?}\n{}", daemon.log());
+    let topics = topics(&files[0]);
+    // flush_s = 0.5: at most half a second (15 frames) of the ~2 s recorded is lost.
+    let depth = topics.get("/camera/depth").copied().unwrap_or(0);
+    assert!(depth >= 30, "only {depth} frames readable: {topics:?}");
+    // The cut may fall between a frame's camera messages and its derived ones.
+    let wolf = topics.get("/character/wolf").copied().unwrap_or(0);
+    assert!(depth - wolf <= 1, "{topics:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_source_that_fails_is_reported_down_and_streaming_resumes_when_it_returns() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    let away = dir.path().join("away.mcap");
+    write_session(&session, 20);
+    // No loop: at the end the source ends, and is reopened after the retry delay.
+    let mut daemon = Daemon::start(&format!("replay:{}", session.display()), "", &[], &[]);
+    let mut ws = daemon.connect().await;
+    wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await;
+    std::fs::rename(&session, &away).unwrap();
+    let down = wait_for(&mut ws, Duration::from_secs(10), |v| {
+        v["type"] == "status"
+            && v["source"] == "down"
+            && v["message"]
+                .as_str()
+                .is_some_and(|m| m.contains("cannot open"))
+    })
+    .await;
+    assert!(
+        down["message"].as_str().unwrap().contains("source down"),
+        "{down}"
+    );
+    std::fs::rename(&away, &session).unwrap();
+    wait_for(&mut ws, Duration::from_secs(10), |v| {
+        v["type"] == "status" && v["source"] == "up"
+    })
+    .await;
+    let before = wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await["seq"]
+        .as_u64()
+        .unwrap();
+    let after = wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await["seq"]
+        .as_u64()
+        .unwrap();
+    assert!(after > before);
+    daemon.signal(libc::SIGTERM);
+    assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
+}
+
+#[test]
+fn a_bad_config_exits_2_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.toml");
+    std::fs::write(
+        &path,
+        "[server]\nlisten = \"127.0.0.1:1\"\n[takes]\nmin_free_mb = \"lots\"\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .arg("run")
+        .arg("--config")
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("bad.toml:4:") && stderr.contains("takes.min_free_mb"),
+        "{stderr}"
+    );
+
+    // A character file that does not exist: named by its key.
+    std::fs::write(&path, "[characters]\nfiles = [\"nope.toml\"]\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .arg("run")
+        .arg("--config")
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("characters.files[0]") && stderr.contains("nope.toml"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn systemd_gets_ready_watchdog_status_and_stopping() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    write_session(&session, 30);
+    let socket_path = dir.path().join("notify.sock");
+    let socket = UnixDatagram::bind(&socket_path).unwrap();
+    socket
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let mut daemon = Daemon::start(
+        &format!("replay:{}?loop=1", session.display()),
+        "",
+        &[],
+        &[
+            ("NOTIFY_SOCKET", socket_path.to_str().unwrap()),
+            ("WATCHDOG_USEC", "400000"),
+        ],
+    );
+    let mut seen = Vec::new();
+    let mut buf = [0u8; 4096];
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while Instant::now() < deadline
+        && !(seen.iter().any(|m: &String| m.starts_with("READY=1"))
+            && seen.iter().filter(|m| *m == "WATCHDOG=1").count() >= 2)
+    {
+        if let Ok(n) = socket.recv(&mut buf) {
+            seen.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+        }
+    }
+    assert!(
+        seen.iter().any(|m| m.starts_with("READY=1\nSTATUS=")),
+        "{seen:?}"
+    );
+    assert!(
+        seen.iter().filter(|m| *m == "WATCHDOG=1").count() >= 2,
+        "{seen:?}"
+    );
+    daemon.signal(libc::SIGTERM);
+    let mut stopping = false;
+    while let Ok(n) = socket.recv(&mut buf) {
+        if &buf[..n] == b"STOPPING=1" {
+            stopping = true;
+            break;
+        }
+    }
+    assert!(stopping, "no STOPPING=1");
+    assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sighup_reloads_characters_without_dropping_clients_and_keeps_the_old_on_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    write_session(&session, 60);
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let wolf = repo
+        .join("config/characters/wolf.toml")
+        .canonicalize()
+        .unwrap();
+    let mut daemon = Daemon::start(
+        &format!("replay:{}?loop=1", session.display()),
+        "",
+        &[],
+        &[],
+    );
+    let config_path = daemon.dir.path().join("mouthpiece.toml");
+    let original = std::fs::read_to_string(&config_path).unwrap();
+    let mut ws = daemon.connect().await;
+    wait_for(&mut ws, Duration::from_secs(10), |v| {
+        v["type"] == "hello" && v["characters"].as_array().unwrap().len() == 2
+    })
+    .await;
+
+    std::fs::write(
+        &config_path,
+        format!("{original}[characters]\nfiles = [\"{}\"]\n", wolf.display()),
+    )
+    .unwrap();
+    daemon.signal(libc::SIGHUP);
+    let hello = wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "hello").await;
+    let names: Vec<&str> = hello["characters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["wolf"], "{hello}");
+    // Frames published before the reload may still be on their way.
+    wait_for(&mut ws, Duration::from_secs(10), |v| {
+        v["type"] == "frame" && v["characters"].as_array().unwrap().len() == 1
+    })
+    .await;
+
+    // A broken file is rejected: the daemon keeps running with the wolf, the client stays.
+    std::fs::write(
+        &config_path,
+        format!("{original}[characters]\nfiles = [\"missing.toml\"]\n"),
+    )
+    .unwrap();
+    daemon.signal(libc::SIGHUP);
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let frame = wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await;
+    let in_frame: Vec<&str> = frame["characters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(in_frame, ["wolf"], "{frame}");
+    assert!(
+        daemon.log().contains("new configuration rejected"),
+        "{}",
+        daemon.log()
+    );
+    assert!(daemon.child.try_wait().unwrap().is_none());
+    daemon.signal(libc::SIGTERM);
+    assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
+}
+
+async fn connect_with_token(
+    port: u16,
+    token: &str,
+) -> Result<Client, tokio_tungstenite::tungstenite::Error> {
+    let mut request = format!("ws://127.0.0.1:{port}/")
+        .into_client_request()
+        .unwrap();
+    request.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        HeaderValue::from_str(&format!("mouthpiece.v1, mouthpiece.token.{token}")).unwrap(),
+    );
+    let (mut ws, _) = tokio_tungstenite::connect_async(request).await?;
+    send(&mut ws, json!({"type": "subscribe"})).await;
+    Ok(ws)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sighup_replaces_tokens_and_connected_clients_stay() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    write_session(&session, 60);
+    let daemon_dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        daemon_dir.path().join("read.token"),
+        "old-read-token-0123456789\n",
+    )
+    .unwrap();
+    std::fs::write(
+        daemon_dir.path().join("control.token"),
+        "old-control-token-0123456789\n",
+    )
+    .unwrap();
+    let mut daemon = Daemon::start(
+        &format!("replay:{}?loop=1", session.display()),
+        "",
+        &[],
+        &[],
+    );
+    // Rewrite the config with tokens in files next to it, then restart on it.
+    let config_path = daemon.dir.path().join("mouthpiece.toml");
+    let text = std::fs::read_to_string(&config_path).unwrap().replace(
+        "[server]\n",
+        &format!(
+            "[server]\nread_token = {{ file = \"{0}/read.token\" }}\ncontrol_token = {{ file = \"{0}/control.token\" }}\n",
+            daemon_dir.path().display()
+        ),
+    );
+    daemon.signal(libc::SIGTERM);
+    daemon.wait_exit(Duration::from_secs(2)).unwrap();
+    let port = daemon.port;
+    let dir_kept = std::mem::replace(&mut daemon.dir, tempfile::tempdir().unwrap());
+    std::fs::write(dir_kept.path().join("mouthpiece.toml"), text).unwrap();
+    let mut daemon = Daemon::start_in(dir_kept, port, &[], &[]);
+
+    assert!(connect_with_token(port, "wrong-token-0123456789")
+        .await
+        .is_err());
+    let mut old_client = connect_with_token(port, "old-read-token-0123456789")
+        .await
+        .unwrap();
+    wait_for(&mut old_client, Duration::from_secs(10), |v| {
+        v["type"] == "frame"
+    })
+    .await;
+
+    std::fs::write(
+        daemon_dir.path().join("read.token"),
+        "new-read-token-0123456789\n",
+    )
+    .unwrap();
+    daemon.signal(libc::SIGHUP);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while connect_with_token(port, "old-read-token-0123456789")
+        .await
+        .is_ok()
+    {
+        assert!(
+            Instant::now() < deadline,
+            "old token still accepted\n{}",
+            daemon.log()
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let mut new_client = connect_with_token(port, "new-read-token-0123456789")
+        .await
+        .unwrap();
+    wait_for(&mut new_client, Duration::from_secs(10), |v| {
+        v["type"] == "frame"
+    })
+    .await;
+    // The client connected with the old token was not dropped.
+    wait_for(&mut old_client, Duration::from_secs(10), |v| {
+        v["type"] == "frame"
+    })
+    .await;
+    assert!(
+        !daemon.log().contains("new-read-token"),
+        "a token was logged"
+    );
+    daemon.signal(libc::SIGTERM);
+    assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
+}
