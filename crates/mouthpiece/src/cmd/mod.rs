@@ -3,9 +3,9 @@
 pub mod check_config;
 pub mod devices;
 pub mod evaluate;
+pub mod export;
 pub mod process;
 pub mod record;
-pub mod export;
 pub mod retarget;
 pub mod run;
 pub mod synth;
