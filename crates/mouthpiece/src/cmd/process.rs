@@ -88,7 +88,7 @@ fn smoothing(smooth: Smooth) -> ShapeSmoothing {
 
 /// A finite stream of frames from a recorded session.
 pub enum Input {
-    Mcap(SessionReader),
+    Mcap(Box<SessionReader>),
     Oni(Box<dyn FrameSource>),
 }
 
@@ -104,7 +104,7 @@ impl Input {
                 let reader = SessionReader::open(path)
                     .with_context(|| format!("cannot open session {}", path.display()))
                     .map_err(bad_input)?;
-                Ok(Input::Mcap(reader))
+                Ok(Input::Mcap(Box::new(reader)))
             }
             Some("oni") => {
                 // OpenNI2 playback through the capture crate, unpaced (`speed=0`).
