@@ -3,6 +3,8 @@
 //! # Layout
 //! - [`source`]: the source thread: opens the source, feeds the [`slot`], reopens a lost
 //!   source with [`backoff`];
+//! - [`live`]: the processor: detect + track (3D dots, names, head pose, neutral
+//!   calibration) + retarget for every configured character;
 //! - [`slot`]: the latest-frame slot between the source thread and processing (newest wins);
 //! - [`notify`]: systemd's notify protocol (READY, STATUS, WATCHDOG, STOPPING);
 //! - [`throttle`]: repeated warnings at most once per interval;
@@ -16,7 +18,7 @@ pub mod capture;
 pub mod characters;
 pub mod check;
 pub mod daemon;
-pub mod interim;
+pub mod live;
 pub mod logging;
 pub mod notify;
 pub mod pipeline;
@@ -27,7 +29,7 @@ pub mod throttle;
 
 pub use daemon::{run, DaemonError, RunOptions};
 
-/// Runs the daemon with the pipeline this build has (see [`interim`]).
+/// Runs the daemon with the real pipeline: detect + track + retarget ([`live`]).
 pub fn run_live(config: mouthpiece_config::Config, options: RunOptions) -> Result<(), DaemonError> {
-    run(config, interim::InterimFactory, options)
+    run(config, live::LiveFactory, options)
 }

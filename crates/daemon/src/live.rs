@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use mouthpiece_config::Config;
 use mouthpiece_detect::DetectConfig;
 use mouthpiece_frame::Frame;
-use mouthpiece_retarget::retarget::{CharacterRetarget, CharacterSettings};
+use mouthpiece_retarget::retarget::{CharacterRetarget, CharacterSettings, StabilisedFrame};
 use mouthpiece_retarget::{Character, PerformerLayout, ShapeSmoothing};
 use mouthpiece_server::{CharacterFrame, CharacterInfo, PerformerFrame, StreamInfo};
 use mouthpiece_track::{TrackConfig, TrackedFrame, Tracker};
@@ -18,12 +18,6 @@ use crate::daemon::Factory;
 use crate::pipeline::{Output, Processor};
 use crate::source::Opener;
 use crate::throttle::Throttle;
-
-/// The characters built into the binary: the embedded default's human and wolf.
-pub const BUILTIN_CHARACTERS: [(&str, &str); 2] = [
-    ("config/characters/human.toml", include_str!("../../../config/characters/human.toml")),
-    ("config/characters/wolf.toml", include_str!("../../../config/characters/wolf.toml")),
-];
 
 /// The sections of the config file this pipeline owns besides the daemon's.
 #[derive(Debug, Default, Deserialize)]
@@ -44,41 +38,38 @@ pub struct Setup {
 /// Loads and validates characters, `[detect]` and `[track]`.
 pub fn setup(config: &Config) -> Result<Setup, CheckError> {
     let sections: Sections = config.extract()?;
-    let invalid = |key: &str, message: String| CheckError::Invalid { location: config.locate(key), message };
-    sections.detect.validate().map_err(|e| invalid("detect", crate::source::error_chain(&e)))?;
-    sections.track.validate().map_err(|e| invalid("track", crate::source::error_chain(&e)))?;
-    let mut characters = Vec::new();
-    if config.characters.files.is_empty() {
-        for (name, text) in BUILTIN_CHARACTERS {
-            let character = Character::from_toml_str(text)
-                .map_err(|e| invalid("characters.files", format!("built-in {name}: {}", crate::source::error_chain(&e))))?;
-            characters.push(character);
-        }
-    } else {
-        for (i, path) in config.characters.files.iter().enumerate() {
-            let key = format!("characters.files[{i}]");
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| invalid(&key, format!("cannot read character file {}: {e}", path.display())))?;
-            let character = Character::from_toml_str(&text)
-                .map_err(|e| invalid(&key, format!("{}: {}", path.display(), crate::source::error_chain(&e))))?;
-            characters.push(character);
-        }
-    }
+    let invalid = |key: &str, message: String| CheckError::Invalid {
+        location: config.locate(key),
+        message,
+    };
+    sections
+        .detect
+        .validate()
+        .map_err(|e| invalid("detect", crate::source::error_chain(&e)))?;
+    sections
+        .track
+        .validate()
+        .map_err(|e| invalid("track", crate::source::error_chain(&e)))?;
+    let characters = crate::characters::load(config)?;
     let layout = sections.track.layout();
     for (i, c) in characters.iter().enumerate() {
         if c.len() != layout.lip_dots {
             return Err(invalid(
                 &format!("characters.files[{i}]"),
-                format!("character {} has {} points but the performer wears {} lip dots", c.name, c.len(), layout.lip_dots),
+                format!(
+                    "character {} has {} points but the performer wears {} lip dots",
+                    c.name,
+                    c.len(),
+                    layout.lip_dots
+                ),
             ));
         }
     }
-    let mut names: Vec<&str> = characters.iter().map(|c| c.name.as_str()).collect();
-    names.sort_unstable();
-    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-        return Err(invalid("characters.files", format!("two characters are named {:?}", w[0])));
-    }
-    Ok(Setup { characters, detect: sections.detect, track: sections.track })
+    Ok(Setup {
+        characters,
+        detect: sections.detect,
+        track: sections.track,
+    })
 }
 
 /// Builds the live pipeline.
@@ -89,22 +80,26 @@ impl Factory for LiveFactory {
     type Processor = LiveProcessor;
 
     fn processor(&self, config: &Config) -> Result<LiveProcessor, CheckError> {
-        LiveProcessor::new(setup(config)?).map_err(|message| CheckError::Invalid { location: config.locate("detect"), message })
+        LiveProcessor::new(setup(config)?).map_err(|message| CheckError::Invalid {
+            location: config.locate("detect"),
+            message,
+        })
     }
 
     fn reload(&self, config: &Config) -> Result<Box<dyn std::any::Any + Send>, CheckError> {
         let setup = setup(config)?;
         // Build the tracker here so a bad colour range is rejected before anything changes.
-        Tracker::new(setup.detect.clone(), setup.track.clone()).map_err(|e| CheckError::Invalid {
-            location: config.locate("detect"),
-            message: crate::source::error_chain(&e),
+        Tracker::new(setup.detect.clone(), setup.track.clone()).map_err(|e| {
+            CheckError::Invalid {
+                location: config.locate("detect"),
+                message: crate::source::error_chain(&e),
+            }
         })?;
         Ok(Box::new(setup))
     }
 
-    fn opener(&self, spec: &str) -> Opener {
-        let spec = spec.to_owned();
-        Box::new(move || mouthpiece_capture::open_source(&spec))
+    fn opener(&self, spec: &str, stall_timeout: Duration) -> Opener {
+        crate::capture::opener(spec, stall_timeout)
     }
 }
 
@@ -117,13 +112,16 @@ pub struct LiveProcessor {
     /// Characters bound to the tracker's current neutral pose (empty until calibrated).
     bound: Vec<CharacterRetarget>,
     dot_names: Vec<String>,
+    /// The tracker's last stabilised frame, copied out of its borrow.
+    stabilised: Option<StabilisedFrame>,
     info_changed: bool,
     errors: Throttle,
 }
 
 impl LiveProcessor {
     pub fn new(setup: Setup) -> Result<Self, String> {
-        let tracker = Tracker::new(setup.detect.clone(), setup.track.clone()).map_err(|e| crate::source::error_chain(&e))?;
+        let tracker = Tracker::new(setup.detect.clone(), setup.track.clone())
+            .map_err(|e| crate::source::error_chain(&e))?;
         let dot_names = TrackedFrame::names(tracker.layout());
         Ok(LiveProcessor {
             tracker,
@@ -132,6 +130,7 @@ impl LiveProcessor {
             characters: setup.characters,
             bound: Vec::new(),
             dot_names,
+            stabilised: None,
             info_changed: true,
             errors: Throttle::new(Duration::from_secs(10)),
         })
@@ -142,17 +141,22 @@ impl LiveProcessor {
             self.bound.clear();
             return;
         };
-        let settings = CharacterSettings { smoothing: ShapeSmoothing::default(), one_euro: None };
+        let settings = CharacterSettings {
+            smoothing: ShapeSmoothing::default(),
+            one_euro: None,
+        };
         self.bound = self
             .characters
             .iter()
-            .filter_map(|c| match CharacterRetarget::new(c.clone(), neutral, settings) {
-                Ok(bound) => Some(bound),
-                Err(e) => {
-                    tracing::error!(character = %c.name, "cannot bind character: {e}");
-                    None
-                }
-            })
+            .filter_map(
+                |c| match CharacterRetarget::new(c.clone(), neutral, settings) {
+                    Ok(bound) => Some(bound),
+                    Err(e) => {
+                        tracing::error!(character = %c.name, "cannot bind character: {e}");
+                        None
+                    }
+                },
+            )
             .collect();
         self.info_changed = true;
     }
@@ -168,7 +172,12 @@ impl Processor for LiveProcessor {
             Ok(tracked) => tracked,
             Err(e) => {
                 if let Some(held_back) = self.errors.allow(Instant::now()) {
-                    tracing::warn!(held_back, seq = frame.seq, "tracking failed: {}", crate::source::error_chain(&e));
+                    tracing::warn!(
+                        held_back,
+                        seq = frame.seq,
+                        "tracking failed: {}",
+                        crate::source::error_chain(&e)
+                    );
                 }
                 out.flags.no_dots = true;
                 return;
@@ -181,32 +190,56 @@ impl Processor for LiveProcessor {
         out.flags.no_dots = tracked.status.no_dots;
         let dots = &tracked.dots;
         out.performer_camera.clear();
-        out.performer_camera.extend(dots.lip.iter().chain(dots.forehead.iter()).map(|d| d.map(|p| [p.x, p.y, p.z])));
-        let stabilised = tracked.stabilised.clone();
+        out.performer_camera.extend(
+            dots.lip
+                .iter()
+                .chain(dots.forehead.iter())
+                .map(|d| d.map(|p| [p.x, p.y, p.z])),
+        );
+        // Copied into a kept buffer, reusing its vectors, to end the tracker's borrow.
+        match (&mut self.stabilised, &tracked.stabilised) {
+            (Some(mine), Some(theirs)) => {
+                mine.t = theirs.t;
+                mine.lip.clone_from(&theirs.lip);
+                mine.confidence.clone_from(&theirs.confidence);
+                mine.head = theirs.head.clone();
+                mine.head_lost = theirs.head_lost;
+            }
+            (mine, theirs) => *mine = theirs.clone(),
+        }
         if neutral_taken || (self.bound.is_empty() && self.tracker.neutral().is_some()) {
             self.bind_characters();
         }
         let stream = &mut out.stream;
-        match &stabilised {
+        match &self.stabilised {
             Some(stab) => {
                 stream.head.rotation = stab.head.quaternion_wxyz();
-                stream.head.translation = [stab.head.translation.x, stab.head.translation.y, stab.head.translation.z];
+                stream.head.translation = [
+                    stab.head.translation.x,
+                    stab.head.translation.y,
+                    stab.head.translation.z,
+                ];
                 stream.head.lost = stab.head_lost;
                 let performer = stream.performer.get_or_insert_with(PerformerFrame::default);
                 performer.points.clear();
                 performer.points.extend(stab.lip.iter().map(to_f32));
                 performer.confidence.clear();
-                performer.confidence.extend(stab.confidence.iter().map(|&c| c as f32));
-                stream.characters.resize_with(self.bound.len(), CharacterFrame::default);
+                performer
+                    .confidence
+                    .extend(stab.confidence.iter().map(|&c| c as f32));
+                stream
+                    .characters
+                    .resize_with(self.bound.len(), CharacterFrame::default);
                 for (bound, slot) in self.bound.iter_mut().zip(stream.characters.iter_mut()) {
-                    let result = bound.apply(stab);
                     if slot.name != bound.character().name {
                         slot.name.clone_from(&bound.character().name);
                     }
+                    let result = bound.apply(stab);
                     slot.points.clear();
                     slot.points.extend(result.points.iter().map(to_f32));
                     slot.confidence.clear();
-                    slot.confidence.extend(result.confidence.iter().map(|&c| c as f32));
+                    slot.confidence
+                        .extend(result.confidence.iter().map(|&c| c as f32));
                     if result.curve.is_empty() {
                         slot.curve = None;
                     } else {
@@ -220,7 +253,9 @@ impl Processor for LiveProcessor {
                 // Not calibrated yet: every character at rest, confidence 0.
                 stream.head = Default::default();
                 stream.performer = None;
-                stream.characters.resize_with(self.characters.len(), CharacterFrame::default);
+                stream
+                    .characters
+                    .resize_with(self.characters.len(), CharacterFrame::default);
                 for (c, slot) in self.characters.iter().zip(stream.characters.iter_mut()) {
                     if slot.name != c.name {
                         slot.name.clone_from(&c.name);
@@ -255,15 +290,22 @@ impl Processor for LiveProcessor {
                     name: c.name.clone(),
                     points: c.point_names.clone(),
                     neutral: c.neutral.iter().map(to_f32).collect(),
-                    m: bound.map(|b| b.m().iter().map(to_f32).collect()).unwrap_or_default(),
+                    m: bound
+                        .map(|b| b.m().iter().map(to_f32).collect())
+                        .unwrap_or_default(),
                     m_mode: format!("{:?}", c.m_mode).to_lowercase(),
-                    units: c.units.map(|u| format!("{u:?}").to_lowercase()).unwrap_or_default(),
+                    units: c
+                        .units
+                        .map(|u| format!("{u:?}").to_lowercase())
+                        .unwrap_or_default(),
                 }
             })
             .collect();
         StreamInfo {
             characters,
-            performer_points: (0..layout.lip_dots).map(PerformerLayout::lip_name).collect(),
+            performer_points: (0..layout.lip_dots)
+                .map(PerformerLayout::lip_name)
+                .collect(),
             frame_rate,
             source: source.to_owned(),
         }
@@ -274,10 +316,13 @@ impl Processor for LiveProcessor {
     }
 
     fn reload(&mut self, update: Box<dyn std::any::Any + Send>) -> Result<(), String> {
-        let setup = update.downcast::<Setup>().map_err(|_| "internal: wrong reload payload".to_owned())?;
+        let setup = update
+            .downcast::<Setup>()
+            .map_err(|_| "internal: wrong reload payload".to_owned())?;
         if setup.detect != self.detect || setup.track != self.track {
             // New colour ranges or tracking settings: a new tracker, which calibrates afresh.
-            self.tracker = Tracker::new(setup.detect.clone(), setup.track.clone()).map_err(|e| crate::source::error_chain(&e))?;
+            self.tracker = Tracker::new(setup.detect.clone(), setup.track.clone())
+                .map_err(|e| crate::source::error_chain(&e))?;
             self.dot_names = TrackedFrame::names(self.tracker.layout());
             self.detect = setup.detect;
             self.track = setup.track;
