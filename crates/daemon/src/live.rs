@@ -202,7 +202,7 @@ impl Processor for LiveProcessor {
                 mine.t = theirs.t;
                 mine.lip.clone_from(&theirs.lip);
                 mine.confidence.clone_from(&theirs.confidence);
-                mine.head = theirs.head.clone();
+                mine.head = theirs.head;
                 mine.head_lost = theirs.head_lost;
             }
             (mine, theirs) => *mine = theirs.clone(),
