@@ -71,17 +71,40 @@ pub fn depth_by_plane(
     if buf.len() < 6 {
         return None;
     }
+    // Two passes: the plane through every kept reading, then again without the readings far
+    // off that plane (the rim of the mouth opening, flying pixels at an edge).
+    let first = fit_plane(buf)?;
+    let mut residuals: Vec<f64> = buf
+        .iter()
+        .map(|&s| (s.2 - first.dot(&lift(&s))).abs())
+        .collect();
+    let mid = residuals.len() / 2;
+    let mad = *residuals.select_nth_unstable_by(mid, f64::total_cmp).1;
+    // 3 σ of the residuals (σ ≈ 1.48 MAD), never below a millimetre (the sensor's quantisation).
+    let keep = (3.0 * 1.4826 * mad).max(0.001 / scale);
+    buf.retain(|&s| (s.2 - first.dot(&lift(&s))).abs() <= keep);
+    if buf.len() < 6 {
+        return None;
+    }
+    let z = fit_plane(buf)?[0];
+    (z >= lo && z <= hi).then_some((z * scale, DepthMethod::PlaneFit))
+}
+
+fn lift(&(dx, dy, _): &(f64, f64, f64)) -> Vector3<f64> {
+    Vector3::new(1.0, dx, dy)
+}
+
+/// Least-squares plane `z = c + a dx + b dy` as `(c, a, b)`; `None` for a degenerate spread
+/// (all readings on one line).
+fn fit_plane(samples: &[(f64, f64, f64)]) -> Option<Vector3<f64>> {
     let mut ata = Matrix3::zeros();
     let mut atb = Vector3::zeros();
-    for &(dx, dy, z) in buf.iter() {
-        let a = Vector3::new(1.0, dx, dy);
+    for s in samples {
+        let a = lift(s);
         ata += a * a.transpose();
-        atb += a * z;
+        atb += a * s.2;
     }
-    // A degenerate spread (all readings on one line) cannot fix a plane.
-    let solution = ata.cholesky()?.solve(&atb);
-    let z = solution[0];
-    (z >= lo && z <= hi).then_some((z * scale, DepthMethod::PlaneFit))
+    Some(ata.cholesky()?.solve(&atb))
 }
 
 /// Valid readings within `radius` of `center`, as (dx, dy, raw depth).

@@ -67,6 +67,9 @@ pub struct Args {
     /// Configuration file (`[detect]`, `[track]`).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// After each session, a table per dot: found, wrong, bias and RMS per camera axis.
+    #[arg(long)]
+    pub per_dot: bool,
 }
 
 /// One session's figures.
@@ -84,6 +87,20 @@ pub struct Metrics {
     pub char_count: usize,
     pub char_width: f64,
     pub calibrated_at: Option<f64>,
+    /// Per dot (`D1..`, then `F1..`), for `--per-dot`.
+    pub per_dot: Vec<DotStats>,
+}
+
+/// One dot's figures over a session.
+#[derive(Debug, Clone, Default)]
+pub struct DotStats {
+    pub visible: usize,
+    pub found_named: usize,
+    pub wrong: usize,
+    /// Sum of (tracked − true), camera frame, metres: the bias.
+    pub err_sum: Vector3<f64>,
+    /// Sum of squared error components.
+    pub err_sq: Vector3<f64>,
 }
 
 impl Metrics {
@@ -145,6 +162,7 @@ pub fn evaluate(
     let mut synth = Synth::new(synth).context("synthetic performer")?;
     let mut m = Metrics {
         char_width: character.mouth_width(),
+        per_dot: vec![DotStats::default(); names.len()],
         ..Metrics::default()
     };
 
@@ -217,6 +235,7 @@ pub fn evaluate(
             let visible = gt.is_visible(name);
             if visible {
                 m.visible += 1;
+                m.per_dot[i].visible += 1;
             }
             let Some(p) = points[i] else {
                 if visible {
@@ -237,11 +256,17 @@ pub fn evaluate(
                 .expect("dots");
             if nearest != i || dist_px > 8.0 {
                 m.wrong += 1;
+                m.per_dot[i].wrong += 1;
                 tracing::debug!(t, dot = %name, nearest = %names[nearest], dist_px, "wrongly named");
             } else if visible {
                 let dist = (p - truth[i]).norm();
                 m.found_named += 1;
                 m.err_sq_sum += dist * dist;
+                let d = &mut m.per_dot[i];
+                let e = p - truth[i];
+                d.found_named += 1;
+                d.err_sum += e;
+                d.err_sq += e.component_mul(&e);
                 if dist > 0.006 {
                     tracing::debug!(t, dot = %name, dist_mm = dist * 1e3, "far from its true position");
                 }
@@ -273,6 +298,24 @@ pub fn evaluate(
         }
     }
     Ok(m)
+}
+
+fn print_per_dot(m: &Metrics, layout: PerformerLayout) {
+    println!("|  dot | visible | found | wrong | bias x, y, z (mm) | RMS x, y, z (mm) |");
+    for (i, d) in m.per_dot.iter().enumerate() {
+        let name = if i < layout.lip_dots {
+            PerformerLayout::lip_name(i)
+        } else {
+            PerformerLayout::forehead_name(i - layout.lip_dots)
+        };
+        let n = d.found_named.max(1) as f64;
+        let bias = d.err_sum * 1e3 / n;
+        let rms = (d.err_sq / n).map(f64::sqrt) * 1e3;
+        println!(
+            "| {name:>4} | {} | {} | {} | {:+.2}, {:+.2}, {:+.2} | {:.2}, {:.2}, {:.2} |",
+            d.visible, d.found_named, d.wrong, bias.x, bias.y, bias.z, rms.x, rms.y, rms.z
+        );
+    }
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -318,6 +361,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     m.head_rms_deg(),
                     m.char_rms_pct()
                 );
+                if args.per_dot {
+                    print_per_dot(&m, config.track.layout());
+                }
             }
         }
     }
