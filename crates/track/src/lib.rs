@@ -237,6 +237,16 @@ struct DotTrack {
     missing: u32,
 }
 
+impl DotTrack {
+    /// Where constant pixel velocity puts the dot `ratio` frame intervals on.
+    fn predicted_pixel(&self, ratio: f64) -> [f64; 2] {
+        [
+            self.pixel[0] + self.pixel_vel[0] * ratio,
+            self.pixel[1] + self.pixel_vel[1] * ratio,
+        ]
+    }
+}
+
 /// The tracker: owns the detector, the names, and the calibration.
 pub struct Tracker {
     config: TrackConfig,
@@ -247,6 +257,13 @@ pub struct Tracker {
     roles: Vec<DotRole>,
     /// First frame's device timestamp.
     t0: Option<u64>,
+    /// The previous frame's time (seconds) and the interval the tracks' velocities were
+    /// measured over: a live source may skip frames, so predictions scale the velocities by
+    /// this frame's interval over that one.
+    prev_t: Option<f64>,
+    velocity_dt: f64,
+    /// This frame's interval over `velocity_dt` (1 at a steady frame rate).
+    step_ratio: f64,
     tracks: Option<Vec<DotTrack>>,
     /// Forehead positions the head motion is measured against (camera frame).
     reference_forehead: Vec<Vec3>,
@@ -289,6 +306,9 @@ impl Tracker {
             depth_range,
             roles,
             t0: None,
+            prev_t: None,
+            velocity_dt: 0.0,
+            step_ratio: 1.0,
             tracks: None,
             reference_forehead: Vec::new(),
             head: RigidTransform::IDENTITY,
@@ -339,6 +359,13 @@ impl Tracker {
     pub fn process(&mut self, frame: &Frame) -> Result<&TrackedFrame, TrackError> {
         let t0 = *self.t0.get_or_insert(frame.device_ts_us);
         let t = frame.device_ts_us.saturating_sub(t0) as f64 * 1e-6;
+        let dt = self.prev_t.map_or(0.0, |p| t - p);
+        self.step_ratio = if self.velocity_dt > 0.0 && dt > 0.0 {
+            // Past a few skipped frames constant velocity says little: cap the extrapolation.
+            (dt / self.velocity_dt).min(4.0)
+        } else {
+            1.0
+        };
         let calib: &Arc<Calibration> = &frame.calibration;
         let k = calib.color;
         if frame.color.width != k.width || frame.color.height != k.height {
@@ -452,6 +479,10 @@ impl Tracker {
         }
 
         self.update_tracks(&names, &cands);
+        if dt > 0.0 {
+            self.velocity_dt = dt;
+        }
+        self.prev_t = Some(t);
         self.update_calibration(t)?;
         let out = &mut self.out;
         out.stabilised = None;
@@ -599,9 +630,7 @@ impl Tracker {
         let grow = (1u32 << self.frames_with_missing.min(4)) as f64;
         let margin = self.config.roi_margin_px * grow;
         let rect = PixelRect::around(
-            tracks
-                .iter()
-                .map(|t| [t.pixel[0] + t.pixel_vel[0], t.pixel[1] + t.pixel_vel[1]]),
+            tracks.iter().map(|t| t.predicted_pixel(self.step_ratio)),
             margin,
         )?;
         // A region covering most of the image costs as much as the full frame.
@@ -624,7 +653,7 @@ impl Tracker {
             .iter()
             .map(|t| {
                 if t.missing == 0 {
-                    [t.pixel[0] + t.pixel_vel[0], t.pixel[1] + t.pixel_vel[1]]
+                    t.predicted_pixel(self.step_ratio)
                 } else {
                     camera::project(k, &self.head.apply(&t.stab)).unwrap_or(t.pixel)
                 }
@@ -650,7 +679,7 @@ impl Tracker {
             .iter()
             .map(|t| {
                 let q = if t.missing == 0 {
-                    t.stab + t.stab_vel
+                    t.stab + t.stab_vel * self.step_ratio
                 } else {
                     t.stab
                 };
