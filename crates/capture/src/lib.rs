@@ -12,6 +12,8 @@
 //! - [`registration`]: software depth→colour registration.
 //! - `openni`: OpenNI2 cameras and `.oni` replay and recording (feature `openni2`), on top
 //!   of the safe `mouthpiece-openni2` layer.
+//! - `oni_write`: frames to `.oni` without a device (the synthetic performer), through the
+//!   plain-Rust writer of `mouthpiece-openni2` (feature `openni2`).
 //! - `v4l2`: V4L2 cameras (feature `v4l2`).
 //! - `mcap_replay`: MCAP session replay through the recording crate (feature `mcap`).
 //! - [`record`]: `mouthpiece record` (any source to MCAP; OpenNI2 sources to `.oni`).
@@ -33,6 +35,8 @@ pub mod spec;
 
 #[cfg(feature = "mcap")]
 pub mod mcap_replay;
+#[cfg(feature = "openni2")]
+pub mod oni_write;
 #[cfg(feature = "openni2")]
 pub mod openni;
 pub mod record;

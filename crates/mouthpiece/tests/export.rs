@@ -430,7 +430,7 @@ fn bad_input_is_exit_2_naming_the_line() {
         ),
         (
             vec!["session.mcap", "--out", "x.glb"],
-            "processing pipeline",
+            "exporting a recording needs --character",
         ),
         (
             vec![g, "--out", "x.glb", "--character", wolf.as_str()],
@@ -560,4 +560,96 @@ fn wolf_take_from_retarget_lands_on_the_wolf_model() {
             }
         }
     }
+}
+
+/// A recording (`.mcap`, `.oni`) goes through the processing pipeline first: a GLB the
+/// validator accepts, one key per frame and point (fewer with --reduce), the same keys as
+/// exporting `mouthpiece process`'s own output.
+#[test]
+fn recordings_are_processed_then_exported() {
+    let dir = tempfile::tempdir().unwrap();
+    let wolf = repo().join("config/characters/wolf.toml");
+    let c = wolf.to_str().unwrap();
+    for ext in ["mcap", "oni"] {
+        let session = dir.path().join(format!("session.{ext}"));
+        let r = session.to_str().unwrap();
+        let out = mouthpiece(&[
+            "synth",
+            "--out",
+            r,
+            "--seconds",
+            "2.5",
+            "--seed",
+            "5",
+            "--size",
+            "320x240",
+            "--distance",
+            "0.35",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+
+        let glb = dir.path().join(format!("{ext}.glb"));
+        let stderr = export_ok(&[r, "--character", c, "--out", glb.to_str().unwrap()]);
+        // 75 frames × 12 wolf points.
+        assert!(stderr.contains("75 frames, 900 keys"), "{ext}: {stderr}");
+        assert_valid(&glb);
+
+        let take = dir.path().join(format!("{ext}.jsonl"));
+        let out = mouthpiece(&[
+            "process",
+            r,
+            "--character",
+            c,
+            "--out",
+            take.to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let check = check_gltf_with(&take, &glb, &["--character", c]);
+        assert_eq!(check["keys"], 900, "{check}");
+        assert!(
+            check["max_error"].as_f64().unwrap() < 1e-6,
+            "{ext}: {check}"
+        );
+
+        let reduced = dir.path().join(format!("{ext}-reduced.glb"));
+        let stderr = export_ok(&[
+            r,
+            "--character",
+            c,
+            "--out",
+            reduced.to_str().unwrap(),
+            "--reduce",
+            "0.002",
+        ]);
+        assert!(stderr.contains("75 frames"), "{ext}: {stderr}");
+        assert_valid(&reduced);
+        let check = check_gltf_with(&take, &reduced, &["--character", c]);
+        assert!(check["keys"].as_u64().unwrap() < 900, "{ext}: {check}");
+        assert!(
+            check["max_error"].as_f64().unwrap() <= 0.002 + 1e-6,
+            "{ext}: {check}"
+        );
+
+        let out = mouthpiece(&["export", r, "--out", glb.to_str().unwrap()]);
+        assert_eq!(out.status.code(), Some(2), "{ext}: no --character");
+        assert!(String::from_utf8_lossy(&out.stderr).contains("needs --character"));
+    }
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(
+        leftovers.is_empty(),
+        "temporary files left behind: {leftovers:?}"
+    );
 }

@@ -1,5 +1,5 @@
 //! `.oni` file surgery, in plain Rust (no OpenNI calls): listing records and the
-//! cropping-record fix.
+//! cropping-record fix. Writing new recordings is [`crate::oni_writer`].
 //!
 //! OpenNI2 2.2's recorder writes a stream's `xnCropping` (and `xnFOV`) property records only
 //! when the stream answers those properties; its file player drops every frame of a node
@@ -60,6 +60,8 @@ pub enum OniFileError {
         offset: u64,
         reason: String,
     },
+    #[error("cannot write {path}: {reason}")]
+    Invalid { path: PathBuf, reason: String },
 }
 
 /// One record's header, and where it starts.

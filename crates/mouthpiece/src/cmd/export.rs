@@ -1,7 +1,9 @@
-//! `mouthpiece export`: a take (retarget/process JSONL) → glTF 2.0 / GLB / CSV keyframes.
+//! `mouthpiece export`: a take (retarget/process JSONL) → glTF 2.0 / GLB / CSV keyframes. A
+//! recording (`.mcap`, `.oni`) is first processed into a temporary take by the same code as
+//! `mouthpiece process`.
 
 use std::fs::File;
-use std::io::{self, BufRead, BufReader};
+use std::io::{self, BufRead, BufReader, BufWriter, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -11,6 +13,8 @@ use mouthpiece_export::{
     TakeFrame, TakeReader,
 };
 
+use crate::cmd::process::{process_recording, ProcessSetup};
+use crate::cmd::retarget::Smooth;
 use crate::exit::bad_input;
 
 #[derive(Debug, clap::Args)]
@@ -26,8 +30,13 @@ pub struct Args {
     pub out: PathBuf,
     /// Character file (TOML): point names and order, rest pose, and where the mouth sits in
     /// the model. Without it the names come from the take and the mouth node is the origin.
+    /// Required for a recording (it is processed for this character).
     #[arg(long)]
     pub character: Option<PathBuf>,
+    /// Recordings only: configuration file (TOML) whose `[detect]` and `[track]` tables the
+    /// processing uses (as `mouthpiece process --config`).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Drop glTF keys that linear interpolation reproduces within TOLERANCE (character units,
     /// per axis).
     #[arg(long, value_name = "TOLERANCE", allow_negative_numbers = true)]
@@ -105,7 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     let character = args.character.as_deref().map(load_character).transpose()?;
-    let input = open_take(&args.input)?;
+    let input = open_take(&args)?;
     let total_bytes = input.len;
     let mut reader = match &character {
         Some(rig) => TakeReader::with_points(input.reader, input.name, rig.names()),
@@ -229,7 +238,8 @@ struct TakeInput {
     len: Option<u64>,
 }
 
-fn open_take(path: &Path) -> anyhow::Result<TakeInput> {
+fn open_take(args: &Args) -> anyhow::Result<TakeInput> {
+    let path = args.input.as_path();
     if path.as_os_str() == "-" {
         return Ok(TakeInput {
             name: "stdin".into(),
@@ -242,7 +252,7 @@ fn open_take(path: &Path) -> anyhow::Result<TakeInput> {
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
     if matches!(extension.as_deref(), Some("mcap" | "oni")) {
-        return take_from_recording(path);
+        return take_from_recording(args);
     }
     let file = File::open(path)
         .with_context(|| format!("opening the take {}", path.display()))
@@ -255,13 +265,39 @@ fn open_take(path: &Path) -> anyhow::Result<TakeInput> {
     })
 }
 
-/// A recording becomes a take through the processing pipeline (`mouthpiece process`).
-fn take_from_recording(path: &Path) -> anyhow::Result<TakeInput> {
-    Err(bad_input(anyhow!(
-        "{}: exporting a recording needs the processing pipeline (`mouthpiece process`), which \
-         this build does not have yet; export a take JSONL instead",
-        path.display()
-    )))
+/// A recording becomes a take through the processing pipeline (`mouthpiece process`, same
+/// code): one JSONL line per frame into an anonymous temporary file beside the output, read
+/// back from its start.
+fn take_from_recording(args: &Args) -> anyhow::Result<TakeInput> {
+    let path = args.input.as_path();
+    let character = args.character.as_deref().ok_or_else(|| {
+        bad_input(anyhow!(
+            "{}: exporting a recording needs --character (the recording is processed for that \
+             character first)",
+            path.display()
+        ))
+    })?;
+    let dir = spool_dir(&args.out);
+    let mut file = tempfile::tempfile_in(&dir)
+        .with_context(|| format!("cannot create a temporary take in {}", dir.display()))?;
+    let setup = ProcessSetup {
+        input: path,
+        character,
+        config: args.config.as_deref(),
+        // `mouthpiece process`'s default, so that --curve has a curve to export.
+        smooth: Smooth::Bspline,
+        opencv_threads: 0,
+    };
+    let summary = process_recording(&setup, &mut BufWriter::new(&mut file))?;
+    summary.log();
+    file.seek(SeekFrom::Start(0))
+        .context("cannot read back the temporary take")?;
+    let len = file.metadata().ok().map(|m| m.len());
+    Ok(TakeInput {
+        name: format!("{} (processed)", path.display()),
+        reader: Box::new(BufReader::with_capacity(256 * 1024, file)),
+        len,
+    })
 }
 
 /// Without a character file: the take's own names and order, the first frame as rest pose

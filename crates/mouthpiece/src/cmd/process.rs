@@ -132,35 +132,72 @@ impl Input {
     }
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
-    let config = load_config(args.config.as_deref())?;
-    let character = load_character(&args.character)?;
+/// What to process: a recording, the character, the `[detect]`/`[track]` configuration, the
+/// shape smoothing and OpenCV's thread count (0: its default).
+pub struct ProcessSetup<'a> {
+    pub input: &'a Path,
+    pub character: &'a Path,
+    pub config: Option<&'a Path>,
+    pub smooth: Smooth,
+    pub opencv_threads: i32,
+}
+
+/// What one pass over a recording did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProcessSummary {
+    pub frames: u64,
+    /// Wall-clock seconds of the pass (reading, pipeline, writing).
+    pub seconds: f64,
+    /// Session time at which the neutral pose was taken.
+    pub calibrated_at: Option<f64>,
+    pub frames_with_missing_dots: u64,
+    pub pipeline_median_ms: f64,
+    pub pipeline_p99_ms: f64,
+}
+
+impl ProcessSummary {
+    pub fn fps(&self) -> f64 {
+        self.frames as f64 / self.seconds.max(1e-9)
+    }
+
+    /// Logs the summary (INFO) and a warning when no neutral pose was taken.
+    pub fn log(&self) {
+        tracing::info!(
+            frames = self.frames,
+            fps = format!("{:.1}", self.fps()),
+            pipeline_median_ms = format!("{:.3}", self.pipeline_median_ms),
+            pipeline_p99_ms = format!("{:.3}", self.pipeline_p99_ms),
+            calibrated_at_s = ?self.calibrated_at,
+            frames_with_missing_dots = self.frames_with_missing_dots,
+            "process done"
+        );
+        if self.calibrated_at.is_none() && self.frames > 0 {
+            tracing::warn!(
+                "no neutral pose was taken: the session never showed every dot with a still, closed mouth \
+                 for a second (see each line's status)"
+            );
+        }
+    }
+}
+
+/// The whole pipeline over every frame of a recording, one JSONL line per frame to `out`
+/// (flushed at the end). Used by `mouthpiece process` and by `mouthpiece export` of a
+/// recording.
+pub fn process_recording(
+    setup: &ProcessSetup<'_>,
+    out: &mut dyn Write,
+) -> anyhow::Result<ProcessSummary> {
+    let config = load_config(setup.config)?;
+    let character = load_character(setup.character)?;
     let settings = CharacterSettings {
-        smoothing: smoothing(args.smooth),
+        smoothing: smoothing(setup.smooth),
         one_euro: None,
     };
     let mut pipeline = Pipeline::new(config, character, settings).map_err(bad_input)?;
-    if args.opencv_threads > 0 {
-        mouthpiece_detect::set_opencv_threads(args.opencv_threads)?;
+    if setup.opencv_threads > 0 {
+        mouthpiece_detect::set_opencv_threads(setup.opencv_threads)?;
     }
-    let mut input = Input::open(&args.input)?;
-
-    let to_stdout = args.out.as_os_str() == "-";
-    // A file is written beside its destination and renamed into place only when complete.
-    let (mut out, temp): (Box<dyn Write>, Option<tempfile::NamedTempFile>) = if to_stdout {
-        (Box::new(BufWriter::new(io::stdout().lock())), None)
-    } else {
-        let dir = args
-            .out
-            .parent()
-            .filter(|d| !d.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        let temp = tempfile::NamedTempFile::new_in(dir)
-            .with_context(|| format!("cannot create output in {}", dir.display()))
-            .map_err(bad_input)?;
-        let file: File = temp.reopen().context("cannot open the temporary output")?;
-        (Box::new(BufWriter::new(file)), Some(temp))
-    };
+    let mut input = Input::open(setup.input)?;
 
     let progress = io::stderr().is_terminal().then(|| {
         let bar = indicatif::ProgressBar::new_spinner();
@@ -180,14 +217,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut pipeline_ms: Vec<f64> = Vec::new();
     while let Some(frame) = input
         .next_frame()
-        .with_context(|| format!("reading {}", args.input.display()))?
+        .with_context(|| format!("reading {}", setup.input.display()))?
     {
         let tick = Instant::now();
         let (line, tracked) = pipeline
             .process(&frame)
             .with_context(|| format!("frame {}", frame.seq))?;
         pipeline_ms.push(tick.elapsed().as_secs_f64() * 1e3);
-        serde_json::to_writer(&mut out, &line).context("cannot write output")?;
+        serde_json::to_writer(&mut *out, &line).context("cannot write output")?;
         out.write_all(b"\n").context("cannot write output")?;
         if tracked.status.neutral_taken && calibrated_at.is_none() {
             calibrated_at = Some(tracked.t);
@@ -206,15 +243,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     out.flush().context("cannot write output")?;
-    drop(out);
-    if let Some(temp) = temp {
-        temp.persist(&args.out)
-            .with_context(|| format!("cannot write {}", args.out.display()))?;
-    }
     if let Some(bar) = progress {
         bar.finish_and_clear();
     }
-    let secs = started.elapsed().as_secs_f64();
+    let seconds = started.elapsed().as_secs_f64();
     pipeline_ms.sort_by(f64::total_cmp);
     let pct = |q: f64| {
         pipeline_ms
@@ -222,20 +254,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .copied()
             .unwrap_or(0.0)
     };
-    tracing::info!(
+    Ok(ProcessSummary {
         frames,
-        fps = format!("{:.1}", frames as f64 / secs.max(1e-9)),
-        pipeline_median_ms = format!("{:.3}", pct(0.5)),
-        pipeline_p99_ms = format!("{:.3}", pct(0.99)),
-        calibrated_at_s = ?calibrated_at,
-        frames_with_missing_dots = frames_with_missing,
-        "process done"
-    );
-    if calibrated_at.is_none() && frames > 0 {
-        tracing::warn!(
-            "no neutral pose was taken: the session never showed every dot with a still, closed mouth \
-             for a second (see each line's status)"
-        );
+        seconds,
+        calibrated_at,
+        frames_with_missing_dots: frames_with_missing,
+        pipeline_median_ms: pct(0.5),
+        pipeline_p99_ms: pct(0.99),
+    })
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let setup = ProcessSetup {
+        input: &args.input,
+        character: &args.character,
+        config: args.config.as_deref(),
+        smooth: args.smooth,
+        opencv_threads: args.opencv_threads,
+    };
+    if args.out.as_os_str() == "-" {
+        let mut out = BufWriter::new(io::stdout().lock());
+        let summary = process_recording(&setup, &mut out)?;
+        summary.log();
+        return Ok(());
     }
+    // A file is written beside its destination and renamed into place only when complete.
+    let dir = args
+        .out
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let temp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("cannot create output in {}", dir.display()))
+        .map_err(bad_input)?;
+    let file: File = temp.reopen().context("cannot open the temporary output")?;
+    let mut out = BufWriter::new(file);
+    let summary = process_recording(&setup, &mut out)?;
+    drop(out);
+    temp.persist(&args.out)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    summary.log();
     Ok(())
 }

@@ -1,9 +1,12 @@
-//! `mouthpiece synth`: render a synthetic performer session to an MCAP file.
+//! `mouthpiece synth`: render a synthetic performer session to an MCAP file, or to an
+//! OpenNI2 `.oni` (by the output's extension; frames and timestamps only, see
+//! `docs/capture.md`).
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
+use mouthpiece_capture::oni_write::{OniFrameWriter, OniWriteError};
 use mouthpiece_recording::{ColorEncoding, SessionWriter, WriterOptions};
 use mouthpiece_synth::{DotLayout, HeadMotion, NoiseModel, Synth, SynthConfig};
 
@@ -25,7 +28,9 @@ pub enum NoiseArg {
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Output session (MCAP).
+    /// Output session: MCAP (with ground truth), or OpenNI2 `.oni` when the name ends in
+    /// `.oni` (frames only: uncompressed depth and RGB888, no ground truth, no distortion or
+    /// depth baseline).
     #[arg(long)]
     pub out: PathBuf,
     /// Length of the session in seconds.
@@ -59,7 +64,8 @@ pub struct Args {
     /// camera's right (a baseline along x) instead of registered to the colour grid.
     #[arg(long)]
     pub depth_baseline_mm: Option<f64>,
-    /// Store colour losslessly (bgr8 RawImage, ≈ 20× larger) instead of JPEG.
+    /// Store colour losslessly (bgr8 RawImage, ≈ 20× larger) instead of JPEG. (`.oni`
+    /// colour is always lossless.)
     #[arg(long)]
     pub raw_color: bool,
     /// JPEG quality of colour frames (1–100).
@@ -138,34 +144,59 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(path) = &args.layout {
         config.layout = DotLayout::from_file(path).map_err(bad_input)?;
     }
+    let calibration = config.calibration();
     let mut synth = Synth::new(config).map_err(bad_input)?;
-    let options = WriterOptions {
-        color: if args.raw_color {
-            ColorEncoding::Raw
-        } else {
-            ColorEncoding::Jpeg {
-                quality: args.jpeg_quality,
-            }
-        },
-        ..WriterOptions::default()
-    };
-    let mut writer = SessionWriter::create(&args.out, options)
-        .with_context(|| format!("cannot write the session {}", args.out.display()))?;
     let started = Instant::now();
     let total = synth.frame_count();
-    while let Some((frame, truth)) = synth.render_next() {
-        writer.write_frame_with_ground_truth(&frame, Some(&truth))?;
-    }
-    let summary = writer.finish()?;
+    let is_oni = args
+        .out
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("oni"));
+    let frames = if is_oni {
+        let oni_error = |e: OniWriteError| {
+            if e.is_bad_input() {
+                bad_input(e)
+            } else {
+                anyhow::Error::new(e)
+            }
+        };
+        let mut writer = OniFrameWriter::create(&args.out, &calibration, args.fps)
+            .map_err(oni_error)
+            .with_context(|| format!("cannot write the session {}", args.out.display()))?;
+        while let Some((frame, _truth)) = synth.render_next() {
+            writer.write_frame(&frame).map_err(oni_error)?;
+        }
+        let summary = writer.finish().map_err(oni_error)?;
+        summary.depth_frames as u64
+    } else {
+        let options = WriterOptions {
+            color: if args.raw_color {
+                ColorEncoding::Raw
+            } else {
+                ColorEncoding::Jpeg {
+                    quality: args.jpeg_quality,
+                }
+            },
+            ..WriterOptions::default()
+        };
+        let mut writer = SessionWriter::create(&args.out, options)
+            .with_context(|| format!("cannot write the session {}", args.out.display()))?;
+        while let Some((frame, truth)) = synth.render_next() {
+            writer.write_frame_with_ground_truth(&frame, Some(&truth))?;
+        }
+        writer.finish()?.frames
+    };
     let size = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
     tracing::info!(
         out = %args.out.display(),
-        frames = summary.frames,
+        format = if is_oni { "oni" } else { "mcap" },
+        frames,
         seconds = args.seconds,
         bytes = size,
         elapsed_s = format!("{:.2}", started.elapsed().as_secs_f64()),
         "synthetic session written"
     );
-    debug_assert_eq!(summary.frames, total);
+    debug_assert_eq!(frames, total);
     Ok(())
 }
