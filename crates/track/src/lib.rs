@@ -83,11 +83,9 @@ pub struct TrackConfig {
     /// Largest mouth opening (middle of upper to middle of lower lip) as a fraction of the
     /// mouth width for the mouth to count as closed.
     pub max_opening_ratio: f64,
-    /// Radius of the skin patch around a lip dot whose depth readings a plane is fitted to
-    /// (metres; the sensor's depth noise is spatially correlated over a few pixels, so a
-    /// dot-sized patch keeps most of it).
-    pub lip_depth_patch_m: f64,
-    /// The same for a forehead dot (the forehead is flatter, so a wider patch averages more).
+    /// Radius of the skin patch around a forehead dot whose depth readings a plane is fitted
+    /// to, metres (the sensor's depth noise is spatially correlated over a few pixels, so the
+    /// readings under the paint alone keep most of it).
     pub forehead_depth_patch_m: f64,
     /// Margin around the predicted dots for the search region, pixels.
     pub roi_margin_px: f64,
@@ -113,7 +111,6 @@ impl Default for TrackConfig {
             calibration_s: 1.0,
             still_tolerance_m: 0.006,
             max_opening_ratio: 0.6,
-            lip_depth_patch_m: 0.004,
             forehead_depth_patch_m: 0.022,
             roi_margin_px: 20.0,
             full_search_every: 8,
@@ -147,7 +144,6 @@ impl TrackConfig {
             ("calibration_s", self.calibration_s),
             ("still_tolerance_m", self.still_tolerance_m),
             ("max_opening_ratio", self.max_opening_ratio),
-            ("lip_depth_patch_m", self.lip_depth_patch_m),
             ("forehead_depth_patch_m", self.forehead_depth_patch_m),
             ("roi_margin_px", self.roi_margin_px),
             ("min_gate_px", self.min_gate_px),
@@ -394,23 +390,20 @@ impl Tracker {
             let z_hint = blob.depth_m.unwrap_or(0.6);
             let radius_px = self.dot_radius_m * k.fx / z_hint;
             let role = self.roles[blob.class];
-            // A plane through the readings of a skin patch around the dot, evaluated at its
-            // centre: far less noise than the few readings under the paint.
-            let patch_m = if role == DotRole::Forehead {
-                self.config.forehead_depth_patch_m
+            let z = if role == DotRole::Forehead {
+                // The forehead is smooth: a plane over a wide patch of skin around the dot
+                // averages the sensor's (spatially correlated) noise down; the head pose
+                // needs it.
+                let patch_px = self.config.forehead_depth_patch_m * k.fx / z_hint;
+                depth::depth_by_plane(
+                    depth,
+                    scale,
+                    blob.center,
+                    patch_px.max(2.0 * radius_px).max(3.0),
+                    self.depth_range,
+                    &mut self.depth_buf,
+                )
             } else {
-                self.config.lip_depth_patch_m
-            };
-            let patch_px = (patch_m * k.fx / z_hint).max(2.0 * radius_px).max(3.0);
-            let z = depth::depth_by_plane(
-                depth,
-                scale,
-                blob.center,
-                patch_px,
-                self.depth_range,
-                &mut self.depth_buf,
-            )
-            .or_else(|| {
                 depth::depth_at_dot(
                     depth,
                     scale,
@@ -419,7 +412,7 @@ impl Tracker {
                     self.depth_range,
                     &mut self.depth_buf,
                 )
-            });
+            };
             if let Some((z, _)) = z {
                 cands.push(Candidate {
                     pixel: blob.center,
