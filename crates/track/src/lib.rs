@@ -520,6 +520,17 @@ impl Tracker {
         }
         let mut predicted = self.assign_by_prediction(cands, k);
         self.enforce_lip_order(&mut predicted, cands);
+        if !self.corners_are_extremes(&predicted, cands) {
+            // Names slipped by one or more places around the mouth (a slip keeps the order):
+            // geometry names a full set afresh; without one the lips go missing for now
+            // (missing beats wrong).
+            tracing::debug!("lip names slipped around the mouth; renaming");
+            if let Some(geo) = geometry() {
+                return geo.into_iter().map(Some).collect();
+            }
+            predicted[..layout.lip_dots].fill(None);
+            return predicted;
+        }
         if predicted.iter().all(Option::is_some) || cands.len() != total {
             return predicted;
         }
@@ -534,6 +545,28 @@ impl Tracker {
             }
             _ => predicted,
         }
+    }
+
+    /// Whether the named mouth corners are the lip dots furthest out along the mouth's x axis
+    /// (neutral mouth frame, head motion removed), within 3 % of the mouth width: names that
+    /// slipped around the mouth still meet in order, but put a corner name on a lip dot.
+    fn corners_are_extremes(&self, names: &[Option<usize>], cands: &[Candidate]) -> bool {
+        let Some(stab) = &self.stabiliser else {
+            return true;
+        };
+        let frame = &stab.neutral().frame;
+        let tolerance = 0.03 * frame.width;
+        let (n, left, right) = (
+            self.layout.lip_dots,
+            self.layout.left_corner(),
+            self.layout.right_corner(),
+        );
+        let inverse = self.head_now(names, cands).inverse();
+        let x = |i: usize| names[i].map(|c| frame.to_mouth(&inverse.apply(&cands[c].point)).x);
+        let others = || (0..n).filter(|&i| i != left && i != right).filter_map(x);
+        let left_ok = x(left).is_none_or(|l| others().all(|o| o <= l + tolerance));
+        let right_ok = x(right).is_none_or(|r| others().all(|o| o >= r - tolerance));
+        left_ok && right_ok
     }
 
     /// Names that break the walk around the mouth are dropped (missing beats wrong): in the

@@ -323,3 +323,47 @@ fn bad_configuration_names_the_key() {
         .to_string();
     assert!(err.contains("track.lip_dots"), "{err}");
 }
+
+#[test]
+fn names_slipped_around_the_mouth_are_caught_by_the_corners() {
+    let mut tr = tracker();
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    for seq in 0..40 {
+        tr.process(&render(seq, &still, &[])).unwrap();
+    }
+    assert!(tr.neutral().is_some(), "calibrated");
+    // Later, the head turned and the jaw open: candidates in truth order (D1..D12, F1..F3).
+    let truth = posed(0.006, &head(10.0, 4.0, Vec3::new(0.005, 0.0, 0.0)));
+    let k = Intrinsics::default_vga();
+    let cands: Vec<Candidate> = truth
+        .iter()
+        .enumerate()
+        .map(|(i, p)| Candidate {
+            pixel: camera::project(&k, p).unwrap(),
+            point: *p,
+            role: if i < 12 {
+                DotRole::Lip
+            } else {
+                DotRole::Forehead
+            },
+        })
+        .collect();
+    let right: Vec<Option<usize>> = (0..15).map(Some).collect();
+    assert!(tr.corners_are_extremes(&right, &cands));
+    // Every lip name one place on around the mouth: still in order, but D7 (the right corner)
+    // now sits on D8's blob and D1 on D2's: the order check cannot see it, the corners can.
+    for shift in [1, 11] {
+        let slipped: Vec<Option<usize>> = (0..12)
+            .map(|i| Some((i + shift) % 12))
+            .chain((12..15).map(Some))
+            .collect();
+        assert!(
+            !tr.corners_are_extremes(&slipped, &cands),
+            "slip by {shift}"
+        );
+    }
+    // A corner missing is no evidence of a slip.
+    let mut missing = right.clone();
+    missing[6] = None;
+    assert!(tr.corners_are_extremes(&missing, &cands));
+}
