@@ -1,6 +1,10 @@
 //! Allocations on the processing thread's per-frame path (detect + track + retarget into the
 //! reused `Output`), counted with a counting global allocator after a warm-up. Only Rust-side
 //! heap allocations are seen: OpenCV's own (C++) allocations are not counted here.
+//!
+//! The path is not allocation-free yet: the tracker builds small per-frame vectors (candidates,
+//! assignment matrices, missing-dot names), measured at about 90 allocations a frame. What this
+//! test holds is that the count stays flat over a session (nothing accumulates).
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -35,7 +39,7 @@ unsafe impl GlobalAlloc for Counting {
 static GLOBAL: Counting = Counting;
 
 #[test]
-fn allocations_per_frame_in_steady_state() {
+fn allocations_per_frame_stay_flat_over_a_session() {
     let config = mouthpiece_config::Config::embedded();
     let mut processor =
         LiveProcessor::new(mouthpiece_daemon::live::setup(&config).unwrap()).unwrap();
@@ -52,10 +56,18 @@ fn allocations_per_frame_in_steady_state() {
     for f in warm {
         processor.process(f, &mut out);
     }
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    for f in measured {
-        processor.process(f, &mut out);
-    }
-    let per_frame = (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / measured.len() as f64;
-    println!("allocations per frame: {per_frame:.1}");
+    let (first, second) = measured.split_at(measured.len() / 2);
+    let mut count = |frames: &[mouthpiece_frame::Frame]| {
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        for f in frames {
+            processor.process(f, &mut out);
+        }
+        (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / frames.len() as f64
+    };
+    let (a, b) = (count(first), count(second));
+    println!("allocations per frame: {a:.1} in the first half, {b:.1} in the second");
+    assert!(
+        b <= a * 1.5 + 5.0,
+        "allocations grow: {a:.1} then {b:.1} per frame"
+    );
 }
