@@ -39,6 +39,9 @@ pub struct TuneOptions {
     /// How much more saturated (median) a blob must be than the skin around it (the ring
     /// 2–3 px outside its box): paint stands out, a saturated fold of the lips does not.
     pub min_contrast: u8,
+    /// Largest circular standard deviation of hue inside one blob (hue units): a paint dot
+    /// is one colour.
+    pub max_hue_spread: f64,
     /// Darkest pixel (value, 0–255) considered: hue is noise in the dark.
     pub min_value: u8,
     /// Margins added outside the percentiles: hue units, saturation and value units.
@@ -66,6 +69,7 @@ impl TuneOptions {
             min_saturation: 60,
             saturation_above_face: 20,
             min_contrast: 60,
+            max_hue_spread: 6.0,
             min_value: 60,
             hue_margin: 5,
             sv_margin: 25,
@@ -210,13 +214,23 @@ fn hue_diff(a: f64, b: f64) -> f64 {
 
 /// Circular mean of hues (0–180 scale).
 fn circular_mean(hues: impl Iterator<Item = f64>) -> f64 {
-    let (mut s, mut c) = (0.0, 0.0);
+    circular_stats(hues).0
+}
+
+/// Circular mean and standard deviation of hues (0–180 scale, hue units).
+fn circular_stats(hues: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut s, mut c, mut n) = (0.0f64, 0.0f64, 0.0f64);
     for h in hues {
         let a = h * PI / 90.0;
         s += a.sin();
         c += a.cos();
+        n += 1.0;
     }
-    (s.atan2(c) * 90.0 / PI).rem_euclid(180.0)
+    let r = (s.hypot(c) / n.max(1.0)).clamp(1e-12, 1.0);
+    (
+        (s.atan2(c) * 90.0 / PI).rem_euclid(180.0),
+        (-2.0 * r.ln()).sqrt() * 90.0 / PI,
+    )
 }
 
 impl ColourSampler {
@@ -394,9 +408,32 @@ impl ColourSampler {
                     }
                 }
             }
+            // The blob's own colour: pixels within 15 hue units of its trimmed mean (a dot run
+            // into the mouth's dark red keeps only its paint pixels).
+            let all = self.pixels.len() - start;
+            let mean = circular_mean(self.pixels[start..].iter().map(|p| p[0] as f64));
+            let mean = circular_mean(
+                self.pixels[start..]
+                    .iter()
+                    .map(|p| p[0] as f64)
+                    .filter(|h| hue_diff(*h, mean).abs() <= 15.0),
+            );
+            let mut kept = start;
+            for j in start..self.pixels.len() {
+                if hue_diff(self.pixels[j][0] as f64, mean).abs() <= 15.0 {
+                    self.pixels[kept] = self.pixels[j];
+                    kept += 1;
+                }
+            }
+            self.pixels.truncate(kept);
             let px = &self.pixels[start..];
-            let hue = circular_mean(px.iter().map(|p| p[0] as f64));
-            let k = px.len() as f64;
+            let (hue, spread) = circular_stats(px.iter().map(|p| p[0] as f64));
+            if px.len() * 3 < all * 2 || spread > opts.max_hue_spread {
+                // Not one paint.
+                self.pixels.truncate(start);
+                continue;
+            }
+            let k = all as f64;
             self.blobs.push(SampledBlob {
                 frame: frame_idx,
                 center: [sx / k, sy / k],
@@ -719,9 +756,10 @@ impl ColourSampler {
         }
         dh.sort_by(f64::total_cmp);
         let q = |v: &[f64], q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        // 2nd to 98th percentile, at most 20 hue units from the centre, plus the margin.
         let margin = opts.hue_margin as f64;
-        let lo = (c.centre + q(&dh, 0.01) - margin).floor() as i32;
-        let hi = (c.centre + q(&dh, 0.99) + margin).ceil() as i32;
+        let lo = (c.centre + q(&dh, 0.02).max(-20.0) - margin).floor() as i32;
+        let hi = (c.centre + q(&dh, 0.98).min(20.0) + margin).ceil() as i32;
         let hue = hue_ranges(lo, hi);
         // Saturation: as low as the face allows in this hue (rim pixels count in the
         // detector's centre), but no lower than half the paint's low tail.

@@ -85,14 +85,6 @@ fn frames_with_all_dots(session: &Path, config: DetectConfig) -> (usize, usize) 
                 .count()
         };
         frames += 1;
-        if std::env::var("TUNE_DEBUG").is_ok() {
-            eprintln!(
-                "frame {frames}: lip {} forehead {} rejected {}",
-                count(DotRole::Lip),
-                count(DotRole::Forehead),
-                found.rejected
-            );
-        }
         if count(DotRole::Lip) == 12 && count(DotRole::Forehead) == 3 {
             all += 1;
         }
