@@ -20,7 +20,7 @@ use opencv::imgproc;
 
 use mouthpiece_frame::{ColorImage, DepthImage};
 
-use crate::{ColorClass, DetectConfig, DetectError, DotRole};
+use crate::{ColorClass, DetectConfig, DetectError, DotRole, PixelRect};
 
 /// How the sampler looks for blobs and how much room the proposed ranges get.
 #[derive(Debug, Clone, PartialEq)]
@@ -44,9 +44,10 @@ pub struct TuneOptions {
     pub max_hue_spread: f64,
     /// Darkest pixel (value, 0–255) considered: hue is noise in the dark.
     pub min_value: u8,
-    /// Margins added outside the percentiles: hue units, saturation and value units.
+    /// Margins added outside the paint's percentiles, hue and value units (the saturation
+    /// floor comes from the face: as low as it allows in the class's hues).
     pub hue_margin: u8,
-    pub sv_margin: u8,
+    pub value_margin: u8,
     /// Smallest blob (pixels); larger blobs are bounded by a 15 mm disc at their distance.
     pub min_area_px: u32,
     pub min_fill_ratio: f64,
@@ -72,7 +73,7 @@ impl TuneOptions {
             max_hue_spread: 6.0,
             min_value: 60,
             hue_margin: 5,
-            sv_margin: 25,
+            value_margin: 25,
             min_area_px: detect.min_area_px.max(2),
             min_fill_ratio: detect.min_fill_ratio,
             max_aspect: detect.max_aspect,
@@ -95,7 +96,7 @@ pub struct SampledBlob {
     pub frame: u32,
     pub center: [f64; 2],
     pub area: u32,
-    pub bbox: crate::PixelRect,
+    pub bbox: PixelRect,
     /// Circular mean hue of its pixels (0–180, OpenCV scale).
     pub hue: f64,
     /// Where its pixels start in the sampler's pixel store.
@@ -126,7 +127,6 @@ pub struct ColourSampler {
     face_hist: Vec<u64>,
     face_pixels: u64,
     hsv: Mat,
-    mask: Mat,
     labels: Mat,
     stats: Mat,
     centroids: Mat,
@@ -177,6 +177,114 @@ pub fn performer_distance(
         }
     }
     None
+}
+
+/// A connected component that passed the size, shape and contrast tests.
+struct Candidate {
+    label: i32,
+    area: u32,
+    bbox: PixelRect,
+}
+
+/// Marks `rect` grown by `grow` pixels.
+fn mark_box(marks: &mut [bool], (w, h): (usize, usize), rect: PixelRect, grow: i32) {
+    for y in (rect.y - grow).max(0)..(rect.y + rect.height + grow).min(h as i32) {
+        for x in (rect.x - grow).max(0)..(rect.x + rect.width + grow).min(w as i32) {
+            marks[y as usize * w + x as usize] = true;
+        }
+    }
+}
+
+/// Connected components of the foreground pixels at or above `threshold` saturation that
+/// are dot-like: size, fill, aspect, and at least `min_contrast` more saturated (median) than
+/// the ring 2–3 px outside their box; `labels` holds the components.
+#[allow(clippy::too_many_arguments)]
+fn compact_blobs(
+    hsv: &[u8],
+    fg: &[bool],
+    (w, h): (usize, usize),
+    threshold: u8,
+    max_area: f64,
+    opts: &TuneOptions,
+    labels: &mut Mat,
+    stats: &mut Mat,
+    centroids: &mut Mat,
+) -> Result<Vec<Candidate>, DetectError> {
+    let mask: Vec<u8> = (0..w * h)
+        .map(|i| {
+            if fg[i] && hsv[3 * i + 1] >= threshold {
+                255
+            } else {
+                0
+            }
+        })
+        .collect();
+    let mask_mat = Mat::new_rows_cols_with_data(h as i32, w as i32, &mask)?.try_clone()?;
+    let n = imgproc::connected_components_with_stats(
+        &mask_mat,
+        labels,
+        stats,
+        centroids,
+        8,
+        core::CV_32S,
+    )?;
+    let label_of = labels.data_typed::<i32>()?;
+    let mut out = Vec::new();
+    for label in 1..n {
+        let stat = |k| stats.at_2d::<i32>(label, k).copied();
+        let area = stat(imgproc::CC_STAT_AREA)? as u32;
+        let (bx, by) = (stat(imgproc::CC_STAT_LEFT)?, stat(imgproc::CC_STAT_TOP)?);
+        let (bw, bh) = (
+            stat(imgproc::CC_STAT_WIDTH)?,
+            stat(imgproc::CC_STAT_HEIGHT)?,
+        );
+        let fill = area as f64 / (bw as f64 * bh as f64);
+        let aspect = bw.max(bh) as f64 / bw.min(bh) as f64;
+        if area < opts.min_area_px
+            || area as f64 > max_area
+            || fill < opts.min_fill_ratio
+            || aspect > opts.max_aspect
+        {
+            continue;
+        }
+        // Contrast with the surroundings: the ring 2–3 px outside the box.
+        let mut ring = Vec::with_capacity(64);
+        for y in (by - 3).max(0)..(by + bh + 3).min(h as i32) {
+            for x in (bx - 3).max(0)..(bx + bw + 3).min(w as i32) {
+                let inner = x >= bx - 1 && x <= bx + bw && y >= by - 1 && y <= by + bh;
+                let i = y as usize * w + x as usize;
+                if !inner && mask[i] == 0 {
+                    ring.push(hsv[3 * i + 1]);
+                }
+            }
+        }
+        let mut inside = Vec::with_capacity(area as usize);
+        for y in by..by + bh {
+            for x in bx..bx + bw {
+                let i = y as usize * w + x as usize;
+                if label_of[i] == label {
+                    inside.push(hsv[3 * i + 1]);
+                }
+            }
+        }
+        let (Some(s_in), Some(s_ring)) = (median_u8(&inside), median_u8(&ring)) else {
+            continue;
+        };
+        if s_in < s_ring.saturating_add(opts.min_contrast) {
+            continue;
+        }
+        out.push(Candidate {
+            label,
+            area,
+            bbox: PixelRect {
+                x: bx,
+                y: by,
+                width: bw,
+                height: bh,
+            },
+        });
+    }
+    Ok(out)
 }
 
 fn percentile_u8(hist: &[u64; 256], q: f64) -> u8 {
@@ -245,7 +353,6 @@ impl ColourSampler {
             face_hist: vec![0; 180 * 256],
             face_pixels: 0,
             hsv: Mat::default(),
-            mask: Mat::default(),
             labels: Mat::default(),
             stats: Mat::default(),
             centroids: Mat::default(),
@@ -315,86 +422,71 @@ impl ColourSampler {
             self.performer_m.push(z);
         }
 
-        // The face's own saturation: skin and lips must stay below the blob threshold.
-        let mut sat_hist = [0u64; 256];
-        for i in 0..w * h {
-            if hsv[3 * i + 2] >= opts.min_value && foreground(i) {
-                sat_hist[hsv[3 * i + 1] as usize] += 1;
-            }
-        }
-        let face_top = percentile_u8(&sat_hist, 0.995);
-        let threshold = opts
-            .min_saturation
-            .max(face_top.saturating_add(opts.saturation_above_face));
-        self.thresholds.push(threshold);
-
-        // Mask of saturated, bright enough foreground pixels.
-        let mut mask = vec![0u8; w * h];
-        for (i, m) in mask.iter_mut().enumerate() {
-            if hsv[3 * i + 1] >= threshold && hsv[3 * i + 2] >= opts.min_value && foreground(i) {
-                *m = 255;
-            }
-        }
-        self.mask = Mat::new_rows_cols_with_data(h as i32, w as i32, &mask)?.try_clone()?;
-        let n = imgproc::connected_components_with_stats(
-            &self.mask,
-            &mut self.labels,
-            &mut self.stats,
-            &mut self.centroids,
-            8,
-            core::CV_32S,
-        )?;
-        let labels = self.labels.data_typed::<i32>()?;
-        let hsv = self.hsv.data_bytes()?;
+        let fg: Vec<bool> = (0..w * h)
+            .map(|i| hsv[3 * i + 2] >= opts.min_value && foreground(i))
+            .collect();
         let z_blob = performer
             .map(|(_, _, z)| z)
             .unwrap_or(opts.depth_range_m[0]);
         // Nothing painted as a dot is wider than a 15 mm radius disc.
         let max_area = PI * (0.015 * fx / z_blob.max(0.05)).powi(2);
+
+        // The face's own saturation (skin, lips, mouth) must stay below the blob threshold.
+        // Two passes: blobs found above the face's 95th percentile are left out of the
+        // face's histogram, so paint covering more than a few per mille of the face (a
+        // close-up) does not lift the threshold above itself.
+        let face_hist = |exclude: &[bool]| {
+            let mut hist = [0u64; 256];
+            for i in 0..w * h {
+                if fg[i] && !exclude[i] {
+                    hist[hsv[3 * i + 1] as usize] += 1;
+                }
+            }
+            hist
+        };
+        let threshold_above = |level: u8| {
+            opts.min_saturation
+                .max(level.saturating_add(opts.saturation_above_face))
+        };
+        let mut excluded = vec![false; w * h];
+        let first = threshold_above(percentile_u8(&face_hist(&excluded), 0.95));
+        let blobs = compact_blobs(
+            hsv,
+            &fg,
+            (w, h),
+            first,
+            max_area,
+            opts,
+            &mut self.labels,
+            &mut self.stats,
+            &mut self.centroids,
+        )?;
+        for b in &blobs {
+            mark_box(&mut excluded, (w, h), b.bbox, 1);
+        }
+        let threshold = threshold_above(percentile_u8(&face_hist(&excluded), 0.995));
+        self.thresholds.push(threshold);
+        let blobs = compact_blobs(
+            hsv,
+            &fg,
+            (w, h),
+            threshold,
+            max_area,
+            opts,
+            &mut self.labels,
+            &mut self.stats,
+            &mut self.centroids,
+        )?;
+        let labels = self.labels.data_typed::<i32>()?;
         let mut found = 0;
-        for label in 1..n {
-            let stat = |k| self.stats.at_2d::<i32>(label, k).copied();
-            let area = stat(imgproc::CC_STAT_AREA)? as u32;
-            let (bx, by) = (stat(imgproc::CC_STAT_LEFT)?, stat(imgproc::CC_STAT_TOP)?);
-            let (bw, bh) = (
-                stat(imgproc::CC_STAT_WIDTH)?,
-                stat(imgproc::CC_STAT_HEIGHT)?,
-            );
-            let fill = area as f64 / (bw as f64 * bh as f64);
-            let aspect = bw.max(bh) as f64 / bw.min(bh) as f64;
-            if area < opts.min_area_px
-                || area as f64 > max_area
-                || fill < opts.min_fill_ratio
-                || aspect > opts.max_aspect
-            {
-                continue;
-            }
-            // Contrast with the surroundings: the ring 2–3 px outside the box.
-            let mut ring = Vec::with_capacity(64);
-            for y in (by - 3).max(0)..(by + bh + 3).min(h as i32) {
-                for x in (bx - 3).max(0)..(bx + bw + 3).min(w as i32) {
-                    let inner = x >= bx - 1 && x <= bx + bw && y >= by - 1 && y <= by + bh;
-                    let i = y as usize * w + x as usize;
-                    if !inner && mask[i] == 0 {
-                        ring.push(hsv[3 * i + 1]);
-                    }
-                }
-            }
-            let mut inside = Vec::with_capacity(area as usize);
-            for y in by..by + bh {
-                for x in bx..bx + bw {
-                    let i = y as usize * w + x as usize;
-                    if labels[i] == label {
-                        inside.push(hsv[3 * i + 1]);
-                    }
-                }
-            }
-            let (Some(s_in), Some(s_ring)) = (median_u8(&inside), median_u8(&ring)) else {
-                continue;
-            };
-            if s_in < s_ring.saturating_add(opts.min_contrast) {
-                continue;
-            }
+        for blob in blobs {
+            let (label, area) = (blob.label, blob.area);
+            let PixelRect {
+                x: bx,
+                y: by,
+                width: bw,
+                height: bh,
+            } = blob.bbox;
             let start = self.pixels.len();
             let (mut sx, mut sy) = (0.0, 0.0);
             for y in by..by + bh {
@@ -438,7 +530,7 @@ impl ColourSampler {
                 frame: frame_idx,
                 center: [sx / k, sy / k],
                 area,
-                bbox: crate::PixelRect {
+                bbox: PixelRect {
                     x: bx,
                     y: by,
                     width: bw,
@@ -454,15 +546,10 @@ impl ColourSampler {
         // between them are what a red paint's range must leave out.
         let mut near_blob = vec![false; w * h];
         for b in &self.blobs[self.blobs.len() - found..] {
-            let r = b.bbox;
-            for y in (r.y - 1).max(0)..(r.y + r.height + 1).min(h as i32) {
-                for x in (r.x - 1).max(0)..(r.x + r.width + 1).min(w as i32) {
-                    near_blob[y as usize * w + x as usize] = true;
-                }
-            }
+            mark_box(&mut near_blob, (w, h), b.bbox, 1);
         }
         for i in 0..w * h {
-            if !near_blob[i] && hsv[3 * i + 2] >= opts.min_value && foreground(i) {
+            if !near_blob[i] && fg[i] {
                 let hue = (hsv[3 * i] as usize).min(179);
                 self.face_hist[hue * 256 + hsv[3 * i + 1] as usize] += 1;
                 self.face_pixels += 1;
@@ -774,7 +861,7 @@ impl ColourSampler {
             ));
         }
         let v_lo = percentile_u8(&val, 0.02)
-            .saturating_sub(opts.sv_margin)
+            .saturating_sub(opts.value_margin)
             .max(opts.min_value);
         let name = match role {
             DotRole::Lip => "lip",
@@ -983,5 +1070,193 @@ impl Proposal {
             let _ = writeln!(s, "value = [{}, {}]", c.value[0], c.value[1]);
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 160x120 BGR image of skin with depth: the face at 0.6 m in the middle, a wall at
+    /// 1.8 m around it.
+    struct Scene {
+        color: ColorImage,
+        depth: DepthImage,
+    }
+
+    const W: u32 = 160;
+    const H: u32 = 120;
+
+    impl Scene {
+        fn new() -> Self {
+            let mut color = ColorImage::new(W, H);
+            let mut depth = DepthImage::new(W, H);
+            for y in 0..H {
+                for x in 0..W {
+                    let i = (y * W + x) as usize;
+                    let face = (40..120).contains(&x) && (10..110).contains(&y);
+                    // BGR: skin (hue ≈ 10, saturation ≈ 100) or a grey wall.
+                    let bgr = if face { [120, 150, 205] } else { [60, 62, 64] };
+                    color.data[3 * i..3 * i + 3].copy_from_slice(&bgr);
+                    depth.data[i] = if face { 600 } else { 1800 };
+                }
+            }
+            Self { color, depth }
+        }
+
+        fn square(&mut self, x0: u32, y0: u32, bgr: [u8; 3]) {
+            for y in y0..y0 + 3 {
+                for x in x0..x0 + 3 {
+                    let i = (y * W + x) as usize;
+                    self.color.data[3 * i..3 * i + 3].copy_from_slice(&bgr);
+                }
+            }
+        }
+    }
+
+    const GREEN: [u8; 3] = [70, 200, 40]; // BGR, hue ≈ 66
+    const BLUE: [u8; 3] = [230, 90, 40]; // hue ≈ 112
+    const MAGENTA: [u8; 3] = [200, 30, 210]; // hue ≈ 152
+
+    /// Twelve green dots on a lip line, three blue ones above, and magenta dots on the wall
+    /// (a poster behind the performer).
+    fn scene() -> Scene {
+        let mut s = Scene::new();
+        for k in 0..12 {
+            s.square(50 + 5 * k, 80 + (k % 2) * 6, GREEN);
+        }
+        for k in 0..3 {
+            s.square(60 + 20 * k, 30, BLUE);
+        }
+        for k in 0..6 {
+            s.square(5 + 5 * k, 5, MAGENTA);
+            s.square(130, 20 + 6 * k, MAGENTA);
+        }
+        s
+    }
+
+    fn sample(with_depth: bool) -> Proposal {
+        let s = scene();
+        let mut sampler = ColourSampler::new(TuneOptions::default());
+        for _ in 0..10 {
+            let depth = with_depth.then_some((&s.depth, 0.001));
+            let got = sampler.add_frame(&s.color, depth, 140.0).unwrap();
+            assert_eq!(got.performer_m.is_some(), with_depth);
+        }
+        sampler.propose()
+    }
+
+    #[test]
+    fn depth_masks_the_background_and_roles_follow_count_and_height() {
+        let p = sample(true);
+        assert!(p.warnings.is_empty(), "{:?}", p.warnings);
+        assert!(
+            p.unused.is_empty(),
+            "the wall's magenta was sampled: {:?}",
+            p.unused
+        );
+        let performer = p.performer_m.unwrap();
+        assert!((performer - 0.6).abs() < 0.011, "{performer}");
+        assert_eq!(p.classes.len(), 2);
+        let (lip, forehead) = (&p.classes[0], &p.classes[1]);
+        assert_eq!(lip.class.role, DotRole::Lip);
+        assert_eq!(lip.per_frame, 12.0);
+        assert_eq!((lip.blobs, lip.frames_present), (120, 10));
+        assert_eq!(forehead.class.role, DotRole::Forehead);
+        assert_eq!(forehead.per_frame, 3.0);
+        let hue_of = |c: &ProposedClass| hue_set(&c.class.hue);
+        assert!(hue_of(lip)[66] && !hue_of(lip)[112] && !hue_of(lip)[10]);
+        assert!(hue_of(forehead)[112] && !hue_of(forehead)[66]);
+        let config = p.detect_config(&DetectConfig::default());
+        config.validate().unwrap();
+        // The snippet parses back to the same classes.
+        let text = p.to_toml("scene");
+        #[derive(serde::Deserialize)]
+        struct File {
+            detect: DetectConfig,
+        }
+        let back: File = toml::from_str(&text).unwrap();
+        assert_eq!(back.detect.classes, config.classes, "{text}");
+        assert!(
+            text.contains("# hue 66: 120 blobs in 10 of 10 frames (12 per frame)"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn without_depth_the_background_colour_is_seen() {
+        let p = sample(false);
+        assert!(p.performer_m.is_none());
+        // Magenta: 12 wall dots per frame compete with the green lip dots.
+        let seen: Vec<f64> = p
+            .classes
+            .iter()
+            .map(|c| c.hue_centre)
+            .chain(p.unused.iter().map(|c| c.hue))
+            .collect();
+        assert!(seen.iter().any(|h| (h - 152.0).abs() < 3.0), "{seen:?}");
+        assert!(p.to_toml("scene").contains("no depth"));
+    }
+
+    #[test]
+    fn nothing_saturated_gives_no_class_and_a_warning() {
+        let s = Scene::new();
+        let mut sampler = ColourSampler::new(TuneOptions::default());
+        sampler
+            .add_frame(&s.color, Some((&s.depth, 0.001)), 140.0)
+            .unwrap();
+        let p = sampler.propose();
+        assert!(p.classes.is_empty());
+        assert!(
+            p.warnings[0].contains("no saturated, compact colour blobs"),
+            "{:?}",
+            p.warnings
+        );
+    }
+
+    #[test]
+    fn hue_ranges_wrap_around_red() {
+        assert_eq!(hue_ranges(55, 76), vec![[55, 76]]);
+        assert_eq!(hue_ranges(-8, 9), vec![[0, 9], [172, 179]]);
+        assert_eq!(hue_ranges(170, 185), vec![[0, 5], [170, 179]]);
+        assert_eq!(hue_ranges(-100, 100), vec![[0, 179]]);
+        assert!((hue_diff(2.0, 178.0) - 4.0).abs() < 1e-9);
+        assert!((circular_mean([178.0, 2.0].into_iter()) % 180.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn overlapping_classes_split_the_shared_hues() {
+        let class = |hue: Vec<[u8; 2]>, centre: f64| ProposedClass {
+            class: ColorClass {
+                name: "x".into(),
+                role: DotRole::Any,
+                hue,
+                saturation: [100, 255],
+                value: [50, 255],
+            },
+            hue_centre: centre,
+            blobs: 1,
+            frames_present: 1,
+            per_frame: 1.0,
+        };
+        let mut v = vec![
+            class(vec![[0, 20], [170, 179]], 5.0),
+            class(vec![[15, 40]], 28.0),
+        ];
+        separate_hues(&mut v);
+        assert_eq!(v[0].class.hue, vec![[0, 16], [170, 179]]);
+        assert_eq!(v[1].class.hue, vec![[17, 40]]);
+    }
+
+    #[test]
+    fn performer_distance_ignores_specks() {
+        let mut d = DepthImage::new(100, 100);
+        d.data.iter_mut().for_each(|v| *v = 2000);
+        d.data[0] = 300; // one near pixel: a speck, not the performer
+        for v in &mut d.data[5000..6000] {
+            *v = 750;
+        }
+        let z = performer_distance(&d, 0.001, [0.2, 2.5], 0.015).unwrap();
+        assert!((z - 0.75).abs() < 0.011, "{z}");
     }
 }
