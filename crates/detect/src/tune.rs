@@ -72,7 +72,7 @@ impl TuneOptions {
             min_contrast: 60,
             max_hue_spread: 6.0,
             min_value: 60,
-            hue_margin: 5,
+            hue_margin: 12,
             value_margin: 25,
             min_area_px: detect.min_area_px.max(2),
             min_fill_ratio: detect.min_fill_ratio,
@@ -479,6 +479,14 @@ impl ColourSampler {
         )?;
         let labels = self.labels.data_typed::<i32>()?;
         let mut found = 0;
+        // What is not paint: the foreground outside every candidate's box grown by 1 px
+        // (paint mixed into the rim; candidates dropped below for mixed hue are paint too).
+        // Not more: lip dots sit a few pixels apart, and the lips between them are what a
+        // red paint's range must leave out.
+        let mut near_blob = vec![false; w * h];
+        for b in &blobs {
+            mark_box(&mut near_blob, (w, h), b.bbox, 1);
+        }
         for blob in blobs {
             let (label, area) = (blob.label, blob.area);
             let PixelRect {
@@ -540,13 +548,6 @@ impl ColourSampler {
                 pixels: start..self.pixels.len(),
             });
             found += 1;
-        }
-        // What is not paint: the foreground outside the blobs' boxes grown by 1 px (paint
-        // mixed into the rim). Not more: lip dots sit a few pixels apart, and the lips
-        // between them are what a red paint's range must leave out.
-        let mut near_blob = vec![false; w * h];
-        for b in &self.blobs[self.blobs.len() - found..] {
-            mark_box(&mut near_blob, (w, h), b.bbox, 1);
         }
         for i in 0..w * h {
             if !near_blob[i] && fg[i] {

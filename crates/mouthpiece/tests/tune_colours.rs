@@ -262,3 +262,21 @@ fn unusable_input_exits_2() {
     let out = tune(&["x.mcap", "--classes", "3"]);
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn demo_recording_proposal_finds_the_dots() {
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../recordings/demo.mcap");
+    let (stdout, config) = propose(&demo);
+    eprintln!("{stdout}");
+    let (all, frames) = frames_with_all_dots(&demo, config);
+    let (default_all, _) = frames_with_all_dots(&demo, DetectConfig::default());
+    eprintln!(
+        "demo: all 12+3 dots in {all} of {frames} frames (built-in default classes: {default_all})"
+    );
+    // The demo speaks for 20 s (motion blur, open mouth) after the 2 s sampled: about as
+    // good as the hand-written defaults, which fit this paint.
+    assert!(
+        (all + frames / 20) >= default_all,
+        "all 12+3 dots in {all} of {frames} frames, {default_all} with the defaults"
+    );
+}
