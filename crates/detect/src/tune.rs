@@ -1,16 +1,24 @@
 //! Proposing colour classes from frames (`mouthpiece tune-colours`).
 //!
 //! [`ColourSampler::add_frame`] finds saturated, compact colour blobs in one frame: OpenCV
-//! converts to HSV, the performer's distance (a depth histogram: the nearest surface that
-//! covers a real part of the image) masks out the background, pixels above a saturation
-//! threshold that sits above the face's own saturation (skin and lips) form connected
-//! components, and components of dot size and shape keep their pixels' hue, saturation and
-//! value. [`ColourSampler::propose`] clusters the blobs of every frame by hue (a circular
-//! histogram, split at its valleys), keeps the clusters seen in most frames, decides which is
-//! on the lips (the one with about `lip_dots` blobs per frame) and which on the forehead
-//! (about `forehead_dots`, above the lips), and turns each into a [`ColorClass`] from robust
-//! percentiles of its pixels with a margin, a red that wraps around hue 0 written as two
-//! ranges. [`Proposal::to_toml`] prints it as a `[detect]` snippet.
+//! converts to HSV; the performer's distance (a depth histogram: the nearest surface covering
+//! 1.5 % of the image) masks out what is more than 35 cm behind it; the face's saturation is
+//! measured (99.5th percentile of the foreground, with the blobs of a first, lower-threshold
+//! pass left out so a close-up's paint does not lift it) and pixels 20 above it form connected
+//! components; a component is kept when it is dot-sized and shaped, at least 60 more
+//! saturated than the ring around it (paint stands out, a fold of the lips does not) and of
+//! one hue (pixels more than 15 hue units off its trimmed mean are dropped; a blob losing a
+//! third is dropped). Everything else in the foreground goes into a hue x saturation
+//! histogram of "face".
+//!
+//! [`ColourSampler::propose`] clusters the blobs of every frame by hue (a circular histogram,
+//! smoothed, split at its valleys), keeps the clusters seen in two frames out of three, picks
+//! the lip cluster (about `lip_dots` blobs per frame) and the forehead cluster (about
+//! `forehead_dots`, above the lips), and turns each into a [`ColorClass`]: hue from the 2nd to
+//! the 98th percentile of its pixels plus a margin (a red across hue 0 written as two ranges,
+//! hue shared with another class split between them), saturation from the lowest level at
+//! which the face shows (almost) no pixel of that hue, value from the paint's low tail.
+//! [`Proposal::to_toml`] prints it as a `[detect]` snippet.
 
 use std::f64::consts::PI;
 use std::fmt::Write as _;
@@ -585,7 +593,7 @@ impl ColourSampler {
             n if opts.classes == Some(1) => {
                 // The most persistent colour paints every dot.
                 let mut cands = cands;
-                cands.sort_by(|a, b| b.blobs.len().cmp(&a.blobs.len()));
+                cands.sort_by_key(|c| std::cmp::Reverse(c.blobs.len()));
                 if n > 1 {
                     warnings.push(format!(
                         "one paint colour was asked for but {n} were seen; the most frequent is proposed"
@@ -681,7 +689,7 @@ impl ColourSampler {
             .collect();
         // Neighbouring paints: no hue shared between two classes.
         separate_hues(&mut classes);
-        unused.sort_by(|a, b| b.blobs.len().cmp(&a.blobs.len()));
+        unused.sort_by_key(|c| std::cmp::Reverse(c.blobs.len()));
         Proposal {
             classes,
             unused: unused
@@ -808,7 +816,7 @@ impl ColourSampler {
                 blobs: members.iter().map(|(i, _)| *i).collect(),
             });
         }
-        clusters.sort_by(|a, b| b.blobs.len().cmp(&a.blobs.len()));
+        clusters.sort_by_key(|c| std::cmp::Reverse(c.blobs.len()));
         clusters
     }
 
