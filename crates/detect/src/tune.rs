@@ -1025,7 +1025,8 @@ impl Proposal {
     }
 
     /// The `[detect]` snippet: `[[detect.class]]` entries with the keys a configuration file
-    /// takes, comments saying where each came from, `# warning:` lines.
+    /// takes (valid TOML on its own and anywhere in a configuration file whose `[detect]`
+    /// table has no classes), comments saying where each came from, `# warning:` lines.
     pub fn to_toml(&self, source: &str) -> String {
         let mut s = String::new();
         let _ = writeln!(
@@ -1056,7 +1057,8 @@ impl Proposal {
                 c.hue, c.blobs, c.frames_present, self.frames, c.per_frame
             );
         }
-        let _ = writeln!(s, "[detect]");
+        // No `[detect]` line: the entries create the table on their own, and can be pasted
+        // into a file that has one (TOML refuses a table defined twice).
         for p in &self.classes {
             let c = &p.class;
             let _ = writeln!(s);

@@ -105,6 +105,15 @@ fn propose(session: &Path) -> (String, DetectConfig) {
     let config = PipelineConfig::from_toml_str(&stdout)
         .unwrap_or_else(|e| panic!("snippet does not load: {e}\n{stdout}"));
     assert!(stdout.contains("[[detect.class]]"), "{stdout}");
+    // It can be pasted at the end of the shipped configuration file (which has a `[detect]`
+    // table without classes).
+    let shipped = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/mouthpiece.toml"),
+    )
+    .unwrap();
+    let pasted = PipelineConfig::from_toml_str(&format!("{shipped}\n{stdout}"))
+        .unwrap_or_else(|e| panic!("pasted snippet does not load: {e}"));
+    assert_eq!(pasted.detect.classes, config.detect.classes);
     (stdout, config.detect)
 }
 
