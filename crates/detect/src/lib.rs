@@ -15,6 +15,7 @@
 //! The detector does not name dots; that is the tracker's job (`mouthpiece-track`).
 
 mod config;
+pub mod tune;
 
 use opencv::core::{self, Mat, MatTraitConst, Rect, Scalar, Size, Vec3b, Vector};
 use opencv::imgproc;

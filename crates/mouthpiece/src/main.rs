@@ -38,6 +38,10 @@ enum Command {
     Devices(cmd::devices::Args),
     /// Export a take (JSONL or recording) as keyframe animation: glTF 2.0, GLB or CSV.
     Export(cmd::export::Args),
+    /// Propose the detector's colour classes from the first seconds of a session (prints a
+    /// `[detect]` TOML snippet).
+    #[command(name = "tune-colours")]
+    TuneColours(cmd::tune_colours::Args),
 }
 
 fn main() -> ExitCode {
@@ -53,6 +57,7 @@ fn main() -> ExitCode {
         Command::Record(args) => cmd::record::run(args),
         Command::Devices(args) => cmd::devices::run(args),
         Command::Export(args) => cmd::export::run(args),
+        Command::TuneColours(args) => cmd::tune_colours::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

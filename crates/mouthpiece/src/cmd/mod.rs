@@ -9,3 +9,4 @@ pub mod record;
 pub mod retarget;
 pub mod run;
 pub mod synth;
+pub mod tune_colours;
