@@ -6,37 +6,15 @@
 //! assignment matrices, missing-dot names), measured at about 90 allocations a frame. What this
 //! test holds is that the count stays flat over a session (nothing accumulates).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use mouthpiece_daemon::live::LiveProcessor;
 use mouthpiece_daemon::pipeline::{Output, Processor};
 use mouthpiece_synth::{Synth, SynthConfig};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards to the system allocator unchanged; only counts calls.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+#[path = "../../retarget/tests/counting_alloc/mod.rs"]
+mod counting_alloc;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: counting_alloc::Counting = counting_alloc::Counting;
 
 #[test]
 fn allocations_per_frame_stay_flat_over_a_session() {
@@ -58,11 +36,11 @@ fn allocations_per_frame_stay_flat_over_a_session() {
     }
     let (first, second) = measured.split_at(measured.len() / 2);
     let mut count = |frames: &[mouthpiece_frame::Frame]| {
-        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        let before = counting_alloc::allocations();
         for f in frames {
             processor.process(f, &mut out);
         }
-        (ALLOCATIONS.load(Ordering::Relaxed) - before) as f64 / frames.len() as f64
+        (counting_alloc::allocations() - before) as f64 / frames.len() as f64
     };
     let (a, b) = (count(first), count(second));
     println!("allocations per frame: {a:.1} in the first half, {b:.1} in the second");

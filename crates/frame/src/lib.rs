@@ -69,6 +69,28 @@ impl Intrinsics {
         self.distortion.iter().any(|&k| k != 0.0)
     }
 
+    /// Projects a camera-frame point (metres, z forward) to a pixel as the camera images it,
+    /// lens distortion included (Brown–Conrady, OpenCV's `k1 k2 p1 p2 k3`). `None` behind the
+    /// camera.
+    pub fn project(&self, p: [f64; 3]) -> Option<[f64; 2]> {
+        if p[2] <= 0.0 {
+            return None;
+        }
+        let (x, y) = (p[0] / p[2], p[1] / p[2]);
+        let (x, y) = if self.has_distortion() {
+            let [k1, k2, p1, p2, k3] = self.distortion;
+            let r2 = x * x + y * y;
+            let radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
+            (
+                x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+                y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+            )
+        } else {
+            (x, y)
+        };
+        Some([self.fx * x + self.cx, self.fy * y + self.cy])
+    }
+
     /// Projects a camera-frame point (metres, z forward) to pixel coordinates, ignoring
     /// distortion. `None` behind the camera.
     pub fn project_ideal(&self, p: [f64; 3]) -> Option<[f64; 2]> {

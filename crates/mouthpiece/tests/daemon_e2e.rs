@@ -70,7 +70,16 @@ impl Daemon {
     /// Starts `mouthpiece run --config` with `extra` config text after a `[source]` and
     /// `[takes]` pointing into a temporary directory.
     fn start(source_spec: &str, extra: &str, args: &[&str], env: &[(&str, &str)]) -> Daemon {
-        let dir = tempfile::tempdir().unwrap();
+        Self::start_with_dir(tempfile::tempdir().unwrap(), source_spec, extra, args, env)
+    }
+
+    fn start_with_dir(
+        dir: tempfile::TempDir,
+        source_spec: &str,
+        extra: &str,
+        args: &[&str],
+        env: &[(&str, &str)],
+    ) -> Daemon {
         let port = free_port();
         let config = format!(
             "[source]\nspec = \"{source_spec}\"\nretry_initial_s = 0.2\nretry_max_s = 0.4\nstall_timeout_s = 1.0\n\
@@ -78,6 +87,21 @@ impl Daemon {
         );
         std::fs::write(dir.path().join("mouthpiece.toml"), config).unwrap();
         Self::start_in(dir, port, args, env)
+    }
+
+    /// Starts the daemon on a `frames`-frame session ([`write_session`]) replayed in a loop;
+    /// the session lives in the daemon's directory.
+    fn start_looping(frames: u64, extra: &str, args: &[&str], env: &[(&str, &str)]) -> Daemon {
+        let dir = tempfile::tempdir().unwrap();
+        let session = dir.path().join("s.mcap");
+        write_session(&session, frames);
+        Self::start_with_dir(
+            dir,
+            &format!("replay:{}?loop=1", session.display()),
+            extra,
+            args,
+            env,
+        )
     }
 
     fn start_in(dir: tempfile::TempDir, port: u16, args: &[&str], env: &[(&str, &str)]) -> Daemon {
@@ -219,15 +243,7 @@ fn takes_in(dir: &Path) -> Vec<PathBuf> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_client_receives_frames_and_sigterm_closes_it_with_1001_and_exits_0_within_2_s() {
-    let dir = tempfile::tempdir().unwrap();
-    let session = dir.path().join("s.mcap");
-    write_session(&session, 60);
-    let mut daemon = Daemon::start(
-        &format!("replay:{}?loop=1", session.display()),
-        "",
-        &[],
-        &[],
-    );
+    let mut daemon = Daemon::start_looping(60, "", &[], &[]);
     let mut ws = daemon.connect().await;
     let hello = wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "hello").await;
     let names: Vec<&str> = hello["characters"]
@@ -271,15 +287,7 @@ async fn a_client_receives_frames_and_sigterm_closes_it_with_1001_and_exits_0_wi
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_take_started_by_a_control_message_holds_every_channel() {
-    let dir = tempfile::tempdir().unwrap();
-    let session = dir.path().join("s.mcap");
-    write_session(&session, 60);
-    let mut daemon = Daemon::start(
-        &format!("replay:{}?loop=1", session.display()),
-        "",
-        &[],
-        &[],
-    );
+    let mut daemon = Daemon::start_looping(60, "", &[], &[]);
     let mut ws = daemon.connect().await;
     wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await;
     send(

@@ -220,16 +220,7 @@ fn every_layout_passes_the_validator_and_reads_back() {
     }
     assert!(dir.path().join("take.bin").exists());
     assert!(!dir.path().join("embedded.bin").exists());
-    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| n.starts_with('.'))
-        .collect();
-    assert!(
-        leftovers.is_empty(),
-        "temporary files left behind: {leftovers:?}"
-    );
+    assert_no_temporary_files(dir.path());
 }
 
 #[test]
@@ -642,7 +633,12 @@ fn recordings_are_processed_then_exported() {
         assert_eq!(out.status.code(), Some(2), "{ext}: no --character");
         assert!(String::from_utf8_lossy(&out.stderr).contains("needs --character"));
     }
-    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+    assert_no_temporary_files(dir.path());
+}
+
+/// Outputs are written to hidden temporary files and renamed into place: none may be left.
+fn assert_no_temporary_files(dir: &Path) {
+    let leftovers: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
         .filter_map(|e| e.ok())
         .map(|e| e.file_name().to_string_lossy().into_owned())

@@ -1,38 +1,15 @@
 //! A retarget step allocates nothing once warmed up (the daemon calls it for every frame).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use mouthpiece_retarget::jsonl::OutputLine;
 use mouthpiece_retarget::{
     Character, CharacterSettings, NeutralAccumulator, OneEuroParams, PerformerDots,
     PerformerLayout, RetargetConfig, Retargeter, ShapeSmoothing, Vec3,
 };
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards to the system allocator unchanged; only counts calls.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+mod counting_alloc;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: counting_alloc::Counting = counting_alloc::Counting;
 
 fn dots(t: f64, missing: Option<usize>) -> PerformerDots {
     let mut d = PerformerDots::new(PerformerLayout::default());
@@ -82,12 +59,12 @@ fn steady_state_steps_do_not_allocate() {
         let out = rt.step(i as f64 / 30.0, d).unwrap();
         line.update(i as u64, &out);
     }
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let before = counting_alloc::allocations();
     for (i, d) in inputs.iter().enumerate().skip(5) {
         let out = rt.step(i as f64 / 30.0, d).unwrap();
         line.update(i as u64, &out);
     }
-    let after = ALLOCATIONS.load(Ordering::Relaxed);
+    let after = counting_alloc::allocations();
     assert_eq!(
         after - before,
         0,

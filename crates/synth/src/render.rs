@@ -148,20 +148,7 @@ impl View {
         if p[2] <= 0.01 {
             return None;
         }
-        let (xn, yn) = (p[0] / p[2], p[1] / p[2]);
-        let k = &self.k;
-        let (xd, yd) = if k.has_distortion() {
-            let [k1, k2, p1, p2, k3] = k.distortion;
-            let r2 = xn * xn + yn * yn;
-            let radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
-            (
-                xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn),
-                yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn,
-            )
-        } else {
-            (xn, yn)
-        };
-        Some([k.fx * xd + k.cx, k.fy * yd + k.cy])
+        self.k.project(p)
     }
 }
 

@@ -34,22 +34,7 @@ pub fn undistort_normalised(k: &Intrinsics, px: [f64; 2]) -> [f64; 2] {
 
 /// Projects a camera-frame point to a (distorted) pixel. `None` behind the camera.
 pub fn project(k: &Intrinsics, p: &Vec3) -> Option<[f64; 2]> {
-    if p.z <= 0.0 {
-        return None;
-    }
-    let (x, y) = (p.x / p.z, p.y / p.z);
-    let (x, y) = if k.has_distortion() {
-        let [k1, k2, p1, p2, k3] = k.distortion;
-        let r2 = x * x + y * y;
-        let radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
-        (
-            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
-        )
-    } else {
-        (x, y)
-    };
-    Some([k.fx * x + k.cx, k.fy * y + k.cy])
+    k.project([p.x, p.y, p.z])
 }
 
 /// The camera-frame point seen at pixel `px` (distorted, as in the image) at depth `z`
