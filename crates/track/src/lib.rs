@@ -30,8 +30,8 @@ use mouthpiece_detect::{DetectConfig, DetectError, Detector, DotRole, PixelRect}
 use mouthpiece_frame::{Calibration, DepthImage, Frame};
 use mouthpiece_retarget::kabsch::kabsch;
 use mouthpiece_retarget::{
-    MissingDots, NeutralAccumulator, NeutralPose, PerformerDots, PerformerLayout, RigidTransform,
-    StabilisedFrame, Stabiliser,
+    MissingDots, NeutralAccumulator, NeutralPose, OneEuro, OneEuroParams, PerformerDots,
+    PerformerLayout, RigidTransform, StabilisedFrame, Stabiliser,
 };
 use serde::{Deserialize, Serialize};
 
@@ -87,6 +87,11 @@ pub struct TrackConfig {
     /// to, metres (the sensor's depth noise is spatially correlated over a few pixels, so the
     /// readings under the paint alone keep most of it).
     pub forehead_depth_patch_m: f64,
+    /// Temporal filter on each forehead dot's depth (One Euro: cut-off frequency at rest in Hz,
+    /// and how fast it opens with the depth's speed, Hz per m/s). The forehead's depth noise
+    /// is what tilts the head pose; pixels are precise and stay unfiltered. 0 Hz: no filter.
+    pub forehead_depth_min_cutoff_hz: f64,
+    pub forehead_depth_beta: f64,
     /// Margin around the predicted dots for the search region, pixels.
     pub roi_margin_px: f64,
     /// While dots are missing, search the full frame every this many frames.
@@ -112,6 +117,8 @@ impl Default for TrackConfig {
             still_tolerance_m: 0.006,
             max_opening_ratio: 0.6,
             forehead_depth_patch_m: 0.022,
+            forehead_depth_min_cutoff_hz: 2.0,
+            forehead_depth_beta: 200.0,
             roi_margin_px: 20.0,
             full_search_every: 8,
             min_gate_px: 2.5,
@@ -154,6 +161,11 @@ impl TrackConfig {
             }
         }
         for (key, v) in [
+            (
+                "forehead_depth_min_cutoff_hz",
+                self.forehead_depth_min_cutoff_hz,
+            ),
+            ("forehead_depth_beta", self.forehead_depth_beta),
             ("missing_hold_s", self.missing_hold_s),
             ("missing_decay_s", self.missing_decay_s),
         ] {
@@ -274,6 +286,8 @@ pub struct Tracker {
     stabiliser: Option<Stabiliser>,
     registered: DepthImage,
     depth_buf: Vec<(f64, f64, f64)>,
+    /// Per forehead dot: its depth filter (`None` when switched off).
+    forehead_depth: Option<Vec<OneEuro>>,
     pub(crate) out: TrackedFrame,
 }
 
@@ -295,7 +309,16 @@ impl Tracker {
         let roles = detect.classes.iter().map(|c| c.role).collect();
         let detector = Detector::new(detect)?;
         let n = layout.lip_dots + layout.forehead_dots;
+        let forehead_depth = (config.forehead_depth_min_cutoff_hz > 0.0).then(|| {
+            let params = OneEuroParams {
+                min_cutoff: config.forehead_depth_min_cutoff_hz,
+                beta: config.forehead_depth_beta,
+                d_cutoff: 1.0,
+            };
+            vec![OneEuro::new(params); layout.forehead_dots]
+        });
         Ok(Self {
+            forehead_depth,
             layout,
             detector,
             dot_radius_m,
@@ -424,6 +447,19 @@ impl Tracker {
 
         let n = self.layout.lip_dots;
         let names = self.name_candidates(&cands, &k);
+        if let Some(filters) = &mut self.forehead_depth {
+            for (filter, name) in filters.iter_mut().zip(&names[n..]) {
+                match name {
+                    Some(c) => {
+                        let c = &mut cands[*c];
+                        let z = filter.filter(t, c.point.z);
+                        c.point = camera::deproject(&k, c.pixel, z);
+                    }
+                    // Unseen: start afresh when it returns, rather than from a stale depth.
+                    None => filter.reset(),
+                }
+            }
+        }
         // Fill the output.
         let out = &mut self.out;
         out.seq = frame.seq;
