@@ -367,3 +367,40 @@ fn names_slipped_around_the_mouth_are_caught_by_the_corners() {
     missing[6] = None;
     assert!(tr.corners_are_extremes(&missing, &cands));
 }
+
+#[test]
+fn forehead_depth_jitter_is_filtered() {
+    // A still face whose whole depth image jumps by up to ±2 mm from frame to frame (noise
+    // correlated over the patch, which the plane fit cannot average away).
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    let spread = |config: TrackConfig| {
+        let mut tr = Tracker::new(DetectConfig::default(), config).unwrap();
+        let mut zs = Vec::new();
+        for seq in 0..60u64 {
+            let mut frame = render(seq, &still, &[]);
+            let jump = ((seq * 7919) % 5) as i32 - 2;
+            for d in frame.depth.data.iter_mut().filter(|d| **d > 0) {
+                *d = (*d as i32 + jump) as u16;
+            }
+            let out = tr.process(&frame).unwrap();
+            if seq >= 20 {
+                zs.push(out.dots.forehead[1].expect("F2 seen").z);
+            }
+        }
+        let mean = zs.iter().sum::<f64>() / zs.len() as f64;
+        (zs.iter().map(|z| (z - mean).powi(2)).sum::<f64>() / zs.len() as f64).sqrt()
+    };
+    let unfiltered = spread(TrackConfig {
+        forehead_depth_min_cutoff_hz: 0.0,
+        ..TrackConfig::default()
+    });
+    let filtered = spread(TrackConfig::default());
+    assert!(
+        unfiltered > 0.001,
+        "the jitter reaches the dots: {unfiltered}"
+    );
+    assert!(
+        filtered < 0.5 * unfiltered,
+        "filtered {filtered} m against {unfiltered} m unfiltered"
+    );
+}
