@@ -116,7 +116,7 @@ impl Default for TrackConfig {
             calibration_s: 1.0,
             still_tolerance_m: 0.006,
             max_opening_ratio: 0.6,
-            forehead_depth_patch_m: 0.022,
+            forehead_depth_patch_m: 0.014,
             forehead_depth_min_cutoff_hz: 2.0,
             forehead_depth_beta: 200.0,
             roi_margin_px: 20.0,
