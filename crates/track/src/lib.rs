@@ -417,7 +417,10 @@ impl Tracker {
                 // The forehead is smooth: a plane over a wide patch of skin around the dot
                 // averages the sensor's (spatially correlated) noise down; the head pose
                 // needs it.
-                let patch_px = self.config.forehead_depth_patch_m * k.fx / z_hint;
+                // Rounded to 1/64 px: calibrations that differ only in their last digits (an
+                // .oni's field of view is a 32-bit float) must pick the same pixels.
+                let patch_px =
+                    (self.config.forehead_depth_patch_m * k.fx / z_hint * 64.0).round() / 64.0;
                 depth::depth_by_plane(
                     depth,
                     scale,
