@@ -21,7 +21,8 @@ pub fn check(config: &Config) -> Result<(), CheckError> {
             message,
         });
     }
-    crate::characters::load(config)?;
+    // Characters, `[detect]` (colour ranges) and `[track]`, as the pipeline will load them.
+    crate::live::setup(config)?;
     crate::capture::check_spec(config)?;
     crate::daemon::server_config(config)?;
     crate::daemon::timecode_rate(config)?;

@@ -80,3 +80,17 @@ fn a_token_is_never_printed() {
         "{stdout}{stderr}"
     );
 }
+
+#[test]
+fn an_inverted_colour_range_exits_2_naming_the_key() {
+    let (code, _, stderr) = check(
+        "[detect]\n[[detect.class]]\nname = \"lip\"\nrole = \"lip\"\nhue = [[80, 40]]\n\
+         saturation = [90, 255]\nvalue = [40, 255]\n",
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("detect.class[0].hue[0]"), "{stderr}");
+    // And a [track] value out of range.
+    let (code, _, stderr) = check("[track]\nlip_dots = 5\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("track.lip_dots"), "{stderr}");
+}

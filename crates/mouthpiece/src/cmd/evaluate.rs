@@ -172,21 +172,6 @@ pub fn evaluate(
     let mut reference: Option<Retargeter> = None;
     let mut head_at_calibration = Matrix3::identity();
     while let Some((frame, gt)) = synth.render_next() {
-        if let Ok(dump) = std::env::var("MP_DUMP_SEQ") {
-            if dump.parse::<u64>().ok() == Some(frame.seq) {
-                let mut ppm =
-                    format!("P6 {} {} 255\n", frame.color.width, frame.color.height).into_bytes();
-                ppm.extend(frame.color.data.chunks(3).flat_map(|c| [c[2], c[1], c[0]]));
-                std::fs::write("/tmp/dump.ppm", ppm)?;
-                let d: Vec<u8> = frame
-                    .depth
-                    .data
-                    .iter()
-                    .flat_map(|v| v.to_le_bytes())
-                    .collect();
-                std::fs::write("/tmp/dump.depth", d)?;
-            }
-        }
         let (line, tracked) = pipeline.process(&frame)?;
         let t = tracked.t;
         history.push((t, gt.clone()));
