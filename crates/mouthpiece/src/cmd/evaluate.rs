@@ -67,6 +67,10 @@ pub struct Args {
     /// Configuration file (`[detect]`, `[track]`).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Dot layout of the synthetic performer (TOML, as `mouthpiece synth --layout`): where
+    /// the forehead dots are painted, paint colours, dot size.
+    #[arg(long)]
+    pub layout: Option<PathBuf>,
     /// After each session, a table per dot: found, wrong, bias and RMS per camera axis.
     #[arg(long)]
     pub per_dot: bool,
@@ -305,6 +309,10 @@ fn print_per_dot(m: &Metrics, layout: PerformerLayout) {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let config = load_config(args.config.as_deref())?;
+    let layout = match &args.layout {
+        Some(path) => mouthpiece_synth::DotLayout::from_file(path).map_err(bad_input)?,
+        None => mouthpiece_synth::DotLayout::default(),
+    };
     let character = load_character(&args.character)?;
     if !(args.seconds > 2.0 && args.seconds.is_finite()) {
         return Err(bad_input(anyhow::anyhow!(
@@ -331,6 +339,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         Noise::Kinect => NoiseModel::Kinect,
                         Noise::Realsense => NoiseModel::Realsense,
                     },
+                    layout: layout.clone(),
                     ..SynthConfig::default()
                 };
                 let m = evaluate(synth, &config, &character, 1.0)?;
