@@ -60,13 +60,13 @@ fn tune(args: &[&str]) -> Output {
         .unwrap()
 }
 
-/// Frames (out of the session's) in which the detector with `config` finds exactly
-/// `lip` blobs of the lip class and `forehead` of the forehead class.
-fn frames_with_all_dots(session: &Path, config: DetectConfig) -> (usize, usize) {
+/// Runs the detector with `config` over every frame of `session` (full-frame search); per
+/// frame, the blob count per role (lip, forehead, any).
+fn blobs_per_frame(session: &Path, config: DetectConfig) -> Vec<[usize; 3]> {
     let roles: Vec<DotRole> = config.classes.iter().map(|c| c.role).collect();
     let mut detector = Detector::new(config).unwrap();
     let mut reader = SessionReader::open(session).unwrap();
-    let (mut all, mut frames) = (0, 0);
+    let mut counts = Vec::new();
     while let Some(f) = reader.next_frame().unwrap() {
         let f = f.frame;
         let found = detector
@@ -77,19 +77,26 @@ fn frames_with_all_dots(session: &Path, config: DetectConfig) -> (usize, usize) 
                 None,
             )
             .unwrap();
-        let count = |role| {
-            found
-                .blobs
-                .iter()
-                .filter(|b| roles[b.class] == role)
-                .count()
-        };
-        frames += 1;
-        if count(DotRole::Lip) == 12 && count(DotRole::Forehead) == 3 {
-            all += 1;
+        let mut count = [0; 3];
+        for b in &found.blobs {
+            let slot = match roles[b.class] {
+                DotRole::Lip => 0,
+                DotRole::Forehead => 1,
+                DotRole::Any => 2,
+            };
+            count[slot] += 1;
         }
+        counts.push(count);
     }
-    (all, frames)
+    counts
+}
+
+/// Frames (out of the session's) in which the detector with `config` finds exactly 12 blobs
+/// of the lip class and 3 of the forehead class.
+fn frames_with_all_dots(session: &Path, config: DetectConfig) -> (usize, usize) {
+    let counts = blobs_per_frame(session, config);
+    let all = counts.iter().filter(|c| c[0] == 12 && c[1] == 3).count();
+    (all, counts.len())
 }
 
 /// Runs the command, checks the snippet and returns the detector configuration it gives.
@@ -220,21 +227,10 @@ fn one_paint_for_every_dot_is_role_any() {
     );
     assert!(stdout.contains("15 per frame"), "{stdout}");
     // All 15 dots are found with the one class.
-    let mut detector = Detector::new(config).unwrap();
-    let mut reader = SessionReader::open(&session).unwrap();
-    let mut short = 0;
-    while let Some(f) = reader.next_frame().unwrap() {
-        let f = f.frame;
-        let found = detector
-            .detect(
-                &f.color,
-                Some((&f.depth, f.calibration.depth_scale_m)),
-                f.calibration.color.fx,
-                None,
-            )
-            .unwrap();
-        short += (found.blobs.len() != 15) as u32;
-    }
+    let short = blobs_per_frame(&session, config)
+        .iter()
+        .filter(|c| c.iter().sum::<usize>() != 15)
+        .count();
     assert!(short <= 2, "{short} frames without exactly 15 dots");
 }
 
