@@ -1,5 +1,6 @@
-//! `mouthpiece record`: any source to an MCAP session; an OpenNI2 source (camera, Dummy or
-//! `.oni` replay) also to `.oni` through OpenNI2's own recorder.
+//! `mouthpiece record`: any source to an MCAP session or an `.oni`: an OpenNI2 source
+//! (camera, Dummy or `.oni` replay) through OpenNI2's own recorder, any other through the
+//! plain-Rust `.oni` writer.
 //!
 //! Both run on the caller's thread: pull a pair from the source, write it (MCAP) or let
 //! OpenNI2's recorder take it from the stream (`.oni`), until the time limit (device time),
@@ -28,8 +29,9 @@ pub enum RecordError {
     },
     #[error("{path}: unknown output format (expected a .mcap or .oni file name)")]
     UnknownFormat { path: PathBuf },
-    #[error("{spec} cannot be recorded to .oni: OpenNI2's recorder needs an OpenNI2 source (openni2:… or replay:….oni); record to .mcap instead")]
-    NotOpenNi { spec: String },
+    /// The source's frames hold what an `.oni` cannot (distortion, unregistered depth, …).
+    #[error(transparent)]
+    OniUnsupported(crate::oni_write::OniWriteError),
     #[error("{what} support is not built in")]
     NotBuilt { what: &'static str },
 }
@@ -196,9 +198,7 @@ pub fn record_oni(
         SourceSpec::V4l2 { .. } => false,
     };
     if !is_openni {
-        return Err(RecordError::NotOpenNi {
-            spec: spec.to_string(),
-        });
+        return record_oni_written(spec, config, out, limits, on_frame);
     }
     let (mut source, recording) = crate::openni::OpenNiSource::open_recording(spec, config, out)?;
     let result = pump(&mut source, limits, |f| {
@@ -216,6 +216,59 @@ pub fn record_oni(
         duration_s,
         skipped,
         oni_fixed_nodes: fix.cropping_added.len().max(fix.fov_added.len()),
+        lost,
+    })
+}
+
+/// Any other source to `.oni`: its frames through the plain-Rust writer
+/// ([`crate::oni_write`]), which refuses calibrations an `.oni` cannot hold.
+#[cfg(feature = "openni2")]
+fn record_oni_written(
+    spec: &SourceSpec,
+    config: &CaptureConfig,
+    out: &Path,
+    limits: &RecordLimits,
+    mut on_frame: impl FnMut(&Frame),
+) -> Result<RecordSummary, RecordError> {
+    use crate::oni_write::{OniFrameWriter, OniWriteError};
+    let mut source = crate::open_parsed(spec, config)?;
+    // A replay reports no rate: the player paces by the frames' timestamps anyway.
+    let fps = match source.info().fps {
+        f if f > 0.0 => f,
+        _ => 30.0,
+    };
+    tracing::info!(source = %spec, file = %out.display(), "recording .oni (plain-Rust writer)");
+    let mut writer: Option<OniFrameWriter> = None;
+    let fail = |e: OniWriteError| {
+        if e.is_bad_input() {
+            RecordError::OniUnsupported(e)
+        } else {
+            RecordError::Write {
+                path: out.to_path_buf(),
+                source: Box::new(e),
+            }
+        }
+    };
+    let result = pump(source.as_mut(), limits, |f| {
+        let w = match &mut writer {
+            Some(w) => w,
+            None => writer.insert(OniFrameWriter::create(out, &f.calibration, fps).map_err(fail)?),
+        };
+        w.write_frame(f).map_err(fail)?;
+        on_frame(f);
+        Ok(())
+    });
+    let skipped = source.skipped();
+    drop(source);
+    // Close the file whatever happened, so it stays readable.
+    let finished = writer.map(|w| w.finish().map_err(fail)).transpose();
+    let (frames, duration_s, lost) = result?;
+    finished?;
+    Ok(RecordSummary {
+        frames,
+        duration_s,
+        skipped,
+        oni_fixed_nodes: 0,
         lost,
     })
 }

@@ -77,6 +77,22 @@ fn seconds_limit_and_bad_input_exit_codes() {
     let n = count_frames(&format!("replay:{}?speed=0", out.display()));
     assert!((50..=62).contains(&n), "2 s at 30 fps gave {n} frames");
 
+    // A session whose camera has lens distortion, which an .oni cannot hold.
+    let synth = mouthpiece()
+        .current_dir(dir.path())
+        .args([
+            "synth",
+            "--seed",
+            "1",
+            "--seconds",
+            "0.5",
+            "--size",
+            "160x120",
+        ])
+        .args(["--distortion", "0.1,0,0,0,0", "--out", "distorted.mcap"])
+        .output()
+        .unwrap();
+    assert!(synth.status.success(), "{synth:?}");
     for (args, needle) in [
         (
             vec!["record", "--source", "kinect:0", "--out", "x.mcap"],
@@ -87,8 +103,14 @@ fn seconds_limit_and_bad_input_exit_codes() {
             "unknown output format",
         ),
         (
-            vec!["record", "--source", "v4l2:/dev/video0", "--out", "x.oni"],
-            "OpenNI2 source",
+            vec![
+                "record",
+                "--source",
+                "replay:distorted.mcap",
+                "--out",
+                "x.oni",
+            ],
+            "lens distortion",
         ),
         (
             vec![
@@ -133,5 +155,50 @@ fn devices_lists_or_says_there_are_none() {
     assert!(text.contains("V4L2 nodes:"), "{text}");
     if !std::path::Path::new("/dev/video0").exists() {
         assert!(text.contains("none found (no /dev/video*)"), "{text}");
+    }
+}
+
+/// Any source records to `.oni` (here an MCAP replay, through mouthpiece's writer); OpenNI2's
+/// player gives back the same frames.
+#[test]
+fn an_mcap_session_records_to_oni_and_replays_the_same_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let mcap = dir.path().join("s.mcap");
+    let oni = dir.path().join("s.oni");
+    let synth = mouthpiece()
+        .args([
+            "synth",
+            "--seed",
+            "1",
+            "--seconds",
+            "1",
+            "--size",
+            "160x120",
+        ])
+        .args(["--raw-color", "--out"])
+        .arg(&mcap)
+        .output()
+        .unwrap();
+    assert!(synth.status.success(), "{synth:?}");
+    let record = mouthpiece()
+        .args(["record", "--source"])
+        .arg(format!("replay:{}?speed=0", mcap.display()))
+        .arg("--out")
+        .arg(&oni)
+        .output()
+        .unwrap();
+    assert!(record.status.success(), "{record:?}");
+    let frames = |spec: String| {
+        let mut src = open_source(&spec, &CaptureConfig::default()).unwrap();
+        std::iter::from_fn(|| src.next_frame().unwrap()).collect::<Vec<_>>()
+    };
+    let from_mcap = frames(format!("replay:{}?speed=0", mcap.display()));
+    let from_oni = frames(format!("replay:{}?speed=0", oni.display()));
+    assert_eq!(from_mcap.len(), 30);
+    assert_eq!(from_oni.len(), from_mcap.len());
+    for (a, b) in from_mcap.iter().zip(&from_oni) {
+        assert_eq!(a.device_ts_us, b.device_ts_us);
+        assert!(a.color.data == b.color.data, "colour of frame {}", a.seq);
+        assert!(a.depth.data == b.depth.data, "depth of frame {}", a.seq);
     }
 }

@@ -16,7 +16,8 @@ pub struct Args {
     /// What to record: replay:FILE[?loop=1&speed=1.0&start=S], openni2:[URI], v4l2:COLOUR[+DEPTH].
     #[arg(long)]
     pub source: String,
-    /// Output file: .mcap (any source) or .oni (OpenNI2 sources, through OpenNI2's recorder).
+    /// Output file: .mcap or .oni (OpenNI2 sources through OpenNI2's recorder, others through
+    /// mouthpiece's writer: registered, undistorted, centred cameras only).
     #[arg(long)]
     pub out: PathBuf,
     /// Stop after this many seconds of device time (default: until Ctrl-C or the end of a replay).
@@ -91,7 +92,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let summary = result.map_err(|err| match err {
         // The user named something that cannot work: exit code 2.
-        RecordError::NotOpenNi { .. } | RecordError::UnknownFormat { .. } => bad_input(err),
+        RecordError::OniUnsupported(_) | RecordError::UnknownFormat { .. } => bad_input(err),
         RecordError::Source(SourceError::Open { .. } | SourceError::Format { .. })
             if matches!(spec, SourceSpec::Replay(_)) =>
         {
