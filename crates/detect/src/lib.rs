@@ -241,6 +241,24 @@ impl Detector {
         fx: f64,
         search: Option<PixelRect>,
     ) -> Result<Detections, DetectError> {
+        let mut out = Detections::default();
+        self.detect_into(color, depth, fx, search, &mut out)?;
+        Ok(out)
+    }
+
+    /// As [`Self::detect`], into `out` (its blob list is reused: no allocation once it has
+    /// grown to a frame's count).
+    pub fn detect_into(
+        &mut self,
+        color: &ColorImage,
+        depth: Option<(&DepthImage, f64)>,
+        fx: f64,
+        search: Option<PixelRect>,
+        out: &mut Detections,
+    ) -> Result<(), DetectError> {
+        out.blobs.clear();
+        out.searched = None;
+        out.rejected = 0;
         let expected_len = color.width as usize * color.height as usize * 3;
         if color.data.len() != expected_len {
             return Err(DetectError::ImageSize(format!(
@@ -262,7 +280,7 @@ impl Detector {
         let roi = match search {
             Some(r) => match r.clip(color.width, color.height) {
                 Some(r) => r,
-                None => return Ok(Detections::default()),
+                None => return Ok(()),
             },
             None => full,
         };
@@ -275,13 +293,9 @@ impl Detector {
         imgproc::cvt_color_def(&image_roi, &mut self.hsv, imgproc::COLOR_BGR2HSV)?;
         core::split(&self.hsv, &mut self.channels)?;
 
-        let mut out = Detections {
-            blobs: Vec::new(),
-            searched: Some(roi),
-            rejected: 0,
-        };
+        out.searched = Some(roi);
         for class_idx in 0..self.config.classes.len() {
-            self.detect_class(class_idx, roi, depth, fx, &mut out)?;
+            self.detect_class(class_idx, roi, depth, fx, out)?;
         }
         tracing::trace!(
             roi = ?roi,
@@ -289,7 +303,7 @@ impl Detector {
             rejected = out.rejected,
             "detected"
         );
-        Ok(out)
+        Ok(())
     }
 
     fn detect_class(

@@ -6,6 +6,13 @@
 use mouthpiece_frame::DepthImage;
 use nalgebra::{Matrix3, Vector3};
 
+/// Buffers the depth estimates work in, kept by the caller between dots and frames.
+#[derive(Debug, Default)]
+pub struct DepthScratch {
+    samples: Vec<(f64, f64, f64)>,
+    values: Vec<f64>,
+}
+
 /// How a depth value was obtained.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DepthMethod {
@@ -21,16 +28,21 @@ pub fn depth_at_dot(
     center: [f64; 2],
     radius_px: f64,
     range: [f64; 2],
-    buf: &mut Vec<(f64, f64, f64)>,
+    scratch: &mut DepthScratch,
 ) -> Option<(f64, DepthMethod)> {
     let lo = (range[0] / scale).max(1.0);
     let hi = range[1] / scale;
     // Inner disc: 60 % of the paint's radius, at least the pixel and its 4-neighbours.
     let inner = (0.6 * radius_px).max(1.0);
+    let DepthScratch {
+        samples: buf,
+        values: zs,
+    } = scratch;
     collect(depth, center, inner, lo, hi, buf);
     let disc_pixels = std::f64::consts::PI * inner * inner;
     if buf.len() >= 3 && buf.len() as f64 >= 0.5 * disc_pixels {
-        let mut zs: Vec<f64> = buf.iter().map(|s| s.2).collect();
+        zs.clear();
+        zs.extend(buf.iter().map(|s| s.2));
         let mid = zs.len() / 2;
         zs.select_nth_unstable_by(mid, f64::total_cmp);
         let median = if zs.len() % 2 == 1 {
@@ -41,7 +53,14 @@ pub fn depth_at_dot(
         };
         return Some((median * scale, DepthMethod::Median));
     }
-    depth_by_plane(depth, scale, center, (2.5 * radius_px).max(4.0), range, buf)
+    depth_by_plane(
+        depth,
+        scale,
+        center,
+        (2.5 * radius_px).max(4.0),
+        range,
+        scratch,
+    )
 }
 
 /// Depth (metres) at `center` from a least-squares plane through the valid readings within
@@ -54,15 +73,20 @@ pub fn depth_by_plane(
     center: [f64; 2],
     radius: f64,
     range: [f64; 2],
-    buf: &mut Vec<(f64, f64, f64)>,
+    scratch: &mut DepthScratch,
 ) -> Option<(f64, DepthMethod)> {
     let lo = (range[0] / scale).max(1.0);
     let hi = range[1] / scale;
+    let DepthScratch {
+        samples: buf,
+        values: zs,
+    } = scratch;
     collect(depth, center, radius, lo, hi, buf);
     if buf.len() < 6 {
         return None;
     }
-    let mut zs: Vec<f64> = buf.iter().map(|s| s.2).collect();
+    zs.clear();
+    zs.extend(buf.iter().map(|s| s.2));
     let mid = zs.len() / 2;
     let median = *zs.select_nth_unstable_by(mid, f64::total_cmp).1;
     // 15 mm: a lip's curvature across a few pixels is far less; a step to another surface is more.
@@ -74,10 +98,9 @@ pub fn depth_by_plane(
     // Two passes: the plane through every kept reading, then again without the readings far
     // off that plane (the rim of the mouth opening, flying pixels at an edge).
     let first = fit_plane(buf)?;
-    let mut residuals: Vec<f64> = buf
-        .iter()
-        .map(|&s| (s.2 - first.dot(&lift(&s))).abs())
-        .collect();
+    let residuals = zs;
+    residuals.clear();
+    residuals.extend(buf.iter().map(|&s| (s.2 - first.dot(&lift(&s))).abs()));
     let mid = residuals.len() / 2;
     let mad = *residuals.select_nth_unstable_by(mid, f64::total_cmp).1;
     // 3 σ of the residuals (σ ≈ 1.48 MAD), never below a millimetre (the sensor's quantisation).
@@ -156,7 +179,7 @@ mod tests {
     fn median_ignores_a_few_outliers() {
         let mut d = plane(40, 40, |_, _| 600.0);
         d.data[20 * 40 + 20] = 900; // a flying pixel at the centre
-        let mut buf = Vec::new();
+        let mut buf = DepthScratch::default();
         let (z, how) = depth_at_dot(&d, 0.001, [20.2, 19.8], 2.5, [0.2, 2.0], &mut buf).unwrap();
         assert_eq!(how, DepthMethod::Median);
         assert!((z - 0.6).abs() < 1e-9, "{z}");
@@ -173,7 +196,7 @@ mod tests {
                 }
             }
         }
-        let mut buf = Vec::new();
+        let mut buf = DepthScratch::default();
         let (z, how) = depth_at_dot(&d, 0.001, [20.0, 20.0], 2.0, [0.2, 2.0], &mut buf).unwrap();
         assert_eq!(how, DepthMethod::PlaneFit);
         assert!((z - 0.6).abs() < 0.0005, "{z}");
@@ -182,14 +205,14 @@ mod tests {
     #[test]
     fn no_readings_no_depth() {
         let d = DepthImage::new(40, 40);
-        let mut buf = Vec::new();
+        let mut buf = DepthScratch::default();
         assert!(depth_at_dot(&d, 0.001, [20.0, 20.0], 2.0, [0.2, 2.0], &mut buf).is_none());
     }
 
     #[test]
     fn readings_at_the_image_edge_do_not_panic() {
         let d = plane(10, 10, |_, _| 500.0);
-        let mut buf = Vec::new();
+        let mut buf = DepthScratch::default();
         assert!(depth_at_dot(&d, 0.001, [0.0, 9.0], 3.0, [0.2, 2.0], &mut buf).is_some());
     }
 }

@@ -3,9 +3,13 @@
 
 use mouthpiece_detect::DotRole;
 use mouthpiece_retarget::PerformerLayout;
-use pathfinding::prelude::{kuhn_munkres, Matrix};
+use smallvec::SmallVec;
 
 use crate::Vec3;
+
+/// A short per-frame list kept on the stack (dots, candidates: a few dozen at most), so that
+/// tracking a frame needs no heap allocation; longer lists spill to the heap and still work.
+pub type Small<T> = SmallVec<[T; 32]>;
 
 /// A detected dot with its 3D position, not yet named.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,12 +54,12 @@ pub enum GeometryFailure {
 pub fn label_by_geometry(
     cands: &[Candidate],
     layout: PerformerLayout,
-) -> Result<Vec<usize>, GeometryFailure> {
+) -> Result<Small<usize>, GeometryFailure> {
     let (n, k) = (layout.lip_dots, layout.forehead_dots);
-    let mut forehead: Vec<usize> = (0..cands.len())
+    let mut forehead: Small<usize> = (0..cands.len())
         .filter(|&i| cands[i].role == DotRole::Forehead)
         .collect();
-    let mut any: Vec<usize> = (0..cands.len())
+    let mut any: Small<usize> = (0..cands.len())
         .filter(|&i| cands[i].role == DotRole::Any)
         .collect();
     if forehead.len() < k && !any.is_empty() {
@@ -64,7 +68,7 @@ pub fn label_by_geometry(
         let take = (k - forehead.len()).min(any.len());
         forehead.extend(any.drain(..take));
     }
-    let mut lip: Vec<usize> = (0..cands.len())
+    let mut lip: Small<usize> = (0..cands.len())
         .filter(|&i| cands[i].role == DotRole::Lip)
         .collect();
     lip.extend(any);
@@ -118,7 +122,7 @@ pub fn label_by_geometry(
     };
     let start = angle(left);
     let tau = std::f64::consts::TAU;
-    let mut around: Vec<(f64, usize)> = lip
+    let mut around: Small<(f64, usize)> = lip
         .iter()
         .map(|&i| ((angle(i) - start).rem_euclid(tau), i))
         .collect();
@@ -142,7 +146,7 @@ pub fn label_by_geometry(
     }
     forehead.sort_by(|&p, &q| along(q).total_cmp(&along(p)));
 
-    let mut out: Vec<usize> = around.into_iter().map(|(_, i)| i).collect();
+    let mut out: Small<usize> = around.into_iter().map(|(_, i)| i).collect();
     out.extend(forehead);
     Ok(out)
 }
@@ -163,17 +167,18 @@ pub fn assign(
     predictions: &[([f64; 2], f64, Slot)],
     cands: &[Candidate],
     taken: &[bool],
-) -> Vec<Option<usize>> {
+    solver: &mut Assignment,
+) -> Small<Option<usize>> {
     let rows = predictions.len();
     if rows == 0 {
-        return Vec::new();
+        return Small::new();
     }
-    let cols: Vec<usize> = (0..cands.len()).filter(|&j| !taken[j]).collect();
+    let cols: Small<usize> = (0..cands.len()).filter(|&j| !taken[j]).collect();
     // Costs in hundredths of a pixel squared; a gated-out pair never beats "missing".
-    const FORBIDDEN: i64 = -1_000_000_000_000;
+    const FORBIDDEN: i64 = 1_000_000_000_000;
     let scale = 100.0;
     let width = cols.len() + rows;
-    let mut weights = Matrix::new(rows, width, FORBIDDEN);
+    solver.reset(rows, width, FORBIDDEN);
     for (r, &(pred, gate, slot)) in predictions.iter().enumerate() {
         for (c, &j) in cols.iter().enumerate() {
             let cand = &cands[j];
@@ -183,18 +188,129 @@ pub fn assign(
             };
             let d2 = (cand.pixel[0] - pred[0]).powi(2) + (cand.pixel[1] - pred[1]).powi(2);
             if ok && d2 < gate * gate {
-                weights[(r, c)] = -((d2 * scale).round() as i64);
+                solver.set(r, c, (d2 * scale).round() as i64);
             }
         }
         // This dot's own "missing" column costs its gate squared.
-        weights[(r, cols.len() + r)] = -((gate * gate * scale).round() as i64) - 1;
+        solver.set(r, cols.len() + r, (gate * gate * scale).round() as i64 + 1);
     }
-    let (_, assignment) = kuhn_munkres(&weights);
-    assignment
-        .iter()
-        .enumerate()
-        .map(|(r, &c)| (c < cols.len() && weights[(r, c)] != FORBIDDEN).then(|| cols[c]))
+    solver.solve();
+    (0..rows)
+        .map(|r| {
+            let c = solver.column_of(r);
+            (c < cols.len() && solver.cost(r, c) != FORBIDDEN).then(|| cols[c])
+        })
         .collect()
+}
+
+/// Minimum-cost assignment of `rows` ≤ `cols` (the Hungarian method with potentials,
+/// O(rows² · cols)), on buffers kept between calls so that a frame allocates nothing once
+/// they have grown to the frame's size.
+#[derive(Debug, Default)]
+pub struct Assignment {
+    rows: usize,
+    cols: usize,
+    cost: Vec<i64>,
+    u: Vec<i64>,
+    v: Vec<i64>,
+    /// `owner[j]`: the row (1-based, 0 = none) holding column `j` (1-based).
+    owner: Vec<usize>,
+    way: Vec<usize>,
+    min_slack: Vec<i64>,
+    used: Vec<bool>,
+    column: Vec<usize>,
+}
+
+impl Assignment {
+    fn reset(&mut self, rows: usize, cols: usize, fill: i64) {
+        assert!(rows <= cols, "more rows than columns");
+        self.rows = rows;
+        self.cols = cols;
+        self.cost.clear();
+        self.cost.resize(rows * cols, fill);
+    }
+
+    fn set(&mut self, r: usize, c: usize, cost: i64) {
+        self.cost[r * self.cols + c] = cost;
+    }
+
+    fn cost(&self, r: usize, c: usize) -> i64 {
+        self.cost[r * self.cols + c]
+    }
+
+    /// The column assigned to row `r` after [`Self::solve`].
+    fn column_of(&self, r: usize) -> usize {
+        self.column[r]
+    }
+
+    fn solve(&mut self) {
+        let (n, m) = (self.rows, self.cols);
+        const INF: i64 = i64::MAX / 4;
+        for buf in [&mut self.u, &mut self.v, &mut self.min_slack] {
+            buf.clear();
+        }
+        self.u.resize(n + 1, 0);
+        self.v.resize(m + 1, 0);
+        self.owner.clear();
+        self.owner.resize(m + 1, 0);
+        self.way.clear();
+        self.way.resize(m + 1, 0);
+        for i in 1..=n {
+            self.owner[0] = i;
+            let mut j0 = 0;
+            self.min_slack.clear();
+            self.min_slack.resize(m + 1, INF);
+            self.used.clear();
+            self.used.resize(m + 1, false);
+            loop {
+                self.used[j0] = true;
+                let i0 = self.owner[j0];
+                let mut delta = INF;
+                let mut j1 = 0;
+                for j in 1..=m {
+                    if self.used[j] {
+                        continue;
+                    }
+                    let slack = self.cost[(i0 - 1) * m + (j - 1)] - self.u[i0] - self.v[j];
+                    if slack < self.min_slack[j] {
+                        self.min_slack[j] = slack;
+                        self.way[j] = j0;
+                    }
+                    if self.min_slack[j] < delta {
+                        delta = self.min_slack[j];
+                        j1 = j;
+                    }
+                }
+                for j in 0..=m {
+                    if self.used[j] {
+                        self.u[self.owner[j]] += delta;
+                        self.v[j] -= delta;
+                    } else {
+                        self.min_slack[j] -= delta;
+                    }
+                }
+                j0 = j1;
+                if self.owner[j0] == 0 {
+                    break;
+                }
+            }
+            loop {
+                let j1 = self.way[j0];
+                self.owner[j0] = self.owner[j1];
+                j0 = j1;
+                if j0 == 0 {
+                    break;
+                }
+            }
+        }
+        self.column.clear();
+        self.column.resize(n, usize::MAX);
+        for j in 1..=m {
+            if self.owner[j] > 0 {
+                self.column[self.owner[j] - 1] = j - 1;
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -298,7 +414,7 @@ mod tests {
             .collect();
         let cands = to_candidates(&dots, DotRole::Forehead, DotRole::Lip);
         let labels = label_by_geometry(&cands, layout).unwrap();
-        assert_eq!(labels, (0..15).collect::<Vec<_>>());
+        assert_eq!(labels.to_vec(), (0..15).collect::<Vec<_>>());
         assert_eq!(
             label_by_geometry(&cands[1..], layout),
             Err(GeometryFailure::Count {
@@ -325,7 +441,7 @@ mod tests {
             ([20.0, 10.0], 8.0, Slot::Lip),
             ([34.0, 10.0], 8.0, Slot::Lip),
         ];
-        let got = assign(&preds, &cands, &[false, false]);
+        let got = assign(&preds, &cands, &[false, false], &mut Assignment::default()).to_vec();
         assert_eq!(got, vec![Some(0), None, Some(1)]);
     }
 
@@ -349,13 +465,25 @@ mod tests {
             },
         ];
         let preds = [([0.0, 0.0], 5.0, Slot::Lip), ([50.0, 30.0], 5.0, Slot::Lip)];
-        assert_eq!(assign(&preds, &cands, &[false; 3]), vec![Some(1), None]);
         assert_eq!(
-            assign(&preds, &cands, &[false, true, false]),
+            assign(&preds, &cands, &[false; 3], &mut Assignment::default()).to_vec(),
+            vec![Some(1), None]
+        );
+        assert_eq!(
+            assign(
+                &preds,
+                &cands,
+                &[false, true, false],
+                &mut Assignment::default()
+            )
+            .to_vec(),
             vec![None, None]
         );
         let preds = [([0.0, 0.0], 5.0, Slot::Forehead)];
-        assert_eq!(assign(&preds, &cands, &[false; 3]), vec![Some(0)]);
+        assert_eq!(
+            assign(&preds, &cands, &[false; 3], &mut Assignment::default()).to_vec(),
+            vec![Some(0)]
+        );
     }
 
     #[test]
@@ -371,7 +499,7 @@ mod tests {
             .collect();
         let preds = [([4.0, 0.0], 10.0, Slot::Lip), ([8.0, 0.0], 10.0, Slot::Lip)];
         assert_eq!(
-            assign(&preds, &cands, &[false, false]),
+            assign(&preds, &cands, &[false, false], &mut Assignment::default()).to_vec(),
             vec![Some(1), Some(0)]
         );
     }

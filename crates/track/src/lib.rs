@@ -26,7 +26,7 @@ pub mod pipeline;
 use std::collections::VecDeque;
 use std::sync::Arc;
 
-use mouthpiece_detect::{DetectConfig, DetectError, Detector, DotRole, PixelRect};
+use mouthpiece_detect::{DetectConfig, DetectError, Detections, Detector, DotRole, PixelRect};
 use mouthpiece_frame::{Calibration, DepthImage, Frame};
 use mouthpiece_retarget::kabsch::kabsch;
 use mouthpiece_retarget::{
@@ -35,7 +35,7 @@ use mouthpiece_retarget::{
 };
 use serde::{Deserialize, Serialize};
 
-use labels::{Candidate, Slot};
+use labels::{Candidate, Slot, Small};
 
 /// The retarget core's vector type (metres, camera frame unless said otherwise).
 pub type Vec3 = nalgebra::Vector3<f64>;
@@ -187,6 +187,66 @@ impl TrackConfig {
     }
 }
 
+/// A dot's name, `D1..DN` or `F1..FK`, without a heap string (per-frame status is built
+/// without allocating).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DotName {
+    pub forehead: bool,
+    /// 1-based.
+    pub number: u16,
+}
+
+impl DotName {
+    fn of(layout: PerformerLayout, i: usize) -> Self {
+        let (forehead, index) = if i < layout.lip_dots {
+            (false, i)
+        } else {
+            (true, i - layout.lip_dots)
+        };
+        DotName {
+            forehead,
+            number: index as u16 + 1,
+        }
+    }
+}
+
+impl std::fmt::Display for DotName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let letter = if self.forehead { 'F' } else { 'D' };
+        write!(f, "{letter}{}", self.number)
+    }
+}
+
+impl PartialEq<&str> for DotName {
+    fn eq(&self, other: &&str) -> bool {
+        let letter = if self.forehead { "F" } else { "D" };
+        other
+            .strip_prefix(letter)
+            .and_then(|n| n.parse::<u16>().ok())
+            .is_some_and(|n| n == self.number)
+    }
+}
+
+impl Serialize for DotName {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for DotName {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let text = <std::borrow::Cow<'de, str>>::deserialize(deserializer)?;
+        let bad = || serde::de::Error::custom(format!("not a dot name: {text:?}"));
+        let (forehead, number) = match text.split_at_checked(1) {
+            Some(("D", n)) => (false, n),
+            Some(("F", n)) => (true, n),
+            _ => return Err(bad()),
+        };
+        let number = number.parse::<u16>().map_err(|_| bad())?;
+        Ok(DotName { forehead, number })
+    }
+}
+
 /// Per-frame status flags.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Status {
@@ -194,8 +254,8 @@ pub struct Status {
     pub calibrating: bool,
     /// Fewer than 3 forehead dots: the head pose is the last good one.
     pub head_lost: bool,
-    /// Names of dots not seen in this frame.
-    pub dots_missing: Vec<String>,
+    /// Dots not seen in this frame (serialized by name: `"D3"`, `"F1"`).
+    pub dots_missing: Small<DotName>,
     /// No dot candidate of any colour class was found (no paint, wrong colours, no face).
     pub no_dots: bool,
     /// Fewer candidates than the layout needs (and no names from earlier frames to go on).
@@ -285,7 +345,11 @@ pub struct Tracker {
     window: VecDeque<(f64, PerformerDots)>,
     stabiliser: Option<Stabiliser>,
     registered: DepthImage,
-    depth_buf: Vec<(f64, f64, f64)>,
+    depth_buf: depth::DepthScratch,
+    /// Per-frame buffers kept between frames (a frame allocates nothing once they have grown).
+    found: Detections,
+    cands: Vec<Candidate>,
+    assignment: labels::Assignment,
     /// Per forehead dot: its depth filter (`None` when switched off).
     forehead_depth: Option<Vec<OneEuro>>,
     pub(crate) out: TrackedFrame,
@@ -338,7 +402,10 @@ impl Tracker {
             window: VecDeque::new(),
             stabiliser: None,
             registered: DepthImage::new(0, 0),
-            depth_buf: Vec::new(),
+            depth_buf: depth::DepthScratch::default(),
+            found: Detections::default(),
+            cands: Vec::new(),
+            assignment: labels::Assignment::default(),
             out: TrackedFrame {
                 seq: 0,
                 device_ts_us: 0,
@@ -396,19 +463,67 @@ impl Tracker {
                 ),
             });
         }
+        let mut registered = std::mem::replace(&mut self.registered, DepthImage::new(0, 0));
         let depth = if calib.depth_registered {
             &frame.depth
         } else {
-            camera::register_depth(&frame.depth, calib, &mut self.registered);
-            &self.registered
+            camera::register_depth(&frame.depth, calib, &mut registered);
+            &registered
         };
-        let scale = calib.depth_scale_m;
+        let mut found = std::mem::take(&mut self.found);
+        let mut cands = std::mem::take(&mut self.cands);
+        let result = self.detect_and_name(frame, depth, t, &mut found, &mut cands);
+        self.found = found;
+        self.cands = cands;
+        self.registered = registered;
+        result?;
+        if dt > 0.0 {
+            self.velocity_dt = dt;
+        }
+        self.prev_t = Some(t);
+        self.update_calibration(t)?;
+        let out = &mut self.out;
+        match (&mut self.stabiliser, &mut out.stabilised) {
+            (Some(stab), stabilised) => {
+                let s = stab.step(t, &out.dots).map_err(TrackError::Stabilise)?;
+                out.status.head_lost = s.head_lost;
+                // Copied field by field into the kept frame, reusing its vectors.
+                match stabilised {
+                    Some(mine) => {
+                        mine.t = s.t;
+                        mine.lip.clone_from(&s.lip);
+                        mine.confidence.clone_from(&s.confidence);
+                        mine.head = s.head;
+                        mine.head_lost = s.head_lost;
+                    }
+                    none => *none = Some(s.clone()),
+                }
+            }
+            (None, stabilised) => {
+                *stabilised = None;
+                out.status.head_lost = out.dots.forehead.iter().flatten().count() < 3;
+            }
+        }
+        out.status.calibrating = self.calibrating;
+        tracing::trace!(seq = frame.seq, candidates = self.cands.len(), "tracked");
+        Ok(&self.out)
+    }
 
+    /// The body of [`Self::process`], on buffers taken out of the tracker for the frame.
+    fn detect_and_name(
+        &mut self,
+        frame: &Frame,
+        depth: &DepthImage,
+        t: f64,
+        found: &mut Detections,
+        cands: &mut Vec<Candidate>,
+    ) -> Result<(), TrackError> {
+        let k = frame.calibration.color;
+        let scale = frame.calibration.depth_scale_m;
         let search = self.search_region(frame);
-        let found = self
-            .detector
-            .detect(&frame.color, Some((depth, scale)), k.fx, search)?;
-        let mut cands = Vec::with_capacity(found.blobs.len());
+        self.detector
+            .detect_into(&frame.color, Some((depth, scale)), k.fx, search, found)?;
+        cands.clear();
         for blob in &found.blobs {
             let z_hint = blob.depth_m.unwrap_or(0.6);
             let radius_px = self.dot_radius_m * k.fx / z_hint;
@@ -449,7 +564,7 @@ impl Tracker {
         }
 
         let n = self.layout.lip_dots;
-        let names = self.name_candidates(&cands, &k);
+        let names = self.name_candidates(cands, &k);
         if let Some(filters) = &mut self.forehead_depth {
             for (filter, name) in filters.iter_mut().zip(&names[n..]) {
                 match name {
@@ -469,7 +584,7 @@ impl Tracker {
         out.device_ts_us = frame.device_ts_us;
         out.t = t;
         out.dots.clear();
-        let mut used = vec![false; cands.len()];
+        let mut used: Small<bool> = smallvec::smallvec![false; cands.len()];
         for (dot, name) in names.iter().enumerate() {
             let p = name.map(|c| {
                 used[c] = true;
@@ -485,20 +600,18 @@ impl Tracker {
             *slot = p.map(|c| c.point);
         }
         let seen = names.iter().filter(|c| c.is_some()).count();
-        out.status = Status {
-            calibrating: false,
-            head_lost: false,
-            dots_missing: names
-                .iter()
-                .enumerate()
-                .filter(|(_, c)| c.is_none())
-                .map(|(i, _)| dot_name(self.layout, i))
-                .collect(),
-            no_dots: found.blobs.is_empty(),
-            too_few_dots: self.tracks.is_none() && cands.len() < names.len(),
-            unassigned_blobs: used.iter().filter(|u| !**u).count(),
-            neutral_taken: false,
-        };
+        out.status.calibrating = false;
+        out.status.head_lost = false;
+        out.status.dots_missing.clear();
+        out.status.dots_missing.extend(
+            (0..names.len())
+                .filter(|&i| names[i].is_none())
+                .map(|i| DotName::of(self.layout, i)),
+        );
+        out.status.no_dots = found.blobs.is_empty();
+        out.status.too_few_dots = self.tracks.is_none() && cands.len() < names.len();
+        out.status.unassigned_blobs = used.iter().filter(|u| !**u).count();
+        out.status.neutral_taken = false;
         if seen == 0 {
             self.frames_without_names += 1;
         } else {
@@ -510,24 +623,8 @@ impl Tracker {
             self.frames_with_missing = 0;
         }
 
-        self.update_tracks(&names, &cands);
-        if dt > 0.0 {
-            self.velocity_dt = dt;
-        }
-        self.prev_t = Some(t);
-        self.update_calibration(t)?;
-        let out = &mut self.out;
-        out.stabilised = None;
-        if let Some(stab) = &mut self.stabiliser {
-            let s = stab.step(t, &out.dots).map_err(TrackError::Stabilise)?;
-            out.status.head_lost = s.head_lost;
-            out.stabilised = Some(s.clone());
-        } else {
-            out.status.head_lost = out.dots.forehead.iter().flatten().count() < 3;
-        }
-        out.status.calibrating = self.calibrating;
-        tracing::trace!(seq = frame.seq, seen, candidates = cands.len(), "tracked");
-        Ok(&self.out)
+        self.update_tracks(&names, cands);
+        Ok(())
     }
 
     /// Names for this frame's candidates, per dot (lip dots, then forehead).
@@ -541,7 +638,7 @@ impl Tracker {
         &mut self,
         cands: &[Candidate],
         k: &mouthpiece_frame::Intrinsics,
-    ) -> Vec<Option<usize>> {
+    ) -> Small<Option<usize>> {
         let layout = self.layout;
         let total = layout.lip_dots + layout.forehead_dots;
         let geometry = || match labels::label_by_geometry(cands, layout) {
@@ -554,10 +651,12 @@ impl Tracker {
         if self.tracks.is_none() {
             return match geometry() {
                 Some(names) => names.into_iter().map(Some).collect(),
-                None => vec![None; total],
+                None => smallvec::smallvec![None; total],
             };
         }
-        let mut predicted = self.assign_by_prediction(cands, k);
+        let mut solver = std::mem::take(&mut self.assignment);
+        let mut predicted = self.assign_by_prediction(cands, k, &mut solver);
+        self.assignment = solver;
         self.enforce_lip_order(&mut predicted, cands);
         if !self.corners_are_extremes(&predicted, cands) {
             // Names slipped by one or more places around the mouth (a slip keeps the order):
@@ -634,15 +733,15 @@ impl Tracker {
             }
         };
         let angle = |c: usize| (raw(c) - start).rem_euclid(tau);
-        let found: Vec<(usize, f64)> = (0..n)
+        let found: Small<(usize, f64)> = (0..n)
             .filter_map(|i| names[i].map(|c| (i, angle(c))))
             .collect();
         if found.len() < 2 {
             return;
         }
         // Longest increasing subsequence of the angles in label order (n is small: O(n²)).
-        let mut best_len = vec![1usize; found.len()];
-        let mut prev = vec![usize::MAX; found.len()];
+        let mut best_len: Small<usize> = smallvec::smallvec![1; found.len()];
+        let mut prev: Small<usize> = smallvec::smallvec![usize::MAX; found.len()];
         for a in 0..found.len() {
             for b in 0..a {
                 if found[b].1 < found[a].1 && best_len[b] + 1 > best_len[a] {
@@ -654,7 +753,7 @@ impl Tracker {
         let mut end = (0..found.len())
             .max_by_key(|&a| best_len[a])
             .expect("non-empty");
-        let mut keep = vec![false; found.len()];
+        let mut keep: Small<bool> = smallvec::smallvec![false; found.len()];
         loop {
             keep[end] = true;
             if prev[end] == usize::MAX {
@@ -673,7 +772,7 @@ impl Tracker {
     /// This frame's head motion (reference → now) from the named forehead dots, or the last one.
     fn head_now(&self, names: &[Option<usize>], cands: &[Candidate]) -> RigidTransform {
         let n = self.layout.lip_dots;
-        let (from, to): (Vec<Vec3>, Vec<Vec3>) = names[n..]
+        let (from, to): (Small<Vec3>, Small<Vec3>) = names[n..]
             .iter()
             .enumerate()
             .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
@@ -709,12 +808,13 @@ impl Tracker {
         &self,
         cands: &[Candidate],
         k: &mouthpiece_frame::Intrinsics,
-    ) -> Vec<Option<usize>> {
+        solver: &mut labels::Assignment,
+    ) -> Small<Option<usize>> {
         let n = self.layout.lip_dots;
         let tracks = self.tracks.as_ref().expect("called with tracks");
-        let mut taken = vec![false; cands.len()];
+        let mut taken: Small<bool> = smallvec::smallvec![false; cands.len()];
 
-        let forehead_preds: Vec<[f64; 2]> = tracks[n..]
+        let forehead_preds: Small<[f64; 2]> = tracks[n..]
             .iter()
             .map(|t| {
                 if t.missing == 0 {
@@ -728,19 +828,20 @@ impl Tracker {
             &self.gated(&forehead_preds, &tracks[n..], Slot::Forehead),
             cands,
             &taken,
+            solver,
         );
         for c in forehead.iter().flatten() {
             taken[*c] = true;
         }
         // Head motion from the named forehead dots, against the reference forehead.
-        let (from, to): (Vec<Vec3>, Vec<Vec3>) = forehead
+        let (from, to): (Small<Vec3>, Small<Vec3>) = forehead
             .iter()
             .enumerate()
             .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
             .unzip();
         let head = kabsch(&from, &to).unwrap_or(self.head);
 
-        let lip_preds: Vec<[f64; 2]> = tracks[..n]
+        let lip_preds: Small<[f64; 2]> = tracks[..n]
             .iter()
             .map(|t| {
                 let q = if t.missing == 0 {
@@ -755,6 +856,7 @@ impl Tracker {
             &self.gated(&lip_preds, &tracks[..n], Slot::Lip),
             cands,
             &taken,
+            solver,
         );
 
         // Second chance for lip dots still missing: the lips move together (the jaw carries
@@ -766,8 +868,8 @@ impl Tracker {
                 taken[*c] = true;
             }
             let inverse = head.inverse();
-            let mut preds = Vec::new();
-            let mut which = Vec::new();
+            let mut preds: Small<[f64; 2]> = Small::new();
+            let mut which: Small<usize> = Small::new();
             for i in (0..n).filter(|&i| lip[i].is_none()) {
                 let mut sum = Vec3::zeros();
                 let mut count = 0.0;
@@ -787,15 +889,18 @@ impl Tracker {
             }
             if !preds.is_empty() {
                 // Gates from this frame's lip positions (found or predicted).
-                let mut all: Vec<[f64; 2]> = (0..n)
+                let mut all: Small<[f64; 2]> = (0..n)
                     .map(|i| lip[i].map_or(lip_preds[i], |c| cands[c].pixel))
                     .collect();
                 for (p, &i) in preds.iter().zip(&which) {
                     all[i] = *p;
                 }
                 let gates = self.gated(&all, &tracks[..n], Slot::Lip);
-                let second: Vec<_> = which.iter().map(|&i| gates[i]).collect();
-                for (&i, c) in which.iter().zip(labels::assign(&second, cands, &taken)) {
+                let second: Small<_> = which.iter().map(|&i| gates[i]).collect();
+                for (&i, c) in which
+                    .iter()
+                    .zip(labels::assign(&second, cands, &taken, solver))
+                {
                     lip[i] = c;
                 }
             }
@@ -810,7 +915,7 @@ impl Tracker {
         preds: &[[f64; 2]],
         tracks: &[DotTrack],
         slot: Slot,
-    ) -> Vec<([f64; 2], f64, Slot)> {
+    ) -> Small<([f64; 2], f64, Slot)> {
         preds
             .iter()
             .enumerate()
@@ -872,7 +977,7 @@ impl Tracker {
             return;
         }
         // Head motion from this frame's forehead against the reference.
-        let (from, to): (Vec<Vec3>, Vec<Vec3>) = names[n..]
+        let (from, to): (Small<Vec3>, Small<Vec3>) = names[n..]
             .iter()
             .enumerate()
             .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
@@ -1019,14 +1124,6 @@ impl Tracker {
         let opening = (upper_mid - lower_mid).norm() / width.max(1e-9);
         tracing::trace!(worst_rms_mm = worst * 1e3, opening, "calibration window");
         worst <= self.config.still_tolerance_m && opening <= self.config.max_opening_ratio
-    }
-}
-
-fn dot_name(layout: PerformerLayout, i: usize) -> String {
-    if i < layout.lip_dots {
-        PerformerLayout::lip_name(i)
-    } else {
-        PerformerLayout::forehead_name(i - layout.lip_dots)
     }
 }
 

@@ -238,7 +238,14 @@ fn a_hidden_dot_is_missing_never_renamed_and_comes_back() {
         let out = tr.process(&render(seq, &truth, hidden)).unwrap();
         assert_named_correctly(out, &truth, hidden, 0.0015);
         if !hidden.is_empty() {
-            assert_eq!(out.status.dots_missing, vec!["D3".to_string()]);
+            assert_eq!(
+                out.status.dots_missing.as_slice(),
+                &[DotName {
+                    forehead: false,
+                    number: 3
+                }]
+            );
+            assert_eq!(out.status.dots_missing[0].to_string(), "D3");
             assert_eq!(out.confidence[2], 0.0);
         }
     }
