@@ -411,3 +411,12 @@ fn forehead_depth_jitter_is_filtered() {
         "filtered {filtered} m against {unfiltered} m unfiltered"
     );
 }
+
+#[test]
+fn the_example_config_lists_the_defaults() {
+    // config/mouthpiece.toml documents every [detect] and [track] key with its default.
+    let text = include_str!("../../../config/mouthpiece.toml");
+    let config = crate::pipeline::PipelineConfig::from_toml_str(text).unwrap();
+    assert_eq!(config.detect, DetectConfig::default());
+    assert_eq!(config.track, TrackConfig::default());
+}
