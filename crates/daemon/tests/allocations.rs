@@ -1,5 +1,6 @@
 //! The processing thread's per-frame path (detect + track + retarget into the reused
-//! `Output`) makes no heap allocation in steady state: counted with a counting global
+//! `Output`, then the publish into the server hub's ring) makes no heap allocation in steady
+//! state: counted with a counting global
 //! allocator over a synthetic session after a warm-up in which the tracker's buffers grow to
 //! their working size. Only Rust-side allocations are seen; OpenCV allocates on its C++ side
 //! (a `Mat` header for each region-of-interest view it is asked for, and its scratch images
@@ -29,10 +30,17 @@ fn the_per_frame_path_does_not_allocate_in_steady_state() {
     .map(|(f, _)| f)
     .collect();
     let mut out = Output::default();
+    let (hub, _control) = mouthpiece_server::Hub::new(&mouthpiece_server::HubConfig::default());
+    // What the processing thread does with each frame (`pipeline::run`).
+    let mut step = |f: &mouthpiece_frame::Frame, out: &mut Output| {
+        processor.process(f, out);
+        out.stream.capture_us = f.device_ts_us;
+        hub.publish(&out.stream);
+    };
     // The neutral second, then tracking until every buffer has met its largest frame.
     let (warm, measured) = frames.split_at(90);
     for f in warm {
-        processor.process(f, &mut out);
+        step(f, &mut out);
     }
     assert!(
         out.stream.performer.is_some(),
@@ -40,7 +48,7 @@ fn the_per_frame_path_does_not_allocate_in_steady_state() {
     );
     let before = counting_alloc::allocations();
     for f in measured {
-        processor.process(f, &mut out);
+        step(f, &mut out);
     }
     let allocations = counting_alloc::allocations() - before;
     println!(
