@@ -131,40 +131,23 @@ pub fn record_mcap(
     out: &Path,
     options: mouthpiece_recording::WriterOptions,
     limits: &RecordLimits,
-    mut on_frame: impl FnMut(&Frame),
+    on_frame: impl FnMut(&Frame),
 ) -> Result<RecordSummary, RecordError> {
-    let mut source = crate::open_parsed(spec, config)?;
-    let mut writer = mouthpiece_recording::SessionWriter::create(out, options).map_err(|e| {
-        RecordError::Write {
-            path: out.to_path_buf(),
-            source: Box::new(e),
-        }
-    })?;
-    tracing::info!(source = %spec, file = %out.display(), "recording MCAP session");
-    let result = pump(source.as_mut(), limits, |f| {
-        writer.write_frame(f).map_err(|e| RecordError::Write {
-            path: out.to_path_buf(),
-            source: Box::new(e),
-        })?;
-        on_frame(f);
-        Ok(())
-    });
-    let skipped = source.skipped();
-    drop(source);
-    // Close the file whatever happened, so it stays readable.
-    let finished = writer.finish().map_err(|e| RecordError::Write {
+    let failed = |e: mouthpiece_recording::RecordingError| RecordError::Write {
         path: out.to_path_buf(),
         source: Box::new(e),
-    });
-    let (frames, duration_s, lost) = result?;
-    finished?;
-    Ok(RecordSummary {
-        frames,
-        duration_s,
-        skipped,
-        oni_fixed_nodes: 0,
-        lost,
-    })
+    };
+    let source = crate::open_parsed(spec, config)?;
+    let writer = mouthpiece_recording::SessionWriter::create(out, options).map_err(failed)?;
+    tracing::info!(source = %spec, file = %out.display(), "recording MCAP session");
+    record_with(
+        source,
+        limits,
+        writer,
+        |writer, f| writer.write_frame(f).map(drop).map_err(failed),
+        |writer| writer.finish().map(drop).map_err(failed),
+        on_frame,
+    )
 }
 
 #[cfg(not(feature = "mcap"))]
@@ -228,17 +211,16 @@ fn record_oni_written(
     config: &CaptureConfig,
     out: &Path,
     limits: &RecordLimits,
-    mut on_frame: impl FnMut(&Frame),
+    on_frame: impl FnMut(&Frame),
 ) -> Result<RecordSummary, RecordError> {
     use crate::oni_write::{OniFrameWriter, OniWriteError};
-    let mut source = crate::open_parsed(spec, config)?;
+    let source = crate::open_parsed(spec, config)?;
     // A replay reports no rate: the player paces by the frames' timestamps anyway.
     let fps = match source.info().fps {
         f if f > 0.0 => f,
         _ => 30.0,
     };
     tracing::info!(source = %spec, file = %out.display(), "recording .oni (plain-Rust writer)");
-    let mut writer: Option<OniFrameWriter> = None;
     let fail = |e: OniWriteError| {
         if e.is_bad_input() {
             RecordError::OniUnsupported(e)
@@ -249,19 +231,43 @@ fn record_oni_written(
             }
         }
     };
+    record_with(
+        source,
+        limits,
+        None::<OniFrameWriter>,
+        |writer, f| {
+            let w = match writer {
+                Some(w) => w,
+                None => {
+                    writer.insert(OniFrameWriter::create(out, &f.calibration, fps).map_err(fail)?)
+                }
+            };
+            w.write_frame(f).map_err(fail)
+        },
+        |writer| writer.map_or(Ok(()), |w| w.finish().map(drop).map_err(fail)),
+        on_frame,
+    )
+}
+
+/// Pulls frames from `source` into `sink` (`write`) until the limits, then closes the file
+/// (`finish`) whatever happened, so it stays readable, and sums up.
+#[cfg(any(feature = "mcap", feature = "openni2"))]
+fn record_with<W>(
+    mut source: Box<dyn FrameSource>,
+    limits: &RecordLimits,
+    mut sink: W,
+    mut write: impl FnMut(&mut W, &Frame) -> Result<(), RecordError>,
+    finish: impl FnOnce(W) -> Result<(), RecordError>,
+    mut on_frame: impl FnMut(&Frame),
+) -> Result<RecordSummary, RecordError> {
     let result = pump(source.as_mut(), limits, |f| {
-        let w = match &mut writer {
-            Some(w) => w,
-            None => writer.insert(OniFrameWriter::create(out, &f.calibration, fps).map_err(fail)?),
-        };
-        w.write_frame(f).map_err(fail)?;
+        write(&mut sink, f)?;
         on_frame(f);
         Ok(())
     });
     let skipped = source.skipped();
     drop(source);
-    // Close the file whatever happened, so it stays readable.
-    let finished = writer.map(|w| w.finish().map_err(fail)).transpose();
+    let finished = finish(sink);
     let (frames, duration_s, lost) = result?;
     finished?;
     Ok(RecordSummary {
