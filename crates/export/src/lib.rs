@@ -28,6 +28,7 @@ pub mod take;
 pub use csv::{CsvSummary, CsvWriter};
 pub use error::ExportError;
 pub use gltf::{GltfLayout, GltfOptions, GltfSummary, GltfWriter, ModelUp};
+pub use output::PendingFile;
 pub use reduce::Reducer;
 pub use rig::{MouthRig, RigPoint};
 pub use take::{TakeFrame, TakeReader};

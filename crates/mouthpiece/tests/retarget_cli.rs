@@ -551,3 +551,33 @@ fn one_euro_smooths_over_time_and_bad_values_exit_2() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("samples_per_span"));
 }
+
+/// `--out` naming a FIFO (or `/dev/null`) writes into it: the output is never renamed over a
+/// destination that is not a regular file (as root, that would replace `/dev/null`).
+#[test]
+fn an_output_that_is_not_a_regular_file_is_written_in_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("out.fifo");
+    let status = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(status.success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+    };
+    let o = mouthpiece()
+        .args(["retarget", "--character"])
+        .arg(repo().join("config/characters/wolf.toml"))
+        .arg("--input")
+        .arg(repo().join("tests/data/example-performer.jsonl"))
+        .arg("--out")
+        .arg(&fifo)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Checked before joining: a reader still waiting on a replaced FIFO would never return.
+    use std::os::unix::fs::FileTypeExt as _;
+    let kind = std::fs::metadata(&fifo).unwrap().file_type();
+    assert!(kind.is_fifo(), "the FIFO was replaced: {kind:?}");
+    let text = reader.join().unwrap();
+    assert!(text.lines().count() > 10, "{text}");
+}

@@ -6,7 +6,6 @@
 //! `status` (calibrating, head_lost, dots_missing, no_dots, too_few_dots, …) and
 //! `frame {seq, device_ts_us}`. A progress line on stderr when stderr is a terminal.
 
-use std::fs::File;
 use std::io::{self, BufWriter, IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -279,19 +278,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     // A file is written beside its destination and renamed into place only when complete.
-    let dir = args
-        .out
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let temp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("cannot create output in {}", dir.display()))
+    let mut out = mouthpiece_export::PendingFile::create(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))
         .map_err(bad_input)?;
-    let file: File = temp.reopen().context("cannot open the temporary output")?;
-    let mut out = BufWriter::new(file);
     let summary = process_recording(&setup, &mut out)?;
-    drop(out);
-    temp.persist(&args.out)
+    out.commit()
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     summary.log();
     Ok(())

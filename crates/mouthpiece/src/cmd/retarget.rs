@@ -22,6 +22,7 @@ use mouthpiece_retarget::{
 };
 
 use crate::exit::bad_input;
+use mouthpiece_export::PendingFile;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Smooth {
@@ -521,60 +522,52 @@ fn emit(
     out.write_line(line_out)
 }
 
-/// Where the output goes: stdout, or a temporary file renamed into place by `finish`.
+/// Where the output goes: stdout, or a file written under a temporary name and moved into
+/// place by `finish` ([`PendingFile`]).
 struct Output {
-    writer: BufWriter<Box<dyn Write>>,
-    temp: Option<(tempfile::TempPath, PathBuf)>,
+    sink: Sink,
     flush_each_line: bool,
+}
+
+enum Sink {
+    Stdout(BufWriter<io::Stdout>),
+    File(PendingFile),
 }
 
 impl Output {
     fn open(path: &Path, streaming: bool) -> anyhow::Result<Self> {
-        if is_dash(path) {
-            return Ok(Self {
-                writer: BufWriter::new(Box::new(io::stdout())),
-                temp: None,
-                flush_each_line: streaming,
-            });
-        }
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
+        let sink = if is_dash(path) {
+            Sink::Stdout(BufWriter::new(io::stdout()))
+        } else {
+            Sink::File(
+                PendingFile::create(path)
+                    .with_context(|| format!("cannot create output {}", path.display()))
+                    .map_err(bad_input)?,
+            )
         };
-        // Readable like any file the user writes (the umask still applies); tempfile's 0600
-        // default would surprise.
-        use std::os::unix::fs::PermissionsExt as _;
-        let temp = tempfile::Builder::new()
-            .permissions(std::fs::Permissions::from_mode(0o666))
-            .prefix(".mouthpiece-retarget-")
-            .suffix(".jsonl.tmp")
-            .tempfile_in(dir)
-            .with_context(|| format!("cannot create output in {}", dir.display()))
-            .map_err(bad_input)?;
-        let (file, temp_path) = temp.into_parts();
         Ok(Self {
-            writer: BufWriter::new(Box::new(file)),
-            temp: Some((temp_path, path.to_path_buf())),
-            flush_each_line: false,
+            flush_each_line: streaming && matches!(sink, Sink::Stdout(_)),
+            sink,
         })
     }
 
     fn write_line(&mut self, line: &OutputLine) -> anyhow::Result<()> {
-        serde_json::to_writer(&mut self.writer, line).context("writing output")?;
-        self.writer.write_all(b"\n").context("writing output")?;
+        let writer: &mut dyn Write = match &mut self.sink {
+            Sink::Stdout(w) => w,
+            Sink::File(f) => f,
+        };
+        serde_json::to_writer(&mut *writer, line).context("writing output")?;
+        writer.write_all(b"\n").context("writing output")?;
         if self.flush_each_line {
-            self.writer.flush().context("writing output")?;
+            writer.flush().context("writing output")?;
         }
         Ok(())
     }
 
-    fn finish(mut self) -> anyhow::Result<()> {
-        self.writer.flush().context("writing output")?;
-        if let Some((temp, dest)) = self.temp.take() {
-            temp.persist(&dest).with_context(|| {
-                format!("cannot move the output into place at {}", dest.display())
-            })?;
+    fn finish(self) -> anyhow::Result<()> {
+        match self.sink {
+            Sink::Stdout(mut w) => w.flush().context("writing output"),
+            Sink::File(f) => f.commit().context("cannot move the output into place"),
         }
-        Ok(())
     }
 }
