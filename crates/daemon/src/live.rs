@@ -197,16 +197,7 @@ impl Processor for LiveProcessor {
                 .map(|d| d.map(|p| [p.x, p.y, p.z])),
         );
         // Copied into a kept buffer, reusing its vectors, to end the tracker's borrow.
-        match (&mut self.stabilised, &tracked.stabilised) {
-            (Some(mine), Some(theirs)) => {
-                mine.t = theirs.t;
-                mine.lip.clone_from(&theirs.lip);
-                mine.confidence.clone_from(&theirs.confidence);
-                mine.head = theirs.head;
-                mine.head_lost = theirs.head_lost;
-            }
-            (mine, theirs) => *mine = theirs.clone(),
-        }
+        self.stabilised.clone_from(&tracked.stabilised);
         if neutral_taken || (self.bound.is_empty() && self.tracker.neutral().is_some()) {
             self.bind_characters();
         }

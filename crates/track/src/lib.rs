@@ -217,16 +217,6 @@ impl std::fmt::Display for DotName {
     }
 }
 
-impl PartialEq<&str> for DotName {
-    fn eq(&self, other: &&str) -> bool {
-        let letter = if self.forehead { "F" } else { "D" };
-        other
-            .strip_prefix(letter)
-            .and_then(|n| n.parse::<u16>().ok())
-            .is_some_and(|n| n == self.number)
-    }
-}
-
 impl Serialize for DotName {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         serializer.collect_str(self)
@@ -487,15 +477,9 @@ impl Tracker {
             (Some(stab), stabilised) => {
                 let s = stab.step(t, &out.dots).map_err(TrackError::Stabilise)?;
                 out.status.head_lost = s.head_lost;
-                // Copied field by field into the kept frame, reusing its vectors.
+                // Into the kept frame, reusing its vectors.
                 match stabilised {
-                    Some(mine) => {
-                        mine.t = s.t;
-                        mine.lip.clone_from(&s.lip);
-                        mine.confidence.clone_from(&s.confidence);
-                        mine.head = s.head;
-                        mine.head_lost = s.head_lost;
-                    }
+                    Some(mine) => mine.clone_from(s),
                     none => *none = Some(s.clone()),
                 }
             }
