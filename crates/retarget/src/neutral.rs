@@ -74,12 +74,15 @@ impl NeutralPose {
 }
 
 /// Collects the calibration frames and averages them robustly.
+///
+/// The performer's head need not be still while the mouth rests: before averaging, each
+/// frame is carried onto a common head pose (its forehead dots fitted rigidly onto the
+/// average forehead, twice), so that a head turning a little during the calibration second
+/// neither blurs the neutral shape nor bends the forehead reference out of rigid.
 #[derive(Debug, Clone)]
 pub struct NeutralAccumulator {
     layout: PerformerLayout,
-    lip: Vec<Vec<Vec3>>,
-    forehead: Vec<Vec<Vec3>>,
-    frames: usize,
+    frames: Vec<PerformerDots>,
 }
 
 impl NeutralAccumulator {
@@ -87,39 +90,82 @@ impl NeutralAccumulator {
     pub fn new(layout: PerformerLayout) -> Self {
         Self {
             layout,
-            lip: vec![Vec::new(); layout.lip_dots],
-            forehead: vec![Vec::new(); layout.forehead_dots],
-            frames: 0,
+            frames: Vec::new(),
         }
     }
 
     /// Adds one calibration frame.
     pub fn push(&mut self, dots: &PerformerDots) -> Result<(), Error> {
         dots.check(self.layout)?;
-        for (acc, d) in self.lip.iter_mut().zip(&dots.lip) {
-            acc.extend(d);
-        }
-        for (acc, d) in self.forehead.iter_mut().zip(&dots.forehead) {
-            acc.extend(d);
-        }
-        self.frames += 1;
+        self.frames.push(dots.clone());
         Ok(())
     }
 
     /// Frames pushed so far.
     pub fn frames(&self) -> usize {
-        self.frames
+        self.frames.len()
     }
 
-    /// The neutral pose: each dot's robust mean; every lip dot must have been seen, and at
-    /// least 3 non-collinear forehead dots.
+    /// The neutral pose: each dot's robust mean over the head-registered frames; every lip dot
+    /// must have been seen, and at least 3 non-collinear forehead dots.
     pub fn finish(&self) -> Result<NeutralPose, Error> {
-        if self.frames == 0 {
+        if self.frames.is_empty() {
             return Err(Error::NeutralEmpty);
         }
-        let lip = self.lip.iter().map(|s| robust_mean(s)).collect();
-        let forehead = self.forehead.iter().map(|s| robust_mean(s)).collect();
-        NeutralPose::from_positions(self.layout, lip, forehead, self.frames)
+        let mut registered = self.frames.clone();
+        let mut reference = self.mean_forehead(&registered);
+        for _ in 0..2 {
+            let seen: Vec<Vec3> = reference.iter().flatten().copied().collect();
+            if !spans_plane(&seen) {
+                break;
+            }
+            registered.clear();
+            for frame in &self.frames {
+                let (from, to): (Vec<Vec3>, Vec<Vec3>) = frame
+                    .forehead
+                    .iter()
+                    .zip(&reference)
+                    .filter_map(|(p, r)| Some(((*p)?, (*r)?)))
+                    .unzip();
+                // A frame whose head motion cannot be measured cannot be registered.
+                if let Some(motion) = crate::kabsch::kabsch(&from, &to) {
+                    let carry = |d: &Option<Vec3>| d.map(|p| motion.apply(&p));
+                    registered.push(PerformerDots {
+                        lip: frame.lip.iter().map(carry).collect(),
+                        forehead: frame.forehead.iter().map(carry).collect(),
+                    });
+                }
+            }
+            if registered.is_empty() {
+                registered = self.frames.clone();
+                break;
+            }
+            reference = self.mean_forehead(&registered);
+        }
+        let lip = (0..self.layout.lip_dots)
+            .map(|i| {
+                robust_mean(
+                    &registered
+                        .iter()
+                        .filter_map(|f| f.lip[i])
+                        .collect::<Vec<_>>(),
+                )
+            })
+            .collect();
+        NeutralPose::from_positions(self.layout, lip, reference, self.frames.len())
+    }
+
+    fn mean_forehead(&self, frames: &[PerformerDots]) -> Vec<Option<Vec3>> {
+        (0..self.layout.forehead_dots)
+            .map(|j| {
+                robust_mean(
+                    &frames
+                        .iter()
+                        .filter_map(|f| f.forehead[j])
+                        .collect::<Vec<_>>(),
+                )
+            })
+            .collect()
     }
 }
 
@@ -201,5 +247,60 @@ mod tests {
         ];
         acc.push(&dots).unwrap();
         assert!(matches!(acc.finish(), Err(Error::NeutralMissingDot { dot }) if dot == "D7"));
+    }
+
+    #[test]
+    fn a_head_turning_during_calibration_leaves_the_neutral_shape_rigid() {
+        use nalgebra::{Rotation3, Vector3};
+        let layout = PerformerLayout::default();
+        // A face at rest: lips on an ellipse, forehead above, at 0.6 m.
+        let lip: Vec<Vec3> = (0..layout.lip_dots)
+            .map(|i| {
+                let a = std::f64::consts::TAU * i as f64 / layout.lip_dots as f64;
+                Vec3::new(0.025 * a.cos(), 0.01 * a.sin(), 0.6 + 0.005 * a.sin().abs())
+            })
+            .collect();
+        let forehead = vec![
+            Vec3::new(0.03, -0.1, 0.605),
+            Vec3::new(0.0, -0.118, 0.6),
+            Vec3::new(-0.03, -0.1, 0.605),
+        ];
+        let pivot = Vec3::new(0.0, 0.0, 0.7);
+        let mut acc = NeutralAccumulator::new(layout);
+        // The head turns 4° one way over the window and back a little: averaging the raw
+        // positions would shrink the mouth and bend the forehead.
+        for k in 0..30 {
+            let yaw = (4.0 * (k as f64 / 29.0) - 1.0 * (k as f64 / 29.0).powi(3)).to_radians();
+            let r = Rotation3::from_axis_angle(&Vector3::y_axis(), yaw);
+            let carry = |p: &Vec3| Some(r * (p - pivot) + pivot);
+            acc.push(&PerformerDots {
+                lip: lip.iter().map(carry).collect(),
+                forehead: forehead.iter().map(carry).collect(),
+            })
+            .unwrap();
+        }
+        let neutral = acc.finish().unwrap();
+        // Rigid: every distance of the true shape is kept.
+        let all = |l: &[Vec3], f: &[Vec3]| l.iter().chain(f).copied().collect::<Vec<_>>();
+        let truth = all(&lip, &forehead);
+        let got = all(
+            &neutral.lip_camera,
+            &neutral
+                .forehead_camera
+                .iter()
+                .map(|p| p.unwrap())
+                .collect::<Vec<_>>(),
+        );
+        for a in 0..truth.len() {
+            for b in a + 1..truth.len() {
+                let d = ((truth[a] - truth[b]).norm() - (got[a] - got[b]).norm()).abs();
+                assert!(d < 1e-9, "distance {a}-{b} off by {d}");
+            }
+        }
+        assert_relative_eq!(
+            neutral.mouth_width(),
+            (lip[0] - lip[layout.right_corner()]).norm(),
+            epsilon = 1e-9
+        );
     }
 }

@@ -158,13 +158,41 @@ pub enum Slot {
     Forehead,
 }
 
+/// Where a dot is expected in this frame, and how far from it a candidate may be.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prediction {
+    pub pixel: [f64; 2],
+    /// Largest pixel distance.
+    pub gate_px: f64,
+    pub slot: Slot,
+    /// Expected depth (metres) and the largest difference from it (infinite: no depth gate).
+    /// A lip dot's colour can show where the paint is not: motion blur leaves a ghost of the
+    /// dot where the lip just was, over the open mouth, a centimetre or more behind the lip.
+    pub z: f64,
+    pub z_gate: f64,
+}
+
+impl Prediction {
+    /// A prediction gated in the image only.
+    pub fn in_image(pixel: [f64; 2], gate_px: f64, slot: Slot) -> Self {
+        Prediction {
+            pixel,
+            gate_px,
+            slot,
+            z: 0.0,
+            z_gate: f64::INFINITY,
+        }
+    }
+}
+
 /// Optimal assignment of dots to candidates by pixel distance to each dot's prediction, with
-/// a gate per dot: a dot whose best candidate is outside its gate is missing, never given a
-/// neighbour's candidate. `taken` marks candidates already used (they are skipped).
+/// a gate per dot: a dot whose best candidate is outside its gate (in the image, or in depth)
+/// is missing, never given a neighbour's candidate. `taken` marks candidates already used
+/// (they are skipped).
 ///
 /// Returns, per dot, the candidate index.
 pub fn assign(
-    predictions: &[([f64; 2], f64, Slot)],
+    predictions: &[Prediction],
     cands: &[Candidate],
     taken: &[bool],
     solver: &mut Assignment,
@@ -179,15 +207,16 @@ pub fn assign(
     let scale = 100.0;
     let width = cols.len() + rows;
     solver.reset(rows, width, FORBIDDEN);
-    for (r, &(pred, gate, slot)) in predictions.iter().enumerate() {
+    for (r, p) in predictions.iter().enumerate() {
+        let (pred, gate) = (p.pixel, p.gate_px);
         for (c, &j) in cols.iter().enumerate() {
             let cand = &cands[j];
-            let ok = match slot {
+            let ok = match p.slot {
                 Slot::Lip => cand.can_be_lip(),
                 Slot::Forehead => cand.can_be_forehead(),
             };
             let d2 = (cand.pixel[0] - pred[0]).powi(2) + (cand.pixel[1] - pred[1]).powi(2);
-            if ok && d2 < gate * gate {
+            if ok && d2 < gate * gate && (cand.point.z - p.z).abs() <= p.z_gate {
                 solver.set(r, c, (d2 * scale).round() as i64);
             }
         }
@@ -437,9 +466,9 @@ mod tests {
         // Three dots predicted 20 px apart; the middle one is not seen. The two seen dots moved
         // 4 px towards the middle: still theirs, and the middle dot stays missing.
         let preds = [
-            ([6.0, 10.0], 8.0, Slot::Lip),
-            ([20.0, 10.0], 8.0, Slot::Lip),
-            ([34.0, 10.0], 8.0, Slot::Lip),
+            Prediction::in_image([6.0, 10.0], 8.0, Slot::Lip),
+            Prediction::in_image([20.0, 10.0], 8.0, Slot::Lip),
+            Prediction::in_image([34.0, 10.0], 8.0, Slot::Lip),
         ];
         let got = assign(&preds, &cands, &[false, false], &mut Assignment::default()).to_vec();
         assert_eq!(got, vec![Some(0), None, Some(1)]);
@@ -464,7 +493,10 @@ mod tests {
                 role: DotRole::Lip,
             },
         ];
-        let preds = [([0.0, 0.0], 5.0, Slot::Lip), ([50.0, 30.0], 5.0, Slot::Lip)];
+        let preds = [
+            Prediction::in_image([0.0, 0.0], 5.0, Slot::Lip),
+            Prediction::in_image([50.0, 30.0], 5.0, Slot::Lip),
+        ];
         assert_eq!(
             assign(&preds, &cands, &[false; 3], &mut Assignment::default()).to_vec(),
             vec![Some(1), None]
@@ -479,7 +511,7 @@ mod tests {
             .to_vec(),
             vec![None, None]
         );
-        let preds = [([0.0, 0.0], 5.0, Slot::Forehead)];
+        let preds = [Prediction::in_image([0.0, 0.0], 5.0, Slot::Forehead)];
         assert_eq!(
             assign(&preds, &cands, &[false; 3], &mut Assignment::default()).to_vec(),
             vec![Some(0)]
@@ -497,10 +529,33 @@ mod tests {
                 role: DotRole::Lip,
             })
             .collect();
-        let preds = [([4.0, 0.0], 10.0, Slot::Lip), ([8.0, 0.0], 10.0, Slot::Lip)];
+        let preds = [
+            Prediction::in_image([4.0, 0.0], 10.0, Slot::Lip),
+            Prediction::in_image([8.0, 0.0], 10.0, Slot::Lip),
+        ];
         assert_eq!(
             assign(&preds, &cands, &[false, false], &mut Assignment::default()).to_vec(),
             vec![Some(1), Some(0)]
         );
+    }
+
+    #[test]
+    fn a_candidate_at_the_wrong_depth_is_not_the_dot() {
+        // The paint's ghost over the open mouth (nearer the prediction in the image, 2 cm
+        // deeper) against the dot itself.
+        let cand = |x: f64, z: f64| Candidate {
+            pixel: [x, 0.0],
+            point: Vec3::new(0.0, 0.0, z),
+            role: DotRole::Lip,
+        };
+        let cands = [cand(1.0, 0.62), cand(3.0, 0.60)];
+        let mut pred = Prediction::in_image([0.0, 0.0], 5.0, Slot::Lip);
+        let solve = |p: Prediction| assign(&[p], &cands, &[false; 2], &mut Assignment::default());
+        assert_eq!(solve(pred).to_vec(), vec![Some(0)]);
+        pred.z = 0.601;
+        pred.z_gate = 0.008;
+        assert_eq!(solve(pred).to_vec(), vec![Some(1)]);
+        pred.z = 0.64;
+        assert_eq!(solve(pred).to_vec(), vec![None]);
     }
 }

@@ -100,6 +100,10 @@ pub struct TrackConfig {
     pub min_gate_px: f64,
     /// Gate as a fraction of the distance to the nearest other predicted dot.
     pub gate_fraction: f64,
+    /// Largest difference between a lip candidate's depth and the dot's predicted depth,
+    /// metres (motion blur leaves a ghost of a lip dot over the open mouth, deeper by a
+    /// centimetre or more; the lips move a few millimetres in depth between frames).
+    pub lip_depth_gate_m: f64,
     /// After this many frames with no dot named, forget the names and re-acquire from geometry.
     pub lost_after_frames: u32,
     /// How long a missing lip dot keeps its last value, then decays to neutral (seconds);
@@ -123,6 +127,7 @@ impl Default for TrackConfig {
             full_search_every: 8,
             min_gate_px: 2.5,
             gate_fraction: 0.5,
+            lip_depth_gate_m: 0.008,
             lost_after_frames: 15,
             missing_hold_s: 0.5,
             missing_decay_s: 0.5,
@@ -155,6 +160,7 @@ impl TrackConfig {
             ("roi_margin_px", self.roi_margin_px),
             ("min_gate_px", self.min_gate_px),
             ("gate_fraction", self.gate_fraction),
+            ("lip_depth_gate_m", self.lip_depth_gate_m),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return bad(key, "must be a positive number");
@@ -304,6 +310,10 @@ impl DotTrack {
         ]
     }
 }
+
+/// Largest RMS misfit (metres) of the upper lip and forehead dots to their rest shape for
+/// the head motion fitted to them to be used while a forehead dot is hidden.
+const HEAD_FALLBACK_RMS_M: f64 = 0.003;
 
 /// The tracker: owns the detector, the names, and the calibration.
 pub struct Tracker {
@@ -754,14 +764,43 @@ impl Tracker {
     }
 
     /// This frame's head motion (reference → now) from the named forehead dots, or the last one.
+    ///
+    /// For naming only (the reported head pose follows method §4): with fewer than 3 forehead
+    /// dots the motion is fitted to the two forehead dots seen plus the upper lip and corners
+    /// at rest. The upper lip moves little with speech; a head turning fast while a forehead dot
+    /// is hidden moves far more, and a stale head pose would bend every lip prediction.
     fn head_now(&self, names: &[Option<usize>], cands: &[Candidate]) -> RigidTransform {
         let n = self.layout.lip_dots;
-        let (from, to): (Small<Vec3>, Small<Vec3>) = names[n..]
+        let (mut from, mut to): (Small<Vec3>, Small<Vec3>) = names[n..]
             .iter()
             .enumerate()
             .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
             .unzip();
-        kabsch(&from, &to).unwrap_or(self.head)
+        if let Some(head) = kabsch(&from, &to) {
+            return head;
+        }
+        if self.rest.len() == n && from.len() == 2 {
+            for i in 0..=self.layout.right_corner() {
+                if let Some(c) = names[i] {
+                    from.push(self.rest[i]);
+                    to.push(cands[c].point);
+                }
+            }
+        }
+        // Only a fit the upper lip follows rigidly (wrong or deformed lip names fit badly).
+        match kabsch(&from, &to) {
+            Some(head)
+                if from
+                    .iter()
+                    .zip(&to)
+                    .map(|(f, t)| (head.apply(f) - t).norm_squared())
+                    .sum::<f64>()
+                    <= from.len() as f64 * HEAD_FALLBACK_RMS_M.powi(2) =>
+            {
+                head
+            }
+            _ => self.head,
+        }
     }
 
     /// Where to look: around the predicted dots, growing while some are missing; the full
@@ -825,7 +864,7 @@ impl Tracker {
             .unzip();
         let head = kabsch(&from, &to).unwrap_or(self.head);
 
-        let lip_preds: Small<[f64; 2]> = tracks[..n]
+        let lip_points: Small<Vec3> = tracks[..n]
             .iter()
             .map(|t| {
                 let q = if t.missing == 0 {
@@ -833,15 +872,17 @@ impl Tracker {
                 } else {
                     t.stab
                 };
-                camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
+                head.apply(&q)
             })
             .collect();
-        let mut lip = labels::assign(
-            &self.gated(&lip_preds, &tracks[..n], Slot::Lip),
-            cands,
-            &taken,
-            solver,
-        );
+        let lip_preds: Small<[f64; 2]> = lip_points
+            .iter()
+            .zip(&tracks[..n])
+            .map(|(p, t)| camera::project(k, p).unwrap_or(t.pixel))
+            .collect();
+        let mut gates = self.gated(&lip_preds, &tracks[..n], Slot::Lip);
+        self.gate_depth(&mut gates, &lip_points, &tracks[..n]);
+        let mut lip = labels::assign(&gates, cands, &taken, solver);
 
         // Second chance for lip dots still missing: the lips move together (the jaw carries
         // the whole lower lip), so predict each from its neighbours along the mouth as found
@@ -853,6 +894,7 @@ impl Tracker {
             }
             let inverse = head.inverse();
             let mut preds: Small<[f64; 2]> = Small::new();
+            let mut points: Small<Vec3> = Small::new();
             let mut which: Small<usize> = Small::new();
             for i in (0..n).filter(|&i| lip[i].is_none()) {
                 let mut sum = Vec3::zeros();
@@ -865,8 +907,10 @@ impl Tracker {
                     }
                 }
                 if count > 0.0 {
-                    if let Some(px) = camera::project(k, &head.apply(&(sum / count))) {
+                    let point = head.apply(&(sum / count));
+                    if let Some(px) = camera::project(k, &point) {
                         preds.push(px);
+                        points.push(point);
                         which.push(i);
                     }
                 }
@@ -880,7 +924,10 @@ impl Tracker {
                     all[i] = *p;
                 }
                 let gates = self.gated(&all, &tracks[..n], Slot::Lip);
-                let second: Small<_> = which.iter().map(|&i| gates[i]).collect();
+                let mut second: Small<_> = which.iter().map(|&i| gates[i]).collect();
+                let second_tracks: Small<DotTrack> =
+                    which.iter().map(|&i| tracks[i].clone()).collect();
+                self.gate_depth(&mut second, &points, &second_tracks);
                 for (&i, c) in which
                     .iter()
                     .zip(labels::assign(&second, cands, &taken, solver))
@@ -899,7 +946,7 @@ impl Tracker {
         preds: &[[f64; 2]],
         tracks: &[DotTrack],
         slot: Slot,
-    ) -> Small<([f64; 2], f64, Slot)> {
+    ) -> Small<labels::Prediction> {
         preds
             .iter()
             .enumerate()
@@ -912,9 +959,19 @@ impl Tracker {
                     .fold(f64::INFINITY, f64::min);
                 let base = (self.config.gate_fraction * nearest).max(self.config.min_gate_px);
                 let widen = 1.0 + 0.05 * tracks[i].missing.min(10) as f64;
-                (*p, base * widen, slot)
+                labels::Prediction::in_image(*p, base * widen, slot)
             })
             .collect()
+    }
+
+    /// Adds the depth gate to lip predictions: a candidate further than
+    /// [`TrackConfig::lip_depth_gate_m`] from the predicted depth is not this dot (widened
+    /// like the pixel gate for dots missing for a while).
+    fn gate_depth(&self, gates: &mut [labels::Prediction], points: &[Vec3], tracks: &[DotTrack]) {
+        for ((g, p), t) in gates.iter_mut().zip(points).zip(tracks) {
+            g.z = p.z;
+            g.z_gate = self.config.lip_depth_gate_m * (1.0 + 0.1 * t.missing.min(10) as f64);
+        }
     }
 
     fn update_tracks(&mut self, names: &[Option<usize>], cands: &[Candidate]) {
@@ -960,15 +1017,7 @@ impl Tracker {
             self.tracks = None;
             return;
         }
-        // Head motion from this frame's forehead against the reference.
-        let (from, to): (Small<Vec3>, Small<Vec3>) = names[n..]
-            .iter()
-            .enumerate()
-            .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
-            .unzip();
-        if let Some(h) = kabsch(&from, &to) {
-            self.head = h;
-        }
+        self.head = self.head_now(names, cands);
         let inverse = self.head.inverse();
         let tracks = self.tracks.as_mut().expect("checked");
         for (track, name) in tracks.iter_mut().zip(names) {
