@@ -87,6 +87,52 @@ def robust_mean(samples):
     return samples[keep].mean(axis=0)
 
 
+def spans_plane(points):
+    points = np.asarray(points, float)
+    return len(points) >= 3 and np.linalg.matrix_rank(points - points.mean(axis=0), tol=1e-9) >= 2
+
+
+def neutral_pose(frames, n, n_fh):
+    """§3 with the head registered: each frame's forehead is fitted rigidly onto the robust
+    mean forehead and the whole frame carried along (twice), then every dot is averaged."""
+    def split(frame):
+        lip, fh = [None] * n, [None] * n_fh
+        for k, v in frame.items():
+            if v is not None:
+                kind, i = dot_index(k)
+                (lip if kind == "D" else fh)[i] = np.array(v, float)
+        return lip, fh
+
+    def mean_forehead(frames):
+        return [robust_mean(s) if (s := [f[1][j] for f in frames if f[1][j] is not None]) else None
+                for j in range(n_fh)]
+
+    raw = [split(l["points"]) for l in frames]
+    registered = raw
+    reference = mean_forehead(registered)
+    for _ in range(2):
+        if not spans_plane([r for r in reference if r is not None]):
+            break
+        registered = []
+        for lip, fh in raw:
+            pairs = [(c, r) for c, r in zip(fh, reference) if c is not None and r is not None]
+            cur = np.array([c for c, _ in pairs]).reshape(-1, 3)
+            ref = np.array([r for _, r in pairs]).reshape(-1, 3)
+            if not (spans_plane(cur) and spans_plane(ref)):
+                continue
+            cc, rc = cur.mean(axis=0), ref.mean(axis=0)
+            rot = Rotation.align_vectors(ref - rc, cur - cc)[0].as_matrix()
+            carry = lambda p: None if p is None else rot @ (p - cc) + rc
+            registered.append(([carry(p) for p in lip], [carry(p) for p in fh]))
+        if not registered:
+            registered = raw
+            break
+        reference = mean_forehead(registered)
+    d0_cam = np.array([robust_mean([f[0][i] for f in registered if f[0][i] is not None])
+                       for i in range(n)])
+    return d0_cam, {j: r for j, r in enumerate(reference) if r is not None}
+
+
 def dot_index(name):
     m = re.fullmatch(r"([DF])([1-9][0-9]*)", name)
     return m.group(1), int(m.group(2)) - 1
@@ -148,16 +194,7 @@ def run(character, lines, smooth_method="bspline", hold=0.5, decay=0.5, samples=
     flagged = [l for l in lines if l.get("neutral")]
     neutral = flagged if flagged else lines[:1]
     n_fh = max([dot_index(k)[1] + 1 for l in neutral for k in l["points"] if k[0] == "F"] + [0])
-    lip_samples = [[] for _ in range(n)]
-    fh_samples = [[] for _ in range(n_fh)]
-    for l in neutral:
-        for k, v in l["points"].items():
-            if v is None:
-                continue
-            kind, i = dot_index(k)
-            (lip_samples if kind == "D" else fh_samples)[i].append(v)
-    d0_cam = np.array([robust_mean(s) for s in lip_samples])
-    fh_ref = {i: robust_mean(s) for i, s in enumerate(fh_samples) if s}
+    d0_cam, fh_ref = neutral_pose(neutral, n, n_fh)
     up = np.mean(list(fh_ref.values()), axis=0) - (d0_cam[0] + d0_cam[n // 2]) / 2
     origin, axes, width = mouth_frame(d0_cam[0], d0_cam[n // 2], up)
     d0 = (d0_cam - origin) @ axes

@@ -7,8 +7,8 @@
 //! forehead_color = [40, 90, 230]
 //! [[forehead]]                  # optional; default F1..F3 below
 //! name = "F1"
-//! x_mm = 30.0                   # performer's left is +x
-//! y_mm = -100.0                 # above the mouth is negative (camera y points down)
+//! x_mm = 35.0                   # performer's left is +x
+//! y_mm = -95.0                  # above the mouth is negative (camera y points down)
 //! ```
 
 use std::path::Path;
@@ -49,10 +49,13 @@ impl Default for DotLayout {
             radius_mm: crate::DEFAULT_DOT_RADIUS_M * 1000.0,
             lip_color: crate::LIP_DOT_RGB,
             forehead_color: crate::FOREHEAD_DOT_RGB,
+            // A wide, tall triangle (70 × 40 mm): the head pose rests on depth and pixel
+            // differences across it, so its size sets the head pose's precision (README,
+            // "Painting the dots").
             forehead: vec![
-                dot("F1", 30.0, -100.0),
-                dot("F2", 0.0, -118.0),
-                dot("F3", -30.0, -100.0),
+                dot("F1", 35.0, -95.0),
+                dot("F2", 0.0, -135.0),
+                dot("F3", -35.0, -95.0),
             ],
         }
     }
