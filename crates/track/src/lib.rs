@@ -297,6 +297,9 @@ struct DotTrack {
     /// Last position carried back into the reference head pose (`H⁻¹ p`).
     stab: Vec3,
     stab_vel: Vec3,
+    /// Depth when last seen (camera frame, metres): what the depth gate compares with (the
+    /// stabilised position carries the head pose's noise, metres away from the forehead).
+    depth: f64,
     /// Frames since last seen (0 = seen in the last frame).
     missing: u32,
 }
@@ -652,6 +655,7 @@ impl Tracker {
         let mut predicted = self.assign_by_prediction(cands, k, &mut solver);
         self.assignment = solver;
         self.enforce_lip_order(&mut predicted, cands);
+        self.keep_corner_neighbours_in_place(&mut predicted, cands);
         if !self.corners_are_extremes(&predicted, cands) {
             // Names slipped by one or more places around the mouth (a slip keeps the order):
             // geometry names a full set afresh; without one the lips go missing for now
@@ -676,6 +680,59 @@ impl Tracker {
                 geo.into_iter().map(Some).collect()
             }
             _ => predicted,
+        }
+    }
+
+    /// Around a corner, with one of two dots unseen, names can slip by one place without
+    /// breaking the order around the mouth: the dot next to the corner named on the corner's
+    /// blob, the corner on its neighbour's, or the upper-lip dot next to the corner on the
+    /// lower-lip dot's. In the neutral mouth frame (head motion removed) a corner stays out
+    /// beyond its two neighbours, and the upper neighbour above the lower one, by at least
+    /// 40 % of their gap at rest; with one of the two unseen, the seen one is held to that
+    /// against where the other was last (if it was seen lately). A name that breaks it is
+    /// dropped (missing beats wrong).
+    fn keep_corner_neighbours_in_place(&self, names: &mut [Option<usize>], cands: &[Candidate]) {
+        let (Some(stab), Some(tracks)) = (&self.stabiliser, &self.tracks) else {
+            return;
+        };
+        let neutral = stab.neutral();
+        let frame = &neutral.frame;
+        let n = self.layout.lip_dots;
+        let inverse = self.head_now(names, cands).inverse();
+        let now = |names: &[Option<usize>], i: usize| {
+            names[i].map(|c| frame.to_mouth(&inverse.apply(&cands[c].point)))
+        };
+        let last = |i: usize| (tracks[i].missing <= 30).then(|| frame.to_mouth(&tracks[i].stab));
+        let (left, right) = (self.layout.left_corner(), self.layout.right_corner());
+        // (outer or upper dot, inner or lower dot, axis): `outer` stays beyond `inner` along
+        // the axis (x for the left corner, -x for the right one, y for upper over lower).
+        let x = Vec3::x();
+        let y = Vec3::y();
+        let pairs = [
+            (left, (left + 1) % n, x),
+            (left, (left + n - 1) % n, x),
+            (right, right - 1, -x),
+            (right, right + 1, -x),
+            ((left + 1) % n, (left + n - 1) % n, y),
+            (right - 1, right + 1, y),
+        ];
+        for (outer, inner, axis) in pairs {
+            let gap = (neutral.lip[outer] - neutral.lip[inner]).dot(&axis);
+            if gap <= 0.0 {
+                continue;
+            }
+            let margin = 0.4 * gap;
+            match (now(names, outer), now(names, inner)) {
+                (None, Some(q)) if last(outer).is_some_and(|o| (o - q).dot(&axis) < margin) => {
+                    tracing::debug!(dot = %PerformerLayout::lip_name(inner), "where an unseen neighbour was; name dropped");
+                    names[inner] = None;
+                }
+                (Some(q), None) if last(inner).is_some_and(|i| (q - i).dot(&axis) < margin) => {
+                    tracing::debug!(dot = %PerformerLayout::lip_name(outer), "where an unseen neighbour was; name dropped");
+                    names[outer] = None;
+                }
+                _ => {}
+            }
         }
     }
 
@@ -881,10 +938,18 @@ impl Tracker {
             .map(|(p, t)| camera::project(k, p).unwrap_or(t.pixel))
             .collect();
         let mut gates = self.gated(&lip_preds, &tracks[..n], Slot::Lip);
-        self.gate_depth(&mut gates, &lip_points, &tracks[..n]);
+        self.gate_depth(&mut gates, &tracks[..n]);
         let mut lip = labels::assign(&gates, cands, &taken, solver);
+        self.recover_moved_lips(
+            &mut lip,
+            &lip_preds,
+            cands,
+            &mut taken,
+            &tracks[..n],
+            solver,
+        );
 
-        // Second chance for lip dots still missing: the lips move together (the jaw carries
+        // Last chance for lip dots still missing: the lips move together (the jaw carries
         // the whole lower lip), so predict each from its neighbours along the mouth as found
         // now, keeping its rest offset to them. Only dots with a found neighbour, only blobs
         // nobody took, same gates.
@@ -894,7 +959,6 @@ impl Tracker {
             }
             let inverse = head.inverse();
             let mut preds: Small<[f64; 2]> = Small::new();
-            let mut points: Small<Vec3> = Small::new();
             let mut which: Small<usize> = Small::new();
             for i in (0..n).filter(|&i| lip[i].is_none()) {
                 let mut sum = Vec3::zeros();
@@ -907,10 +971,8 @@ impl Tracker {
                     }
                 }
                 if count > 0.0 {
-                    let point = head.apply(&(sum / count));
-                    if let Some(px) = camera::project(k, &point) {
+                    if let Some(px) = camera::project(k, &head.apply(&(sum / count))) {
                         preds.push(px);
-                        points.push(point);
                         which.push(i);
                     }
                 }
@@ -923,11 +985,9 @@ impl Tracker {
                 for (p, &i) in preds.iter().zip(&which) {
                     all[i] = *p;
                 }
-                let gates = self.gated(&all, &tracks[..n], Slot::Lip);
-                let mut second: Small<_> = which.iter().map(|&i| gates[i]).collect();
-                let second_tracks: Small<DotTrack> =
-                    which.iter().map(|&i| tracks[i].clone()).collect();
-                self.gate_depth(&mut second, &points, &second_tracks);
+                let mut gates = self.gated(&all, &tracks[..n], Slot::Lip);
+                self.gate_depth(&mut gates, &tracks[..n]);
+                let second: Small<_> = which.iter().map(|&i| gates[i]).collect();
                 for (&i, c) in which
                     .iter()
                     .zip(labels::assign(&second, cands, &taken, solver))
@@ -937,6 +997,159 @@ impl Tracker {
             }
         }
         lip.into_iter().chain(forehead).collect()
+    }
+
+    /// Second chance for lip dots the prediction missed because they moved more than it said.
+    /// Speech moves neighbouring dots together (the jaw drops or lifts the whole lower lip
+    /// between two frames), so:
+    /// 1. a missing dot next to a found one is looked for where its prediction lands when
+    ///    moved as that neighbour moved (its miss against its own prediction), repeated
+    ///    along the mouth while it finds dots;
+    /// 2. when both corners are found, dots still missing are looked for with one common
+    ///    shift of their predictions across the lip line (a jaw's motion), the shift that
+    ///    lands the most of them (at least two) on free candidates. Shifts along the lip line are not tried: a shift
+    ///    of one dot spacing along the lip would land each prediction on its neighbour.
+    /// Same gates (pixel and depth) as the first pass, candidates nobody took.
+    fn recover_moved_lips(
+        &self,
+        lip: &mut [Option<usize>],
+        preds: &[[f64; 2]],
+        cands: &[Candidate],
+        taken: &mut [bool],
+        tracks: &[DotTrack],
+        solver: &mut labels::Assignment,
+    ) {
+        let n = lip.len();
+        for c in lip.iter().flatten() {
+            taken[*c] = true;
+        }
+        // Names with moved predictions; true when any dot was found.
+        let mut try_names =
+            |lip: &mut [Option<usize>], taken: &mut [bool], moved: &[(usize, [f64; 2])]| -> bool {
+                if moved.is_empty() {
+                    return false;
+                }
+                let mut all: Small<[f64; 2]> = (0..n)
+                    .map(|i| lip[i].map_or(preds[i], |c| cands[c].pixel))
+                    .collect();
+                for &(i, p) in moved {
+                    all[i] = p;
+                }
+                let mut gates = self.gated(&all, tracks, Slot::Lip);
+                self.gate_depth(&mut gates, tracks);
+                let these: Small<labels::Prediction> =
+                    moved.iter().map(|&(i, _)| gates[i]).collect();
+                let mut found = false;
+                for (&(i, _), c) in moved
+                    .iter()
+                    .zip(labels::assign(&these, cands, taken, solver))
+                {
+                    if let Some(c) = c {
+                        lip[i] = Some(c);
+                        taken[c] = true;
+                        found = true;
+                    }
+                }
+                found
+            };
+
+        // 1. Moved as a found neighbour moved.
+        for _ in 0..n {
+            let moved: Small<(usize, [f64; 2])> = (0..n)
+                .filter(|&i| lip[i].is_none())
+                .filter_map(|i| {
+                    let misses: Small<[f64; 2]> = [(i + n - 1) % n, (i + 1) % n]
+                        .iter()
+                        .filter_map(|&j| {
+                            lip[j].map(|c| {
+                                [
+                                    cands[c].pixel[0] - preds[j][0],
+                                    cands[c].pixel[1] - preds[j][1],
+                                ]
+                            })
+                        })
+                        .collect();
+                    if misses.is_empty() {
+                        return None;
+                    }
+                    let k = misses.len() as f64;
+                    let dx = misses.iter().map(|m| m[0]).sum::<f64>() / k;
+                    let dy = misses.iter().map(|m| m[1]).sum::<f64>() / k;
+                    Some((i, [preds[i][0] + dx, preds[i][1] + dy]))
+                })
+                .collect();
+            if !try_names(lip, taken, &moved) {
+                break;
+            }
+        }
+
+        // 2. One common shift across the lip line.
+        // Only between seen corners: they anchor the names around the mouth.
+        let (left, right) = (self.layout.left_corner(), self.layout.right_corner());
+        if lip[left].is_none() || lip[right].is_none() {
+            return;
+        }
+        let missing: Small<usize> = (0..n).filter(|&i| lip[i].is_none()).collect();
+        if missing.len() < 2 {
+            return;
+        }
+        let along = [
+            preds[left][0] - preds[right][0],
+            preds[left][1] - preds[right][1],
+        ];
+        let length = (along[0] * along[0] + along[1] * along[1]).sqrt();
+        if length < 1.0 {
+            return;
+        }
+        let along = [along[0] / length, along[1] / length];
+        let spacing = 2.0 * length / n as f64;
+        let free: Small<usize> = (0..cands.len())
+            .filter(|&j| !taken[j] && cands[j].role != DotRole::Forehead)
+            .collect();
+        let mut gates_all = self.gated(preds, tracks, Slot::Lip);
+        self.gate_depth(&mut gates_all, tracks);
+        let lands = |g: &labels::Prediction, c: &Candidate, shift: [f64; 2]| {
+            let d2 = (c.pixel[0] - g.pixel[0] - shift[0]).powi(2)
+                + (c.pixel[1] - g.pixel[1] - shift[1]).powi(2);
+            (d2 < g.gate_px * g.gate_px && (c.point.z - g.z).abs() <= g.z_gate).then_some(d2)
+        };
+        // (dots landed, summed squared residual, shift)
+        let mut best: Option<(usize, f64, [f64; 2])> = None;
+        for &i in &missing {
+            for &j in &free {
+                let g = &gates_all[i];
+                let shift = [
+                    cands[j].pixel[0] - g.pixel[0],
+                    cands[j].pixel[1] - g.pixel[1],
+                ];
+                if (shift[0] * along[0] + shift[1] * along[1]).abs() > 0.3 * spacing {
+                    continue;
+                }
+                let (mut count, mut residual) = (0, 0.0);
+                for &m in &missing {
+                    let nearest = free
+                        .iter()
+                        .filter_map(|&f| lands(&gates_all[m], &cands[f], shift))
+                        .fold(f64::INFINITY, f64::min);
+                    if nearest.is_finite() {
+                        count += 1;
+                        residual += nearest;
+                    }
+                }
+                if best.is_none_or(|(c, r, _)| count > c || (count == c && residual < r)) {
+                    best = Some((count, residual, shift));
+                }
+            }
+        }
+        if let Some((count, _, shift)) = best.filter(|b| b.0 >= 2) {
+            let moved: Small<(usize, [f64; 2])> = missing
+                .iter()
+                .map(|&i| (i, [preds[i][0] + shift[0], preds[i][1] + shift[1]]))
+                .collect();
+            if try_names(lip, taken, &moved) {
+                tracing::debug!(count, shift_px = ?shift, "lip dots found moved together");
+            }
+        }
     }
 
     /// Gate per prediction: a fraction of the distance to the nearest other prediction of the
@@ -965,12 +1178,12 @@ impl Tracker {
     }
 
     /// Adds the depth gate to lip predictions: a candidate further than
-    /// [`TrackConfig::lip_depth_gate_m`] from the predicted depth is not this dot (widened
-    /// like the pixel gate for dots missing for a while).
-    fn gate_depth(&self, gates: &mut [labels::Prediction], points: &[Vec3], tracks: &[DotTrack]) {
-        for ((g, p), t) in gates.iter_mut().zip(points).zip(tracks) {
-            g.z = p.z;
-            g.z_gate = self.config.lip_depth_gate_m * (1.0 + 0.1 * t.missing.min(10) as f64);
+    /// [`TrackConfig::lip_depth_gate_m`] from the dot's last depth is not this dot (widened
+    /// for dots missing for a while).
+    fn gate_depth(&self, gates: &mut [labels::Prediction], tracks: &[DotTrack]) {
+        for (g, t) in gates.iter_mut().zip(tracks) {
+            g.z = t.depth;
+            g.z_gate = self.config.lip_depth_gate_m * (1.0 + 0.2 * t.missing.min(10) as f64);
         }
     }
 
@@ -1001,6 +1214,7 @@ impl Tracker {
                             pixel_vel: [0.0; 2],
                             stab: c.point,
                             stab_vel: Vec3::zeros(),
+                            depth: c.point.z,
                             missing: 0,
                         }
                     })
@@ -1034,6 +1248,7 @@ impl Tracker {
                         track.stab_vel = Vec3::zeros();
                     }
                     track.pixel = c.pixel;
+                    track.depth = c.point.z;
                     track.stab = stab;
                     track.missing = 0;
                 }
