@@ -837,10 +837,11 @@ impl Tracker {
             return head;
         }
         if self.rest.len() == n && from.len() == 2 {
-            for i in 0..=self.layout.right_corner() {
-                if let Some(c) = names[i] {
-                    from.push(self.rest[i]);
-                    to.push(cands[c].point);
+            let upper = 0..=self.layout.right_corner();
+            for (rest, c) in self.rest[upper.clone()].iter().zip(&names[upper]) {
+                if let Some(c) = c {
+                    from.push(*rest);
+                    to.push(cands[*c].point);
                 }
             }
         }
@@ -1009,6 +1010,7 @@ impl Tracker {
     ///    shift of their predictions across the lip line (a jaw's motion), the shift that
     ///    lands the most of them (at least two) on free candidates. Shifts along the lip line are not tried: a shift
     ///    of one dot spacing along the lip would land each prediction on its neighbour.
+    ///
     /// Same gates (pixel and depth) as the first pass, candidates nobody took.
     fn recover_moved_lips(
         &self,
