@@ -34,11 +34,14 @@ pub struct ColorClass {
 pub enum Morphology {
     /// 2x2 opening as a filter: a component survives when some of it survives the opening,
     /// which removes speckle and thin lines but keeps dots 2–3 px across whole and never joins
-    /// neighbouring dots. The default.
+    /// neighbouring dots. It also removes a dot seen at a grazing angle (a forehead dot on a
+    /// head turned 30°, paint stretched thin at a mouth corner), so it is not the default.
     Open,
     /// 3x3 closing: fills pinholes that sensor noise punches into a dot, but joins dots that
     /// are less than a pixel apart (close-up sessions with large dots only).
     Close,
+    /// Components straight from the threshold; speckle is left to the area filter (a blob
+    /// must cover a fifth of the paint's expected area). The default.
     None,
 }
 
@@ -80,7 +83,7 @@ impl Default for DetectConfig {
             max_aspect: 4.0,
             depth_search_px: 3,
             depth_range_m: [0.2, 2.5],
-            morphology: Morphology::Open,
+            morphology: Morphology::None,
             weight_hue_margin: 8,
             classes: default_classes(),
         }
