@@ -203,6 +203,27 @@ mod tests {
     }
 
     #[test]
+    fn plane_fit_on_a_lip_ignores_the_open_mouth_behind_it() {
+        // A lower lip at 600 mm tilting 1 mm per pixel, the open mouth 25 mm behind it above
+        // row 18: the dot at row 20 sits near the lip's edge.
+        let d = plane(
+            40,
+            40,
+            |_, y| {
+                if y < 18.0 {
+                    625.0
+                } else {
+                    600.0 + (y - 20.0)
+                }
+            },
+        );
+        let mut buf = DepthScratch::default();
+        let (z, how) = depth_by_plane(&d, 0.001, [20.0, 20.0], 3.0, [0.2, 2.0], &mut buf).unwrap();
+        assert_eq!(how, DepthMethod::PlaneFit);
+        assert!((z - 0.6).abs() < 0.0005, "{z}");
+    }
+
+    #[test]
     fn no_readings_no_depth() {
         let d = DepthImage::new(40, 40);
         let mut buf = DepthScratch::default();

@@ -87,6 +87,10 @@ pub struct TrackConfig {
     /// to, metres (the sensor's depth noise is spatially correlated over a few pixels, so the
     /// readings under the paint alone keep most of it).
     pub forehead_depth_patch_m: f64,
+    /// Radius of the patch around a lip dot whose depth readings a plane is fitted to,
+    /// robustly, metres; 0: the median of the paint's inner disc (the fallback when the
+    /// patch has too few readings). The paint's own few pixels share one sensor error.
+    pub lip_depth_patch_m: f64,
     /// Temporal filter on each forehead dot's depth (One Euro: cut-off frequency at rest in Hz,
     /// and how fast it opens with the depth's speed, Hz per m/s). The forehead's depth noise
     /// is what tilts the head pose; pixels are precise and stay unfiltered. 0 Hz: no filter.
@@ -121,6 +125,7 @@ impl Default for TrackConfig {
             still_tolerance_m: 0.006,
             max_opening_ratio: 0.6,
             forehead_depth_patch_m: 0.014,
+            lip_depth_patch_m: 0.0035,
             forehead_depth_min_cutoff_hz: 2.0,
             forehead_depth_beta: 200.0,
             roi_margin_px: 20.0,
@@ -172,6 +177,7 @@ impl TrackConfig {
                 self.forehead_depth_min_cutoff_hz,
             ),
             ("forehead_depth_beta", self.forehead_depth_beta),
+            ("lip_depth_patch_m", self.lip_depth_patch_m),
             ("missing_hold_s", self.missing_hold_s),
             ("missing_decay_s", self.missing_decay_s),
         ] {
@@ -542,14 +548,33 @@ impl Tracker {
                     &mut self.depth_buf,
                 )
             } else {
-                depth::depth_at_dot(
-                    depth,
-                    scale,
-                    blob.center,
-                    radius_px,
-                    self.depth_range,
-                    &mut self.depth_buf,
-                )
+                // A robust plane over a few millimetres of lip around the dot: the sensor's
+                // noise is correlated over a few pixels, so the paint's own pixels share one
+                // error; the plane's outlier rejection drops the open mouth behind the lip.
+                let patch_px =
+                    (self.config.lip_depth_patch_m * k.fx / z_hint * 64.0).round() / 64.0;
+                (self.config.lip_depth_patch_m > 0.0)
+                    .then(|| {
+                        depth::depth_by_plane(
+                            depth,
+                            scale,
+                            blob.center,
+                            patch_px.max(radius_px),
+                            self.depth_range,
+                            &mut self.depth_buf,
+                        )
+                    })
+                    .flatten()
+                    .or_else(|| {
+                        depth::depth_at_dot(
+                            depth,
+                            scale,
+                            blob.center,
+                            radius_px,
+                            self.depth_range,
+                            &mut self.depth_buf,
+                        )
+                    })
             };
             if let Some((z, _)) = z {
                 cands.push(Candidate {
