@@ -1031,10 +1031,11 @@ impl Tracker {
     /// 1. a missing dot next to a found one is looked for where its prediction lands when
     ///    moved as that neighbour moved (its miss against its own prediction), repeated
     ///    along the mouth while it finds dots;
-    /// 2. when both corners are found, dots still missing are looked for with one common
-    ///    shift of their predictions across the lip line (a jaw's motion), the shift that
-    ///    lands the most of them (at least two) on free candidates. Shifts along the lip line are not tried: a shift
-    ///    of one dot spacing along the lip would land each prediction on its neighbour.
+    /// 2. when both corners are found, lip dots still missing are looked for with one
+    ///    common shift of their predictions across the lip line (a jaw's motion), the shift
+    ///    that lands the most of them (at least two) on free candidates; then 1 again.
+    ///    Shifts along the lip line are not tried: a shift of one dot spacing along the lip
+    ///    would land each prediction on its neighbour.
     ///
     /// Same gates (pixel and depth) as the first pass, candidates nobody took.
     fn recover_moved_lips(
@@ -1046,136 +1047,18 @@ impl Tracker {
         tracks: &[DotTrack],
         solver: &mut labels::Assignment,
     ) {
-        let n = lip.len();
         for c in lip.iter().flatten() {
             taken[*c] = true;
         }
-        // Names with moved predictions; true when any dot was found.
-        let mut try_names =
-            |lip: &mut [Option<usize>], taken: &mut [bool], moved: &[(usize, [f64; 2])]| -> bool {
-                if moved.is_empty() {
-                    return false;
-                }
-                let mut all: Small<[f64; 2]> = (0..n)
-                    .map(|i| lip[i].map_or(preds[i], |c| cands[c].pixel))
-                    .collect();
-                for &(i, p) in moved {
-                    all[i] = p;
-                }
-                let mut gates = self.gated(&all, tracks, Slot::Lip);
-                self.gate_depth(&mut gates, tracks);
-                let these: Small<labels::Prediction> =
-                    moved.iter().map(|&(i, _)| gates[i]).collect();
-                let mut found = false;
-                for (&(i, _), c) in moved
-                    .iter()
-                    .zip(labels::assign(&these, cands, taken, solver))
-                {
-                    if let Some(c) = c {
-                        lip[i] = Some(c);
-                        taken[c] = true;
-                        found = true;
-                    }
-                }
-                found
-            };
-
-        // 1. Moved as a found neighbour moved.
-        for _ in 0..n {
-            let moved: Small<(usize, [f64; 2])> = (0..n)
-                .filter(|&i| lip[i].is_none())
-                .filter_map(|i| {
-                    let misses: Small<[f64; 2]> = [(i + n - 1) % n, (i + 1) % n]
-                        .iter()
-                        .filter_map(|&j| {
-                            lip[j].map(|c| {
-                                [
-                                    cands[c].pixel[0] - preds[j][0],
-                                    cands[c].pixel[1] - preds[j][1],
-                                ]
-                            })
-                        })
-                        .collect();
-                    if misses.is_empty() {
-                        return None;
-                    }
-                    let k = misses.len() as f64;
-                    let dx = misses.iter().map(|m| m[0]).sum::<f64>() / k;
-                    let dy = misses.iter().map(|m| m[1]).sum::<f64>() / k;
-                    Some((i, [preds[i][0] + dx, preds[i][1] + dy]))
-                })
-                .collect();
-            if !try_names(lip, taken, &moved) {
-                break;
-            }
-        }
-
-        // 2. One common shift across the lip line.
-        // Only between seen corners: they anchor the names around the mouth.
-        let (left, right) = (self.layout.left_corner(), self.layout.right_corner());
-        if lip[left].is_none() || lip[right].is_none() {
-            return;
-        }
-        let missing: Small<usize> = (0..n).filter(|&i| lip[i].is_none()).collect();
-        if missing.len() < 2 {
-            return;
-        }
-        let along = [
-            preds[left][0] - preds[right][0],
-            preds[left][1] - preds[right][1],
-        ];
-        let length = (along[0] * along[0] + along[1] * along[1]).sqrt();
-        if length < 1.0 {
-            return;
-        }
-        let along = [along[0] / length, along[1] / length];
-        let spacing = 2.0 * length / n as f64;
-        let free: Small<usize> = (0..cands.len())
-            .filter(|&j| !taken[j] && cands[j].role != DotRole::Forehead)
-            .collect();
-        let mut gates_all = self.gated(preds, tracks, Slot::Lip);
-        self.gate_depth(&mut gates_all, tracks);
-        let lands = |g: &labels::Prediction, c: &Candidate, shift: [f64; 2]| {
-            let d2 = (c.pixel[0] - g.pixel[0] - shift[0]).powi(2)
-                + (c.pixel[1] - g.pixel[1] - shift[1]).powi(2);
-            (d2 < g.gate_px * g.gate_px && (c.point.z - g.z).abs() <= g.z_gate).then_some(d2)
+        let recover = Recovery {
+            tracker: self,
+            preds,
+            cands,
+            tracks,
         };
-        // (dots landed, summed squared residual, shift)
-        let mut best: Option<(usize, f64, [f64; 2])> = None;
-        for &i in &missing {
-            for &j in &free {
-                let g = &gates_all[i];
-                let shift = [
-                    cands[j].pixel[0] - g.pixel[0],
-                    cands[j].pixel[1] - g.pixel[1],
-                ];
-                if (shift[0] * along[0] + shift[1] * along[1]).abs() > 0.3 * spacing {
-                    continue;
-                }
-                let (mut count, mut residual) = (0, 0.0);
-                for &m in &missing {
-                    let nearest = free
-                        .iter()
-                        .filter_map(|&f| lands(&gates_all[m], &cands[f], shift))
-                        .fold(f64::INFINITY, f64::min);
-                    if nearest.is_finite() {
-                        count += 1;
-                        residual += nearest;
-                    }
-                }
-                if best.is_none_or(|(c, r, _)| count > c || (count == c && residual < r)) {
-                    best = Some((count, residual, shift));
-                }
-            }
-        }
-        if let Some((count, _, shift)) = best.filter(|b| b.0 >= 2) {
-            let moved: Small<(usize, [f64; 2])> = missing
-                .iter()
-                .map(|&i| (i, [preds[i][0] + shift[0], preds[i][1] + shift[1]]))
-                .collect();
-            if try_names(lip, taken, &moved) {
-                tracing::debug!(count, shift_px = ?shift, "lip dots found moved together");
-            }
+        recover.follow_neighbours(lip, taken, solver);
+        if recover.shift_across_lip_line(lip, taken, solver) {
+            recover.follow_neighbours(lip, taken, solver);
         }
     }
 
@@ -1399,6 +1282,173 @@ impl Tracker {
         let opening = (upper_mid - lower_mid).norm() / width.max(1e-9);
         tracing::trace!(worst_rms_mm = worst * 1e3, opening, "calibration window");
         worst <= self.config.still_tolerance_m && opening <= self.config.max_opening_ratio
+    }
+}
+
+/// The second-chance searches of [`Tracker::recover_moved_lips`] over one frame.
+struct Recovery<'a> {
+    tracker: &'a Tracker,
+    /// Per lip dot: its first-pass prediction (pixels).
+    preds: &'a [[f64; 2]],
+    cands: &'a [Candidate],
+    tracks: &'a [DotTrack],
+}
+
+impl Recovery<'_> {
+    /// Names missing dots at moved predictions, with the first pass's gates recomputed for
+    /// this frame's positions (found or predicted). True when any dot was found.
+    fn name_moved(
+        &self,
+        lip: &mut [Option<usize>],
+        taken: &mut [bool],
+        solver: &mut labels::Assignment,
+        moved: &[(usize, [f64; 2])],
+    ) -> bool {
+        if moved.is_empty() {
+            return false;
+        }
+        let n = lip.len();
+        let mut all: Small<[f64; 2]> = (0..n)
+            .map(|i| lip[i].map_or(self.preds[i], |c| self.cands[c].pixel))
+            .collect();
+        for &(i, p) in moved {
+            all[i] = p;
+        }
+        let mut gates = self.tracker.gated(&all, self.tracks, Slot::Lip);
+        self.tracker.gate_depth(&mut gates, self.tracks);
+        let these: Small<labels::Prediction> = moved.iter().map(|&(i, _)| gates[i]).collect();
+        let mut found = false;
+        for (&(i, _), c) in moved
+            .iter()
+            .zip(labels::assign(&these, self.cands, taken, solver))
+        {
+            if let Some(c) = c {
+                lip[i] = Some(c);
+                taken[c] = true;
+                found = true;
+            }
+        }
+        found
+    }
+
+    /// Missing dots next to found ones, moved as those neighbours moved, along the mouth.
+    fn follow_neighbours(
+        &self,
+        lip: &mut [Option<usize>],
+        taken: &mut [bool],
+        solver: &mut labels::Assignment,
+    ) {
+        let n = lip.len();
+        for _ in 0..n {
+            let moved: Small<(usize, [f64; 2])> = (0..n)
+                .filter(|&i| lip[i].is_none())
+                .filter_map(|i| {
+                    let misses: Small<[f64; 2]> = [(i + n - 1) % n, (i + 1) % n]
+                        .iter()
+                        .filter_map(|&j| {
+                            lip[j].map(|c| {
+                                let p = self.cands[c].pixel;
+                                [p[0] - self.preds[j][0], p[1] - self.preds[j][1]]
+                            })
+                        })
+                        .collect();
+                    if misses.is_empty() {
+                        return None;
+                    }
+                    let k = misses.len() as f64;
+                    let dx = misses.iter().map(|m| m[0]).sum::<f64>() / k;
+                    let dy = misses.iter().map(|m| m[1]).sum::<f64>() / k;
+                    Some((i, [self.preds[i][0] + dx, self.preds[i][1] + dy]))
+                })
+                .collect();
+            if !self.name_moved(lip, taken, solver, &moved) {
+                break;
+            }
+        }
+    }
+
+    /// Missing dots between the corners, all moved by the one shift across the lip line
+    /// that lands the most of them (at least two) on free candidates. True when it found
+    /// any.
+    fn shift_across_lip_line(
+        &self,
+        lip: &mut [Option<usize>],
+        taken: &mut [bool],
+        solver: &mut labels::Assignment,
+    ) -> bool {
+        let n = lip.len();
+        let layout = self.tracker.layout;
+        let (left, right) = (layout.left_corner(), layout.right_corner());
+        // Only between seen corners: they anchor the names around the mouth (measured: with
+        // a corner unseen, the shift finds more dots but names more of them wrongly).
+        if lip[left].is_none() || lip[right].is_none() {
+            return false;
+        }
+        let missing: Small<usize> = (0..n)
+            .filter(|&i| lip[i].is_none() && i != left && i != right)
+            .collect();
+        if missing.len() < 2 {
+            return false;
+        }
+        let preds = self.preds;
+        let along = [
+            preds[left][0] - preds[right][0],
+            preds[left][1] - preds[right][1],
+        ];
+        let length = (along[0] * along[0] + along[1] * along[1]).sqrt();
+        if length < 1.0 {
+            return false;
+        }
+        let along = [along[0] / length, along[1] / length];
+        let spacing = 2.0 * length / n as f64;
+        let free: Small<usize> = (0..self.cands.len())
+            .filter(|&j| !taken[j] && self.cands[j].role != DotRole::Forehead)
+            .collect();
+        let mut gates = self.tracker.gated(preds, self.tracks, Slot::Lip);
+        self.tracker.gate_depth(&mut gates, self.tracks);
+        let lands = |g: &labels::Prediction, c: &Candidate, shift: [f64; 2]| {
+            let d2 = (c.pixel[0] - g.pixel[0] - shift[0]).powi(2)
+                + (c.pixel[1] - g.pixel[1] - shift[1]).powi(2);
+            (d2 < g.gate_px * g.gate_px && (c.point.z - g.z).abs() <= g.z_gate).then_some(d2)
+        };
+        // (dots landed, summed squared residual, shift)
+        let mut best: Option<(usize, f64, [f64; 2])> = None;
+        for &i in &missing {
+            for &j in &free {
+                let g = &gates[i];
+                let c = &self.cands[j].pixel;
+                let shift = [c[0] - g.pixel[0], c[1] - g.pixel[1]];
+                if (shift[0] * along[0] + shift[1] * along[1]).abs() > 0.3 * spacing {
+                    continue;
+                }
+                let (mut count, mut residual) = (0, 0.0);
+                for &m in &missing {
+                    let nearest = free
+                        .iter()
+                        .filter_map(|&f| lands(&gates[m], &self.cands[f], shift))
+                        .fold(f64::INFINITY, f64::min);
+                    if nearest.is_finite() {
+                        count += 1;
+                        residual += nearest;
+                    }
+                }
+                if best.is_none_or(|(c, r, _)| count > c || (count == c && residual < r)) {
+                    best = Some((count, residual, shift));
+                }
+            }
+        }
+        let Some((count, _, shift)) = best.filter(|b| b.0 >= 2) else {
+            return false;
+        };
+        let moved: Small<(usize, [f64; 2])> = missing
+            .iter()
+            .map(|&i| (i, [preds[i][0] + shift[0], preds[i][1] + shift[1]]))
+            .collect();
+        let found = self.name_moved(lip, taken, solver, &moved);
+        if found {
+            tracing::debug!(count, shift_px = ?shift, "lip dots found moved together");
+        }
+        found
     }
 }
 
