@@ -2,7 +2,8 @@
 //!
 //! ```toml
 //! lip_dots = 12                 # even, ≥ 4: two corners + the same count on each lip
-//! radius_mm = 2.25              # 2–2.5 mm paint dots
+//! radius_mm = 2.25              # lip dots: 2–2.5 mm paint dots
+//! forehead_radius_mm = 4.0      # forehead dots: larger (skin there does not move)
 //! lip_color = [40, 200, 70]     # RGB
 //! forehead_color = [40, 90, 230]
 //! [[forehead]]                  # optional; default F1..F3 below
@@ -32,6 +33,9 @@ pub struct ForeheadDot {
 pub struct DotLayout {
     pub lip_dots: usize,
     pub radius_mm: f64,
+    /// Forehead dots' radius: they can be larger than the lip dots (the forehead does not
+    /// move with speech), and a larger dot gives the head pose a steadier centre and depth.
+    pub forehead_radius_mm: f64,
     pub lip_color: [u8; 3],
     pub forehead_color: [u8; 3],
     pub forehead: Vec<ForeheadDot>,
@@ -47,6 +51,7 @@ impl Default for DotLayout {
         Self {
             lip_dots: 12,
             radius_mm: crate::DEFAULT_DOT_RADIUS_M * 1000.0,
+            forehead_radius_mm: 4.0,
             lip_color: crate::LIP_DOT_RGB,
             forehead_color: crate::FOREHEAD_DOT_RGB,
             // A wide, tall triangle (70 × 40 mm): the head pose rests on depth and pixel
@@ -92,6 +97,12 @@ impl DotLayout {
             return Err(format!(
                 "radius_mm must be within 1–4 mm, got {}",
                 self.radius_mm
+            ));
+        }
+        if !(1.0..=6.0).contains(&self.forehead_radius_mm) {
+            return Err(format!(
+                "forehead_radius_mm must be within 1–6 mm, got {}",
+                self.forehead_radius_mm
             ));
         }
         if self.forehead.len() < 3 {

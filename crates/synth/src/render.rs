@@ -34,6 +34,8 @@ struct Dot {
     metric: [f32; 2],
     /// Linear RGB paint.
     paint: [f32; 3],
+    /// Paint radius, metres.
+    radius_m: f64,
     is_lip: bool,
 }
 
@@ -155,7 +157,6 @@ impl View {
 pub(crate) struct Renderer {
     geo: Geometry,
     dots: Vec<Dot>,
-    radius_m: f64,
     distance: f64,
     noise: NoiseModel,
     effects: bool,
@@ -294,6 +295,11 @@ impl Renderer {
                 } else {
                     layout.forehead_color
                 }),
+                radius_m: if is_lip {
+                    layout.radius_mm
+                } else {
+                    layout.forehead_radius_mm
+                } / 1000.0,
                 is_lip,
             });
         }
@@ -323,7 +329,6 @@ impl Renderer {
         let n = geo.attrs.len();
         Self {
             dots,
-            radius_m: layout.radius_mm / 1000.0,
             distance: cfg.distance_m,
             noise: cfg.noise,
             effects: cfg.colour_effects,
@@ -428,8 +433,8 @@ impl Renderer {
         let mut points = std::collections::BTreeMap::new();
         let mut visible = std::collections::BTreeMap::new();
         let mut lip_px = Vec::with_capacity(self.dots.len());
-        let r2 = (self.radius_m * self.radius_m) as f32;
         for dot in &self.dots {
+            let r2 = (dot.radius_m * dot.radius_m) as f32;
             let centre = to_camera(head::deform(&dot.attrs, mouth));
             points.insert(dot.name.clone(), centre);
             let px = self.color_view.project(centre);
@@ -448,7 +453,7 @@ impl Renderer {
                 }
                 // Paint every pixel whose surface is this dot's material.
                 let reach =
-                    (self.radius_m * self.color_view.k.fx / centre[2] * 2.0 + 3.0).ceil() as i64;
+                    (dot.radius_m * self.color_view.k.fx / centre[2] * 2.0 + 3.0).ceil() as i64;
                 let (xa, xb) = ((cu - reach).max(0), (cu + reach).min(buf.w as i64 - 1));
                 let (ya, yb) = ((cv - reach).max(0), (cv + reach).min(buf.h as i64 - 1));
                 for y in ya..=yb {
