@@ -1031,9 +1031,10 @@ impl Tracker {
     /// 1. a missing dot next to a found one is looked for where its prediction lands when
     ///    moved as that neighbour moved (its miss against its own prediction), repeated
     ///    along the mouth while it finds dots;
-    /// 2. when both corners are found, lip dots still missing are looked for with one
-    ///    common shift of their predictions across the lip line (a jaw's motion), the shift
-    ///    that lands the most of them (at least two) on free candidates; then 1 again.
+    /// 2. lip dots between the corners still missing are looked for with one common shift
+    ///    of their predictions across the lip line (a jaw's motion), the shift that lands
+    ///    the most of them on free candidates (at least two, or with a corner unseen all
+    ///    of them and at least three); then 1 again.
     ///    Shifts along the lip line are not tried: a shift of one dot spacing along the lip
     ///    would land each prediction on its neighbour.
     ///
@@ -1379,11 +1380,10 @@ impl Recovery<'_> {
         let n = lip.len();
         let layout = self.tracker.layout;
         let (left, right) = (layout.left_corner(), layout.right_corner());
-        // Only between seen corners: they anchor the names around the mouth (measured: with
-        // a corner unseen, the shift finds more dots but names more of them wrongly).
-        if lip[left].is_none() || lip[right].is_none() {
-            return false;
-        }
+        // Corners anchor the names around the mouth: with one unseen, only a shift that
+        // lands every missing dot (at least three) counts (measured: a looser rule finds a
+        // few more dots but names more of them wrongly).
+        let corners_seen = lip[left].is_some() && lip[right].is_some();
         let missing: Small<usize> = (0..n)
             .filter(|&i| lip[i].is_none() && i != left && i != right)
             .collect();
@@ -1437,7 +1437,14 @@ impl Recovery<'_> {
                 }
             }
         }
-        let Some((count, _, shift)) = best.filter(|b| b.0 >= 2) else {
+        let enough = |count: usize| {
+            if corners_seen {
+                count >= 2
+            } else {
+                count >= 3 && count >= missing.len()
+            }
+        };
+        let Some((count, _, shift)) = best.filter(|b| enough(b.0)) else {
             return false;
         };
         let moved: Small<(usize, [f64; 2])> = missing
