@@ -368,19 +368,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 mod tests {
     use super::*;
 
-    /// A short session rendered now, measured against its ground truth. The thresholds guard
-    /// what the pipeline achieves today (README's table); the targets are stricter and
-    /// not all met yet (docs/detection.md says which).
-    #[test]
-    fn synthetic_session_is_tracked_against_ground_truth() {
+    /// Figures a short session must reach (README's table is the 12-session measurement).
+    struct Guard {
+        found_pct: f64,
+        wrong: usize,
+        rms_mm: f64,
+        head_deg: f64,
+        char_pct: f64,
+    }
+
+    /// Renders a 4 s session now, measures it against its ground truth and holds it to the
+    /// figures the pipeline reached when this was written (regression guards, a little
+    /// looser than measured; the targets are in docs/detection.md).
+    fn session_holds(synth: SynthConfig, guard: Guard) {
         let character =
             Character::from_toml_str(include_str!("../../../../config/characters/human.toml"))
                 .unwrap();
-        let synth = SynthConfig {
-            seed: 3,
-            seconds: 4.0,
-            ..SynthConfig::default()
-        };
         let m = evaluate(synth, &PipelineConfig::default(), &character, 1.0).unwrap();
         let calibrated = m.calibrated_at.expect("neutral pose taken");
         assert!(
@@ -388,23 +391,58 @@ mod tests {
             "calibrated at {calibrated} s"
         );
         assert!(m.frames >= 89 && m.visible > 1000, "{m:?}");
-        assert!(
-            m.found_pct() > 90.0,
-            "found and named {:.2} %",
-            m.found_pct()
-        );
-        assert!(
-            (m.wrong as f64) < 0.03 * m.visible as f64,
-            "wrongly named {} of {}",
+        let figures = format!(
+            "found and named {:.2} %, {} wrong of {}, 3D RMS {:.2} mm, head RMS {:.2}°, character RMS {:.2} % of its width",
+            m.found_pct(),
             m.wrong,
-            m.visible
-        );
-        assert!(m.rms_mm() < 2.5, "3D RMS {:.2} mm", m.rms_mm());
-        assert!(m.head_rms_deg() < 3.0, "head RMS {:.2}°", m.head_rms_deg());
-        assert!(
-            m.char_rms_pct() < 15.0,
-            "character RMS {:.2} % of its width",
+            m.visible,
+            m.rms_mm(),
+            m.head_rms_deg(),
             m.char_rms_pct()
+        );
+        assert!(m.found_pct() >= guard.found_pct, "{figures}");
+        assert!(m.wrong <= guard.wrong, "{figures}");
+        assert!(m.rms_mm() <= guard.rms_mm, "{figures}");
+        assert!(m.head_rms_deg() <= guard.head_deg, "{figures}");
+        assert!(m.char_rms_pct() <= guard.char_pct, "{figures}");
+    }
+
+    #[test]
+    fn synthetic_session_is_tracked_against_ground_truth() {
+        // Measured: 100 % found and named, none wrong, 1.25 mm, 0.57°, 2.87 %.
+        session_holds(
+            SynthConfig {
+                seed: 3,
+                seconds: 4.0,
+                ..SynthConfig::default()
+            },
+            Guard {
+                found_pct: 99.5,
+                wrong: 0,
+                rms_mm: 1.5,
+                head_deg: 0.8,
+                char_pct: 3.5,
+            },
+        );
+    }
+
+    #[test]
+    fn strong_head_motion_is_tracked_against_ground_truth() {
+        // Measured: 98.42 % found and named, 3 wrong of 1327, 1.27 mm, 0.67°, 4.98 %.
+        session_holds(
+            SynthConfig {
+                seed: 2,
+                seconds: 4.0,
+                head_motion: HeadMotion::Strong,
+                ..SynthConfig::default()
+            },
+            Guard {
+                found_pct: 98.0,
+                wrong: 5,
+                rms_mm: 1.5,
+                head_deg: 0.9,
+                char_pct: 6.0,
+            },
         );
     }
 
