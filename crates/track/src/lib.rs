@@ -1036,7 +1036,10 @@ impl Tracker {
     ///    the most of them on free candidates (at least two, or with a corner unseen all
     ///    of them and at least three); then 1 again.
     ///    Shifts along the lip line are not tried: a shift of one dot spacing along the lip
-    ///    would land each prediction on its neighbour.
+    ///    would land each prediction on its neighbour;
+    /// 3. a dot that stayed at its prediction while the lip beside it jumped has likely
+    ///    taken its own motion-blur ghost: it takes the blob its neighbour's motion points to
+    ///    ([`Recovery::leave_ghosts`]).
     ///
     /// Same gates (pixel and depth) as the first pass, candidates nobody took.
     fn recover_moved_lips(
@@ -1061,6 +1064,7 @@ impl Tracker {
         if recover.shift_across_lip_line(lip, taken, solver) {
             recover.follow_neighbours(lip, taken, solver);
         }
+        recover.leave_ghosts(lip, taken);
     }
 
     /// Gate per prediction: a fraction of the distance to the nearest other prediction of the
@@ -1330,6 +1334,62 @@ impl Recovery<'_> {
             }
         }
         found
+    }
+
+    /// A lip dot that stayed where it was while a neighbour jumped has probably taken the
+    /// motion blur's ghost of itself (the exposure also saw where the lip just was): when a
+    /// free candidate lies where the neighbour's motion puts the dot, within its gate, the
+    /// dot takes that one instead and the ghost is left.
+    fn leave_ghosts(&self, lip: &mut [Option<usize>], taken: &mut [bool]) {
+        let n = lip.len();
+        let mut gates = self.tracker.gated(self.preds, self.tracks, Slot::Lip);
+        self.tracker.gate_depth(&mut gates, self.tracks);
+        let miss = |lip: &[Option<usize>], i: usize| {
+            lip[i].map(|c| {
+                let p = self.cands[c].pixel;
+                [p[0] - self.preds[i][0], p[1] - self.preds[i][1]]
+            })
+        };
+        let norm = |v: [f64; 2]| (v[0] * v[0] + v[1] * v[1]).sqrt();
+        let layout = self.tracker.layout;
+        let is_corner = |i: usize| i == layout.left_corner() || i == layout.right_corner();
+        // Corners neither move nor lead: a corner moves about half as far as the lip beside
+        // it, and a corner name is the one most often on the wrong blob.
+        for i in (0..n).filter(|&i| !is_corner(i)) {
+            let Some(own) = miss(lip, i) else { continue };
+            let g = gates[i];
+            // The neighbour that moved most beyond its prediction.
+            let Some(moved) = [(i + n - 1) % n, (i + 1) % n]
+                .iter()
+                .filter(|&&j| !is_corner(j))
+                .filter_map(|&j| miss(lip, j))
+                .max_by(|a, b| norm(*a).total_cmp(&norm(*b)))
+            else {
+                continue;
+            };
+            if norm(moved) <= g.gate_px || norm([own[0] - moved[0], own[1] - moved[1]]) <= g.gate_px
+            {
+                continue;
+            }
+            let target = [self.preds[i][0] + moved[0], self.preds[i][1] + moved[1]];
+            let better = (0..self.cands.len())
+                .filter(|&j| !taken[j] && self.cands[j].role != DotRole::Forehead)
+                .filter(|&j| (self.cands[j].point.z - g.z).abs() <= g.z_gate)
+                .map(|j| {
+                    let p = self.cands[j].pixel;
+                    (j, norm([p[0] - target[0], p[1] - target[1]]))
+                })
+                .filter(|&(_, d)| d < g.gate_px)
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((j, _)) = better {
+                if let Some(old) = lip[i] {
+                    taken[old] = false;
+                }
+                lip[i] = Some(j);
+                taken[j] = true;
+                tracing::debug!(dot = %PerformerLayout::lip_name(i), "stayed while its neighbour moved: took the blob the neighbour's motion points to");
+            }
+        }
     }
 
     /// Missing dots next to found ones, moved as those neighbours moved, along the mouth.
