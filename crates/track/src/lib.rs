@@ -727,8 +727,24 @@ impl Tracker {
         let now = |names: &[Option<usize>], i: usize| {
             names[i].map(|c| frame.to_mouth(&inverse.apply(&cands[c].point)))
         };
-        let last = |i: usize| (tracks[i].missing <= 30).then(|| frame.to_mouth(&tracks[i].stab));
         let (left, right) = (self.layout.left_corner(), self.layout.right_corner());
+        let is_corner = |i: usize| i == left || i == right;
+        // Where an unseen dot is taken to be: where it was, if lately; a dot beside a corner
+        // unseen for longer, from the next dot along its lip as seen now plus their offset
+        // at rest (the mouth moves on while a dot is unseen).
+        let last = |names: &[Option<usize>], i: usize| {
+            let track = &tracks[i];
+            if track.missing > 2 && !is_corner(i) {
+                let beyond = [(i + n - 1) % n, (i + 1) % n]
+                    .into_iter()
+                    .find(|&k| !is_corner(k))
+                    .expect("a dot beside a corner has a lip dot on its other side");
+                if let Some(q) = now(names, beyond) {
+                    return Some(q + (neutral.lip[i] - neutral.lip[beyond]));
+                }
+            }
+            (track.missing <= 30).then(|| frame.to_mouth(&track.stab))
+        };
         // (outer or upper dot, inner or lower dot, axis): `outer` stays beyond `inner` along
         // the axis (x for the left corner, -x for the right one, y for upper over lower).
         let x = Vec3::x();
@@ -748,11 +764,15 @@ impl Tracker {
             }
             let margin = 0.4 * gap;
             match (now(names, outer), now(names, inner)) {
-                (None, Some(q)) if last(outer).is_some_and(|o| (o - q).dot(&axis) < margin) => {
+                (None, Some(q))
+                    if last(names, outer).is_some_and(|o| (o - q).dot(&axis) < margin) =>
+                {
                     tracing::debug!(dot = %PerformerLayout::lip_name(inner), "where an unseen neighbour was; name dropped");
                     names[inner] = None;
                 }
-                (Some(q), None) if last(inner).is_some_and(|i| (q - i).dot(&axis) < margin) => {
+                (Some(q), None)
+                    if last(names, inner).is_some_and(|i| (q - i).dot(&axis) < margin) =>
+                {
                     tracing::debug!(dot = %PerformerLayout::lip_name(outer), "where an unseen neighbour was; name dropped");
                     names[outer] = None;
                 }
