@@ -757,15 +757,36 @@ impl Tracker {
             ((left + 1) % n, (left + n - 1) % n, y),
             (right - 1, right + 1, y),
         ];
+        // A corner unseen for a while, checked against one neighbour, from its other
+        // neighbour as seen now plus their rest offset (a mouth pursing moves the corners in).
+        let corner_ref = |names: &[Option<usize>], corner: usize, against: usize| {
+            let other = [(corner + n - 1) % n, (corner + 1) % n]
+                .into_iter()
+                .find(|&k| k != against)
+                .expect("a corner has two neighbours");
+            match now(names, other) {
+                Some(q) if tracks[corner].missing > 2 => {
+                    Some(q + (neutral.lip[corner] - neutral.lip[other]))
+                }
+                _ => last(names, corner),
+            }
+        };
         for (outer, inner, axis) in pairs {
             let gap = (neutral.lip[outer] - neutral.lip[inner]).dot(&axis);
             if gap <= 0.0 {
                 continue;
             }
             let margin = 0.4 * gap;
+            let outer_ref = |names: &[Option<usize>]| {
+                if is_corner(outer) {
+                    corner_ref(names, outer, inner)
+                } else {
+                    last(names, outer)
+                }
+            };
             match (now(names, outer), now(names, inner)) {
                 (None, Some(q))
-                    if last(names, outer).is_some_and(|o| (o - q).dot(&axis) < margin) =>
+                    if outer_ref(names).is_some_and(|o| (o - q).dot(&axis) < margin) =>
                 {
                     tracing::debug!(dot = %PerformerLayout::lip_name(inner), "where an unseen neighbour was; name dropped");
                     names[inner] = None;
