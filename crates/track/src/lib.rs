@@ -735,12 +735,12 @@ impl Tracker {
         let last = |names: &[Option<usize>], i: usize| {
             let track = &tracks[i];
             if track.missing > 2 && !is_corner(i) {
-                let beyond = [(i + n - 1) % n, (i + 1) % n]
+                let seen = [(i + n - 1) % n, (i + 1) % n]
                     .into_iter()
-                    .find(|&k| !is_corner(k))
-                    .expect("a dot beside a corner has a lip dot on its other side");
-                if let Some(q) = now(names, beyond) {
-                    return Some(q + (neutral.lip[i] - neutral.lip[beyond]));
+                    .filter(|&k| !is_corner(k))
+                    .find_map(|k| now(names, k).map(|q| (k, q)));
+                if let Some((k, q)) = seen {
+                    return Some(q + (neutral.lip[i] - neutral.lip[k]));
                 }
             }
             (track.missing <= 30).then(|| frame.to_mouth(&track.stab))
@@ -749,14 +749,15 @@ impl Tracker {
         // the axis (x for the left corner, -x for the right one, y for upper over lower).
         let x = Vec3::x();
         let y = Vec3::y();
-        let pairs = [
+        let corners = [
             (left, (left + 1) % n, x),
             (left, (left + n - 1) % n, x),
             (right, right - 1, -x),
             (right, right + 1, -x),
-            ((left + 1) % n, (left + n - 1) % n, y),
-            (right - 1, right + 1, y),
         ];
+        // Each upper-lip dot over the lower-lip dot opposite it (D2 over D12, … D6 over D8).
+        let lips = (1..right).map(|u| (u, n - u, y));
+        let pairs = corners.into_iter().chain(lips);
         // A corner unseen for a while, checked against one neighbour, from its other
         // neighbour as seen now plus their rest offset (a mouth pursing moves the corners in).
         let corner_ref = |names: &[Option<usize>], corner: usize, against: usize| {
