@@ -376,6 +376,73 @@ fn names_slipped_around_the_mouth_are_caught_by_the_corners() {
 }
 
 #[test]
+fn a_name_slipped_onto_an_unseen_neighbours_place_is_dropped() {
+    let mut tr = tracker();
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    for seq in 0..40 {
+        tr.process(&render(seq, &still, &[])).unwrap();
+    }
+    assert!(tr.neutral().is_some(), "calibrated");
+    let k = Intrinsics::default_vga();
+    let cands: Vec<Candidate> = still
+        .iter()
+        .enumerate()
+        .map(|(i, p)| Candidate {
+            pixel: camera::project(&k, p).unwrap(),
+            point: *p,
+            role: if i < 12 {
+                DotRole::Lip
+            } else {
+                DotRole::Forehead
+            },
+        })
+        .collect();
+    let right: Vec<Option<usize>> = (0..15).map(Some).collect();
+    let check = |names: &[Option<usize>]| {
+        let mut names = names.to_vec();
+        tr.keep_corner_neighbours_in_place(&mut names, &cands);
+        names
+    };
+    assert_eq!(check(&right), right, "right names stay");
+    // D1 (left corner) unseen, D2 on its blob: in order around the mouth, but out where the
+    // corner is.
+    let mut slipped = right.clone();
+    slipped[0] = None;
+    slipped[1] = Some(0);
+    assert_eq!(check(&slipped)[1], None);
+    // D2 unseen, D1 on D2's blob: not out beyond where D2 is.
+    let mut slipped = right.clone();
+    slipped[1] = None;
+    slipped[0] = Some(1);
+    assert_eq!(check(&slipped)[0], None);
+    // D4 unseen, D10 on its blob: a lower-lip dot over the upper lip.
+    let mut slipped = right.clone();
+    slipped[3] = None;
+    slipped[9] = Some(3);
+    assert_eq!(check(&slipped)[9], None);
+    // A corner unseen and its neighbours in place: nothing to drop.
+    let mut missing = right.clone();
+    missing[6] = None;
+    assert_eq!(check(&missing), missing);
+}
+
+#[test]
+fn a_jaw_dropping_between_two_frames_keeps_the_lower_lip_named() {
+    let mut tr = tracker();
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    for seq in 0..40 {
+        tr.process(&render(seq, &still, &[])).unwrap();
+    }
+    // The jaw drops 14 mm in one frame (12 px at 0.6 m), more than the gates: the lower lip
+    // moves together, and is found where its found neighbours' motion puts it.
+    let open = posed(0.014, &RigidTransform::IDENTITY);
+    let out = tr.process(&render(40, &open, &[])).unwrap();
+    assert_named_correctly(out, &open, &[], 0.0015);
+    let out = tr.process(&render(41, &still, &[])).unwrap();
+    assert_named_correctly(out, &still, &[], 0.0015);
+}
+
+#[test]
 fn forehead_depth_jitter_is_filtered() {
     // A still face whose whole depth image jumps by up to ±2 mm from frame to frame (noise
     // correlated over the patch, which the plane fit cannot average away).
