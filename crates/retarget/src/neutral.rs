@@ -142,31 +142,24 @@ impl NeutralAccumulator {
             }
             reference = self.mean_forehead(&registered);
         }
-        let lip = (0..self.layout.lip_dots)
-            .map(|i| {
-                robust_mean(
-                    &registered
-                        .iter()
-                        .filter_map(|f| f.lip[i])
-                        .collect::<Vec<_>>(),
-                )
-            })
-            .collect();
+        let lip = means(&registered, self.layout.lip_dots, |f, i| f.lip[i]);
         NeutralPose::from_positions(self.layout, lip, reference, self.frames.len())
     }
 
     fn mean_forehead(&self, frames: &[PerformerDots]) -> Vec<Option<Vec3>> {
-        (0..self.layout.forehead_dots)
-            .map(|j| {
-                robust_mean(
-                    &frames
-                        .iter()
-                        .filter_map(|f| f.forehead[j])
-                        .collect::<Vec<_>>(),
-                )
-            })
-            .collect()
+        means(frames, self.layout.forehead_dots, |f, j| f.forehead[j])
     }
+}
+
+/// Per dot `0..count`, the robust mean of its positions over the frames that saw it.
+fn means(
+    frames: &[PerformerDots],
+    count: usize,
+    dot: impl Fn(&PerformerDots, usize) -> Option<Vec3>,
+) -> Vec<Option<Vec3>> {
+    (0..count)
+        .map(|i| robust_mean(&frames.iter().filter_map(|f| dot(f, i)).collect::<Vec<_>>()))
+        .collect()
 }
 
 /// Mean of the samples after rejecting outliers: a sample is dropped when, on any axis, it is

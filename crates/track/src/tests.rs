@@ -142,6 +142,35 @@ fn tracker() -> Tracker {
     Tracker::new(DetectConfig::default(), TrackConfig::default()).unwrap()
 }
 
+/// A tracker that has seen the still face long enough to take its neutral pose.
+fn calibrated_tracker() -> Tracker {
+    let mut tr = tracker();
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    for seq in 0..40 {
+        tr.process(&render(seq, &still, &[])).unwrap();
+    }
+    assert!(tr.neutral().is_some(), "calibrated");
+    tr
+}
+
+/// Candidates exactly at the given dots, in their order (D1..D12, F1..F3).
+fn candidates(truth: &[Vec3]) -> Vec<Candidate> {
+    let k = Intrinsics::default_vga();
+    truth
+        .iter()
+        .enumerate()
+        .map(|(i, p)| Candidate {
+            pixel: camera::project(&k, p).unwrap(),
+            point: *p,
+            role: if i < 12 {
+                DotRole::Lip
+            } else {
+                DotRole::Forehead
+            },
+        })
+        .collect()
+}
+
 fn assert_named_correctly(out: &TrackedFrame, truth: &[Vec3], hidden: &[usize], tol_m: f64) {
     let all: Vec<Option<Vec3>> = out
         .dots
@@ -333,28 +362,10 @@ fn bad_configuration_names_the_key() {
 
 #[test]
 fn names_slipped_around_the_mouth_are_caught_by_the_corners() {
-    let mut tr = tracker();
-    let still = posed(0.0, &RigidTransform::IDENTITY);
-    for seq in 0..40 {
-        tr.process(&render(seq, &still, &[])).unwrap();
-    }
-    assert!(tr.neutral().is_some(), "calibrated");
+    let tr = calibrated_tracker();
     // Later, the head turned and the jaw open: candidates in truth order (D1..D12, F1..F3).
     let truth = posed(0.006, &head(10.0, 4.0, Vec3::new(0.005, 0.0, 0.0)));
-    let k = Intrinsics::default_vga();
-    let cands: Vec<Candidate> = truth
-        .iter()
-        .enumerate()
-        .map(|(i, p)| Candidate {
-            pixel: camera::project(&k, p).unwrap(),
-            point: *p,
-            role: if i < 12 {
-                DotRole::Lip
-            } else {
-                DotRole::Forehead
-            },
-        })
-        .collect();
+    let cands = candidates(&truth);
     let right: Vec<Option<usize>> = (0..15).map(Some).collect();
     assert!(tr.corners_are_extremes(&right, &cands));
     // Every lip name one place on around the mouth: still in order, but D7 (the right corner)
@@ -377,26 +388,8 @@ fn names_slipped_around_the_mouth_are_caught_by_the_corners() {
 
 #[test]
 fn a_name_slipped_onto_an_unseen_neighbours_place_is_dropped() {
-    let mut tr = tracker();
-    let still = posed(0.0, &RigidTransform::IDENTITY);
-    for seq in 0..40 {
-        tr.process(&render(seq, &still, &[])).unwrap();
-    }
-    assert!(tr.neutral().is_some(), "calibrated");
-    let k = Intrinsics::default_vga();
-    let cands: Vec<Candidate> = still
-        .iter()
-        .enumerate()
-        .map(|(i, p)| Candidate {
-            pixel: camera::project(&k, p).unwrap(),
-            point: *p,
-            role: if i < 12 {
-                DotRole::Lip
-            } else {
-                DotRole::Forehead
-            },
-        })
-        .collect();
+    let tr = calibrated_tracker();
+    let cands = candidates(&posed(0.0, &RigidTransform::IDENTITY));
     let right: Vec<Option<usize>> = (0..15).map(Some).collect();
     let check = |names: &[Option<usize>]| {
         let mut names = names.to_vec();
@@ -428,11 +421,8 @@ fn a_name_slipped_onto_an_unseen_neighbours_place_is_dropped() {
 
 #[test]
 fn a_jaw_dropping_between_two_frames_keeps_the_lower_lip_named() {
-    let mut tr = tracker();
+    let mut tr = calibrated_tracker();
     let still = posed(0.0, &RigidTransform::IDENTITY);
-    for seq in 0..40 {
-        tr.process(&render(seq, &still, &[])).unwrap();
-    }
     // The jaw drops 14 mm in one frame (12 px at 0.6 m), more than the gates: the lower lip
     // moves together, and is found where its found neighbours' motion puts it.
     let open = posed(0.014, &RigidTransform::IDENTITY);
