@@ -104,9 +104,10 @@ pub struct TrackConfig {
     pub min_gate_px: f64,
     /// Gate as a fraction of the distance to the nearest other predicted dot.
     pub gate_fraction: f64,
-    /// Largest difference between a lip candidate's depth and the dot's predicted depth,
-    /// metres (motion blur leaves a ghost of a lip dot over the open mouth, deeper by a
-    /// centimetre or more; the lips move a few millimetres in depth between frames).
+    /// Largest difference between a lip candidate's depth and the dot's depth when last
+    /// seen, metres (motion blur leaves a ghost of a lip dot over the open mouth, deeper by
+    /// a centimetre or more; the lips move a few millimetres in depth between frames).
+    /// Widened by a fifth per frame the dot has been missing, up to 10 frames.
     pub lip_depth_gate_m: f64,
     /// After this many frames with no dot named, forget the names and re-acquire from geometry.
     pub lost_after_frames: u32,
@@ -708,14 +709,14 @@ impl Tracker {
         }
     }
 
-    /// Around a corner, with one of two dots unseen, names can slip by one place without
-    /// breaking the order around the mouth: the dot next to the corner named on the corner's
-    /// blob, the corner on its neighbour's, or the upper-lip dot next to the corner on the
-    /// lower-lip dot's. In the neutral mouth frame (head motion removed) a corner stays out
-    /// beyond its two neighbours, and the upper neighbour above the lower one, by at least
+    /// With one of two neighbouring dots unseen, names can slip by one place without breaking
+    /// the order around the mouth: the dot next to a corner named on the corner's blob, the
+    /// corner on its neighbour's, a lower-lip dot on the upper-lip blob above it. In the
+    /// neutral mouth frame (head motion removed) a corner stays out beyond its two
+    /// neighbours, and each upper-lip dot above the lower-lip dot opposite it, by at least
     /// 40 % of their gap at rest; with one of the two unseen, the seen one is held to that
-    /// against where the other was last (if it was seen lately). A name that breaks it is
-    /// dropped (missing beats wrong).
+    /// against where the unseen one is taken to be. A name that breaks it is dropped (missing
+    /// beats wrong).
     fn keep_corner_neighbours_in_place(&self, names: &mut [Option<usize>], cands: &[Candidate]) {
         let (Some(stab), Some(tracks)) = (&self.stabiliser, &self.tracks) else {
             return;
@@ -729,9 +730,9 @@ impl Tracker {
         };
         let (left, right) = (self.layout.left_corner(), self.layout.right_corner());
         let is_corner = |i: usize| i == left || i == right;
-        // Where an unseen dot is taken to be: where it was, if lately; a dot beside a corner
-        // unseen for longer, from the next dot along its lip as seen now plus their offset
-        // at rest (the mouth moves on while a dot is unseen).
+        // Where an unseen dot is taken to be: where it was, if lately; a lip dot unseen for
+        // longer, from a seen lip neighbour (not a corner) plus their offset at rest (the
+        // mouth moves on while a dot is unseen); else where it was, up to 30 frames back.
         let last = |names: &[Option<usize>], i: usize| {
             let track = &tracks[i];
             if track.missing > 2 && !is_corner(i) {
