@@ -1077,7 +1077,7 @@ impl Tracker {
     /// 2. lip dots between the corners still missing are looked for with one common shift
     ///    of their predictions across the lip line (a jaw's motion), the shift that lands
     ///    the most of them on free candidates (at least two, or with a corner unseen all
-    ///    of them and at least three); then 1 again.
+    ///    of them but one and at least three); then 1 again.
     ///    Shifts along the lip line are not tried: a shift of one dot spacing along the lip
     ///    would land each prediction on its neighbour;
     /// 3. a dot that stayed at its prediction while the lip beside it jumped has likely
@@ -1484,8 +1484,8 @@ impl Recovery<'_> {
         let layout = self.tracker.layout;
         let (left, right) = (layout.left_corner(), layout.right_corner());
         // Corners anchor the names around the mouth: with one unseen, only a shift that
-        // lands every missing dot (at least three) counts (measured: a looser rule finds a
-        // few more dots but names more of them wrongly).
+        // lands all missing dots but one (at least three) counts (measured: at least two
+        // finds a few more dots but names more of them wrongly; all of them finds fewer).
         let corners_seen = lip[left].is_some() && lip[right].is_some();
         let missing: Small<usize> = (0..n)
             .filter(|&i| lip[i].is_none() && i != left && i != right)
@@ -1544,7 +1544,7 @@ impl Recovery<'_> {
             if corners_seen {
                 count >= 2
             } else {
-                count >= 3 && count >= missing.len()
+                count >= 3 && count + 1 >= missing.len()
             }
         };
         let Some((count, _, shift)) = best.filter(|b| enough(b.0)) else {
