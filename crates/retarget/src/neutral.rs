@@ -112,37 +112,44 @@ impl NeutralAccumulator {
         if self.frames.is_empty() {
             return Err(Error::NeutralEmpty);
         }
-        let mut registered = self.frames.clone();
-        let mut reference = self.mean_forehead(&registered);
+        // Empty: the frames as pushed (no head motion could be measured in any).
+        let mut registered: Vec<PerformerDots> = Vec::new();
+        let mut reference = self.mean_forehead(&self.frames);
         for _ in 0..2 {
             let seen: Vec<Vec3> = reference.iter().flatten().copied().collect();
             if !spans_plane(&seen) {
                 break;
             }
-            registered.clear();
-            for frame in &self.frames {
-                let (from, to): (Vec<Vec3>, Vec<Vec3>) = frame
-                    .forehead
-                    .iter()
-                    .zip(&reference)
-                    .filter_map(|(p, r)| Some(((*p)?, (*r)?)))
-                    .unzip();
-                // A frame whose head motion cannot be measured cannot be registered.
-                if let Some(motion) = crate::kabsch::kabsch(&from, &to) {
+            registered = self
+                .frames
+                .iter()
+                .filter_map(|frame| {
+                    let (from, to): (Vec<Vec3>, Vec<Vec3>) = frame
+                        .forehead
+                        .iter()
+                        .zip(&reference)
+                        .filter_map(|(p, r)| Some(((*p)?, (*r)?)))
+                        .unzip();
+                    // A frame whose head motion cannot be measured cannot be registered.
+                    let motion = crate::kabsch::kabsch(&from, &to)?;
                     let carry = |d: &Option<Vec3>| d.map(|p| motion.apply(&p));
-                    registered.push(PerformerDots {
+                    Some(PerformerDots {
                         lip: frame.lip.iter().map(carry).collect(),
                         forehead: frame.forehead.iter().map(carry).collect(),
-                    });
-                }
-            }
+                    })
+                })
+                .collect();
             if registered.is_empty() {
-                registered = self.frames.clone();
                 break;
             }
             reference = self.mean_forehead(&registered);
         }
-        let lip = means(&registered, self.layout.lip_dots, |f, i| f.lip[i]);
+        let frames = if registered.is_empty() {
+            &self.frames
+        } else {
+            &registered
+        };
+        let lip = means(frames, self.layout.lip_dots, |f, i| f.lip[i]);
         NeutralPose::from_positions(self.layout, lip, reference, self.frames.len())
     }
 

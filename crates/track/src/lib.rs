@@ -990,7 +990,7 @@ impl Tracker {
             .unzip();
         let head = kabsch(&from, &to).unwrap_or(self.head);
 
-        let lip_points: Small<Vec3> = tracks[..n]
+        let lip_preds: Small<[f64; 2]> = tracks[..n]
             .iter()
             .map(|t| {
                 let q = if t.missing == 0 {
@@ -998,120 +998,31 @@ impl Tracker {
                 } else {
                     t.stab
                 };
-                head.apply(&q)
+                camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
             })
             .collect();
-        let lip_preds: Small<[f64; 2]> = lip_points
-            .iter()
-            .zip(&tracks[..n])
-            .map(|(p, t)| camera::project(k, p).unwrap_or(t.pixel))
-            .collect();
-        let mut gates = self.gated(&lip_preds, &tracks[..n], Slot::Lip);
-        self.gate_depth(&mut gates, &tracks[..n]);
+        let gates = self.gated(&lip_preds, &tracks[..n], Slot::Lip);
         let mut lip = labels::assign(&gates, cands, &taken, solver);
-        self.recover_moved_lips(
-            &mut lip,
-            &lip_preds,
-            cands,
-            &mut taken,
-            &tracks[..n],
-            solver,
-        );
-
-        // Last chance for lip dots still missing: the lips move together (the jaw carries
-        // the whole lower lip), so predict each from its neighbours along the mouth as found
-        // now, keeping its rest offset to them. Only dots with a found neighbour, only blobs
-        // nobody took, same gates.
-        if lip.iter().any(Option::is_none) {
-            for c in lip.iter().flatten() {
-                taken[*c] = true;
-            }
-            let inverse = head.inverse();
-            let mut preds: Small<[f64; 2]> = Small::new();
-            let mut which: Small<usize> = Small::new();
-            for i in (0..n).filter(|&i| lip[i].is_none()) {
-                let mut sum = Vec3::zeros();
-                let mut count = 0.0;
-                for j in [(i + n - 1) % n, (i + 1) % n] {
-                    if let Some(c) = lip[j] {
-                        let now = inverse.apply(&cands[c].point);
-                        sum += now + (self.rest[i] - self.rest[j]);
-                        count += 1.0;
-                    }
-                }
-                if count > 0.0 {
-                    if let Some(px) = camera::project(k, &head.apply(&(sum / count))) {
-                        preds.push(px);
-                        which.push(i);
-                    }
-                }
-            }
-            if !preds.is_empty() {
-                // Gates from this frame's lip positions (found or predicted).
-                let mut all: Small<[f64; 2]> = (0..n)
-                    .map(|i| lip[i].map_or(lip_preds[i], |c| cands[c].pixel))
-                    .collect();
-                for (p, &i) in preds.iter().zip(&which) {
-                    all[i] = *p;
-                }
-                let mut gates = self.gated(&all, &tracks[..n], Slot::Lip);
-                self.gate_depth(&mut gates, &tracks[..n]);
-                let second: Small<_> = which.iter().map(|&i| gates[i]).collect();
-                for (&i, c) in which
-                    .iter()
-                    .zip(labels::assign(&second, cands, &taken, solver))
-                {
-                    lip[i] = c;
-                }
-            }
-        }
-        lip.into_iter().chain(forehead).collect()
-    }
-
-    /// Second chance for lip dots the prediction missed because they moved more than it said.
-    /// Speech moves neighbouring dots together (the jaw drops or lifts the whole lower lip
-    /// between two frames), so:
-    /// 1. a missing dot next to a found one is looked for where its prediction lands when
-    ///    moved as that neighbour moved (its miss against its own prediction), repeated
-    ///    along the mouth while it finds dots;
-    /// 2. lip dots between the corners still missing are looked for with one common shift
-    ///    of their predictions across the lip line (a jaw's motion), the shift that lands
-    ///    the most of them on free candidates (at least two, or with a corner unseen all
-    ///    of them but one and at least three); then 1 again.
-    ///    Shifts along the lip line are not tried: a shift of one dot spacing along the lip
-    ///    would land each prediction on its neighbour;
-    /// 3. a dot that stayed at its prediction while the lip beside it jumped has likely
-    ///    taken its own motion-blur ghost: it takes the blob its neighbour's motion points to
-    ///    ([`Recovery::leave_ghosts`]).
-    ///
-    /// Same gates (pixel and depth) as the first pass, candidates nobody took.
-    fn recover_moved_lips(
-        &self,
-        lip: &mut [Option<usize>],
-        preds: &[[f64; 2]],
-        cands: &[Candidate],
-        taken: &mut [bool],
-        tracks: &[DotTrack],
-        solver: &mut labels::Assignment,
-    ) {
         for c in lip.iter().flatten() {
             taken[*c] = true;
         }
         let recover = Recovery {
             tracker: self,
-            preds,
+            preds: &lip_preds,
+            gates: &gates,
             cands,
-            tracks,
+            tracks: &tracks[..n],
+            head: &head,
+            k,
         };
-        recover.follow_neighbours(lip, taken, solver);
-        if recover.shift_across_lip_line(lip, taken, solver) {
-            recover.follow_neighbours(lip, taken, solver);
-        }
-        recover.leave_ghosts(lip, taken);
+        recover.run(&mut lip, &mut taken, solver);
+        lip.into_iter().chain(forehead).collect()
     }
 
     /// Gate per prediction: a fraction of the distance to the nearest other prediction of the
-    /// group, at least `min_gate_px`, widened a little for dots missing for a while.
+    /// group, at least `min_gate_px`, widened a little for dots missing for a while. Lip dots
+    /// are gated in depth too: a candidate further than [`TrackConfig::lip_depth_gate_m`]
+    /// from the dot's last depth is not this dot (widened for dots missing for a while).
     fn gated(
         &self,
         preds: &[[f64; 2]],
@@ -1129,20 +1040,16 @@ impl Tracker {
                     .map(|(_, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt())
                     .fold(f64::INFINITY, f64::min);
                 let base = (self.config.gate_fraction * nearest).max(self.config.min_gate_px);
-                let widen = 1.0 + 0.05 * tracks[i].missing.min(10) as f64;
-                labels::Prediction::in_image(*p, base * widen, slot)
+                let missing = tracks[i].missing.min(10) as f64;
+                let mut gate =
+                    labels::Prediction::in_image(*p, base * (1.0 + 0.05 * missing), slot);
+                if slot == Slot::Lip {
+                    gate.z = tracks[i].depth;
+                    gate.z_gate = self.config.lip_depth_gate_m * (1.0 + 0.2 * missing);
+                }
+                gate
             })
             .collect()
-    }
-
-    /// Adds the depth gate to lip predictions: a candidate further than
-    /// [`TrackConfig::lip_depth_gate_m`] from the dot's last depth is not this dot (widened
-    /// for dots missing for a while).
-    fn gate_depth(&self, gates: &mut [labels::Prediction], tracks: &[DotTrack]) {
-        for (g, t) in gates.iter_mut().zip(tracks) {
-            g.z = t.depth;
-            g.z_gate = self.config.lip_depth_gate_m * (1.0 + 0.2 * t.missing.min(10) as f64);
-        }
     }
 
     fn update_tracks(&mut self, names: &[Option<usize>], cands: &[Candidate]) {
@@ -1333,16 +1240,49 @@ impl Tracker {
     }
 }
 
-/// The second-chance searches of [`Tracker::recover_moved_lips`] over one frame.
+/// The second chances for lip dots over one frame, after the first pass of naming by
+/// prediction ([`Recovery::run`]).
 struct Recovery<'a> {
     tracker: &'a Tracker,
-    /// Per lip dot: its first-pass prediction (pixels).
+    /// Per lip dot: its first-pass prediction (pixels) and gates.
     preds: &'a [[f64; 2]],
+    gates: &'a [labels::Prediction],
     cands: &'a [Candidate],
     tracks: &'a [DotTrack],
+    /// This frame's head motion (reference → now) and the colour intrinsics.
+    head: &'a RigidTransform,
+    k: &'a mouthpiece_frame::Intrinsics,
 }
 
 impl Recovery<'_> {
+    /// Second chances for lip dots the prediction missed because they moved more than it said.
+    /// Speech moves neighbouring dots together (the jaw drops or lifts the whole lower lip
+    /// between two frames), so:
+    /// 1. a missing dot next to a found one is looked for where its prediction lands when
+    ///    moved as that neighbour moved (its miss against its own prediction), repeated
+    ///    along the mouth while it finds dots;
+    /// 2. lip dots between the corners still missing are looked for with one common shift
+    ///    of their predictions across the lip line (a jaw's motion), the shift that lands
+    ///    the most of them on free candidates (at least two, or with a corner unseen all
+    ///    of them but one and at least three); then 1 again.
+    ///    Shifts along the lip line are not tried: a shift of one dot spacing along the lip
+    ///    would land each prediction on its neighbour;
+    /// 3. a dot that stayed at its prediction while the lip beside it jumped has likely
+    ///    taken its own motion-blur ghost: it takes the blob its neighbour's motion points to
+    ///    ([`Recovery::leave_ghosts`]);
+    /// 4. last, a dot still missing is looked for at its found neighbours' positions plus
+    ///    its rest offset to them ([`Recovery::keep_rest_offsets`]).
+    ///
+    /// Same gates (pixel and depth) as the first pass, candidates nobody took.
+    fn run(&self, lip: &mut [Option<usize>], taken: &mut [bool], solver: &mut labels::Assignment) {
+        self.follow_neighbours(lip, taken, solver);
+        if self.shift_across_lip_line(lip, taken, solver) {
+            self.follow_neighbours(lip, taken, solver);
+        }
+        self.leave_ghosts(lip, taken);
+        self.keep_rest_offsets(lip, taken, solver);
+    }
+
     /// Names missing dots at moved predictions, with the first pass's gates recomputed for
     /// this frame's positions (found or predicted). True when any dot was found.
     fn name_moved(
@@ -1362,8 +1302,7 @@ impl Recovery<'_> {
         for &(i, p) in moved {
             all[i] = p;
         }
-        let mut gates = self.tracker.gated(&all, self.tracks, Slot::Lip);
-        self.tracker.gate_depth(&mut gates, self.tracks);
+        let gates = self.tracker.gated(&all, self.tracks, Slot::Lip);
         let these: Small<labels::Prediction> = moved.iter().map(|&(i, _)| gates[i]).collect();
         let mut found = false;
         for (&(i, _), c) in moved
@@ -1385,8 +1324,7 @@ impl Recovery<'_> {
     /// dot takes that one instead and the ghost is left.
     fn leave_ghosts(&self, lip: &mut [Option<usize>], taken: &mut [bool]) {
         let n = lip.len();
-        let mut gates = self.tracker.gated(self.preds, self.tracks, Slot::Lip);
-        self.tracker.gate_depth(&mut gates, self.tracks);
+        let gates = self.gates;
         let miss = |lip: &[Option<usize>], i: usize| {
             lip[i].map(|c| {
                 let p = self.cands[c].pixel;
@@ -1433,6 +1371,40 @@ impl Recovery<'_> {
                 tracing::debug!(dot = %PerformerLayout::lip_name(i), "stayed while its neighbour moved: took the blob the neighbour's motion points to");
             }
         }
+    }
+
+    /// Missing dots looked for at their found neighbours' positions now (head motion
+    /// removed) plus their rest offsets to them: the lips move together (the jaw carries the
+    /// whole lower lip). Only dots with a found neighbour.
+    fn keep_rest_offsets(
+        &self,
+        lip: &mut [Option<usize>],
+        taken: &mut [bool],
+        solver: &mut labels::Assignment,
+    ) {
+        let n = lip.len();
+        let (head, k) = (self.head, self.k);
+        let rest = &self.tracker.rest;
+        let inverse = head.inverse();
+        let moved: Small<(usize, [f64; 2])> = (0..n)
+            .filter(|&i| lip[i].is_none())
+            .filter_map(|i| {
+                let mut sum = Vec3::zeros();
+                let mut count = 0.0;
+                for j in [(i + n - 1) % n, (i + 1) % n] {
+                    if let Some(c) = lip[j] {
+                        let now = inverse.apply(&self.cands[c].point);
+                        sum += now + (rest[i] - rest[j]);
+                        count += 1.0;
+                    }
+                }
+                (count > 0.0)
+                    .then(|| camera::project(k, &head.apply(&(sum / count))))
+                    .flatten()
+                    .map(|px| (i, px))
+            })
+            .collect();
+        self.name_moved(lip, taken, solver, &moved);
     }
 
     /// Missing dots next to found ones, moved as those neighbours moved, along the mouth.
@@ -1507,8 +1479,7 @@ impl Recovery<'_> {
         let free: Small<usize> = (0..self.cands.len())
             .filter(|&j| !taken[j] && self.cands[j].role != DotRole::Forehead)
             .collect();
-        let mut gates = self.tracker.gated(preds, self.tracks, Slot::Lip);
-        self.tracker.gate_depth(&mut gates, self.tracks);
+        let gates = self.gates;
         let lands = |g: &labels::Prediction, c: &Candidate, shift: [f64; 2]| {
             let d2 = (c.pixel[0] - g.pixel[0] - shift[0]).powi(2)
                 + (c.pixel[1] - g.pixel[1] - shift[1]).powi(2);
