@@ -17,6 +17,8 @@
 //!   whenever a driver thread is still running (streams running, or stopped without a pause),
 //!   while process exit without it is clean. Teardown follows the notes: stop streams, wait
 //!   [`TEARDOWN_PAUSE`], destroy streams, close the device; recorders are destroyed first.
+//!   A dropped stream is only stopped; its device destroys it on close, once every sibling
+//!   is stopped too (destroying one while another ran crashed the file player).
 //!
 //! Handles are `NonNull` on the OpenNI thread and never leave it. Errors carry the
 //! [`Status`] and `oniGetExtendedError()` text.
@@ -385,8 +387,9 @@ impl Device {
     }
 }
 
-/// A stream of one sensor. Dropping it stops it, waits [`TEARDOWN_PAUSE`] and destroys it,
-/// on the OpenNI thread.
+/// A stream of one sensor. Dropping it stops it; OpenNI2's stream is destroyed when its
+/// device closes, after [`TEARDOWN_PAUSE`] (drivers crash when a stream is destroyed while a
+/// sibling runs).
 pub struct Stream {
     id: u64,
     sensor: SensorType,
@@ -565,7 +568,9 @@ impl Drop for FrameReader {
 
 /// OpenNI2's own `.oni` recorder. Attach streams, [`start`](Recorder::start), and
 /// [`finish`](Recorder::finish) to close the file (its thread spins a core while it exists,
-/// so finish promptly). Dropping an unfinished recorder finishes it.
+/// so finish promptly). Dropping an unfinished recorder finishes it. Finishing stops the
+/// streams it recorded (start them again to go on reading): OpenNI2 can deadlock when a
+/// recorder is destroyed while its streams run.
 pub struct Recorder {
     id: u64,
     finished: bool,
@@ -597,7 +602,8 @@ impl Recorder {
         runtime::get()?.call(move |s| s.start_recorder(id))?
     }
 
-    /// Stops recording and destroys the recorder; the file is complete when this returns.
+    /// Stops the recorded streams and the recording, and destroys the recorder; the file is
+    /// complete when this returns.
     pub fn finish(mut self) -> Result<()> {
         self.finished = true;
         let id = self.id;

@@ -131,6 +131,11 @@ impl Sink {
 struct DeviceEntry {
     handle: NonNull<sys::_OniDevice>,
     uri: String,
+    /// Streams dropped by their owner: stopped, destroyed only when the device closes. The
+    /// file player's and the Dummy driver's threads walk their stream lists without a lock,
+    /// so destroying one stream while a sibling still runs crashed them (≈ 1 run in 25 of the
+    /// dummy test); at close every stream is stopped, and one pause covers them all.
+    retired_streams: Vec<NonNull<sys::_OniStream>>,
 }
 
 struct StreamEntry {
@@ -372,6 +377,7 @@ impl State {
             DeviceEntry {
                 handle,
                 uri: info.uri.clone(),
+                retired_streams: Vec::new(),
             },
         );
         Ok((id, info, is_file))
@@ -389,8 +395,16 @@ impl State {
             self.destroy_stream(sid);
         }
         if let Some(dev) = self.devices.remove(&id) {
-            // SAFETY: the device is open, has no streams left (stopped, paused, destroyed
-            // above or earlier) and is closed exactly once.
+            if !dev.retired_streams.is_empty() {
+                thread::sleep(TEARDOWN_PAUSE);
+            }
+            for stream in dev.retired_streams {
+                // SAFETY: stopped when retired, at least TEARDOWN_PAUSE ago, with every
+                // sibling stopped too; destroyed exactly once.
+                unsafe { sys::oniStreamDestroy(stream.as_ptr()) };
+            }
+            // SAFETY: the device is open, its streams are destroyed (above) and it is closed
+            // exactly once.
             let status = unsafe { sys::oniDeviceClose(dev.handle.as_ptr()) };
             if let Err(err) = check("oniDeviceClose", status) {
                 tracing::warn!(uri = %dev.uri, %err, "closing OpenNI2 device");
@@ -540,12 +554,17 @@ impl State {
         if stream.started {
             // SAFETY: a started stream; stopping is always allowed.
             unsafe { sys::oniStreamStop(stream.handle.as_ptr()) };
-            thread::sleep(TEARDOWN_PAUSE);
         }
-        // SAFETY: the stream is stopped (and the driver had TEARDOWN_PAUSE to notice), no
-        // recorder or reader refers to it any more, and it is destroyed exactly once.
-        unsafe { sys::oniStreamDestroy(stream.handle.as_ptr()) };
-        tracing::debug!(sensor = %stream.sensor, "OpenNI2 stream destroyed");
+        tracing::debug!(sensor = %stream.sensor, "OpenNI2 stream stopped and retired");
+        match self.devices.get_mut(&stream.device) {
+            Some(dev) => dev.retired_streams.push(stream.handle),
+            None => {
+                thread::sleep(TEARDOWN_PAUSE);
+                // SAFETY: stopped above, its device already gone (cannot happen: streams keep
+                // their device open), destroyed exactly once.
+                unsafe { sys::oniStreamDestroy(stream.handle.as_ptr()) };
+            }
+        }
     }
 
     fn get_stream_property<T: Default + Copy>(&self, id: u64, property: u32) -> Result<Option<T>> {
@@ -853,6 +872,21 @@ impl State {
         let Some(rec) = self.recorders.remove(&id) else {
             return Ok(());
         };
+        // Destroying a recorder while its streams run deadlocked inside OpenNI2 (the recorder
+        // and a stream's frame thread take each other's locks; ≈ 1 run in 100 of the dummy
+        // test under load): stop them first, and give their frame threads the pause.
+        let mut stopped_any = false;
+        for sid in &rec.streams {
+            if let Some(stream) = self.streams.get_mut(sid).filter(|s| s.started) {
+                // SAFETY: a started stream; stopping is always allowed.
+                unsafe { sys::oniStreamStop(stream.handle.as_ptr()) };
+                stream.started = false;
+                stopped_any = true;
+            }
+        }
+        if stopped_any {
+            thread::sleep(TEARDOWN_PAUSE);
+        }
         let mut handle = rec.handle.as_ptr();
         // SAFETY: live recorder, stopped then destroyed exactly once; destruction flushes the
         // queued frames, writes the end record and joins the recorder thread.
