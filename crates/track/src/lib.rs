@@ -321,6 +321,15 @@ impl DotTrack {
     }
 }
 
+/// How the lip dots are predicted to have moved since the last frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LipMotion {
+    /// On at the velocity they had (in the head's frame).
+    Steady,
+    /// Not at all: where they were last (in the head's frame).
+    Stopped,
+}
+
 /// Largest RMS misfit (metres) of the upper lip and forehead dots to their rest shape for
 /// the head motion fitted to them to be used while a forehead dot is hidden.
 const HEAD_FALLBACK_RMS_M: f64 = 0.003;
@@ -678,10 +687,31 @@ impl Tracker {
             };
         }
         let mut solver = std::mem::take(&mut self.assignment);
-        let mut predicted = self.assign_by_prediction(cands, k, &mut solver);
+        let mut predicted = self.checked_names(cands, k, &mut solver, LipMotion::Steady);
+        // Lips that stop dead (closing against each other, a corner at the end of a smile)
+        // overshoot a constant-velocity prediction: with lip dots missing and candidates
+        // left, the names from "the lips stayed where they were" are taken when they name more.
+        let lips_named = |names: &[Option<usize>]| {
+            names[..layout.lip_dots]
+                .iter()
+                .filter(|c| c.is_some())
+                .count()
+        };
+        let named = predicted.iter().filter(|c| c.is_some()).count();
+        if lips_named(&predicted) < layout.lip_dots && named < cands.len() {
+            let stopped = self.checked_names(cands, k, &mut solver, LipMotion::Stopped);
+            if lips_named(&stopped) > lips_named(&predicted)
+                && self.corners_are_extremes(&stopped, cands)
+            {
+                tracing::debug!(
+                    steady = lips_named(&predicted),
+                    stopped = lips_named(&stopped),
+                    "lips stopped: named from their last places"
+                );
+                predicted = stopped;
+            }
+        }
         self.assignment = solver;
-        self.enforce_lip_order(&mut predicted, cands);
-        self.keep_corner_neighbours_in_place(&mut predicted, cands);
         if !self.corners_are_extremes(&predicted, cands) {
             // Names slipped by one or more places around the mouth (a slip keeps the order):
             // geometry names a full set afresh; without one the lips go missing for now
@@ -707,6 +737,20 @@ impl Tracker {
             }
             _ => predicted,
         }
+    }
+
+    /// Names by prediction, then the checks that drop names breaking the mouth's shape.
+    fn checked_names(
+        &self,
+        cands: &[Candidate],
+        k: &mouthpiece_frame::Intrinsics,
+        solver: &mut labels::Assignment,
+        lip_motion: LipMotion,
+    ) -> Small<Option<usize>> {
+        let mut names = self.assign_by_prediction(cands, k, solver, lip_motion);
+        self.enforce_lip_order(&mut names, cands);
+        self.keep_corner_neighbours_in_place(&mut names, cands);
+        names
     }
 
     /// With one of two neighbouring dots unseen, names can slip by one place without breaking
@@ -958,6 +1002,7 @@ impl Tracker {
         cands: &[Candidate],
         k: &mouthpiece_frame::Intrinsics,
         solver: &mut labels::Assignment,
+        lip_motion: LipMotion,
     ) -> Small<Option<usize>> {
         let n = self.layout.lip_dots;
         let tracks = self.tracks.as_ref().expect("called with tracks");
@@ -993,7 +1038,7 @@ impl Tracker {
         let lip_preds: Small<[f64; 2]> = tracks[..n]
             .iter()
             .map(|t| {
-                let q = if t.missing == 0 {
+                let q = if t.missing == 0 && lip_motion == LipMotion::Steady {
                     t.stab + t.stab_vel * self.step_ratio
                 } else {
                     t.stab
