@@ -802,7 +802,12 @@ impl Tracker {
         ];
         // Each upper-lip dot over the lower-lip dot opposite it (D2 over D12, … D6 over D8).
         let lips = (1..right).map(|u| (u, n - u, y));
-        let pairs = corners.into_iter().chain(lips);
+        // Along each lip, each dot beyond its neighbour towards the right corner (D2 beyond
+        // D3, …; D12 beyond D11, …): a name slipped one place along a lip with the dot it
+        // slipped onto unseen keeps every other order, and held on for 1.5 s in one session.
+        let upper = (1..right - 1).map(|i| (i, i + 1, x));
+        let lower = (right + 1..n - 1).map(|i| (i + 1, i, x));
+        let pairs = corners.into_iter().chain(lips).chain(upper).chain(lower);
         // A corner unseen for a while, checked against one neighbour, from its other
         // neighbour as seen now plus their rest offset (a mouth pursing moves the corners in).
         let corner_ref = |names: &[Option<usize>], corner: usize, against: usize| {

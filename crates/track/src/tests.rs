@@ -413,6 +413,15 @@ fn a_name_slipped_onto_an_unseen_neighbours_place_is_dropped() {
     slipped[3] = None;
     slipped[9] = Some(3);
     assert_eq!(check(&slipped)[9], None);
+    // Along a lip: D10 unseen, D9 on its blob (and D4 unseen, D3 on its blob).
+    let mut slipped = right.clone();
+    slipped[9] = None;
+    slipped[8] = Some(9);
+    assert_eq!(check(&slipped)[8], None);
+    let mut slipped = right.clone();
+    slipped[3] = None;
+    slipped[2] = Some(3);
+    assert_eq!(check(&slipped)[2], None);
     // A corner unseen and its neighbours in place: nothing to drop.
     let mut missing = right.clone();
     missing[6] = None;
