@@ -134,6 +134,11 @@ pub struct Detections {
     pub searched: Option<PixelRect>,
     /// Components that failed a filter (size, shape, depth); for diagnostics.
     pub rejected: u32,
+    /// Components of a dot's shape and depth but smaller than a dot at that distance
+    /// (`area_ratio`), down to `min_area_px`: paint mostly hidden (a mouth corner folding
+    /// in) or a speck. Not in `blobs` (nor counted as rejected); the tracker may take one
+    /// for a dot it would otherwise miss, right where that dot is predicted.
+    pub faint: Vec<Blob>,
 }
 
 /// Why a component was not accepted (counted, logged at TRACE).
@@ -257,6 +262,7 @@ impl Detector {
         out: &mut Detections,
     ) -> Result<(), DetectError> {
         out.blobs.clear();
+        out.faint.clear();
         out.searched = None;
         out.rejected = 0;
         let expected_len = color.width as usize * color.height as usize * 3;
@@ -423,18 +429,17 @@ impl Detector {
                     None => (disc(r1) * cfg.area_ratio[0], disc(r0) * cfg.area_ratio[1]),
                 };
                 let area_f = area as f64;
-                // Tiny discs are quantised: never ask for more than the minimum pixel count.
-                if area_f
-                    < lo.min(cfg.min_area_px as f64 * 2.0)
-                        .max(cfg.min_area_px as f64)
-                    || area_f > hi.max(4.0)
-                {
+                if area_f > hi.max(4.0) {
                     return Err(Reject::Area);
                 }
-                Ok(depth_m)
+                // Tiny discs are quantised: never ask for more than the minimum pixel count.
+                let faint = area_f
+                    < lo.min(cfg.min_area_px as f64 * 2.0)
+                        .max(cfg.min_area_px as f64);
+                Ok((depth_m, faint))
             })();
-            let depth_m = match verdict {
-                Ok(z) => z,
+            let (depth_m, faint) = match verdict {
+                Ok(v) => v,
                 Err(why) => {
                     tracing::trace!(class = class_idx, ?bbox, area, ?why, "component rejected");
                     out.rejected += 1;
@@ -491,13 +496,18 @@ impl Detector {
                 let cy = *self.centroids.at_2d::<f64>(label, 1)?;
                 [cx + roi.x as f64, cy + roi.y as f64]
             };
-            out.blobs.push(Blob {
+            let blob = Blob {
                 class: class_idx,
                 center,
                 area,
                 bbox,
                 depth_m,
-            });
+            };
+            if faint {
+                out.faint.push(blob);
+            } else {
+                out.blobs.push(blob);
+            }
         }
         Ok(())
     }

@@ -237,6 +237,34 @@ fn filters_reject_big_thin_and_depthless_blobs() {
     assert_eq!(found.blobs.len(), 1, "{found:?}");
     assert!(dist(found.blobs[0].center, [50.0, 50.0]) < 0.3);
     assert_eq!(found.rejected, 3);
+    assert!(found.faint.is_empty(), "{:?}", found.faint);
+}
+
+#[test]
+fn specks_smaller_than_a_dot_are_kept_apart_as_faint() {
+    let mut canvas = Canvas::new(320, 240);
+    canvas.disc([50.0, 50.0], 2.0, GREEN); // a dot
+                                           // Two pixels of paint: a dot at 0.6 m covers about 12.
+    for x in [120, 121] {
+        let px = canvas.mat.at_2d_mut::<opencv::core::Vec3b>(80, x).unwrap();
+        *px = opencv::core::Vec3b::from([GREEN.0 as u8, GREEN.1 as u8, GREEN.2 as u8]);
+    }
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    let found = det
+        .detect(
+            &canvas.image(),
+            Some((&flat_depth(320, 240, 600), 0.001)),
+            525.0,
+            None,
+        )
+        .unwrap();
+    assert_eq!(found.blobs.len(), 1, "{found:?}");
+    assert_eq!(found.faint.len(), 1, "{found:?}");
+    assert!(
+        dist(found.faint[0].center, [120.5, 80.0]) < 0.3,
+        "{found:?}"
+    );
+    assert_eq!(found.faint[0].area, 2);
 }
 
 #[test]

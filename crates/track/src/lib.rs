@@ -558,33 +558,7 @@ impl Tracker {
                     &mut self.depth_buf,
                 )
             } else {
-                // A robust plane over a few millimetres of lip around the dot: the sensor's
-                // noise is correlated over a few pixels, so the paint's own pixels share one
-                // error; the plane's outlier rejection drops the open mouth behind the lip.
-                let patch_px =
-                    (self.config.lip_depth_patch_m * k.fx / z_hint * 64.0).round() / 64.0;
-                (self.config.lip_depth_patch_m > 0.0)
-                    .then(|| {
-                        depth::depth_by_plane(
-                            depth,
-                            scale,
-                            blob.center,
-                            patch_px.max(radius_px),
-                            self.depth_range,
-                            &mut self.depth_buf,
-                        )
-                    })
-                    .flatten()
-                    .or_else(|| {
-                        depth::depth_at_dot(
-                            depth,
-                            scale,
-                            blob.center,
-                            radius_px,
-                            self.depth_range,
-                            &mut self.depth_buf,
-                        )
-                    })
+                self.lip_depth(depth, scale, blob.center, z_hint, k.fx)
             };
             if let Some((z, _)) = z {
                 cands.push(Candidate {
@@ -596,7 +570,8 @@ impl Tracker {
         }
 
         let n = self.layout.lip_dots;
-        let names = self.name_candidates(cands, &k);
+        let mut names = self.name_candidates(cands, &k);
+        self.name_faint_corners(&mut names, cands, &found.faint, depth, scale, &k);
         if let Some(filters) = &mut self.forehead_depth {
             for (filter, name) in filters.iter_mut().zip(&names[n..]) {
                 match name {
@@ -657,6 +632,129 @@ impl Tracker {
 
         self.update_tracks(&names, cands);
         Ok(())
+    }
+
+    /// Depth at a lip dot: a robust plane over a few millimetres of lip around it (the
+    /// sensor's noise is correlated over a few pixels, so the paint's own pixels share one
+    /// error; the plane's outlier rejection drops the open mouth behind the lip), else the
+    /// median of the paint's readings.
+    fn lip_depth(
+        &mut self,
+        depth: &DepthImage,
+        scale: f64,
+        center: [f64; 2],
+        z_hint: f64,
+        fx: f64,
+    ) -> Option<(f64, depth::DepthMethod)> {
+        let radius_px = self.dot_radius_m * fx / z_hint;
+        // Rounded to 1/64 px, like the forehead's patch.
+        let patch_px = (self.config.lip_depth_patch_m * fx / z_hint * 64.0).round() / 64.0;
+        (self.config.lip_depth_patch_m > 0.0)
+            .then(|| {
+                depth::depth_by_plane(
+                    depth,
+                    scale,
+                    center,
+                    patch_px.max(radius_px),
+                    self.depth_range,
+                    &mut self.depth_buf,
+                )
+            })
+            .flatten()
+            .or_else(|| {
+                depth::depth_at_dot(
+                    depth,
+                    scale,
+                    center,
+                    radius_px,
+                    self.depth_range,
+                    &mut self.depth_buf,
+                )
+            })
+    }
+
+    /// A mouth corner the names left missing may show only a speck of paint (the corner of
+    /// the mouth folds in over it): a faint blob (smaller than a dot, see
+    /// [`Detections::faint`]) within `min_gate_px` of where the corner is predicted (moving on
+    /// or stopped), at the corner's depth (`lip_depth_gate_m`), names it, if the corner checks
+    /// still hold with it. Only corners: elsewhere on the lips a speck is as likely a motion-
+    /// blur ghost, and taking ghosts slipped whole lips.
+    fn name_faint_corners(
+        &mut self,
+        names: &mut [Option<usize>],
+        cands: &mut Vec<Candidate>,
+        faint: &[mouthpiece_detect::Blob],
+        depth: &DepthImage,
+        scale: f64,
+        k: &mouthpiece_frame::Intrinsics,
+    ) {
+        if faint.is_empty() || self.tracks.is_none() || self.stabiliser.is_none() {
+            return;
+        }
+        let head = self.head_now(names, cands);
+        let real = cands.len();
+        for corner in [self.layout.left_corner(), self.layout.right_corner()] {
+            let track = &self.tracks.as_ref().expect("checked")[corner];
+            if names[corner].is_some() || track.missing > 2 {
+                continue;
+            }
+            let (stab, moving, last_depth) = (
+                track.stab,
+                track.stab + track.stab_vel * self.step_ratio,
+                track.depth,
+            );
+            let preds: Small<[f64; 2]> = [stab, moving]
+                .iter()
+                .filter_map(|q| camera::project(k, &head.apply(q)))
+                .collect();
+            let gate = self.config.min_gate_px;
+            let nearest = faint
+                .iter()
+                .filter(|b| matches!(self.roles[b.class], DotRole::Lip | DotRole::Any))
+                .filter_map(|b| {
+                    let d = preds
+                        .iter()
+                        .map(|p| {
+                            ((b.center[0] - p[0]).powi(2) + (b.center[1] - p[1]).powi(2)).sqrt()
+                        })
+                        .fold(f64::INFINITY, f64::min);
+                    (d < gate).then_some((d, b))
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let Some((_, blob)) = nearest else { continue };
+            let z_hint = blob.depth_m.unwrap_or(last_depth);
+            let Some((z, _)) = self.lip_depth(depth, scale, blob.center, z_hint, k.fx) else {
+                continue;
+            };
+            if (z - last_depth).abs() > self.config.lip_depth_gate_m {
+                continue;
+            }
+            cands.push(Candidate {
+                pixel: blob.center,
+                point: camera::deproject(k, blob.center, z),
+                role: DotRole::Lip,
+            });
+            names[corner] = Some(cands.len() - 1);
+        }
+        if cands.len() == real {
+            return;
+        }
+        self.keep_corner_neighbours_in_place(names, cands);
+        if !self.corners_are_extremes(names, cands) {
+            for name in names.iter_mut() {
+                if name.is_some_and(|c| c >= real) {
+                    *name = None;
+                }
+            }
+        }
+        // Faint candidates no name kept are not blobs the frame left unassigned.
+        while cands.len() > real && !names.contains(&Some(cands.len() - 1)) {
+            cands.pop();
+        }
+        tracing::debug!(
+            named = cands.len() - real,
+            "mouth corners named on faint paint"
+        );
     }
 
     /// Names for this frame's candidates, per dot (lip dots, then forehead).

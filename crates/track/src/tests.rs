@@ -442,6 +442,33 @@ fn a_jaw_dropping_between_two_frames_keeps_the_lower_lip_named() {
 }
 
 #[test]
+fn a_mouth_corner_showing_a_speck_of_paint_is_named_on_it() {
+    let mut tr = calibrated_tracker();
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    let k = Intrinsics::default_vga();
+    // D1 (the left corner) and D4 folded away but for two pixels of paint each: too small
+    // for a dot at 0.6 m; `dx` moves the specks off where the dots are.
+    let speckled = |seq: u64, dx: i64| {
+        let mut frame = render(seq, &still, &[0, 3]);
+        for dot in [0, 3] {
+            let px = camera::project(&k, &still[dot]).unwrap();
+            let (u, v) = (px[0].round() as i64 + dx, px[1].round() as i64);
+            for u in [u, u + 1] {
+                let o = (v as usize * 640 + u as usize) * 3;
+                frame.color.data[o..o + 3].copy_from_slice(&[50, 175, 40]);
+            }
+        }
+        frame
+    };
+    // The corner is named on its speck, D4 (not a corner) is left missing, the rest named.
+    let out = tr.process(&speckled(40, 0)).unwrap();
+    assert_named_correctly(out, &still, &[3], 0.0015);
+    // A speck 5 px from where the corner is predicted is not the corner.
+    let out = tr.process(&speckled(41, 5)).unwrap();
+    assert!(out.dots.lip[0].is_none(), "{:?}", out.dots.lip[0]);
+}
+
+#[test]
 fn forehead_depth_jitter_is_filtered() {
     // A still face whose whole depth image jumps by up to ±2 mm from frame to frame (noise
     // correlated over the patch, which the plane fit cannot average away).
