@@ -124,6 +124,10 @@ pub struct Blob {
     pub bbox: PixelRect,
     /// Median valid depth (metres) around the blob; `None` when no depth image was given.
     pub depth_m: Option<f64>,
+    /// Spread of the colour weight about the centre (second central moments over the
+    /// weight, px²): `[xx, xy, yy]`. Two dots merged into one blob spread along the line
+    /// between them; the tracker splits such a blob when it misses a dot there.
+    pub spread: [f64; 3],
 }
 
 /// What one call found.
@@ -486,15 +490,18 @@ impl Detector {
             let weight_local = Mat::roi(&self.weight, local.to_cv())?;
             core::min(&weight_local, &self.comp_grown, &mut self.comp_weight)?;
             let m = imgproc::moments(&self.comp_weight, false)?;
-            let center = if m.m00 > 0.0 {
-                [
-                    m.m10 / m.m00 + (local.x + roi.x) as f64,
-                    m.m01 / m.m00 + (local.y + roi.y) as f64,
-                ]
+            let (center, spread) = if m.m00 > 0.0 {
+                (
+                    [
+                        m.m10 / m.m00 + (local.x + roi.x) as f64,
+                        m.m01 / m.m00 + (local.y + roi.y) as f64,
+                    ],
+                    [m.mu20 / m.m00, m.mu11 / m.m00, m.mu02 / m.m00],
+                )
             } else {
                 let cx = *self.centroids.at_2d::<f64>(label, 0)?;
                 let cy = *self.centroids.at_2d::<f64>(label, 1)?;
-                [cx + roi.x as f64, cy + roi.y as f64]
+                ([cx + roi.x as f64, cy + roi.y as f64], [0.0; 3])
             };
             let blob = Blob {
                 class: class_idx,
@@ -502,6 +509,7 @@ impl Detector {
                 area,
                 bbox,
                 depth_m,
+                spread,
             };
             if faint {
                 out.faint.push(blob);

@@ -241,6 +241,33 @@ fn filters_reject_big_thin_and_depthless_blobs() {
 }
 
 #[test]
+fn a_blob_spreads_along_the_line_between_two_merged_dots() {
+    let mut canvas = Canvas::new(320, 240);
+    canvas.disc([50.0, 50.0], 2.0, GREEN);
+    canvas.disc([150.0, 60.0], 2.0, GREEN);
+    canvas.disc([150.0, 63.5], 2.0, GREEN); // 3.5 px below: one blob
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    let found = det
+        .detect(
+            &canvas.image(),
+            Some((&flat_depth(320, 240, 600), 0.001)),
+            525.0,
+            None,
+        )
+        .unwrap();
+    assert_eq!(found.blobs.len(), 2, "{found:?}");
+    let single = nearest(&found.blobs, [50.0, 50.0]).spread;
+    let merged = nearest(&found.blobs, [150.0, 61.75]).spread;
+    // One dot: round. Two: the vertical spread exceeds the horizontal by (3.5 / 2)².
+    assert!(
+        (single[0] - single[2]).abs() < 0.2 && single[1].abs() < 0.2,
+        "{single:?}"
+    );
+    let excess = merged[2] - merged[0];
+    assert!((excess - 1.75f64.powi(2)).abs() < 0.5, "{merged:?}");
+}
+
+#[test]
 fn specks_smaller_than_a_dot_are_kept_apart_as_faint() {
     let mut canvas = Canvas::new(320, 240);
     canvas.disc([50.0, 50.0], 2.0, GREEN); // a dot

@@ -368,6 +368,8 @@ pub struct Tracker {
     /// Per-frame buffers kept between frames (a frame allocates nothing once they have grown).
     found: Detections,
     cands: Vec<Candidate>,
+    /// Per candidate: its blob in `found.blobs` (split halves: the blob split).
+    cand_blob: Vec<usize>,
     assignment: labels::Assignment,
     /// Per forehead dot: its depth filter (`None` when switched off).
     forehead_depth: Option<Vec<OneEuro>>,
@@ -424,6 +426,7 @@ impl Tracker {
             depth_buf: depth::DepthScratch::default(),
             found: Detections::default(),
             cands: Vec::new(),
+            cand_blob: Vec::new(),
             assignment: labels::Assignment::default(),
             out: TrackedFrame {
                 seq: 0,
@@ -537,7 +540,8 @@ impl Tracker {
         self.detector
             .detect_into(&frame.color, Some((depth, scale)), k.fx, search, found)?;
         cands.clear();
-        for blob in &found.blobs {
+        self.cand_blob.clear();
+        for (blob_index, blob) in found.blobs.iter().enumerate() {
             let z_hint = blob.depth_m.unwrap_or(0.6);
             let radius_px = self.dot_radius_m * k.fx / z_hint;
             let role = self.roles[blob.class];
@@ -566,11 +570,13 @@ impl Tracker {
                     point: camera::deproject(&k, blob.center, z),
                     role,
                 });
+                self.cand_blob.push(blob_index);
             }
         }
 
         let n = self.layout.lip_dots;
         let mut names = self.name_candidates(cands, &k);
+        self.split_merged_blobs(&mut names, cands, &found.blobs, depth, scale, &k);
         self.name_faint_corners(&mut names, cands, &found.faint, depth, scale, &k);
         if let Some(filters) = &mut self.forehead_depth {
             for (filter, name) in filters.iter_mut().zip(&names[n..]) {
@@ -671,6 +677,146 @@ impl Tracker {
                     &mut self.depth_buf,
                 )
             })
+    }
+
+    /// Two lip dots close together (lips pressed shut, a corner and its neighbour in a
+    /// pursed mouth) merge into one blob: one of them is missing, or both, or the blob went to
+    /// the wrong one. A missing lip dot (seen within the last 2 frames) whose prediction lies
+    /// within a dot's diameter plus its gate of a blob at least 1.5 times a dot's area splits
+    /// that blob with the dot holding it (or another missing dot predicted there): the
+    /// blob's colour weight spreads along the line between the two predictions by the
+    /// dots' own spread plus a quarter of their separation squared, which gives the two
+    /// centres. The split names are kept only if the mouth's order and corner checks hold.
+    fn split_merged_blobs(
+        &mut self,
+        names: &mut [Option<usize>],
+        cands: &mut Vec<Candidate>,
+        blobs: &[mouthpiece_detect::Blob],
+        depth: &DepthImage,
+        scale: f64,
+        k: &mouthpiece_frame::Intrinsics,
+    ) {
+        let n = self.layout.lip_dots;
+        let (Some(tracks), Some(_)) = (&self.tracks, &self.stabiliser) else {
+            return;
+        };
+        if names[..n].iter().all(Option::is_some) {
+            return;
+        }
+        let head = self.head_now(names, cands);
+        let preds: Small<[f64; 2]> = tracks[..n]
+            .iter()
+            .map(|t| {
+                camera::project(k, &head.apply(&(t.stab + t.stab_vel * self.step_ratio)))
+                    .unwrap_or(t.pixel)
+            })
+            .collect();
+        let missing: Small<u32> = tracks[..n].iter().map(|t| t.missing).collect();
+        let last_depth: Small<f64> = tracks[..n].iter().map(|t| t.depth).collect();
+        let before: Small<Option<usize>> = names.iter().copied().collect();
+        let real = cands.len();
+        let mut split_any = false;
+        for i in 0..n {
+            if names[i].is_some() || missing[i] > 2 {
+                continue;
+            }
+            let p = preds[i];
+            let dist = |q: [f64; 2]| ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2)).sqrt();
+            // The merged blob: the nearest big lip blob within reach.
+            let merged = (0..real)
+                .filter(|&c| cands[c].role != DotRole::Forehead)
+                .filter_map(|c| {
+                    let blob = &blobs[self.cand_blob[c]];
+                    let r = self.dot_radius_m * k.fx / cands[c].point.z;
+                    let big = blob.area as f64 >= 1.5 * std::f64::consts::PI * r * r;
+                    let d = dist(cands[c].pixel);
+                    (big && d <= 2.0 * r + self.config.min_gate_px).then_some((d, c, r))
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let Some((_, c, r)) = merged else { continue };
+            // Its other dot: the lip dot named on it, else another missing one predicted
+            // nearest to it.
+            let holder = (0..n).find(|&j| names[j] == Some(c));
+            let partner = holder.or_else(|| {
+                (0..n)
+                    .filter(|&j| j != i && names[j].is_none() && missing[j] <= 2)
+                    .map(|j| {
+                        let q = preds[j];
+                        let e = cands[c].pixel;
+                        (((q[0] - e[0]).powi(2) + (q[1] - e[1]).powi(2)).sqrt(), j)
+                    })
+                    .filter(|&(d, _)| d <= 2.0 * r + self.config.min_gate_px)
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .map(|(_, j)| j)
+            });
+            let Some(j) = partner else { continue };
+            let (u, len) = {
+                let d = [preds[i][0] - preds[j][0], preds[i][1] - preds[j][1]];
+                let len = (d[0] * d[0] + d[1] * d[1]).sqrt();
+                ([d[0] / len, d[1] / len], len)
+            };
+            if !len.is_finite() || len < 1e-6 {
+                continue;
+            }
+            let [xx, xy, yy] = blobs[self.cand_blob[c]].spread;
+            let along = u[0] * u[0] * xx + 2.0 * u[0] * u[1] * xy + u[1] * u[1] * yy;
+            let across = u[1] * u[1] * xx - 2.0 * u[0] * u[1] * xy + u[0] * u[0] * yy;
+            let half = (along - across).max(0.0).sqrt();
+            // Less than half a dot apart: one dot, not two.
+            if half < 0.5 * r {
+                continue;
+            }
+            let centre = cands[c].pixel;
+            let at = |sign: f64| {
+                [
+                    centre[0] + sign * half * u[0],
+                    centre[1] + sign * half * u[1],
+                ]
+            };
+            let mut halves = [(i, at(1.0)), (j, at(-1.0))].into_iter().map(|(dot, px)| {
+                let z_hint = cands[c].point.z;
+                self.lip_depth(depth, scale, px, z_hint, k.fx)
+                    .filter(|(z, _)| (z - last_depth[dot]).abs() <= self.config.lip_depth_gate_m)
+                    .map(|(z, _)| (dot, px, z))
+            });
+            let (Some(a), Some(b)) = (halves.next().flatten(), halves.next().flatten()) else {
+                continue;
+            };
+            for (dot, px, z) in [a, b] {
+                cands.push(Candidate {
+                    pixel: px,
+                    point: camera::deproject(k, px, z),
+                    role: cands[c].role,
+                });
+                self.cand_blob.push(self.cand_blob[c]);
+                names[dot] = Some(cands.len() - 1);
+            }
+            split_any = true;
+        }
+        if !split_any {
+            return;
+        }
+        self.enforce_lip_order(names, cands);
+        self.keep_corner_neighbours_in_place(names, cands);
+        if !self.corners_are_extremes(names, cands) {
+            names.copy_from_slice(&before);
+        }
+        // A blob split in two is two dots, not a third candidate left over.
+        for c in 0..real {
+            let halves_named = names
+                .iter()
+                .flatten()
+                .any(|&h| h >= real && self.cand_blob[h] == self.cand_blob[c]);
+            if halves_named && names.contains(&Some(c)) {
+                // Both the whole blob and a half named: the half wins, the whole goes.
+                for name in names.iter_mut() {
+                    if *name == Some(c) {
+                        *name = None;
+                    }
+                }
+            }
+        }
+        tracing::debug!(dots = cands.len() - real, "merged lip blobs split");
     }
 
     /// A mouth corner the names left missing may show only a speck of paint (the corner of

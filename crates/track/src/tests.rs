@@ -442,6 +442,34 @@ fn a_jaw_dropping_between_two_frames_keeps_the_lower_lip_named() {
 }
 
 #[test]
+fn two_lip_dots_merged_into_one_blob_are_split() {
+    let mut tr = calibrated_tracker();
+    // The middles of the lips (D4 and D10) close 2 mm a frame until 3.5 mm apart: their
+    // paint (4.5 mm across) merges into one blob.
+    let mut truth = posed(0.0, &RigidTransform::IDENTITY);
+    let centre_y = (truth[3].y + truth[9].y) / 2.0;
+    let mut merged_frames = 0;
+    for seq in 40..70 {
+        truth[3].y = (truth[3].y + 0.001).min(centre_y - 0.00175);
+        truth[9].y = (truth[9].y - 0.001).max(centre_y + 0.00175);
+        let frame = render(seq, &truth, &[]);
+        let blobs = tr
+            .detector
+            .detect(&frame.color, None, 525.0, None)
+            .unwrap()
+            .blobs
+            .len();
+        merged_frames += usize::from(blobs == 14);
+        let out = tr.process(&frame).unwrap();
+        assert_named_correctly(out, &truth, &[], 0.0015);
+    }
+    assert!(
+        merged_frames >= 10,
+        "the dots merged in {merged_frames} frames"
+    );
+}
+
+#[test]
 fn a_mouth_corner_showing_a_speck_of_paint_is_named_on_it() {
     let mut tr = calibrated_tracker();
     let still = posed(0.0, &RigidTransform::IDENTITY);
