@@ -321,6 +321,9 @@ impl DotTrack {
     }
 }
 
+/// A lip dot unseen for longer than this many frames is not looked for in a merged blob.
+const SPLIT_MISSING_FRAMES: u32 = 10;
+
 /// How the lip dots are predicted to have moved since the last frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum LipMotion {
@@ -681,9 +684,9 @@ impl Tracker {
 
     /// Two lip dots close together (lips pressed shut, a corner and its neighbour in a
     /// pursed mouth) merge into one blob: one of them is missing, or both, or the blob went to
-    /// the wrong one. A missing lip dot (seen within the last 2 frames) whose prediction lies
-    /// within a dot's diameter plus its gate of a blob at least 1.5 times a dot's area splits
-    /// that blob with the dot holding it (or another missing dot predicted there): the
+    /// the wrong one. A missing lip dot (seen within the last [`SPLIT_MISSING_FRAMES`])
+    /// whose prediction lies within a dot's diameter plus its gate of a blob at least 1.5
+    /// times a dot's area splits that blob with the dot holding it (or another missing dot predicted there): the
     /// blob's colour weight spreads along the line between the two predictions by the
     /// dots' own spread plus a quarter of their separation squared, which gives the two
     /// centres. The split names are kept only if the mouth's order and corner checks hold.
@@ -707,8 +710,12 @@ impl Tracker {
         let preds: Small<[f64; 2]> = tracks[..n]
             .iter()
             .map(|t| {
-                camera::project(k, &head.apply(&(t.stab + t.stab_vel * self.step_ratio)))
-                    .unwrap_or(t.pixel)
+                let q = if t.missing == 0 {
+                    t.stab + t.stab_vel * self.step_ratio
+                } else {
+                    t.stab
+                };
+                camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
             })
             .collect();
         let missing: Small<u32> = tracks[..n].iter().map(|t| t.missing).collect();
@@ -717,7 +724,7 @@ impl Tracker {
         let real = cands.len();
         let mut split_any = false;
         for i in 0..n {
-            if names[i].is_some() || missing[i] > 2 {
+            if names[i].is_some() || missing[i] > SPLIT_MISSING_FRAMES {
                 continue;
             }
             let p = preds[i];
@@ -739,7 +746,7 @@ impl Tracker {
             let holder = (0..n).find(|&j| names[j] == Some(c));
             let partner = holder.or_else(|| {
                 (0..n)
-                    .filter(|&j| j != i && names[j].is_none() && missing[j] <= 2)
+                    .filter(|&j| j != i && names[j].is_none() && missing[j] <= SPLIT_MISSING_FRAMES)
                     .map(|j| {
                         let q = preds[j];
                         let e = cands[c].pixel;
