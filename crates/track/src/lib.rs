@@ -1570,6 +1570,7 @@ impl Recovery<'_> {
     ///    would land each prediction on its neighbour;
     /// 3. a dot that stayed at its prediction while the lip beside it jumped has likely
     ///    taken its own motion-blur ghost: it takes the blob its neighbour's motion points to
+    ///    (within its gate; right there when the neighbour moved less than its gate)
     ///    ([`Recovery::leave_ghosts`]);
     /// 4. last, a dot still missing is looked for at its found neighbours' positions plus
     ///    its rest offset to them ([`Recovery::keep_rest_offsets`]).
@@ -1649,10 +1650,16 @@ impl Recovery<'_> {
             else {
                 continue;
             };
-            if norm(moved) <= g.gate_px || norm([own[0] - moved[0], own[1] - moved[1]]) <= g.gate_px
-            {
+            let apart = norm([own[0] - moved[0], own[1] - moved[1]]);
+            // A neighbour that jumped beyond its gate pulls from anywhere within the gate; one
+            // that moved less only to a blob right where its motion points.
+            let reach = if norm(moved) > g.gate_px && apart > g.gate_px {
+                g.gate_px
+            } else if apart > 0.5 * g.gate_px {
+                0.25 * g.gate_px
+            } else {
                 continue;
-            }
+            };
             let target = [self.preds[i][0] + moved[0], self.preds[i][1] + moved[1]];
             let better = (0..self.cands.len())
                 .filter(|&j| !taken[j] && self.cands[j].role != DotRole::Forehead)
@@ -1661,7 +1668,7 @@ impl Recovery<'_> {
                     let p = self.cands[j].pixel;
                     (j, norm([p[0] - target[0], p[1] - target[1]]))
                 })
-                .filter(|&(_, d)| d < g.gate_px)
+                .filter(|&(_, d)| d < reach)
                 .min_by(|a, b| a.1.total_cmp(&b.1));
             if let Some((j, _)) = better {
                 if let Some(old) = lip[i] {

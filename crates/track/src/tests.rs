@@ -442,6 +442,38 @@ fn a_jaw_dropping_between_two_frames_keeps_the_lower_lip_named() {
 }
 
 #[test]
+fn a_lip_dot_leaves_its_motion_blur_ghost_when_its_neighbours_jump() {
+    let mut tr = calibrated_tracker();
+    let k = Intrinsics::default_vga();
+    // The jaw opens 2 mm a frame, then 6 mm: D9 (lower lip) leaves a ghost of its paint where
+    // it was, nearer its constant-velocity prediction than the dot itself.
+    let mut open = 0.0;
+    for (seq, step) in (40..).zip([0.002, 0.002, 0.002, 0.002, 0.006]) {
+        let before = posed(open, &RigidTransform::IDENTITY);
+        open += step;
+        let truth = posed(open, &RigidTransform::IDENTITY);
+        let mut frame = render(seq, &truth, &[]);
+        if step > 0.002 {
+            // The ghost lies on the lip's skin: paint and depth.
+            let ghost = camera::project(&k, &before[8]).unwrap();
+            let r = 0.00225 * k.fx / before[8].z;
+            let z_mm = (before[8].z * 1000.0).round() as u16;
+            for v in (ghost[1] - r).floor() as usize..=(ghost[1] + r).ceil() as usize {
+                for u in (ghost[0] - r).floor() as usize..=(ghost[0] + r).ceil() as usize {
+                    if (u as f64 - ghost[0]).powi(2) + (v as f64 - ghost[1]).powi(2) <= r * r {
+                        let o = (v * 640 + u) * 3;
+                        frame.color.data[o..o + 3].copy_from_slice(&[50, 175, 40]);
+                        frame.depth.data[v * 640 + u] = z_mm;
+                    }
+                }
+            }
+        }
+        let out = tr.process(&frame).unwrap();
+        assert_named_correctly(out, &truth, &[], 0.0015);
+    }
+}
+
+#[test]
 fn two_lip_dots_merged_into_one_blob_are_split() {
     let mut tr = calibrated_tracker();
     // The middles of the lips (D4 and D10) close 2 mm a frame until 3.5 mm apart: their
