@@ -321,6 +321,13 @@ impl DotTrack {
     }
 }
 
+/// The depths (metres, low and high) a lip candidate may have to be this dot: within `gate`
+/// of its last depth or of its last place carried by this frame's head motion (`head`).
+fn depth_window(track: &DotTrack, head: &RigidTransform, gate: f64) -> [f64; 2] {
+    let (last, carried) = (track.depth, head.apply(&track.stab).z);
+    [last.min(carried) - gate, last.max(carried) + gate]
+}
+
 /// A lip dot unseen for longer than this many frames is not looked for in a merged blob.
 const SPLIT_MISSING_FRAMES: u32 = 10;
 
@@ -719,7 +726,11 @@ impl Tracker {
             })
             .collect();
         let missing: Small<u32> = tracks[..n].iter().map(|t| t.missing).collect();
-        let last_depth: Small<f64> = tracks[..n].iter().map(|t| t.depth).collect();
+        // Depth windows as the assignment's (see `gated`): last depth to carried depth.
+        let depth_window: Small<[f64; 2]> = tracks[..n]
+            .iter()
+            .map(|t| depth_window(t, &head, self.config.lip_depth_gate_m))
+            .collect();
         let before: Small<Option<usize>> = names.iter().copied().collect();
         let real = cands.len();
         let mut split_any = false;
@@ -783,7 +794,7 @@ impl Tracker {
             let mut halves = [(i, at(1.0)), (j, at(-1.0))].into_iter().map(|(dot, px)| {
                 let z_hint = cands[c].point.z;
                 self.lip_depth(depth, scale, px, z_hint, k.fx)
-                    .filter(|(z, _)| (z - last_depth[dot]).abs() <= self.config.lip_depth_gate_m)
+                    .filter(|(z, _)| (depth_window[dot][0]..=depth_window[dot][1]).contains(z))
                     .map(|(z, _)| (dot, px, z))
             });
             let (Some(a), Some(b)) = (halves.next().flatten(), halves.next().flatten()) else {
@@ -851,10 +862,10 @@ impl Tracker {
             if names[corner].is_some() || track.missing > 2 {
                 continue;
             }
-            let (stab, moving, last_depth) = (
+            let (stab, moving, window) = (
                 track.stab,
                 track.stab + track.stab_vel * self.step_ratio,
-                track.depth,
+                depth_window(track, &head, self.config.lip_depth_gate_m),
             );
             let preds: Small<[f64; 2]> = [stab, moving]
                 .iter()
@@ -875,11 +886,11 @@ impl Tracker {
                 })
                 .min_by(|a, b| a.0.total_cmp(&b.0));
             let Some((_, blob)) = nearest else { continue };
-            let z_hint = blob.depth_m.unwrap_or(last_depth);
+            let z_hint = blob.depth_m.unwrap_or(0.5 * (window[0] + window[1]));
             let Some((z, _)) = self.lip_depth(depth, scale, blob.center, z_hint, k.fx) else {
                 continue;
             };
-            if (z - last_depth).abs() > self.config.lip_depth_gate_m {
+            if !(window[0]..=window[1]).contains(&z) {
                 continue;
             }
             cands.push(Candidate {
@@ -1275,7 +1286,7 @@ impl Tracker {
             })
             .collect();
         let forehead = labels::assign(
-            &self.gated(&forehead_preds, &tracks[n..], Slot::Forehead),
+            &self.gated(&forehead_preds, &tracks[n..], Slot::Forehead, &self.head),
             cands,
             &taken,
             solver,
@@ -1302,7 +1313,7 @@ impl Tracker {
                 camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
             })
             .collect();
-        let gates = self.gated(&lip_preds, &tracks[..n], Slot::Lip);
+        let gates = self.gated(&lip_preds, &tracks[..n], Slot::Lip, &head);
         let mut lip = labels::assign(&gates, cands, &taken, solver);
         for c in lip.iter().flatten() {
             taken[*c] = true;
@@ -1323,12 +1334,17 @@ impl Tracker {
     /// Gate per prediction: a fraction of the distance to the nearest other prediction of the
     /// group, at least `min_gate_px`, widened a little for dots missing for a while. Lip dots
     /// are gated in depth too: a candidate further than [`TrackConfig::lip_depth_gate_m`]
-    /// from the dot's last depth is not this dot (widened for dots missing for a while).
+    /// from the dot's expected depth is not this dot (widened for dots missing for a while).
+    /// The window spans the dot's last depth and its last place carried by this frame's head
+    /// motion (`head`, reference → now): a head moving fast in depth moved the lips 8 mm
+    /// between two frames, out of a gate around their last depth, while the head pose's own
+    /// noise makes the carried depth alone the worse guess in some sessions.
     fn gated(
         &self,
         preds: &[[f64; 2]],
         tracks: &[DotTrack],
         slot: Slot,
+        head: &RigidTransform,
     ) -> Small<labels::Prediction> {
         preds
             .iter()
@@ -1345,8 +1361,11 @@ impl Tracker {
                 let mut gate =
                     labels::Prediction::in_image(*p, base * (1.0 + 0.05 * missing), slot);
                 if slot == Slot::Lip {
-                    gate.z = tracks[i].depth;
-                    gate.z_gate = self.config.lip_depth_gate_m * (1.0 + 0.2 * missing);
+                    // Between its last depth and where the head motion carried it.
+                    let (last, carried) = (tracks[i].depth, head.apply(&tracks[i].stab).z);
+                    gate.z = 0.5 * (last + carried);
+                    gate.z_gate = self.config.lip_depth_gate_m * (1.0 + 0.2 * missing)
+                        + 0.5 * (last - carried).abs();
                 }
                 gate
             })
@@ -1604,7 +1623,7 @@ impl Recovery<'_> {
         for &(i, p) in moved {
             all[i] = p;
         }
-        let gates = self.tracker.gated(&all, self.tracks, Slot::Lip);
+        let gates = self.tracker.gated(&all, self.tracks, Slot::Lip, self.head);
         let these: Small<labels::Prediction> = moved.iter().map(|&(i, _)| gates[i]).collect();
         let mut found = false;
         for (&(i, _), c) in moved
