@@ -94,6 +94,19 @@ fn nearest(blobs: &[Blob], p: [f64; 2]) -> &Blob {
         .expect("no blobs")
 }
 
+/// The default detector on `canvas` over a flat surface 0.6 m away (fx 525).
+fn detect_at_600_mm(canvas: &Canvas) -> Detections {
+    let (w, h) = (canvas.mat.cols() as u32, canvas.mat.rows() as u32);
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    det.detect(
+        &canvas.image(),
+        Some((&flat_depth(w, h, 600), 0.001)),
+        525.0,
+        None,
+    )
+    .unwrap()
+}
+
 fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
 }
@@ -246,15 +259,7 @@ fn a_blob_spreads_along_the_line_between_two_merged_dots() {
     canvas.disc([50.0, 50.0], 2.0, GREEN);
     canvas.disc([150.0, 60.0], 2.0, GREEN);
     canvas.disc([150.0, 63.5], 2.0, GREEN); // 3.5 px below: one blob
-    let mut det = Detector::new(DetectConfig::default()).unwrap();
-    let found = det
-        .detect(
-            &canvas.image(),
-            Some((&flat_depth(320, 240, 600), 0.001)),
-            525.0,
-            None,
-        )
-        .unwrap();
+    let found = detect_at_600_mm(&canvas);
     assert_eq!(found.blobs.len(), 2, "{found:?}");
     let single = nearest(&found.blobs, [50.0, 50.0]).spread;
     let merged = nearest(&found.blobs, [150.0, 61.75]).spread;
@@ -276,15 +281,7 @@ fn specks_smaller_than_a_dot_are_kept_apart_as_faint() {
         let px = canvas.mat.at_2d_mut::<opencv::core::Vec3b>(80, x).unwrap();
         *px = opencv::core::Vec3b::from([GREEN.0 as u8, GREEN.1 as u8, GREEN.2 as u8]);
     }
-    let mut det = Detector::new(DetectConfig::default()).unwrap();
-    let found = det
-        .detect(
-            &canvas.image(),
-            Some((&flat_depth(320, 240, 600), 0.001)),
-            525.0,
-            None,
-        )
-        .unwrap();
+    let found = detect_at_600_mm(&canvas);
     assert_eq!(found.blobs.len(), 1, "{found:?}");
     assert_eq!(found.faint.len(), 1, "{found:?}");
     assert!(

@@ -321,6 +321,14 @@ impl DotTrack {
     }
 }
 
+/// This frame's depth image (on the colour grid, `scale` metres per unit) and colour
+/// intrinsics, for the last-chance naming steps that measure new candidates.
+struct DepthView<'a> {
+    depth: &'a DepthImage,
+    scale: f64,
+    k: &'a mouthpiece_frame::Intrinsics,
+}
+
 /// The depths (metres, low and high) a lip candidate may have to be this dot: within `gate`
 /// of its last depth or of its last place carried by this frame's head motion (`head`).
 fn depth_window(track: &DotTrack, head: &RigidTransform, gate: f64) -> [f64; 2] {
@@ -586,8 +594,13 @@ impl Tracker {
 
         let n = self.layout.lip_dots;
         let mut names = self.name_candidates(cands, &k);
-        self.split_merged_blobs(&mut names, cands, &found.blobs, depth, scale, &k);
-        self.name_faint_corners(&mut names, cands, &found.faint, depth, scale, &k);
+        let view = DepthView {
+            depth,
+            scale,
+            k: &k,
+        };
+        self.split_merged_blobs(&mut names, cands, &found.blobs, &view);
+        self.name_faint_corners(&mut names, cands, &found.faint, &view);
         if let Some(filters) = &mut self.forehead_depth {
             for (filter, name) in filters.iter_mut().zip(&names[n..]) {
                 match name {
@@ -693,19 +706,19 @@ impl Tracker {
     /// pursed mouth) merge into one blob: one of them is missing, or both, or the blob went to
     /// the wrong one. A missing lip dot (seen within the last [`SPLIT_MISSING_FRAMES`])
     /// whose prediction lies within a dot's diameter plus its gate of a blob at least 1.5
-    /// times a dot's area splits that blob with the dot holding it (or another missing dot predicted there): the
-    /// blob's colour weight spreads along the line between the two predictions by the
-    /// dots' own spread plus a quarter of their separation squared, which gives the two
-    /// centres. The split names are kept only if the mouth's order and corner checks hold.
+    /// times a dot's area splits that blob with the dot holding it (or another missing dot
+    /// predicted there): the blob's colour weight spreads along the line between the two
+    /// predictions by the dots' own spread plus a quarter of their separation squared, which
+    /// gives the two centres. The split names are kept only if the mouth's order and corner
+    /// checks hold.
     fn split_merged_blobs(
         &mut self,
         names: &mut [Option<usize>],
         cands: &mut Vec<Candidate>,
         blobs: &[mouthpiece_detect::Blob],
-        depth: &DepthImage,
-        scale: f64,
-        k: &mouthpiece_frame::Intrinsics,
+        view: &DepthView,
     ) {
+        let (depth, scale, k) = (view.depth, view.scale, view.k);
         let n = self.layout.lip_dots;
         let (Some(tracks), Some(_)) = (&self.tracks, &self.stabiliser) else {
             return;
@@ -848,10 +861,9 @@ impl Tracker {
         names: &mut [Option<usize>],
         cands: &mut Vec<Candidate>,
         faint: &[mouthpiece_detect::Blob],
-        depth: &DepthImage,
-        scale: f64,
-        k: &mouthpiece_frame::Intrinsics,
+        view: &DepthView,
     ) {
+        let (depth, scale, k) = (view.depth, view.scale, view.k);
         if faint.is_empty() || self.tracks.is_none() || self.stabiliser.is_none() {
             return;
         }

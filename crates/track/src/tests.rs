@@ -397,31 +397,23 @@ fn a_name_slipped_onto_an_unseen_neighbours_place_is_dropped() {
         names
     };
     assert_eq!(check(&right), right, "right names stay");
+    // `dot` named on the blob of `unseen`, which is not seen: is the name dropped?
+    let dropped = |unseen: usize, dot: usize| {
+        let mut slipped = right.clone();
+        slipped[unseen] = None;
+        slipped[dot] = Some(unseen);
+        check(&slipped)[dot].is_none()
+    };
     // D1 (left corner) unseen, D2 on its blob: in order around the mouth, but out where the
     // corner is.
-    let mut slipped = right.clone();
-    slipped[0] = None;
-    slipped[1] = Some(0);
-    assert_eq!(check(&slipped)[1], None);
+    assert!(dropped(0, 1));
     // D2 unseen, D1 on D2's blob: not out beyond where D2 is.
-    let mut slipped = right.clone();
-    slipped[1] = None;
-    slipped[0] = Some(1);
-    assert_eq!(check(&slipped)[0], None);
+    assert!(dropped(1, 0));
     // D4 unseen, D10 on its blob: a lower-lip dot over the upper lip.
-    let mut slipped = right.clone();
-    slipped[3] = None;
-    slipped[9] = Some(3);
-    assert_eq!(check(&slipped)[9], None);
-    // Along a lip: D10 unseen, D9 on its blob (and D4 unseen, D3 on its blob).
-    let mut slipped = right.clone();
-    slipped[9] = None;
-    slipped[8] = Some(9);
-    assert_eq!(check(&slipped)[8], None);
-    let mut slipped = right.clone();
-    slipped[3] = None;
-    slipped[2] = Some(3);
-    assert_eq!(check(&slipped)[2], None);
+    assert!(dropped(3, 9));
+    // Along a lip: D10 unseen, D9 on its blob; D4 unseen, D3 on its blob.
+    assert!(dropped(9, 8));
+    assert!(dropped(3, 2));
     // A corner unseen and its neighbours in place: nothing to drop.
     let mut missing = right.clone();
     missing[6] = None;
