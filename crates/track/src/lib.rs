@@ -705,8 +705,8 @@ impl Tracker {
     /// Two lip dots close together (lips pressed shut, a corner and its neighbour in a
     /// pursed mouth) merge into one blob: one of them is missing, or both, or the blob went to
     /// the wrong one. A missing lip dot (seen within the last [`SPLIT_MISSING_FRAMES`])
-    /// whose prediction lies within a dot's diameter plus its gate of a blob at least 1.5
-    /// times a dot's area splits that blob with the dot holding it (or another missing dot
+    /// whose prediction lies within a dot's diameter plus its gate of a blob at least 1.2
+    /// times a dot's area (a corner half folded away adds less than a dot) splits that blob with the dot holding it (or another missing dot
     /// predicted there): the blob's colour weight spreads along the line between the two
     /// predictions by the dots' own spread plus a quarter of their separation squared, which
     /// gives the two centres. The split names are kept only if the mouth's order and corner
@@ -759,7 +759,7 @@ impl Tracker {
                 .filter_map(|c| {
                     let blob = &blobs[self.cand_blob[c]];
                     let r = self.dot_radius_m * k.fx / cands[c].point.z;
-                    let big = blob.area as f64 >= 1.5 * std::f64::consts::PI * r * r;
+                    let big = blob.area as f64 >= 1.2 * std::f64::consts::PI * r * r;
                     let d = dist(cands[c].pixel);
                     (big && d <= 2.0 * r + self.config.min_gate_px).then_some((d, c, r))
                 })
