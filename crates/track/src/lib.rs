@@ -104,10 +104,11 @@ pub struct TrackConfig {
     pub min_gate_px: f64,
     /// Gate as a fraction of the distance to the nearest other predicted dot.
     pub gate_fraction: f64,
-    /// Largest difference between a lip candidate's depth and the dot's depth when last
-    /// seen, metres (motion blur leaves a ghost of a lip dot over the open mouth, deeper by
-    /// a centimetre or more; the lips move a few millimetres in depth between frames).
-    /// Widened by a fifth per frame the dot has been missing, up to 10 frames.
+    /// Largest difference between a lip candidate's depth and the dot's depth, metres: its
+    /// depth when last seen, or its last place carried by this frame's head motion (motion
+    /// blur leaves a ghost of a lip dot over the open mouth, deeper by a centimetre or more;
+    /// the lips move a few millimetres in depth between frames). Widened by a fifth per
+    /// frame the dot has been missing, up to 10 frames.
     pub lip_depth_gate_m: f64,
     /// After this many frames with no dot named, forget the names and re-acquire from geometry.
     pub lost_after_frames: u32,
@@ -304,8 +305,9 @@ struct DotTrack {
     /// Last position carried back into the reference head pose (`H⁻¹ p`).
     stab: Vec3,
     stab_vel: Vec3,
-    /// Depth when last seen (camera frame, metres): what the depth gate compares with (the
-    /// stabilised position carries the head pose's noise, metres away from the forehead).
+    /// Depth when last seen (camera frame, metres): one end of the depth gate's window (the
+    /// other, the stabilised position carried by the head motion, carries the head pose's
+    /// noise about the lever from the forehead).
     depth: f64,
     /// Frames since last seen (0 = seen in the last frame).
     missing: u32,
@@ -706,11 +708,11 @@ impl Tracker {
     /// pursed mouth) merge into one blob: one of them is missing, or both, or the blob went to
     /// the wrong one. A missing lip dot (seen within the last [`SPLIT_MISSING_FRAMES`])
     /// whose prediction lies within a dot's diameter plus its gate of a blob at least 1.2
-    /// times a dot's area (a corner half folded away adds less than a dot) splits that blob with the dot holding it (or another missing dot
-    /// predicted there): the blob's colour weight spreads along the line between the two
-    /// predictions by the dots' own spread plus a quarter of their separation squared, which
-    /// gives the two centres. The split names are kept only if the mouth's order and corner
-    /// checks hold.
+    /// times a dot's area (a corner half folded away adds less than a dot) splits that blob
+    /// with the dot holding it (or another missing dot predicted there): the blob's colour
+    /// weight spreads along the line between the two predictions by the dots' own spread plus
+    /// a quarter of their separation squared, which gives the two centres. The split names
+    /// are kept only if the mouth's order and corner checks hold.
     fn split_merged_blobs(
         &mut self,
         names: &mut [Option<usize>],
@@ -727,17 +729,7 @@ impl Tracker {
             return;
         }
         let head = self.head_now(names, cands);
-        let preds: Small<[f64; 2]> = tracks[..n]
-            .iter()
-            .map(|t| {
-                let q = if t.missing == 0 {
-                    t.stab + t.stab_vel * self.step_ratio
-                } else {
-                    t.stab
-                };
-                camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
-            })
-            .collect();
+        let preds = self.lip_predictions(&head, k, LipMotion::Steady);
         let missing: Small<u32> = tracks[..n].iter().map(|t| t.missing).collect();
         // Depth windows as the assignment's (see `gated`): last depth to carried depth.
         let depth_window: Small<[f64; 2]> = tracks[..n]
@@ -831,21 +823,6 @@ impl Tracker {
         self.keep_corner_neighbours_in_place(names, cands);
         if !self.corners_are_extremes(names, cands) {
             names.copy_from_slice(&before);
-        }
-        // A blob split in two is two dots, not a third candidate left over.
-        for c in 0..real {
-            let halves_named = names
-                .iter()
-                .flatten()
-                .any(|&h| h >= real && self.cand_blob[h] == self.cand_blob[c]);
-            if halves_named && names.contains(&Some(c)) {
-                // Both the whole blob and a half named: the half wins, the whole goes.
-                for name in names.iter_mut() {
-                    if *name == Some(c) {
-                        *name = None;
-                    }
-                }
-            }
         }
         tracing::debug!(dots = cands.len() - real, "merged lip blobs split");
     }
@@ -961,7 +938,11 @@ impl Tracker {
             };
         }
         let mut solver = std::mem::take(&mut self.assignment);
-        let mut predicted = self.checked_names(cands, k, &mut solver, LipMotion::Steady);
+        // The forehead is named once; the lips under each motion hypothesis below.
+        let (forehead, head) = self.assign_forehead(cands, k, &mut solver);
+        let named_forehead = (&forehead[..], &head);
+        let mut predicted =
+            self.checked_names(cands, k, &mut solver, named_forehead, LipMotion::Steady);
         // Lips that stop dead (closing against each other, a corner at the end of a smile)
         // overshoot a constant-velocity prediction: with lip dots missing and candidates
         // left, the names from "the lips stayed where they were" are taken when they name more.
@@ -973,7 +954,8 @@ impl Tracker {
         };
         let named = predicted.iter().filter(|c| c.is_some()).count();
         if lips_named(&predicted) < layout.lip_dots && named < cands.len() {
-            let stopped = self.checked_names(cands, k, &mut solver, LipMotion::Stopped);
+            let stopped =
+                self.checked_names(cands, k, &mut solver, named_forehead, LipMotion::Stopped);
             if lips_named(&stopped) > lips_named(&predicted)
                 && self.corners_are_extremes(&stopped, cands)
             {
@@ -1013,15 +995,16 @@ impl Tracker {
         }
     }
 
-    /// Names by prediction, then the checks that drop names breaking the mouth's shape.
+    /// Lip names by prediction, then the checks that drop names breaking the mouth's shape.
     fn checked_names(
         &self,
         cands: &[Candidate],
         k: &mouthpiece_frame::Intrinsics,
         solver: &mut labels::Assignment,
+        (forehead, head): (&[Option<usize>], &RigidTransform),
         lip_motion: LipMotion,
     ) -> Small<Option<usize>> {
-        let mut names = self.assign_by_prediction(cands, k, solver, lip_motion);
+        let mut names = self.assign_lips(cands, k, solver, forehead, head, lip_motion);
         self.enforce_lip_order(&mut names, cands);
         self.keep_corner_neighbours_in_place(&mut names, cands);
         names
@@ -1274,19 +1257,16 @@ impl Tracker {
         (rect.area() < full / 2).then_some(rect)
     }
 
-    /// Names by prediction: forehead first (constant pixel velocity), then the head motion,
-    /// then the lip dots (their stabilised position and velocity carried by the head motion).
-    fn assign_by_prediction(
+    /// Forehead names by prediction (constant pixel velocity), and the head motion
+    /// (reference → now) fitted to the named forehead dots (the last one without any).
+    fn assign_forehead(
         &self,
         cands: &[Candidate],
         k: &mouthpiece_frame::Intrinsics,
         solver: &mut labels::Assignment,
-        lip_motion: LipMotion,
-    ) -> Small<Option<usize>> {
+    ) -> (Small<Option<usize>>, RigidTransform) {
         let n = self.layout.lip_dots;
         let tracks = self.tracks.as_ref().expect("called with tracks");
-        let mut taken: Small<bool> = smallvec::smallvec![false; cands.len()];
-
         let forehead_preds: Small<[f64; 2]> = tracks[n..]
             .iter()
             .map(|t| {
@@ -1297,24 +1277,33 @@ impl Tracker {
                 }
             })
             .collect();
+        let taken: Small<bool> = smallvec::smallvec![false; cands.len()];
         let forehead = labels::assign(
             &self.gated(&forehead_preds, &tracks[n..], Slot::Forehead, &self.head),
             cands,
             &taken,
             solver,
         );
-        for c in forehead.iter().flatten() {
-            taken[*c] = true;
-        }
-        // Head motion from the named forehead dots, against the reference forehead.
         let (from, to): (Small<Vec3>, Small<Vec3>) = forehead
             .iter()
             .enumerate()
             .filter_map(|(j, c)| c.map(|c| (self.reference_forehead[j], cands[c].point)))
             .unzip();
         let head = kabsch(&from, &to).unwrap_or(self.head);
+        (forehead, head)
+    }
 
-        let lip_preds: Small<[f64; 2]> = tracks[..n]
+    /// Where each lip dot is predicted in the image: its stabilised position (moved on by its
+    /// velocity when it was seen last frame and `lip_motion` is steady) carried by this
+    /// frame's head motion and projected.
+    fn lip_predictions(
+        &self,
+        head: &RigidTransform,
+        k: &mouthpiece_frame::Intrinsics,
+        lip_motion: LipMotion,
+    ) -> Small<[f64; 2]> {
+        let tracks = self.tracks.as_ref().expect("called with tracks");
+        tracks[..self.layout.lip_dots]
             .iter()
             .map(|t| {
                 let q = if t.missing == 0 && lip_motion == LipMotion::Steady {
@@ -1324,8 +1313,28 @@ impl Tracker {
                 };
                 camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
             })
-            .collect();
-        let gates = self.gated(&lip_preds, &tracks[..n], Slot::Lip, &head);
+            .collect()
+    }
+
+    /// Lip names by prediction on the candidates the forehead left, with the second chances
+    /// ([`Recovery`]); returns every name (lip dots, then the given forehead ones).
+    fn assign_lips(
+        &self,
+        cands: &[Candidate],
+        k: &mouthpiece_frame::Intrinsics,
+        solver: &mut labels::Assignment,
+        forehead: &[Option<usize>],
+        head: &RigidTransform,
+        lip_motion: LipMotion,
+    ) -> Small<Option<usize>> {
+        let n = self.layout.lip_dots;
+        let tracks = self.tracks.as_ref().expect("called with tracks");
+        let mut taken: Small<bool> = smallvec::smallvec![false; cands.len()];
+        for c in forehead.iter().flatten() {
+            taken[*c] = true;
+        }
+        let lip_preds = self.lip_predictions(head, k, lip_motion);
+        let gates = self.gated(&lip_preds, &tracks[..n], Slot::Lip, head);
         let mut lip = labels::assign(&gates, cands, &taken, solver);
         for c in lip.iter().flatten() {
             taken[*c] = true;
@@ -1336,11 +1345,11 @@ impl Tracker {
             gates: &gates,
             cands,
             tracks: &tracks[..n],
-            head: &head,
+            head,
             k,
         };
         recover.run(&mut lip, &mut taken, solver);
-        lip.into_iter().chain(forehead).collect()
+        lip.into_iter().chain(forehead.iter().copied()).collect()
     }
 
     /// Gate per prediction: a fraction of the distance to the nearest other prediction of the
@@ -1373,11 +1382,10 @@ impl Tracker {
                 let mut gate =
                     labels::Prediction::in_image(*p, base * (1.0 + 0.05 * missing), slot);
                 if slot == Slot::Lip {
-                    // Between its last depth and where the head motion carried it.
-                    let (last, carried) = (tracks[i].depth, head.apply(&tracks[i].stab).z);
-                    gate.z = 0.5 * (last + carried);
-                    gate.z_gate = self.config.lip_depth_gate_m * (1.0 + 0.2 * missing)
-                        + 0.5 * (last - carried).abs();
+                    let gate_m = self.config.lip_depth_gate_m * (1.0 + 0.2 * missing);
+                    let [low, high] = depth_window(&tracks[i], head, gate_m);
+                    gate.z = 0.5 * (low + high);
+                    gate.z_gate = 0.5 * (high - low);
                 }
                 gate
             })
