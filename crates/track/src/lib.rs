@@ -20,6 +20,7 @@
 
 pub mod camera;
 pub mod depth;
+pub mod forehead;
 pub mod labels;
 pub mod pipeline;
 
@@ -27,7 +28,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use mouthpiece_detect::{DetectConfig, DetectError, Detections, Detector, DotRole, PixelRect};
-use mouthpiece_frame::{Calibration, DepthImage, Frame};
+use mouthpiece_frame::{Calibration, DepthImage, Frame, Intrinsics};
 use mouthpiece_retarget::kabsch::kabsch;
 use mouthpiece_retarget::{
     MissingDots, NeutralAccumulator, NeutralPose, OneEuro, OneEuroParams, PerformerDots,
@@ -91,6 +92,10 @@ pub struct TrackConfig {
     /// robustly, metres; 0: the median of the paint's inner disc (the fallback when the
     /// patch has too few readings). The paint's own few pixels share one sensor error.
     pub lip_depth_patch_m: f64,
+    /// How far the forehead's skin reaches beyond its dots (to the sides and above; a third
+    /// of it below, towards the brows), metres: the surface the head motion is refined on
+    /// once calibrated ([`forehead`]). 0: the head motion from the three dots alone.
+    pub forehead_surface_margin_m: f64,
     /// Temporal filter on each forehead dot's depth (One Euro: cut-off frequency at rest in Hz,
     /// and how fast it opens with the depth's speed, Hz per m/s). The forehead's depth noise
     /// is what tilts the head pose; pixels are precise and stay unfiltered. 0 Hz: no filter.
@@ -128,6 +133,7 @@ impl Default for TrackConfig {
             max_opening_ratio: 0.6,
             forehead_depth_patch_m: 0.014,
             lip_depth_patch_m: 0.0035,
+            forehead_surface_margin_m: 0.025,
             forehead_depth_min_cutoff_hz: 2.0,
             forehead_depth_beta: 200.0,
             roi_margin_px: 20.0,
@@ -180,6 +186,7 @@ impl TrackConfig {
             ),
             ("forehead_depth_beta", self.forehead_depth_beta),
             ("lip_depth_patch_m", self.lip_depth_patch_m),
+            ("forehead_surface_margin_m", self.forehead_surface_margin_m),
             ("missing_hold_s", self.missing_hold_s),
             ("missing_decay_s", self.missing_decay_s),
         ] {
@@ -354,6 +361,10 @@ enum LipMotion {
 /// the head motion fitted to them to be used while a forehead dot is hidden.
 const HEAD_FALLBACK_RMS_M: f64 = 0.003;
 
+/// The forehead surface is sampled every this many pixels (the sensor's noise is correlated
+/// over about four).
+const FOREHEAD_SAMPLE_STEP_PX: usize = 2;
+
 /// The tracker: owns the detector, the names, and the calibration.
 pub struct Tracker {
     config: TrackConfig,
@@ -382,6 +393,10 @@ pub struct Tracker {
     frames_with_missing: u32,
     calibrating: bool,
     window: VecDeque<(f64, PerformerDots)>,
+    /// The forehead's depth in each frame of `window` (when the surface fit is on).
+    window_crops: VecDeque<forehead::DepthCrop>,
+    /// The neutral forehead surface the head motion is refined on, once calibrated.
+    forehead_surface: Option<forehead::ForeheadSurface>,
     stabiliser: Option<Stabiliser>,
     registered: DepthImage,
     depth_buf: depth::DepthScratch,
@@ -441,6 +456,8 @@ impl Tracker {
             frames_with_missing: 0,
             calibrating: true,
             window: VecDeque::new(),
+            window_crops: VecDeque::new(),
+            forehead_surface: None,
             stabiliser: None,
             registered: DepthImage::new(0, 0),
             depth_buf: depth::DepthScratch::default(),
@@ -481,6 +498,7 @@ impl Tracker {
         tracing::info!("neutral calibration requested");
         self.calibrating = true;
         self.window.clear();
+        self.window_crops.clear();
     }
 
     /// Tracks one frame.
@@ -517,13 +535,15 @@ impl Tracker {
         let result = self.detect_and_name(frame, depth, t, &mut found, &mut cands);
         self.found = found;
         self.cands = cands;
+        let result = result.and_then(|()| {
+            if dt > 0.0 {
+                self.velocity_dt = dt;
+            }
+            self.prev_t = Some(t);
+            self.update_calibration(t, depth, calib.depth_scale_m, k)
+        });
         self.registered = registered;
         result?;
-        if dt > 0.0 {
-            self.velocity_dt = dt;
-        }
-        self.prev_t = Some(t);
-        self.update_calibration(t)?;
         let out = &mut self.out;
         match (&mut self.stabiliser, &mut out.stabilised) {
             (Some(stab), stabilised) => {
@@ -603,6 +623,7 @@ impl Tracker {
         };
         self.split_merged_blobs(&mut names, cands, &found.blobs, &view);
         self.name_faint_corners(&mut names, cands, &found.faint, &view);
+        self.fit_forehead_surface(&names[n..], cands, &view);
         if let Some(filters) = &mut self.forehead_depth {
             for (filter, name) in filters.iter_mut().zip(&names[n..]) {
                 match name {
@@ -1464,7 +1485,13 @@ impl Tracker {
 
     /// Collects fully seen frames while calibrating; takes the neutral pose once the window
     /// spans `calibration_s` of a still, closed mouth.
-    fn update_calibration(&mut self, t: f64) -> Result<(), TrackError> {
+    fn update_calibration(
+        &mut self,
+        t: f64,
+        depth: &DepthImage,
+        depth_scale: f64,
+        k: Intrinsics,
+    ) -> Result<(), TrackError> {
         if !self.calibrating {
             return Ok(());
         }
@@ -1473,9 +1500,21 @@ impl Tracker {
         if !complete {
             // The window must be continuous.
             self.window.clear();
+            self.window_crops.clear();
             return Ok(());
         }
         self.window.push_back((t, dots.clone()));
+        if self.config.forehead_surface_margin_m > 0.0 {
+            let n = self.layout.lip_dots;
+            let pixels: Small<[f64; 2]> = self.out.pixels[n..].iter().flatten().copied().collect();
+            let z = dots.forehead.iter().flatten().map(|p| p.z).sum::<f64>()
+                / dots.forehead.len() as f64;
+            let margin_px = self.config.forehead_surface_margin_m * k.fx / z.max(0.1);
+            self.window_crops
+                .push_back(forehead::DepthCrop::around_forehead(
+                    depth, &pixels, margin_px,
+                ));
+        }
         let span = |w: &VecDeque<(f64, PerformerDots)>| {
             w.back().map_or(0.0, |b| b.0) - w.front().map_or(0.0, |f| f.0)
         };
@@ -1485,6 +1524,7 @@ impl Tracker {
                 >= self.config.calibration_s
         {
             self.window.pop_front();
+            self.window_crops.pop_front();
         }
         // One frame interval short of the span is a full second of frames at any rate.
         let interval = if self.window.len() > 1 {
@@ -1530,10 +1570,81 @@ impl Tracker {
             decay: self.config.missing_decay_s,
         };
         self.stabiliser = Some(Stabiliser::new(neutral, missing).map_err(TrackError::Neutral)?);
+        self.forehead_surface = self.build_forehead_surface(depth_scale, &k);
         self.calibrating = false;
         self.window.clear();
+        self.window_crops.clear();
         self.out.status.neutral_taken = true;
         Ok(())
+    }
+
+    /// The neutral forehead surface from the calibration window (see [`forehead`]).
+    fn build_forehead_surface(
+        &self,
+        scale: f64,
+        k: &Intrinsics,
+    ) -> Option<forehead::ForeheadSurface> {
+        if self.window_crops.len() != self.window.len() {
+            return None;
+        }
+        let crops: Vec<&forehead::DepthCrop> = self.window_crops.iter().collect();
+        let surface = forehead::ForeheadSurface::build(
+            &crops,
+            scale,
+            self.depth_range,
+            k,
+            self.reference_forehead.clone(),
+            FOREHEAD_SAMPLE_STEP_PX,
+        );
+        match &surface {
+            Some(s) => tracing::info!(samples = s.samples(), "forehead surface taken"),
+            None => tracing::warn!(
+                "too little forehead surface with depth: the head motion comes from the forehead dots alone"
+            ),
+        }
+        surface
+    }
+
+    /// With every forehead dot named and a neutral surface, the forehead dots become the
+    /// neutral ones carried by the head motion fitted to the surface and their pixels.
+    fn fit_forehead_surface(
+        &self,
+        forehead: &[Option<usize>],
+        cands: &mut [Candidate],
+        view: &DepthView,
+    ) {
+        let Some(surface) = &self.forehead_surface else {
+            return;
+        };
+        let rays: Small<Option<Vec3>> =
+            forehead.iter().map(|c| c.map(|c| cands[c].point)).collect();
+        let (from, to): (Small<Vec3>, Small<Vec3>) = self
+            .reference_forehead
+            .iter()
+            .zip(&rays)
+            .filter_map(|(f, r)| r.map(|r| (*f, r)))
+            .unzip();
+        if from.len() < forehead.len() {
+            return;
+        }
+        let Some(start) = kabsch(&from, &to) else {
+            return;
+        };
+        let Some(head) = surface.refine(
+            &start,
+            &rays,
+            view.depth,
+            view.scale,
+            view.k,
+            forehead::SurfaceFit::default(),
+        ) else {
+            return;
+        };
+        for (c, reference) in forehead.iter().zip(&self.reference_forehead) {
+            if let Some(c) = c {
+                cands[*c].point = head.apply(reference);
+            }
+        }
     }
 
     /// Whether the lips, with head motion removed, stayed within the tolerance over the

@@ -1,0 +1,276 @@
+//! Head motion from the whole forehead, not just its three dots.
+//!
+//! Three dots' depths tilt the head by the depth noise over their spacing: 0.4 mm over 4 cm
+//! is 0.6°, and the mouth sits 11 cm below. The forehead's skin around and between the dots
+//! holds thousands of depth readings. At calibration their mean over the still second becomes
+//! a surface (camera frame, neutral pose); each frame afterwards the head motion is refined so
+//! that this surface meets the depth image (point-to-plane, projective association as in
+//! KinectFusion) while the dots' neutral places project onto the dots' pixels (their pixels
+//! are precise to a tenth of a pixel; their depth is what is noisy). Gauss–Newton on the
+//! six parameters, Huber weights on the depth residuals (eyebrows, hair and hands are not
+//! the surface).
+
+use mouthpiece_frame::{DepthImage, Intrinsics};
+use mouthpiece_retarget::RigidTransform;
+use nalgebra::{Matrix3, Matrix6, Rotation3, Vector6};
+
+use crate::{camera, Vec3};
+
+/// A rectangle of one frame's depth image, kept while calibrating.
+#[derive(Debug, Clone)]
+pub struct DepthCrop {
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+    data: Vec<u16>,
+}
+
+impl DepthCrop {
+    /// The forehead's skin: the box round the forehead dots' pixels grown by `margin_px` to
+    /// the sides and above, and by a third of it below (towards the brows, which move).
+    pub fn around_forehead(depth: &DepthImage, dots: &[[f64; 2]], margin_px: f64) -> Self {
+        let (mut x_lo, mut y_lo) = (f64::INFINITY, f64::INFINITY);
+        let (mut x_hi, mut y_hi) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+        for p in dots {
+            x_lo = x_lo.min(p[0]);
+            x_hi = x_hi.max(p[0]);
+            y_lo = y_lo.min(p[1]);
+            y_hi = y_hi.max(p[1]);
+        }
+        let (w_img, h_img) = (depth.width as f64, depth.height as f64);
+        let x0 = (x_lo - margin_px).floor().clamp(0.0, w_img) as usize;
+        let x1 = (x_hi + margin_px).ceil().clamp(0.0, w_img) as usize;
+        let y0 = (y_lo - margin_px).floor().clamp(0.0, h_img) as usize;
+        let y1 = (y_hi + margin_px / 3.0).ceil().clamp(0.0, h_img) as usize;
+        let (w, h) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
+        let mut data = Vec::with_capacity(w * h);
+        for y in y0..y0 + h {
+            let row = y * depth.width as usize;
+            data.extend_from_slice(&depth.data[row + x0..row + x0 + w]);
+        }
+        Self { x0, y0, w, h, data }
+    }
+
+    fn get(&self, x: usize, y: usize) -> Option<u16> {
+        (x >= self.x0 && y >= self.y0 && x < self.x0 + self.w && y < self.y0 + self.h)
+            .then(|| self.data[(y - self.y0) * self.w + x - self.x0])
+    }
+}
+
+/// How the refinement weighs its two kinds of evidence.
+#[derive(Debug, Clone, Copy)]
+pub struct SurfaceFit {
+    /// A dot's pixel error, pixels (1 σ).
+    pub dot_sigma_px: f64,
+    /// One surface sample's depth error, metres (1 σ; the sensor's noise is correlated over
+    /// a few pixels, so this is above the per-pixel noise).
+    pub depth_sigma_m: f64,
+}
+
+impl Default for SurfaceFit {
+    fn default() -> Self {
+        Self {
+            dot_sigma_px: 0.2,
+            depth_sigma_m: 0.004,
+        }
+    }
+}
+
+/// Samples farther than this from the measured surface are something else (hair, a hand,
+/// the brows), and not used.
+const OUTLIER_M: f64 = 0.010;
+/// Residuals beyond this are weighed down (Huber).
+const HUBER_M: f64 = 0.002;
+const ITERATIONS: usize = 4;
+
+/// The forehead at neutral: surface samples with their normals, and the dots.
+#[derive(Debug, Clone)]
+pub struct ForeheadSurface {
+    points: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    dots: Vec<Vec3>,
+}
+
+impl ForeheadSurface {
+    /// The surface from the still calibration window's crops: per pixel, the mean of its
+    /// valid readings (at least two thirds of the frames), sampled every `step` pixels, with
+    /// normals from the neighbouring samples. `dots`: the forehead dots at neutral (the
+    /// neutral pose the head motion is measured from). `None` with too little surface.
+    pub fn build(
+        crops: &[&DepthCrop],
+        scale: f64,
+        range: [f64; 2],
+        k: &Intrinsics,
+        dots: Vec<Vec3>,
+        step: usize,
+    ) -> Option<Self> {
+        let last = crops.last()?;
+        let (lo, hi) = ((range[0] / scale).max(1.0), range[1] / scale);
+        let need = (2 * crops.len()).div_ceil(3);
+        let mean = |x: usize, y: usize| -> Option<f64> {
+            let (mut sum, mut n) = (0.0, 0usize);
+            for c in crops {
+                if let Some(v) = c.get(x, y) {
+                    let v = v as f64;
+                    if v >= lo && v <= hi {
+                        sum += v;
+                        n += 1;
+                    }
+                }
+            }
+            (n >= need).then(|| sum / n as f64 * scale)
+        };
+        let point =
+            |x: usize, y: usize| mean(x, y).map(|z| camera::deproject(k, [x as f64, y as f64], z));
+        let mut points = Vec::new();
+        let mut normals = Vec::new();
+        let step = step.max(1);
+        for y in (last.y0 + step..last.y0 + last.h.saturating_sub(step)).step_by(step) {
+            for x in (last.x0 + step..last.x0 + last.w.saturating_sub(step)).step_by(step) {
+                let (Some(p), Some(l), Some(r), Some(u), Some(d)) = (
+                    point(x, y),
+                    point(x - step, y),
+                    point(x + step, y),
+                    point(x, y - step),
+                    point(x, y + step),
+                ) else {
+                    continue;
+                };
+                // A step in depth (the edge of the head, a dot's paint without readings
+                // beside it) makes no surface.
+                let (dx, dy) = (r - l, d - u);
+                if (r.z - l.z).abs() > 0.6 * dx.norm() + 0.004
+                    || (d.z - u.z).abs() > 0.6 * dy.norm() + 0.004
+                {
+                    continue;
+                }
+                let mut n = dx.cross(&dy);
+                if n.norm() < 1e-12 {
+                    continue;
+                }
+                n.normalize_mut();
+                // Facing the camera.
+                if n.dot(&p) > 0.0 {
+                    n = -n;
+                }
+                points.push(p);
+                normals.push(n);
+            }
+        }
+        (points.len() >= 30).then_some(Self {
+            points,
+            normals,
+            dots,
+        })
+    }
+
+    pub fn samples(&self) -> usize {
+        self.points.len()
+    }
+
+    /// The head motion (neutral → now) that best fits the depth image and the dots seen at
+    /// `dot_rays` (their undistorted rays, any length; `None` for a dot not seen), starting
+    /// from `start`. `None` if the fit breaks down (too few samples, a singular system).
+    pub fn refine(
+        &self,
+        start: &RigidTransform,
+        dot_rays: &[Option<Vec3>],
+        depth: &DepthImage,
+        scale: f64,
+        k: &Intrinsics,
+        fit: SurfaceFit,
+    ) -> Option<RigidTransform> {
+        let mut rotation = start.rotation;
+        let mut translation = start.translation;
+        let w_dot = (k.fx / fit.dot_sigma_px).powi(2);
+        let w_depth = fit.depth_sigma_m.powi(-2);
+        let (wd, hd) = (depth.width as i64, depth.height as i64);
+        for _ in 0..ITERATIONS {
+            let mut h = Matrix6::<f64>::zeros();
+            let mut g = Vector6::<f64>::zeros();
+            let mut used = 0usize;
+            for (p, n) in self.points.iter().zip(&self.normals) {
+                let q = rotation * p + translation;
+                let n = rotation * n;
+                let Some(px) = camera::project(k, &q) else {
+                    continue;
+                };
+                let (x, y) = (px[0].round() as i64, px[1].round() as i64);
+                if x < 0 || y < 0 || x >= wd || y >= hd {
+                    continue;
+                }
+                let raw = depth.data[(y * wd + x) as usize];
+                if raw == 0 {
+                    continue;
+                }
+                let measured = camera::deproject(k, [x as f64, y as f64], raw as f64 * scale);
+                let r = n.dot(&(measured - q));
+                if r.abs() > OUTLIER_M {
+                    continue;
+                }
+                let huber = if r.abs() <= HUBER_M {
+                    1.0
+                } else {
+                    HUBER_M / r.abs()
+                };
+                let qn = q.cross(&n);
+                let j = Vector6::new(-qn.x, -qn.y, -qn.z, -n.x, -n.y, -n.z);
+                let w = w_depth * huber;
+                h += w * j * j.transpose();
+                g += w * r * j;
+                used += 1;
+            }
+            if used < 30 {
+                return None;
+            }
+            for (x, ray) in self.dots.iter().zip(dot_rays) {
+                let Some(ray) = ray else { continue };
+                let q = rotation * x + translation;
+                if q.z <= 0.0 || ray.z <= 0.0 {
+                    continue;
+                }
+                let (mx, my) = (ray.x / ray.z, ray.y / ray.z);
+                let r = [q.x / q.z - mx, q.y / q.z - my];
+                // d(normalised)/dq, then dq/d(ω, v) = [-[q]×, I].
+                let dn = nalgebra::Matrix2x3::new(
+                    1.0 / q.z,
+                    0.0,
+                    -q.x / (q.z * q.z),
+                    0.0,
+                    1.0 / q.z,
+                    -q.y / (q.z * q.z),
+                );
+                let dq = {
+                    let mut m = nalgebra::Matrix3x6::zeros();
+                    m.fixed_view_mut::<3, 3>(0, 0)
+                        .copy_from(&(-q.cross_matrix()));
+                    m.fixed_view_mut::<3, 3>(0, 3)
+                        .copy_from(&Matrix3::identity());
+                    m
+                };
+                let j = dn * dq;
+                for row in 0..2 {
+                    let jr = j.row(row).transpose();
+                    h += w_dot * jr * jr.transpose();
+                    g += w_dot * r[row] * jr;
+                }
+            }
+            let delta = h.cholesky()?.solve(&(-g));
+            let omega = delta.fixed_rows::<3>(0).into_owned();
+            let v = delta.fixed_rows::<3>(3).into_owned();
+            let step = Rotation3::new(omega).into_inner();
+            rotation = step * rotation;
+            translation = step * translation + v;
+            if omega.norm() < 1e-6 && v.norm() < 1e-7 {
+                break;
+            }
+        }
+        // Re-orthonormalise against drift over the small steps.
+        let rotation = Rotation3::from_matrix(&rotation).into_inner();
+        Some(RigidTransform {
+            rotation,
+            translation,
+        })
+    }
+}
