@@ -82,6 +82,47 @@ pub fn depth_by_plane(
         values: zs,
     } = scratch;
     collect(depth, center, radius, lo, hi, buf);
+    robust_plane(buf, zs, scale, lo, hi)
+}
+
+/// As [`depth_by_plane`] over an ellipse instead of a disc: `half_len` pixels along the unit
+/// direction `along`, `half_width` across it. A lip is curved across and nearly straight
+/// along its line, so a patch stretched along the lip averages more of the sensor's noise
+/// for the same curvature bias.
+#[allow(clippy::too_many_arguments)]
+pub fn depth_by_plane_along(
+    depth: &DepthImage,
+    scale: f64,
+    center: [f64; 2],
+    along: [f64; 2],
+    half_len: f64,
+    half_width: f64,
+    range: [f64; 2],
+    scratch: &mut DepthScratch,
+) -> Option<(f64, DepthMethod)> {
+    let lo = (range[0] / scale).max(1.0);
+    let hi = range[1] / scale;
+    let DepthScratch {
+        samples: buf,
+        values: zs,
+    } = scratch;
+    collect(depth, center, half_len, lo, hi, buf);
+    buf.retain(|&(dx, dy, _)| {
+        let u = dx * along[0] + dy * along[1];
+        let v = -dx * along[1] + dy * along[0];
+        (u / half_len).powi(2) + (v / half_width).powi(2) <= 1.0
+    });
+    robust_plane(buf, zs, scale, lo, hi)
+}
+
+/// The two-pass robust plane of [`depth_by_plane`] through `buf`, evaluated at its origin.
+fn robust_plane(
+    buf: &mut Vec<(f64, f64, f64)>,
+    zs: &mut Vec<f64>,
+    scale: f64,
+    lo: f64,
+    hi: f64,
+) -> Option<(f64, DepthMethod)> {
     if buf.len() < 6 {
         return None;
     }

@@ -84,6 +84,19 @@ const OUTLIER_M: f64 = 0.010;
 const HUBER_M: f64 = 0.002;
 const ITERATIONS: usize = 4;
 
+/// Skin farther than this from the plane through the forehead dots is not the forehead.
+const OFF_PLANE_M: f64 = 0.025;
+
+/// A point on the plane through the first three of `dots` and its unit normal.
+fn plane_through(dots: &[Vec3]) -> Option<(Vec3, Vec3)> {
+    let [a, b, c] = dots.get(..3)? else {
+        return None;
+    };
+    let n = (b - a).cross(&(c - a));
+    let len = n.norm();
+    (len > 1e-12).then(|| ((a + b + c) / 3.0, n / len))
+}
+
 /// The forehead at neutral: surface samples with their normals, and the dots.
 #[derive(Debug, Clone)]
 pub struct ForeheadSurface {
@@ -123,6 +136,9 @@ impl ForeheadSurface {
         };
         let point =
             |x: usize, y: usize| mean(x, y).map(|z| camera::deproject(k, [x as f64, y as f64], z));
+        // The skin lies near the plane through the dots; what lies far behind it (the wall,
+        // the room) or before it is not the head, and must not hold the fit still.
+        let plane = plane_through(&dots)?;
         let mut points = Vec::new();
         let mut normals = Vec::new();
         let step = step.max(1);
@@ -150,6 +166,9 @@ impl ForeheadSurface {
                     continue;
                 }
                 n.normalize_mut();
+                if (p - plane.0).dot(&plane.1).abs() > OFF_PLANE_M {
+                    continue;
+                }
                 // Facing the camera.
                 if n.dot(&p) > 0.0 {
                     n = -n;

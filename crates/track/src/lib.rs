@@ -92,6 +92,14 @@ pub struct TrackConfig {
     /// robustly, metres; 0: the median of the paint's inner disc (the fallback when the
     /// patch has too few readings). The paint's own few pixels share one sensor error.
     pub lip_depth_patch_m: f64,
+    /// Once named, a lip dot (not a corner) takes its depth again from a patch stretched
+    /// along the lip: this far each way along the line through its neighbours (at most
+    /// [`LIP_PATCH_NEIGHBOUR_FRACTION`] of the way to the nearer one), metres; 0: no second
+    /// look. A lip is curved across and nearly straight along its line, so the long patch
+    /// averages more of the sensor's correlated noise for the same curvature.
+    pub lip_depth_along_m: f64,
+    /// ... and this far each way across the lip, metres.
+    pub lip_depth_across_m: f64,
     /// How far the forehead's skin reaches beyond its dots (to the sides and above; a third
     /// of it below, towards the brows), metres: the surface the head motion is refined on
     /// once calibrated ([`forehead`]). 0: the head motion from the three dots alone.
@@ -133,6 +141,8 @@ impl Default for TrackConfig {
             max_opening_ratio: 0.6,
             forehead_depth_patch_m: 0.014,
             lip_depth_patch_m: 0.0035,
+            lip_depth_along_m: 0.009,
+            lip_depth_across_m: 0.0018,
             forehead_surface_margin_m: 0.025,
             forehead_depth_min_cutoff_hz: 2.0,
             forehead_depth_beta: 200.0,
@@ -174,6 +184,7 @@ impl TrackConfig {
             ("min_gate_px", self.min_gate_px),
             ("gate_fraction", self.gate_fraction),
             ("lip_depth_gate_m", self.lip_depth_gate_m),
+            ("lip_depth_across_m", self.lip_depth_across_m),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return bad(key, "must be a positive number");
@@ -186,6 +197,7 @@ impl TrackConfig {
             ),
             ("forehead_depth_beta", self.forehead_depth_beta),
             ("lip_depth_patch_m", self.lip_depth_patch_m),
+            ("lip_depth_along_m", self.lip_depth_along_m),
             ("forehead_surface_margin_m", self.forehead_surface_margin_m),
             ("missing_hold_s", self.missing_hold_s),
             ("missing_decay_s", self.missing_decay_s),
@@ -360,6 +372,9 @@ enum LipMotion {
 /// Largest RMS misfit (metres) of the upper lip and forehead dots to their rest shape for
 /// the head motion fitted to them to be used while a forehead dot is hidden.
 const HEAD_FALLBACK_RMS_M: f64 = 0.003;
+
+/// How far towards its nearer neighbour a lip dot's stretched depth patch may reach.
+pub const LIP_PATCH_NEIGHBOUR_FRACTION: f64 = 0.8;
 
 /// The forehead surface is sampled every this many pixels (the sensor's noise is correlated
 /// over about four).
@@ -624,6 +639,7 @@ impl Tracker {
         self.split_merged_blobs(&mut names, cands, &found.blobs, &view);
         self.name_faint_corners(&mut names, cands, &found.faint, &view);
         self.fit_forehead_surface(&names[n..], cands, &view);
+        self.lip_depths_along_the_lips(&names[..n], cands, &view);
         if let Some(filters) = &mut self.forehead_depth {
             for (filter, name) in filters.iter_mut().zip(&names[n..]) {
                 match name {
@@ -1576,6 +1592,69 @@ impl Tracker {
         self.window_crops.clear();
         self.out.status.neutral_taken = true;
         Ok(())
+    }
+
+    /// Each named lip dot but the corners: its depth again, from a patch stretched along
+    /// the lip (the line through its neighbours' pixels; [`TrackConfig::lip_depth_along_m`]).
+    /// Names are settled by then: this only sharpens the depth.
+    fn lip_depths_along_the_lips(
+        &mut self,
+        lip: &[Option<usize>],
+        cands: &mut [Candidate],
+        view: &DepthView,
+    ) {
+        let (along_m, across_m) = (
+            self.config.lip_depth_along_m,
+            self.config.lip_depth_across_m,
+        );
+        if along_m <= 0.0 {
+            return;
+        }
+        let n = lip.len();
+        let corners = [self.layout.left_corner(), self.layout.right_corner()];
+        for i in 0..n {
+            if corners.contains(&i) {
+                continue;
+            }
+            let Some(c) = lip[i] else { continue };
+            let here = cands[c].pixel;
+            let prev = lip[(i + n - 1) % n].map(|p| cands[p].pixel);
+            let next = lip[(i + 1) % n].map(|p| cands[p].pixel);
+            let (a, b) = match (prev, next) {
+                (Some(p), Some(q)) => (p, q),
+                (Some(p), None) => (p, here),
+                (None, Some(q)) => (here, q),
+                (None, None) => continue,
+            };
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let len = (dx * dx + dy * dy).sqrt();
+            if len < 1.0 {
+                continue;
+            }
+            let gap = |p: Option<[f64; 2]>| {
+                p.map_or(f64::INFINITY, |p| {
+                    ((p[0] - here[0]).powi(2) + (p[1] - here[1]).powi(2)).sqrt()
+                })
+            };
+            let nearest_px = gap(prev).min(gap(next));
+            let z_hint = cands[c].point.z;
+            let px = |m: f64| (m * view.k.fx / z_hint * 64.0).round() / 64.0;
+            // Short of the neighbours: towards a corner the lip bends away.
+            let along_px =
+                px(along_m).min((LIP_PATCH_NEIGHBOUR_FRACTION * nearest_px * 64.0).round() / 64.0);
+            if let Some((z, _)) = depth::depth_by_plane_along(
+                view.depth,
+                view.scale,
+                here,
+                [dx / len, dy / len],
+                along_px,
+                px(across_m),
+                self.depth_range,
+                &mut self.depth_buf,
+            ) {
+                cands[c].point = camera::deproject(view.k, here, z);
+            }
+        }
     }
 
     /// The neutral forehead surface from the calibration window (see [`forehead`]).
