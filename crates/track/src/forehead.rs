@@ -269,10 +269,10 @@ impl ForeheadSurface {
                     m
                 };
                 let j = dn * dq;
-                for row in 0..2 {
+                for (row, r) in r.iter().enumerate() {
                     let jr = j.row(row).transpose();
                     h += w_dot * jr * jr.transpose();
-                    g += w_dot * r[row] * jr;
+                    g += w_dot * r * jr;
                 }
             }
             let delta = h.cholesky()?.solve(&(-g));

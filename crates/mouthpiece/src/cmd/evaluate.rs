@@ -13,7 +13,10 @@
 //! - *head RMS*: angle between the tracked head rotation and the true one (both relative to
 //!   the pose at calibration);
 //! - *character RMS*: the character points against those the retarget core gives from the
-//!   true dots with the same neutral frames, as a share of the character's mouth width.
+//!   true dots with the same neutral frames, as a share of the character's mouth width; over
+//!   the points whose driving lip dot is visible (the targets are on visible dots),
+//!   and over all points (a dot the camera cannot see holds its last value, method.md §6,
+//!   while the truth moves on).
 
 use std::path::PathBuf;
 
@@ -89,6 +92,9 @@ pub struct Metrics {
     pub head_frames: usize,
     pub char_sq_sum: f64,
     pub char_count: usize,
+    /// Over the points whose driving lip dot is visible.
+    pub char_visible_sq_sum: f64,
+    pub char_visible_count: usize,
     pub char_width: f64,
     pub calibrated_at: Option<f64>,
     /// Per dot (`D1..`, then `F1..`), for `--per-dot`.
@@ -119,8 +125,14 @@ impl Metrics {
             .sqrt()
             .to_degrees()
     }
+    /// Over every character point.
     pub fn char_rms_pct(&self) -> f64 {
         100.0 * (self.char_sq_sum / self.char_count.max(1) as f64).sqrt() / self.char_width
+    }
+    /// Over the character points whose driving lip dot is visible.
+    pub fn char_visible_rms_pct(&self) -> f64 {
+        100.0 * (self.char_visible_sq_sum / self.char_visible_count.max(1) as f64).sqrt()
+            / self.char_width
     }
 }
 
@@ -283,6 +295,10 @@ pub fn evaluate(
                 );
                 m.char_sq_sum += d2;
                 m.char_count += 1;
+                if gt.is_visible(&names[character.driver[k]]) {
+                    m.char_visible_sq_sum += d2;
+                    m.char_visible_count += 1;
+                }
             }
         }
     }
@@ -320,9 +336,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )));
     }
     println!(
-        "| seed | noise | head motion | frames | calibrated at (s) | visible dots | found & named | wrong | named hidden | 3D RMS (mm) | head RMS (°) | character RMS (% width) |"
+        "| seed | noise | head motion | frames | calibrated at (s) | visible dots | found & named | wrong | named hidden | 3D RMS (mm) | head RMS (°) | character RMS, visible dots (% width) | character RMS, all dots (% width) |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &motion in &args.head_motion {
         for &noise in &args.noise {
             for &seed in &args.seeds {
@@ -344,7 +360,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 };
                 let m = evaluate(synth, &config, &character, 1.0)?;
                 println!(
-                    "| {seed} | {noise:?} | {motion:?} | {} | {} | {} | {:.2} % | {} | {} | {:.2} | {:.2} | {:.2} |",
+                    "| {seed} | {noise:?} | {motion:?} | {} | {} | {} | {:.2} % | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
                     m.frames,
                     m.calibrated_at.map_or("never".to_string(), |t| format!("{t:.2}")),
                     m.visible,
@@ -353,6 +369,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     m.named_hidden,
                     m.rms_mm(),
                     m.head_rms_deg(),
+                    m.char_visible_rms_pct(),
                     m.char_rms_pct()
                 );
                 if args.per_dot {
