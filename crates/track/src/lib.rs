@@ -361,17 +361,23 @@ fn depth_window(track: &DotTrack, head: &RigidTransform, gate: f64) -> [f64; 2] 
 const SPLIT_MISSING_FRAMES: u32 = 10;
 
 /// How the lip dots are predicted to have moved since the last frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 enum LipMotion {
     /// On at the velocity they had (in the head's frame).
     Steady,
     /// Not at all: where they were last (in the head's frame).
     Stopped,
+    /// As `Steady`, the lower lip between the corners shifted by these pixels besides (the
+    /// jaw dropping or snapping shut within one frame).
+    JawJumped([f64; 2]),
 }
 
 /// Largest RMS misfit (metres) of the upper lip and forehead dots to their rest shape for
 /// the head motion fitted to them to be used while a forehead dot is hidden.
 const HEAD_FALLBACK_RMS_M: f64 = 0.003;
+
+/// Farthest a lower-lip dot is looked for beyond its prediction when the jaw jumps, pixels.
+const JAW_JUMP_PX: f64 = 12.0;
 
 /// How far towards its nearer neighbour a lip dot's stretched depth patch may reach.
 pub const LIP_PATCH_NEIGHBOUR_FRACTION: f64 = 0.8;
@@ -1004,6 +1010,30 @@ impl Tracker {
                 predicted = stopped;
             }
         }
+        // The jaw drops or snaps shut within a frame: the lower lip lands beyond its
+        // prediction together, leaving ghosts where it was.
+        if lips_named(&predicted) < layout.lip_dots && named < cands.len() {
+            if let Some(shift) = self.jaw_jump(&predicted, cands, k, &head) {
+                let jumped = self.checked_names(
+                    cands,
+                    k,
+                    &mut solver,
+                    named_forehead,
+                    LipMotion::JawJumped(shift),
+                );
+                if lips_named(&jumped) > lips_named(&predicted)
+                    && self.corners_are_extremes(&jumped, cands)
+                {
+                    tracing::debug!(
+                        before = lips_named(&predicted),
+                        jumped = lips_named(&jumped),
+                        ?shift,
+                        "the jaw jumped: lower lip named from its shifted places"
+                    );
+                    predicted = jumped;
+                }
+            }
+        }
         self.assignment = solver;
         if !self.corners_are_extremes(&predicted, cands) {
             // Names slipped by one or more places around the mouth (a slip keeps the order):
@@ -1030,6 +1060,49 @@ impl Tracker {
             }
             _ => predicted,
         }
+    }
+
+    /// How far the lower lip jumped beyond its prediction, in pixels: the median offset from
+    /// each missing lower-lip dot's prediction to the nearest free lip candidate within
+    /// [`JAW_JUMP_PX`] and its depth window. `None` when no such candidate lies near one.
+    fn jaw_jump(
+        &self,
+        names: &[Option<usize>],
+        cands: &[Candidate],
+        k: &mouthpiece_frame::Intrinsics,
+        head: &RigidTransform,
+    ) -> Option<[f64; 2]> {
+        let n = self.layout.lip_dots;
+        let tracks = self.tracks.as_ref()?;
+        let preds = self.lip_predictions(head, k, LipMotion::Steady);
+        let mut taken: Small<bool> = smallvec::smallvec![false; cands.len()];
+        for c in names.iter().flatten() {
+            taken[*c] = true;
+        }
+        let (mut dx, mut dy): (Small<f64>, Small<f64>) = (Small::new(), Small::new());
+        for i in self.layout.right_corner() + 1..n {
+            if names[i].is_some() {
+                continue;
+            }
+            let window = depth_window(&tracks[i], head, self.config.lip_depth_gate_m);
+            let nearest = cands
+                .iter()
+                .enumerate()
+                .filter(|&(j, c)| !taken[j] && c.role != DotRole::Forehead)
+                .filter(|(_, c)| (window[0]..=window[1]).contains(&c.point.z))
+                .map(|(_, c)| [c.pixel[0] - preds[i][0], c.pixel[1] - preds[i][1]])
+                .filter(|d| d[0].hypot(d[1]) <= JAW_JUMP_PX)
+                .min_by(|a, b| a[0].hypot(a[1]).total_cmp(&b[0].hypot(b[1])));
+            if let Some(d) = nearest {
+                dx.push(d[0]);
+                dy.push(d[1]);
+            }
+        }
+        let median = |v: &mut Small<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        (!dx.is_empty()).then(|| [median(&mut dx), median(&mut dy)])
     }
 
     /// Lip names by prediction, then the checks that drop names breaking the mouth's shape.
@@ -1343,12 +1416,19 @@ impl Tracker {
         tracks[..self.layout.lip_dots]
             .iter()
             .map(|t| {
-                let q = if t.missing == 0 && lip_motion == LipMotion::Steady {
+                let q = if t.missing == 0 && lip_motion != LipMotion::Stopped {
                     t.stab + t.stab_vel * self.step_ratio
                 } else {
                     t.stab
                 };
                 camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
+            })
+            .enumerate()
+            .map(|(i, p)| match lip_motion {
+                LipMotion::JawJumped(shift) if i > self.layout.right_corner() => {
+                    [p[0] + shift[0], p[1] + shift[1]]
+                }
+                _ => p,
             })
             .collect()
     }
@@ -1811,7 +1891,11 @@ impl Recovery<'_> {
             self.follow_neighbours(lip, taken, solver);
         }
         self.leave_ghosts(lip, taken);
-        self.keep_rest_offsets(lip, taken, solver);
+        // Dots found from their neighbours' places may show a jump the dots beside them
+        // stayed behind on their ghosts for.
+        if self.keep_rest_offsets(lip, taken, solver) {
+            self.leave_ghosts(lip, taken);
+        }
     }
 
     /// Names missing dots at moved predictions, with the first pass's gates recomputed for
@@ -1854,12 +1938,34 @@ impl Recovery<'_> {
     /// free candidate lies where the neighbour's motion puts the dot, within its gate, the
     /// dot takes that one instead and the ghost is left.
     fn leave_ghosts(&self, lip: &mut [Option<usize>], taken: &mut [bool]) {
+        let preds: Small<Option<[f64; 2]>> = self.preds.iter().map(|p| Some(*p)).collect();
+        self.leave_ghosts_from(lip, taken, &preds);
+        // The same against where each dot was last frame: a dot whose prediction was off
+        // (seen again only last frame, no velocity yet) shows no miss while it sits on its
+        // ghost, but its neighbour's step since last frame still points to it.
+        {
+            let last: Small<Option<[f64; 2]>> = self
+                .tracks
+                .iter()
+                .map(|t| (t.missing == 0).then_some(t.pixel))
+                .collect();
+            self.leave_ghosts_from(lip, taken, &last);
+        }
+    }
+
+    fn leave_ghosts_from(
+        &self,
+        lip: &mut [Option<usize>],
+        taken: &mut [bool],
+        from: &[Option<[f64; 2]>],
+    ) {
         let n = lip.len();
         let gates = self.gates;
         let miss = |lip: &[Option<usize>], i: usize| {
+            let from = from[i]?;
             lip[i].map(|c| {
                 let p = self.cands[c].pixel;
-                [p[0] - self.preds[i][0], p[1] - self.preds[i][1]]
+                [p[0] - from[0], p[1] - from[1]]
             })
         };
         let norm = |v: [f64; 2]| (v[0] * v[0] + v[1] * v[1]).sqrt();
@@ -1889,7 +1995,8 @@ impl Recovery<'_> {
             } else {
                 continue;
             };
-            let target = [self.preds[i][0] + moved[0], self.preds[i][1] + moved[1]];
+            let Some(base) = from[i] else { continue };
+            let target = [base[0] + moved[0], base[1] + moved[1]];
             let better = (0..self.cands.len())
                 .filter(|&j| !taken[j] && self.cands[j].role != DotRole::Forehead)
                 .filter(|&j| (self.cands[j].point.z - g.z).abs() <= g.z_gate)
@@ -1912,13 +2019,13 @@ impl Recovery<'_> {
 
     /// Missing dots looked for at their found neighbours' positions now (head motion
     /// removed) plus their rest offsets to them: the lips move together (the jaw carries the
-    /// whole lower lip). Only dots with a found neighbour.
+    /// whole lower lip). Only dots with a found neighbour. True when any was found.
     fn keep_rest_offsets(
         &self,
         lip: &mut [Option<usize>],
         taken: &mut [bool],
         solver: &mut labels::Assignment,
-    ) {
+    ) -> bool {
         let n = lip.len();
         let (head, k) = (self.head, self.k);
         let rest = &self.tracker.rest;
@@ -1941,7 +2048,7 @@ impl Recovery<'_> {
                     .map(|px| (i, px))
             })
             .collect();
-        self.name_moved(lip, taken, solver, &moved);
+        self.name_moved(lip, taken, solver, &moved)
     }
 
     /// Missing dots next to found ones, moved as those neighbours moved, along the mouth.
