@@ -816,18 +816,33 @@ impl Tracker {
                     .map(|(_, j)| j)
             });
             let Some(j) = partner else { continue };
-            let (u, len) = {
-                let d = [preds[i][0] - preds[j][0], preds[i][1] - preds[j][1]];
-                let len = (d[0] * d[0] + d[1] * d[1]).sqrt();
-                ([d[0] / len, d[1] / len], len)
+            let d = [preds[i][0] - preds[j][0], preds[i][1] - preds[j][1]];
+            let [xx, xy, yy] = blobs[self.cand_blob[c]].spread;
+            // The blob's long axis, pointing from dot j's side to dot i's: the two dots lie
+            // along it (their predictions give only the side; a mouth narrowing fast turns
+            // the line between a corner and its neighbour within a frame). Two equal dots
+            // 2h apart spread h² more along that line than across it.
+            let mean = 0.5 * (xx + yy);
+            let root = (0.25 * (xx - yy).powi(2) + xy * xy).sqrt();
+            let (long, short) = (mean + root, mean - root);
+            let axis = if xy.abs() > 1e-12 {
+                [xy, long - xx]
+            } else if xx >= yy {
+                [1.0, 0.0]
+            } else {
+                [0.0, 1.0]
             };
-            if !len.is_finite() || len < 1e-6 {
+            let norm = axis[0].hypot(axis[1]);
+            let sign = if axis[0] * d[0] + axis[1] * d[1] >= 0.0 {
+                1.0
+            } else {
+                -1.0
+            };
+            let u = [sign * axis[0] / norm, sign * axis[1] / norm];
+            if !(norm.is_finite() && norm > 0.0) {
                 continue;
             }
-            let [xx, xy, yy] = blobs[self.cand_blob[c]].spread;
-            let along = u[0] * u[0] * xx + 2.0 * u[0] * u[1] * xy + u[1] * u[1] * yy;
-            let across = u[1] * u[1] * xx - 2.0 * u[0] * u[1] * xy + u[0] * u[0] * yy;
-            let half = (along - across).max(0.0).sqrt();
+            let half = (long - short).max(0.0).sqrt();
             // Less than half a dot apart: one dot, not two.
             if half < 0.5 * r {
                 continue;

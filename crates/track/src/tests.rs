@@ -63,6 +63,47 @@ fn head(yaw_deg: f64, pitch_deg: f64, shift: Vec3) -> RigidTransform {
     }
 }
 
+/// The lips in the depth image: a band 5 px either side of the loop through the lip dots
+/// (D1..D12 and back), its depth linear along each stretch between two dots (a lip is a
+/// surface: the depth patch stretched along it must find the dot's depth there too).
+fn draw_lip_band(depth: &mut Mat, k: &Intrinsics, lips: &[Vec3]) {
+    let px: Vec<[f64; 2]> = lips
+        .iter()
+        .map(|p| camera::project(k, p).unwrap())
+        .collect();
+    let half_width = 5.0;
+    let (mut x0, mut y0, mut x1, mut y1) = (f64::INFINITY, f64::INFINITY, 0.0f64, 0.0f64);
+    for p in &px {
+        x0 = x0.min(p[0]);
+        y0 = y0.min(p[1]);
+        x1 = x1.max(p[0]);
+        y1 = y1.max(p[1]);
+    }
+    let n = lips.len();
+    for v in (y0 - half_width).floor() as i32..=(y1 + half_width).ceil() as i32 {
+        for u in (x0 - half_width).floor() as i32..=(x1 + half_width).ceil() as i32 {
+            let q = [u as f64, v as f64];
+            // The nearest stretch of the loop, and how far along it.
+            let (dist, z) = (0..n)
+                .map(|i| {
+                    let (a, b) = (px[i], px[(i + 1) % n]);
+                    let d = [b[0] - a[0], b[1] - a[1]];
+                    let t = (((q[0] - a[0]) * d[0] + (q[1] - a[1]) * d[1])
+                        / (d[0] * d[0] + d[1] * d[1]))
+                        .clamp(0.0, 1.0);
+                    let off = [a[0] + t * d[0] - q[0], a[1] + t * d[1] - q[1]];
+                    let z = lips[i].z + t * (lips[(i + 1) % n].z - lips[i].z);
+                    (off[0].hypot(off[1]), z)
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .unwrap();
+            if dist <= half_width {
+                *depth.at_2d_mut::<u16>(v, u).unwrap() = (z * 1000.0).round() as u16;
+            }
+        }
+    }
+}
+
 fn render(seq: u64, points: &[Vec3], hidden: &[usize]) -> Frame {
     let k = Intrinsics::default_vga();
     let mut color = Mat::new_rows_cols_with_default(480, 640, CV_8UC3, SKIN).unwrap();
@@ -87,23 +128,12 @@ fn render(seq: u64, points: &[Vec3], hidden: &[usize]) -> Frame {
             *depth.at_2d_mut::<u16>(v, u).unwrap() = (z * 1000.0).round() as u16;
         }
     }
+    draw_lip_band(&mut depth, &k, &points[..12]);
     for (i, p) in points.iter().enumerate() {
         let px = camera::project(&k, p).unwrap();
         let s = 256.0;
         let c = Point::new((px[0] * s).round() as i32, (px[1] * s).round() as i32);
         let r = 0.00225 * k.fx / p.z;
-        if i < 12 {
-            imgproc::circle(
-                &mut depth,
-                c,
-                ((r + 3.0) * s) as i32,
-                Scalar::all(p.z * 1000.0),
-                -1,
-                imgproc::LINE_8,
-                8,
-            )
-            .unwrap();
-        }
         if hidden.contains(&i) {
             continue;
         }
