@@ -774,6 +774,7 @@ impl Tracker {
         let head = self.head_now(names, cands);
         let preds = self.lip_predictions(&head, k, LipMotion::Steady);
         let missing: Small<u32> = tracks[..n].iter().map(|t| t.missing).collect();
+        let last_seen: Small<[f64; 2]> = tracks[..n].iter().map(|t| t.pixel).collect();
         // Depth windows as the assignment's (see `gated`): last depth to carried depth.
         let depth_window: Small<[f64; 2]> = tracks[..n]
             .iter()
@@ -787,7 +788,14 @@ impl Tracker {
                 continue;
             }
             let p = preds[i];
-            let dist = |q: [f64; 2]| ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2)).sqrt();
+            // From its prediction or, if that overshot (a velocity measured on merged blobs
+            // is poor), from where it was last seen.
+            let last = last_seen[i];
+            let dist = |q: [f64; 2]| {
+                ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2))
+                    .sqrt()
+                    .min(((q[0] - last[0]).powi(2) + (q[1] - last[1]).powi(2)).sqrt())
+            };
             // The merged blob: the nearest big lip blob within reach.
             let merged = (0..real)
                 .filter(|&c| cands[c].role != DotRole::Forehead)
