@@ -236,7 +236,7 @@ impl ForeheadSurface {
                 let qn = q.cross(&n);
                 let j = Vector6::new(-qn.x, -qn.y, -qn.z, -n.x, -n.y, -n.z);
                 let w = w_depth * huber;
-                h += w * j * j.transpose();
+                h.ger(w, &j, &j, 1.0);
                 g += w * r * j;
                 used += 1;
             }
@@ -281,7 +281,8 @@ impl ForeheadSurface {
             let step = Rotation3::new(omega).into_inner();
             rotation = step * rotation;
             translation = step * translation + v;
-            if omega.norm() < 1e-6 && v.norm() < 1e-7 {
+            // Converged: a hundredth of a degree, a hundredth of a millimetre.
+            if omega.norm() < 2e-4 && v.norm() < 1e-5 {
                 break;
             }
         }

@@ -382,9 +382,10 @@ const JAW_JUMP_PX: f64 = 12.0;
 /// How far towards its nearer neighbour a lip dot's stretched depth patch may reach.
 pub const LIP_PATCH_NEIGHBOUR_FRACTION: f64 = 0.8;
 
-/// The forehead surface is sampled every this many pixels (the sensor's noise is correlated
-/// over about four).
-const FOREHEAD_SAMPLE_STEP_PX: usize = 2;
+/// The forehead surface is sampled this far apart, metres (2 px at 0.6 m in VGA; the
+/// sensor's noise is correlated over about four pixels, and the samples' count is what the
+/// fit costs).
+const FOREHEAD_SAMPLE_SPACING_M: f64 = 0.002;
 
 /// The tracker: owns the detector, the names, and the calibration.
 pub struct Tracker {
@@ -1770,13 +1771,16 @@ impl Tracker {
             return None;
         }
         let crops: Vec<&forehead::DepthCrop> = self.window_crops.iter().collect();
+        let z = self.reference_forehead.iter().map(|p| p.z).sum::<f64>()
+            / self.reference_forehead.len().max(1) as f64;
+        let step_px = (FOREHEAD_SAMPLE_SPACING_M * k.fx / z.max(0.1)).round().max(1.0) as usize;
         let surface = forehead::ForeheadSurface::build(
             &crops,
             scale,
             self.depth_range,
             k,
             self.reference_forehead.clone(),
-            FOREHEAD_SAMPLE_STEP_PX,
+            step_px,
         );
         match &surface {
             Some(s) => tracing::info!(samples = s.samples(), "forehead surface taken"),
