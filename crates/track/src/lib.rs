@@ -1773,7 +1773,9 @@ impl Tracker {
         let crops: Vec<&forehead::DepthCrop> = self.window_crops.iter().collect();
         let z = self.reference_forehead.iter().map(|p| p.z).sum::<f64>()
             / self.reference_forehead.len().max(1) as f64;
-        let step_px = (FOREHEAD_SAMPLE_SPACING_M * k.fx / z.max(0.1)).round().max(1.0) as usize;
+        let step_px = (FOREHEAD_SAMPLE_SPACING_M * k.fx / z.max(0.1))
+            .round()
+            .max(1.0) as usize;
         let surface = forehead::ForeheadSurface::build(
             &crops,
             scale,

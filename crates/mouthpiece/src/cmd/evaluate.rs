@@ -391,6 +391,8 @@ mod tests {
         wrong: usize,
         rms_mm: f64,
         head_deg: f64,
+        /// Character RMS over the points whose dot is visible, and over all points.
+        char_visible_pct: f64,
         char_pct: f64,
     }
 
@@ -409,24 +411,30 @@ mod tests {
         );
         assert!(m.frames >= 89 && m.visible > 1000, "{m:?}");
         let figures = format!(
-            "found and named {:.2} %, {} wrong of {}, 3D RMS {:.2} mm, head RMS {:.2}°, character RMS {:.2} % of its width",
+            "found and named {:.2} %, {} wrong of {}, 3D RMS {:.2} mm, head RMS {:.2}°, character RMS {:.2} % of its width on visible dots, {:.2} % on all",
             m.found_pct(),
             m.wrong,
             m.visible,
             m.rms_mm(),
             m.head_rms_deg(),
+            m.char_visible_rms_pct(),
             m.char_rms_pct()
         );
         assert!(m.found_pct() >= guard.found_pct, "{figures}");
         assert!(m.wrong <= guard.wrong, "{figures}");
         assert!(m.rms_mm() <= guard.rms_mm, "{figures}");
         assert!(m.head_rms_deg() <= guard.head_deg, "{figures}");
+        assert!(
+            m.char_visible_rms_pct() <= guard.char_visible_pct,
+            "{figures}"
+        );
         assert!(m.char_rms_pct() <= guard.char_pct, "{figures}");
     }
 
     #[test]
     fn synthetic_session_is_tracked_against_ground_truth() {
-        // Measured: 100 % found and named, none wrong, 1.25 mm, 0.57°, 2.87 %.
+        // Measured: 100 % found and named, none wrong, 1.01 mm, 0.31°, character 1.93 % on
+        // visible dots, 2.14 % on all.
         session_holds(
             SynthConfig {
                 seed: 3,
@@ -436,9 +444,10 @@ mod tests {
             Guard {
                 found_pct: 99.5,
                 wrong: 0,
-                rms_mm: 1.5,
-                head_deg: 0.8,
-                char_pct: 3.5,
+                rms_mm: 1.3,
+                head_deg: 0.5,
+                char_visible_pct: 2.4,
+                char_pct: 2.6,
             },
         );
     }
@@ -447,8 +456,11 @@ mod tests {
     fn lips_pressed_shut_stay_named() {
         // At 2.9 s the lips press shut and stop dead: their constant-velocity predictions
         // overshoot past each other, and every lip dot went missing for a frame (99.18 %
-        // found) until the names from "the lips stopped" were tried (99.70 %). Measured now:
-        // 100 %, none wrong, 1.28 mm, 0.70°, 3.04 %.
+        // found) until the names from "the lips stopped" were tried (99.70 %). At 2.53 s the
+        // jaw drops within a frame: the lower lip left ghosts where it was, three of its dots
+        // took them and two went missing (1 wrong name, 99.78 %) until the names from "the
+        // lower lip jumped together" were tried. Measured now: 100 %, none wrong, 1.08 mm,
+        // 0.23°, character 2.15 % on visible dots, 2.38 % on all.
         session_holds(
             SynthConfig {
                 seed: 1,
@@ -458,9 +470,10 @@ mod tests {
             Guard {
                 found_pct: 99.6,
                 wrong: 0,
-                rms_mm: 1.5,
-                head_deg: 0.9,
-                char_pct: 3.5,
+                rms_mm: 1.3,
+                head_deg: 0.4,
+                char_visible_pct: 2.5,
+                char_pct: 2.7,
             },
         );
     }
@@ -469,7 +482,10 @@ mod tests {
     fn a_corner_folding_into_the_mouth_is_not_named_on_its_neighbour() {
         // At 5.0 s D7 (a corner) half folds away and its paint merges with D6's; with blobs
         // split only from 1.5 dots' area, D6 was named on the merged blob, nearer D7 (2 wrong
-        // names, 99.50 % found). Measured: 99.73 %, none wrong, 1.44 mm, 0.87°, 3.63 %.
+        // names, 99.50 % found). Lip dots found from their neighbours' places are checked for
+        // a ghost left beside them again (character 3.11 % on all points without, 2.79 with).
+        // Measured: 99.82 %, none wrong, 1.22 mm, 0.44°, character 2.57 % on visible dots,
+        // 2.79 % on all.
         session_holds(
             SynthConfig {
                 seed: 1,
@@ -480,16 +496,18 @@ mod tests {
             Guard {
                 found_pct: 99.6,
                 wrong: 0,
-                rms_mm: 1.5,
-                head_deg: 0.95,
-                char_pct: 3.9,
+                rms_mm: 1.4,
+                head_deg: 0.6,
+                char_visible_pct: 2.8,
+                char_pct: 3.0,
             },
         );
     }
 
     #[test]
     fn strong_head_motion_is_tracked_against_ground_truth() {
-        // Measured: 99.77 % found and named, none wrong of 1327, 1.30 mm, 0.67°, 3.57 %.
+        // Measured: 99.77 % found and named, none wrong of 1327, 1.07 mm, 0.39°, character
+        // 2.78 % on visible dots, 2.94 % on all.
         session_holds(
             SynthConfig {
                 seed: 2,
@@ -499,10 +517,62 @@ mod tests {
             },
             Guard {
                 found_pct: 99.5,
-                wrong: 1,
-                rms_mm: 1.5,
-                head_deg: 0.9,
-                char_pct: 4.0,
+                wrong: 0,
+                rms_mm: 1.3,
+                head_deg: 0.6,
+                char_visible_pct: 3.0,
+                char_pct: 3.2,
+            },
+        );
+    }
+
+    #[test]
+    fn lip_dots_near_the_corners_leave_their_ghosts_when_the_jaw_drops() {
+        // At 1.87 s the jaw drops 6 px within a frame. D8 and D12 had been seen again only
+        // the frame before (no velocity yet): their predictions stayed put, right on their
+        // motion-blur ghosts, so they showed no miss while D9..D11 jumped. Judged against
+        // where they were last frame they are (2 wrong names without). Measured: 99.92 %,
+        // none wrong, 1.12 mm, 0.42°, character 2.33 % on visible dots, 2.52 % on all.
+        session_holds(
+            SynthConfig {
+                seed: 3,
+                seconds: 4.0,
+                head_motion: HeadMotion::Strong,
+                ..SynthConfig::default()
+            },
+            Guard {
+                found_pct: 99.7,
+                wrong: 0,
+                rms_mm: 1.3,
+                head_deg: 0.6,
+                char_visible_pct: 2.6,
+                char_pct: 2.8,
+            },
+        );
+    }
+
+    #[test]
+    fn a_corner_merged_with_its_neighbour_is_split_from_where_the_neighbour_was() {
+        // At 2.0-2.1 s the mouth narrows fast and D7 (a corner) merges with D6; D6's velocity,
+        // measured on the merged blob, overshoots by 4 px, so its prediction lay too far from
+        // the merged blob to split it, and D7 then held D6's blob (2 wrong names without the
+        // merged blob looked for from D6's last place; 3 with the split along the line
+        // between the two predictions instead of the blob's long axis). Measured: 99.85 %,
+        // none wrong, 1.29 mm, 0.34°, character 3.09 % on visible dots, 3.40 % on all (a
+        // hard session: a pursed mouth a few pixels across).
+        session_holds(
+            SynthConfig {
+                seed: 6,
+                seconds: 4.0,
+                ..SynthConfig::default()
+            },
+            Guard {
+                found_pct: 99.7,
+                wrong: 0,
+                rms_mm: 1.45,
+                head_deg: 0.5,
+                char_visible_pct: 3.4,
+                char_pct: 3.7,
             },
         );
     }
