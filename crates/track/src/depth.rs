@@ -265,6 +265,64 @@ mod tests {
     }
 
     #[test]
+    fn a_patch_stretched_along_a_lip_averages_more_noise_than_a_disc() {
+        // A lip along x at row 40: curved across (radius 6 mm, 1.14 mm per pixel), straight
+        // along; sensor noise of ±1.5 mm shared by 4x4-pixel cells, as a structured-light
+        // sensor's correlation windows.
+        let node = |i: u64, j: u64| {
+            // splitmix64 of the node's index: uniform in [-1, 1], σ ≈ 0.58.
+            let mut z = (i * 1000 + j).wrapping_add(0x9e37_79b9_7f4a_7c15);
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            z ^= z >> 31;
+            (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        // Nodes every 4 px, bilinear between them; about 1.5 mm RMS.
+        let cell = |x: f64, y: f64| {
+            let (i, j) = ((x / 4.0) as u64, (y / 4.0) as u64);
+            let (fx, fy) = (x / 4.0 - i as f64, y / 4.0 - j as f64);
+            let top = node(i, j) * (1.0 - fx) + node(i + 1, j) * fx;
+            let bottom = node(i, j + 1) * (1.0 - fx) + node(i + 1, j + 1) * fx;
+            3.0 * (top * (1.0 - fy) + bottom * fy)
+        };
+        let d = plane(200, 80, |x, y| {
+            let across_mm = (y - 40.0) * 1.14;
+            600.0 + across_mm * across_mm / 12.0 + cell(x, y)
+        });
+        let mut buf = DepthScratch::default();
+        let (mut disc_sq, mut wide_sq, mut along_sq) = (0.0, 0.0, 0.0);
+        let centres: Vec<f64> = (0..40)
+            .map(|i| 20.0 + 4.0 * i as f64 + 0.37 * (i % 3) as f64)
+            .collect();
+        for &x in &centres {
+            let (z, _) = depth_by_plane(&d, 0.001, [x, 40.0], 3.0, [0.2, 2.0], &mut buf).unwrap();
+            disc_sq += (z - 0.6).powi(2);
+            // A disc of the stretched patch's area: more noise averaged, but the lip's
+            // curvature across puts its plane behind the lip.
+            let (z, _) = depth_by_plane(&d, 0.001, [x, 40.0], 3.6, [0.2, 2.0], &mut buf).unwrap();
+            wide_sq += (z - 0.6).powi(2);
+            let (z, _) = depth_by_plane_along(
+                &d,
+                0.001,
+                [x, 40.0],
+                [1.0, 0.0],
+                8.0,
+                1.6,
+                [0.2, 2.0],
+                &mut buf,
+            )
+            .unwrap();
+            along_sq += (z - 0.6).powi(2);
+        }
+        let n = centres.len() as f64;
+        let rms = |sq: f64| (sq / n).sqrt() * 1e3;
+        let (disc, wide, along) = (rms(disc_sq), rms(wide_sq), rms(along_sq));
+        let figures =
+            format!("along the lip {along:.2} mm, disc {disc:.2} mm, wide disc {wide:.2} mm");
+        assert!(along < 0.85 * disc && along < 0.9 * wide, "{figures}");
+    }
+
+    #[test]
     fn no_readings_no_depth() {
         let d = DepthImage::new(40, 40);
         let mut buf = DepthScratch::default();

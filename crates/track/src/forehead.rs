@@ -294,3 +294,154 @@ impl ForeheadSurface {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    /// A forehead: a sphere of radius 9 cm whose front is at 0.6 m, seen by the VGA camera
+    /// over a wall at 1.2 m; depth in millimetres, plus an offset field per pixel (noise).
+    fn render(
+        head: &RigidTransform,
+        k: &Intrinsics,
+        noise_mm: impl Fn(usize, usize) -> f64,
+    ) -> DepthImage {
+        let centre = head.apply(&Vec3::new(0.0, -0.1, 0.69));
+        let radius = 0.09;
+        let mut d = DepthImage::new(k.width, k.height);
+        for y in 0..k.height as usize {
+            for x in 0..k.width as usize {
+                let ray = camera::deproject(k, [x as f64, y as f64], 1.0).normalize();
+                // Nearest hit of the ray with the sphere, else the wall.
+                let b = ray.dot(&centre);
+                let disc = b * b - (centre.norm_squared() - radius * radius);
+                let z = if disc >= 0.0 {
+                    (b - disc.sqrt()) * ray.z
+                } else {
+                    1.2
+                };
+                d.data[y * k.width as usize + x] = (z * 1000.0 + noise_mm(x, y)).round() as u16;
+            }
+        }
+        d
+    }
+
+    /// Three dots on the sphere, in the neutral pose.
+    fn dots() -> Vec<Vec3> {
+        let centre = Vec3::new(0.0, -0.1, 0.69);
+        [[0.035, 0.0], [0.0, -0.035], [-0.035, 0.0]]
+            .iter()
+            .map(|[x, y]| {
+                let (x, y) = (*x, -0.1 + y);
+                let z = centre.z - (0.09f64.powi(2) - x * x - (y - centre.y).powi(2)).sqrt();
+                Vec3::new(x, y, z)
+            })
+            .collect()
+    }
+
+    fn surface(k: &Intrinsics, neutral: &DepthImage) -> ForeheadSurface {
+        let pixels: Vec<[f64; 2]> = dots()
+            .iter()
+            .map(|p| camera::project(k, p).unwrap())
+            .collect();
+        let crop = DepthCrop::around_forehead(neutral, &pixels, 0.025 * k.fx / 0.6);
+        ForeheadSurface::build(&[&crop], 0.001, [0.2, 2.0], k, dots(), 2).unwrap()
+    }
+
+    fn angle_deg(a: &RigidTransform, b: &RigidTransform) -> f64 {
+        let r = a.rotation.transpose() * b.rotation;
+        ((r.trace() - 1.0) / 2.0)
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees()
+    }
+
+    fn moved(yaw_deg: f64, pitch_deg: f64) -> RigidTransform {
+        let rotation =
+            Rotation3::from_euler_angles(pitch_deg.to_radians(), yaw_deg.to_radians(), 0.0)
+                .into_inner();
+        // About the head's centre, and a little to the side.
+        let pivot = Vec3::new(0.0, -0.1, 0.69);
+        RigidTransform {
+            rotation,
+            translation: pivot - rotation * pivot + Vec3::new(0.01, 0.0, 0.005),
+        }
+    }
+
+    #[test]
+    fn the_wall_behind_is_not_surface() {
+        let k = Intrinsics::default_vga();
+        let neutral = render(&RigidTransform::IDENTITY, &k, |_, _| 0.0);
+        let s = surface(&k, &neutral);
+        assert!(s.samples() > 300, "{}", s.samples());
+        assert!(s.points.iter().all(|p| p.z < 0.7), "a sample on the wall");
+        // Normals face the camera.
+        assert!(s.points.iter().zip(&s.normals).all(|(p, n)| n.dot(p) < 0.0));
+    }
+
+    #[test]
+    fn the_head_motion_is_found_from_the_surface_when_the_dots_depth_is_wrong() {
+        let k = Intrinsics::default_vga();
+        let neutral = render(&RigidTransform::IDENTITY, &k, |_, _| 0.0);
+        let s = surface(&k, &neutral);
+        let truth = moved(12.0, -5.0);
+        // Depth noise correlated over 4 px, as a structured-light sensor's.
+        let noise = |x: usize, y: usize| {
+            let (i, j) = (x / 4, y / 4);
+            1.5 * (((i * 7919 + j * 104_729) % 1000) as f64 / 500.0 - 1.0)
+        };
+        let now = render(&truth, &k, noise);
+        // The dots' rays as seen; the start: their true places with 1.5 mm of depth error
+        // on one of them, which tilts the three-dot fit by about 2°.
+        let seen: Vec<Vec3> = dots().iter().map(|p| truth.apply(p)).collect();
+        let rays: Vec<Option<Vec3>> = seen.iter().map(|p| Some(*p)).collect();
+        let mut bad = seen.clone();
+        let stretch = 1.0 + 0.0015 / bad[0].z;
+        bad[0] *= stretch;
+        let start = mouthpiece_retarget::kabsch::kabsch(&dots(), &bad).unwrap();
+        assert!(
+            angle_deg(&start, &truth) > 1.0,
+            "{}",
+            angle_deg(&start, &truth)
+        );
+        let fitted = s
+            .refine(&start, &rays, &now, 0.001, &k, SurfaceFit::default())
+            .unwrap();
+        let error = angle_deg(&fitted, &truth);
+        assert!(error < 0.25, "{error}°");
+        assert!((fitted.translation - truth.translation).norm() < 0.001);
+    }
+
+    #[test]
+    fn a_hand_over_part_of_the_forehead_is_left_out() {
+        let k = Intrinsics::default_vga();
+        let neutral = render(&RigidTransform::IDENTITY, &k, |_, _| 0.0);
+        let s = surface(&k, &neutral);
+        let truth = moved(-8.0, 4.0);
+        let mut now = render(&truth, &k, |_, _| 0.0);
+        // A hand 5 cm in front of the left third of the forehead.
+        let left = camera::project(&k, &truth.apply(&dots()[2])).unwrap();
+        for y in 0..k.height as usize {
+            for x in 0..(left[0] as usize + 10) {
+                let v = &mut now.data[y * k.width as usize + x];
+                if *v < 700 {
+                    *v -= 50;
+                }
+            }
+        }
+        let rays: Vec<Option<Vec3>> = dots().iter().map(|p| Some(truth.apply(p))).collect();
+        let fitted = s
+            .refine(
+                &moved(-7.0, 3.0),
+                &rays,
+                &now,
+                0.001,
+                &k,
+                SurfaceFit::default(),
+            )
+            .unwrap();
+        let error = angle_deg(&fitted, &truth);
+        assert!(error < 0.1, "{error}°");
+    }
+}
