@@ -637,7 +637,7 @@ impl Tracker {
         }
 
         let n = self.layout.lip_dots;
-        let mut names = self.name_candidates(cands, &k);
+        let mut names = self.name_candidates(cands, &k, &found.blobs);
         let view = DepthView {
             depth,
             scale,
@@ -988,6 +988,7 @@ impl Tracker {
         &mut self,
         cands: &[Candidate],
         k: &mouthpiece_frame::Intrinsics,
+        blobs: &[mouthpiece_detect::Blob],
     ) -> Small<Option<usize>> {
         let layout = self.layout;
         let total = layout.lip_dots + layout.forehead_dots;
@@ -1035,9 +1036,22 @@ impl Tracker {
             }
         }
         // The jaw drops or snaps shut within a frame: the lower lip lands beyond its
-        // prediction together, leaving ghosts where it was.
-        if lips_named(&predicted) < layout.lip_dots && named < cands.len() {
-            if let Some(shift) = self.jaw_jump(&predicted, cands, k, &head) {
+        // prediction together, leaving ghosts where it was (faint: part of the exposure).
+        let ghosts = self.lower_lip_on_ghosts(&predicted, cands, k, blobs);
+        let free_lips = (0..cands.len())
+            .filter(|c| cands[*c].role != DotRole::Forehead && !predicted.contains(&Some(*c)))
+            .count();
+        let lower_area = |names: &[Option<usize>]| -> f64 {
+            names[layout.right_corner() + 1..layout.lip_dots]
+                .iter()
+                .flatten()
+                .map(|&c| blobs[self.cand_blob[c]].area as f64)
+                .sum()
+        };
+        if (lips_named(&predicted) < layout.lip_dots && named < cands.len())
+            || (ghosts.iter().filter(|g| **g).count() >= 2 && free_lips >= 2)
+        {
+            if let Some(shift) = self.jaw_jump(&predicted, &ghosts, cands, k, &head) {
                 let jumped = self.checked_names(
                     cands,
                     k,
@@ -1045,9 +1059,10 @@ impl Tracker {
                     named_forehead,
                     LipMotion::JawJumped(shift),
                 );
-                if lips_named(&jumped) > lips_named(&predicted)
-                    && self.corners_are_extremes(&jumped, cands)
-                {
+                let better = lips_named(&jumped) > lips_named(&predicted)
+                    || (lips_named(&jumped) == lips_named(&predicted)
+                        && lower_area(&jumped) > 1.3 * lower_area(&predicted));
+                if better && self.corners_are_extremes(&jumped, cands) {
                     tracing::debug!(
                         before = lips_named(&predicted),
                         jumped = lips_named(&jumped),
@@ -1092,6 +1107,7 @@ impl Tracker {
     fn jaw_jump(
         &self,
         names: &[Option<usize>],
+        ghosts: &[bool],
         cands: &[Candidate],
         k: &mouthpiece_frame::Intrinsics,
         head: &RigidTransform,
@@ -1105,7 +1121,7 @@ impl Tracker {
         }
         let (mut dx, mut dy): (Small<f64>, Small<f64>) = (Small::new(), Small::new());
         for i in self.layout.right_corner() + 1..n {
-            if names[i].is_some() {
+            if names[i].is_some() && !ghosts[i] {
                 continue;
             }
             let window = depth_window(&tracks[i], head, self.config.lip_depth_gate_m);
@@ -1127,6 +1143,27 @@ impl Tracker {
             v[v.len() / 2]
         };
         (!dx.is_empty()).then(|| [median(&mut dx), median(&mut dy)])
+    }
+
+    /// Per lip dot: named on a blob less than half a dot's area, on the lower lip between
+    /// the corners (what a motion-blur ghost of the jaw's lip looks like).
+    fn lower_lip_on_ghosts(
+        &self,
+        names: &[Option<usize>],
+        cands: &[Candidate],
+        k: &mouthpiece_frame::Intrinsics,
+        blobs: &[mouthpiece_detect::Blob],
+    ) -> Small<bool> {
+        let n = self.layout.lip_dots;
+        (0..n)
+            .map(|i| {
+                i > self.layout.right_corner()
+                    && names[i].is_some_and(|c| {
+                        let r = self.dot_radius_m * k.fx / cands[c].point.z;
+                        (blobs[self.cand_blob[c]].area as f64) < 0.5 * std::f64::consts::PI * r * r
+                    })
+            })
+            .collect()
     }
 
     /// Lip names by prediction, then the checks that drop names breaking the mouth's shape.
