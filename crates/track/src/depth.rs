@@ -75,6 +75,52 @@ pub fn depth_by_plane(
     range: [f64; 2],
     scratch: &mut DepthScratch,
 ) -> Option<(f64, DepthMethod)> {
+    plane_over(depth, scale, center, radius, range, scratch, |_, _| true)
+}
+
+/// An elliptic patch: `half_len` pixels each way along the unit direction `along`,
+/// `half_width` across it.
+#[derive(Debug, Clone, Copy)]
+pub struct Ellipse {
+    pub along: [f64; 2],
+    pub half_len: f64,
+    pub half_width: f64,
+}
+
+/// As [`depth_by_plane`] over an ellipse instead of a disc. A lip is curved across and
+/// nearly straight along its line, so a patch stretched along the lip averages more of the
+/// sensor's noise for the same curvature bias.
+pub fn depth_by_plane_along(
+    depth: &DepthImage,
+    scale: f64,
+    center: [f64; 2],
+    patch: Ellipse,
+    range: [f64; 2],
+    scratch: &mut DepthScratch,
+) -> Option<(f64, DepthMethod)> {
+    let Ellipse {
+        along,
+        half_len,
+        half_width,
+    } = patch;
+    plane_over(depth, scale, center, half_len, range, scratch, |dx, dy| {
+        let u = dx * along[0] + dy * along[1];
+        let v = -dx * along[1] + dy * along[0];
+        (u / half_len).powi(2) + (v / half_width).powi(2) <= 1.0
+    })
+}
+
+/// The two-pass robust plane through the valid readings within `radius` of `center` that
+/// `inside(dx, dy)` keeps, evaluated at the centre.
+fn plane_over(
+    depth: &DepthImage,
+    scale: f64,
+    center: [f64; 2],
+    radius: f64,
+    range: [f64; 2],
+    scratch: &mut DepthScratch,
+    inside: impl Fn(f64, f64) -> bool,
+) -> Option<(f64, DepthMethod)> {
     let lo = (range[0] / scale).max(1.0);
     let hi = range[1] / scale;
     let DepthScratch {
@@ -82,47 +128,7 @@ pub fn depth_by_plane(
         values: zs,
     } = scratch;
     collect(depth, center, radius, lo, hi, buf);
-    robust_plane(buf, zs, scale, lo, hi)
-}
-
-/// As [`depth_by_plane`] over an ellipse instead of a disc: `half_len` pixels along the unit
-/// direction `along`, `half_width` across it. A lip is curved across and nearly straight
-/// along its line, so a patch stretched along the lip averages more of the sensor's noise
-/// for the same curvature bias.
-#[allow(clippy::too_many_arguments)]
-pub fn depth_by_plane_along(
-    depth: &DepthImage,
-    scale: f64,
-    center: [f64; 2],
-    along: [f64; 2],
-    half_len: f64,
-    half_width: f64,
-    range: [f64; 2],
-    scratch: &mut DepthScratch,
-) -> Option<(f64, DepthMethod)> {
-    let lo = (range[0] / scale).max(1.0);
-    let hi = range[1] / scale;
-    let DepthScratch {
-        samples: buf,
-        values: zs,
-    } = scratch;
-    collect(depth, center, half_len, lo, hi, buf);
-    buf.retain(|&(dx, dy, _)| {
-        let u = dx * along[0] + dy * along[1];
-        let v = -dx * along[1] + dy * along[0];
-        (u / half_len).powi(2) + (v / half_width).powi(2) <= 1.0
-    });
-    robust_plane(buf, zs, scale, lo, hi)
-}
-
-/// The two-pass robust plane of [`depth_by_plane`] through `buf`, evaluated at its origin.
-fn robust_plane(
-    buf: &mut Vec<(f64, f64, f64)>,
-    zs: &mut Vec<f64>,
-    scale: f64,
-    lo: f64,
-    hi: f64,
-) -> Option<(f64, DepthMethod)> {
+    buf.retain(|&(dx, dy, _)| inside(dx, dy));
     if buf.len() < 6 {
         return None;
     }
@@ -301,17 +307,13 @@ mod tests {
             // curvature across puts its plane behind the lip.
             let (z, _) = depth_by_plane(&d, 0.001, [x, 40.0], 3.6, [0.2, 2.0], &mut buf).unwrap();
             wide_sq += (z - 0.6).powi(2);
-            let (z, _) = depth_by_plane_along(
-                &d,
-                0.001,
-                [x, 40.0],
-                [1.0, 0.0],
-                8.0,
-                1.6,
-                [0.2, 2.0],
-                &mut buf,
-            )
-            .unwrap();
+            let patch = Ellipse {
+                along: [1.0, 0.0],
+                half_len: 8.0,
+                half_width: 1.6,
+            };
+            let (z, _) =
+                depth_by_plane_along(&d, 0.001, [x, 40.0], patch, [0.2, 2.0], &mut buf).unwrap();
             along_sq += (z - 0.6).powi(2);
         }
         let n = centres.len() as f64;

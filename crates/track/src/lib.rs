@@ -376,6 +376,11 @@ enum LipMotion {
 /// the head motion fitted to them to be used while a forehead dot is hidden.
 const HEAD_FALLBACK_RMS_M: f64 = 0.003;
 
+/// Largest change the forehead surface fit may make to the dots' head motion: rotation
+/// (radians, 5°) and the forehead dots' places (metres).
+const SURFACE_FIT_MAX_TURN_RAD: f64 = 0.087;
+const SURFACE_FIT_MAX_SHIFT_M: f64 = 0.01;
+
 /// Farthest a lower-lip dot is looked for beyond its prediction when the jaw jumps, pixels.
 const JAW_JUMP_PX: f64 = 12.0;
 
@@ -1102,8 +1107,9 @@ impl Tracker {
     }
 
     /// How far the lower lip jumped beyond its prediction, in pixels: the median offset from
-    /// each missing lower-lip dot's prediction to the nearest free lip candidate within
-    /// [`JAW_JUMP_PX`] and its depth window. `None` when no such candidate lies near one.
+    /// the prediction of each lower-lip dot that is missing or on a ghost (`ghosts`) to the
+    /// nearest free lip candidate within [`JAW_JUMP_PX`] and its depth window. `None` when no
+    /// such candidate lies near one.
     fn jaw_jump(
         &self,
         names: &[Option<usize>],
@@ -1145,8 +1151,8 @@ impl Tracker {
         (!dx.is_empty()).then(|| [median(&mut dx), median(&mut dy)])
     }
 
-    /// Per lip dot: named on a blob less than half a dot's area, on the lower lip between
-    /// the corners (what a motion-blur ghost of the jaw's lip looks like).
+    /// Per lip dot: whether it is on the lower lip between the corners and named on a blob
+    /// of less than half a dot's area (what a motion-blur ghost of the jaw's lip looks like).
     fn lower_lip_on_ghosts(
         &self,
         names: &[Option<usize>],
@@ -1787,9 +1793,11 @@ impl Tracker {
                 view.depth,
                 view.scale,
                 here,
-                [dx / len, dy / len],
-                along_px,
-                px(across_m),
+                depth::Ellipse {
+                    along: [dx / len, dy / len],
+                    half_len: along_px,
+                    half_width: px(across_m),
+                },
                 self.depth_range,
                 &mut self.depth_buf,
             ) {
@@ -1865,6 +1873,24 @@ impl Tracker {
         ) else {
             return;
         };
+        // The dots' own fit is off by a degree or two at worst: a refinement that turned or
+        // moved the forehead far from it fitted something else (a hand over most of the
+        // forehead).
+        let turned = ((head.rotation.transpose() * start.rotation).trace() - 1.0) / 2.0;
+        let moved = self
+            .reference_forehead
+            .iter()
+            .map(|p| (head.apply(p) - start.apply(p)).norm())
+            .fold(0.0, f64::max);
+        if turned.clamp(-1.0, 1.0).acos() > SURFACE_FIT_MAX_TURN_RAD
+            || moved > SURFACE_FIT_MAX_SHIFT_M
+        {
+            tracing::debug!(
+                moved_m = moved,
+                "forehead surface fit far from the dots' fit; not used"
+            );
+            return;
+        }
         for (c, reference) in forehead.iter().zip(&self.reference_forehead) {
             if let Some(c) = c {
                 cands[*c].point = head.apply(reference);
