@@ -12,7 +12,10 @@
 //!    then each lip dot's last head-stabilised position plus its velocity, carried by that
 //!    head motion and projected. Gated: a dot with nothing near its prediction is missing
 //!    (confidence 0), never given a neighbour's blob;
-//! 5. neutral calibration (method.md §3) once the mouth has been still for
+//! 5. once named, lip dots take their depth again from a patch stretched along the lip
+//!    ([`depth::depth_by_plane_along`]), and, once calibrated, the head motion is refined on
+//!    the whole forehead surface ([`forehead`]) and the forehead dots placed by it;
+//! 6. neutral calibration (method.md §3) once the mouth has been still for
 //!    [`TrackConfig::calibration_s`] (again on [`Tracker::calibrate`]), then head pose and
 //!    stabilised lip dots every frame through the retarget core's [`Stabiliser`] (§4).
 //!
