@@ -93,6 +93,7 @@ impl Intrinsics {
 
     /// Projects a camera-frame point (metres, z forward) to pixel coordinates, ignoring
     /// distortion. `None` behind the camera.
+    #[inline]
     pub fn project_ideal(&self, p: [f64; 3]) -> Option<[f64; 2]> {
         if p[2] <= 0.0 {
             return None;
@@ -104,6 +105,7 @@ impl Intrinsics {
     }
 
     /// Back-projects an undistorted pixel at depth `z` (metres) into the camera frame.
+    #[inline]
     pub fn deproject_ideal(&self, px: [f64; 2], z: f64) -> [f64; 3] {
         [
             (px[0] - self.cx) / self.fx * z,

@@ -273,8 +273,8 @@ mod tests {
     #[test]
     fn a_patch_stretched_along_a_lip_averages_more_noise_than_a_disc() {
         // A lip along x at row 40: curved across (radius 6 mm, 1.14 mm per pixel), straight
-        // along; sensor noise of ±1.5 mm shared by 4x4-pixel cells, as a structured-light
-        // sensor's correlation windows.
+        // along; sensor noise correlated over 4 px, as a structured-light sensor's
+        // correlation windows.
         let node = |i: u64, j: u64| {
             // splitmix64 of the node's index: uniform in [-1, 1], σ ≈ 0.58.
             let mut z = (i * 1000 + j).wrapping_add(0x9e37_79b9_7f4a_7c15);

@@ -146,8 +146,11 @@ impl ForeheadSurface {
         let step = step.max(1);
         for y in (last.y0 + step..last.y0 + last.h.saturating_sub(step)).step_by(step) {
             for x in (last.x0 + step..last.x0 + last.w.saturating_sub(step)).step_by(step) {
-                let (Some(p), Some(l), Some(r), Some(u), Some(d)) = (
-                    point(x, y),
+                let Some(p) = point(x, y) else { continue };
+                if (p - plane.0).dot(&plane.1).abs() > OFF_PLANE_M {
+                    continue;
+                }
+                let (Some(l), Some(r), Some(u), Some(d)) = (
                     point(x - step, y),
                     point(x + step, y),
                     point(x, y - step),
@@ -168,9 +171,6 @@ impl ForeheadSurface {
                     continue;
                 }
                 n.normalize_mut();
-                if (p - plane.0).dot(&plane.1).abs() > OFF_PLANE_M {
-                    continue;
-                }
                 // Facing the camera.
                 if n.dot(&p) > 0.0 {
                     n = -n;
@@ -214,14 +214,14 @@ impl ForeheadSurface {
         let ideal = !k.has_distortion();
         let project = |q: &Vec3| {
             if ideal {
-                (q.z > 0.0).then(|| [k.fx * q.x / q.z + k.cx, k.fy * q.y / q.z + k.cy])
+                k.project_ideal([q.x, q.y, q.z])
             } else {
                 camera::project(k, q)
             }
         };
         let deproject = |px: [f64; 2], z: f64| {
             if ideal {
-                Vec3::new((px[0] - k.cx) / k.fx * z, (px[1] - k.cy) / k.fy * z, z)
+                Vec3::from(k.deproject_ideal(px, z))
             } else {
                 camera::deproject(k, px, z)
             }
@@ -292,7 +292,7 @@ impl ForeheadSurface {
                 let j = dn * dq;
                 for (row, r) in r.iter().enumerate() {
                     let jr = j.row(row).transpose();
-                    h += w_dot * jr * jr.transpose();
+                    h.ger(w_dot, &jr, &jr, 1.0);
                     g += w_dot * r * jr;
                 }
             }

@@ -360,6 +360,11 @@ fn depth_window(track: &DotTrack, head: &RigidTransform, gate: f64) -> [f64; 2] 
     [last.min(carried) - gate, last.max(carried) + gate]
 }
 
+/// Area (pixels) of a disc of radius `r` pixels: what a dot's paint covers.
+fn disc_area(r: f64) -> f64 {
+    std::f64::consts::PI * r * r
+}
+
 /// A lip dot unseen for longer than this many frames is not looked for in a merged blob.
 const SPLIT_MISSING_FRAMES: u32 = 10;
 
@@ -613,7 +618,7 @@ impl Tracker {
         self.cand_blob.clear();
         for (blob_index, blob) in found.blobs.iter().enumerate() {
             let z_hint = blob.depth_m.unwrap_or(0.6);
-            let radius_px = self.dot_radius_m * k.fx / z_hint;
+            let radius_px = self.dot_radius_px(k.fx, z_hint);
             let role = self.roles[blob.class];
             let z = if role == DotRole::Forehead {
                 // The forehead is smooth: a plane over a wide patch of skin around the dot
@@ -717,6 +722,11 @@ impl Tracker {
         Ok(())
     }
 
+    /// A dot's paint radius in pixels at depth `z` (metres).
+    fn dot_radius_px(&self, fx: f64, z: f64) -> f64 {
+        self.dot_radius_m * fx / z
+    }
+
     /// Depth at a lip dot: a robust plane over a few millimetres of lip around it (the
     /// sensor's noise is correlated over a few pixels, so the paint's own pixels share one
     /// error; the plane's outlier rejection drops the open mouth behind the lip), else the
@@ -729,7 +739,7 @@ impl Tracker {
         z_hint: f64,
         fx: f64,
     ) -> Option<(f64, depth::DepthMethod)> {
-        let radius_px = self.dot_radius_m * fx / z_hint;
+        let radius_px = self.dot_radius_px(fx, z_hint);
         // Rounded to 1/64 px, like the forehead's patch.
         let patch_px = (self.config.lip_depth_patch_m * fx / z_hint * 64.0).round() / 64.0;
         (self.config.lip_depth_patch_m > 0.0)
@@ -762,9 +772,9 @@ impl Tracker {
     /// whose prediction lies within a dot's diameter plus its gate of a blob at least 1.2
     /// times a dot's area (a corner half folded away adds less than a dot) splits that blob
     /// with the dot holding it (or another missing dot predicted there): the blob's colour
-    /// weight spreads along the line between the two predictions by the dots' own spread plus
-    /// a quarter of their separation squared, which gives the two centres. The split names
-    /// are kept only if the mouth's order and corner checks hold.
+    /// weight spreads along its long axis by the dots' own spread plus a quarter of their
+    /// separation squared, which gives the two centres. The split names are kept only if the
+    /// mouth's order and corner checks hold.
     fn split_merged_blobs(
         &mut self,
         names: &mut [Option<usize>],
@@ -810,8 +820,8 @@ impl Tracker {
                 .filter(|&c| cands[c].role != DotRole::Forehead)
                 .filter_map(|c| {
                     let blob = &blobs[self.cand_blob[c]];
-                    let r = self.dot_radius_m * k.fx / cands[c].point.z;
-                    let big = blob.area as f64 >= 1.2 * std::f64::consts::PI * r * r;
+                    let r = self.dot_radius_px(k.fx, cands[c].point.z);
+                    let big = blob.area as f64 >= 1.2 * disc_area(r);
                     let d = dist(cands[c].pixel);
                     (big && d <= 2.0 * r + self.config.min_gate_px).then_some((d, c, r))
                 })
@@ -850,15 +860,15 @@ impl Tracker {
                 [0.0, 1.0]
             };
             let norm = axis[0].hypot(axis[1]);
+            if !(norm.is_finite() && norm > 0.0) {
+                continue;
+            }
             let sign = if axis[0] * d[0] + axis[1] * d[1] >= 0.0 {
                 1.0
             } else {
                 -1.0
             };
             let u = [sign * axis[0] / norm, sign * axis[1] / norm];
-            if !(norm.is_finite() && norm > 0.0) {
-                continue;
-            }
             let half = (long - short).max(0.0).sqrt();
             // Less than half a dot apart: one dot, not two.
             if half < 0.5 * r {
@@ -1173,8 +1183,8 @@ impl Tracker {
             .map(|i| {
                 i > self.layout.right_corner()
                     && names[i].is_some_and(|c| {
-                        let r = self.dot_radius_m * k.fx / cands[c].point.z;
-                        (blobs[self.cand_blob[c]].area as f64) < 0.5 * std::f64::consts::PI * r * r
+                        let r = self.dot_radius_px(k.fx, cands[c].point.z);
+                        (blobs[self.cand_blob[c]].area as f64) < 0.5 * disc_area(r)
                     })
             })
             .collect()
@@ -2043,16 +2053,16 @@ impl Recovery<'_> {
         // The same against where each dot was last frame: a dot whose prediction was off
         // (seen again only last frame, no velocity yet) shows no miss while it sits on its
         // ghost, but its neighbour's step since last frame still points to it.
-        {
-            let last: Small<Option<[f64; 2]>> = self
-                .tracks
-                .iter()
-                .map(|t| (t.missing == 0).then_some(t.pixel))
-                .collect();
-            self.leave_ghosts_from(lip, taken, &last);
-        }
+        let last: Small<Option<[f64; 2]>> = self
+            .tracks
+            .iter()
+            .map(|t| (t.missing == 0).then_some(t.pixel))
+            .collect();
+        self.leave_ghosts_from(lip, taken, &last);
     }
 
+    /// [`Self::leave_ghosts`] with each dot's miss measured from `from` (a dot without one
+    /// is left as it is).
     fn leave_ghosts_from(
         &self,
         lip: &mut [Option<usize>],
@@ -2095,7 +2105,7 @@ impl Recovery<'_> {
             } else {
                 continue;
             };
-            let Some(base) = from[i] else { continue };
+            let base = from[i].expect("a dot with a miss has a place it is measured from");
             let target = [base[0] + moved[0], base[1] + moved[1]];
             let better = (0..self.cands.len())
                 .filter(|&j| !taken[j] && self.cands[j].role != DotRole::Forehead)
