@@ -4,6 +4,13 @@
 use std::fmt;
 use std::path::PathBuf;
 
+/// Slowest replay speed (`speed=`): slower would make frame gaps overflow a `Duration`.
+pub const MIN_SPEED: f64 = 0.001;
+/// Fastest paced replay speed; `speed=0` is unpaced.
+pub const MAX_SPEED: f64 = 1000.0;
+/// Latest replay start (`start=`), seconds: a year.
+pub const MAX_START_S: f64 = 365.0 * 86_400.0;
+
 /// A parsed source spec.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SourceSpec {
@@ -97,9 +104,9 @@ impl SourceSpec {
                             let s: f64 = value
                                 .parse()
                                 .map_err(|_| err(format!("speed={value:?}: expected a number")))?;
-                            if !s.is_finite() || s < 0.0 {
+                            if !(s == 0.0 || (MIN_SPEED..=MAX_SPEED).contains(&s)) {
                                 return Err(err(format!(
-                                    "speed={value}: expected 0 (unpaced) or a positive number"
+                                    "speed={value}: expected 0 (unpaced) or a number from {MIN_SPEED} to {MAX_SPEED}"
                                 )));
                             }
                             replay.speed = if s == 0.0 { None } else { Some(s) };
@@ -108,8 +115,10 @@ impl SourceSpec {
                             let s: f64 = value.parse().map_err(|_| {
                                 err(format!("start={value:?}: expected seconds from the start"))
                             })?;
-                            if !s.is_finite() || s < 0.0 {
-                                return Err(err(format!("start={value}: expected seconds >= 0")));
+                            if !(0.0..=MAX_START_S).contains(&s) {
+                                return Err(err(format!(
+                                    "start={value}: expected seconds from 0 to {MAX_START_S}"
+                                )));
                             }
                             replay.start_s = s;
                         }
@@ -260,6 +269,9 @@ mod tests {
             ("replay:x.mcap?speed=-1", "speed=-1"),
             ("replay:x.mcap?speed=fast", "speed=\"fast\""),
             ("replay:x.mcap?start=-2", "start=-2"),
+            ("replay:x.mcap?start=1e300", "start=1e300"),
+            ("replay:x.mcap?speed=1e-300", "speed=1e-300"),
+            ("replay:x.mcap?speed=1e300", "speed=1e300"),
             ("replay:x.mcap?rewind=1", "unknown replay option \"rewind\""),
             ("replay:x.mcap?loop", "not key=value"),
             ("v4l2:", "needs a colour node"),

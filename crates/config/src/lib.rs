@@ -40,6 +40,12 @@ pub const DEFAULT_SOURCE_SPEC: &str = "replay:recordings/demo.mcap?loop=1&speed=
 /// The server's default address: loopback only, so no token is required.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:9870";
 
+/// Hard cap of `[takes] queue_frames`: two minutes at 30 fps (each frame holds its images).
+pub const MAX_QUEUE_FRAMES: u32 = 3600;
+
+/// Hard cap of `[server] max_clients`: the server's TCP connection cap.
+pub const MAX_CLIENTS: u32 = 512;
+
 /// Why a configuration was rejected.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -307,6 +313,9 @@ pub struct ServerConfig {
     pub listen: ListenAddr,
     /// Browser origins allowed to connect (`Origin` header); empty = same host only.
     pub allowed_origins: Vec<String>,
+    /// Host names the server answers to besides `localhost`, the loopback addresses and
+    /// the listen address (`Host` header; anything else is refused: DNS rebinding).
+    pub allowed_hosts: Vec<String>,
     pub max_clients: u32,
     /// Token to subscribe (read) and to send control requests (calibrate, record).
     pub read_token: Option<TokenRef>,
@@ -324,6 +333,7 @@ impl Default for ServerConfig {
         ServerConfig {
             listen: ListenAddr(DEFAULT_LISTEN.parse().expect("valid default address")),
             allowed_origins: Vec::new(),
+            allowed_hosts: Vec::new(),
             max_clients: 64,
             read_token: None,
             control_token: None,
@@ -445,16 +455,16 @@ pub struct Slate(pub String);
 impl TryFrom<String> for Slate {
     type Error = String;
     fn try_from(s: String) -> Result<Self, String> {
-        let ok = !s.is_empty()
-            && s.len() <= 64
-            && !s.starts_with('.')
+        // The protocol's rule (the daemon's tests check that they agree).
+        let ok = s.len() <= 64
+            && s.chars().next().is_some_and(|c| c.is_ascii_alphanumeric())
             && s.chars()
                 .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
         if ok {
             Ok(Slate(s))
         } else {
             Err(format!(
-                "expected a slate of 1-64 letters, digits, '-', '_' or '.' (not starting with '.'), got {s:?}"
+                "expected a slate of 1-64 letters, digits, '-', '_' or '.', starting with a letter or digit, got {s:?}"
             ))
         }
     }
@@ -532,10 +542,11 @@ impl Config {
     /// Reads, parses and validates a config file, resolves its relative paths and reads its
     /// tokens.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text =
+            read_bounded(path, MAX_CONFIG_FILE_BYTES).map_err(|source| ConfigError::Read {
+                path: path.to_owned(),
+                source,
+            })?;
         Config::parse(&text, path)
     }
 
@@ -545,7 +556,12 @@ impl Config {
         let file = path.display().to_string();
         let mut config: Config = toml::from_str(text).map_err(|err| {
             let span = err.span();
-            invalid(text, &file, span, err.message().trim_end().to_owned())
+            redact_token_error(invalid(
+                text,
+                &file,
+                span,
+                err.message().trim_end().to_owned(),
+            ))
         })?;
         config.origin = Origin::File {
             path: path.to_owned(),
@@ -633,10 +649,22 @@ impl Config {
                 ),
             ));
         }
-        if self.takes.queue_frames == 0 {
+        if self.takes.queue_frames == 0 || self.takes.queue_frames > MAX_QUEUE_FRAMES {
             return Err(fail(
                 "takes.queue_frames",
-                "expected at least 1 frame, got 0".into(),
+                format!(
+                    "expected 1 to {MAX_QUEUE_FRAMES} frames, got {}",
+                    self.takes.queue_frames
+                ),
+            ));
+        }
+        if self.server.max_clients > MAX_CLIENTS {
+            return Err(fail(
+                "server.max_clients",
+                format!(
+                    "expected at most {MAX_CLIENTS} clients (the server's connection cap), got {}",
+                    self.server.max_clients
+                ),
             ));
         }
         for (i, file) in self.characters.files.iter().enumerate() {
@@ -790,7 +818,7 @@ impl TokenRef {
         let value = if let Some(name) = &self.env {
             std::env::var(name).map_err(|_| TokenError::EnvMissing(name.clone()))?
         } else if let Some(path) = &self.file {
-            std::fs::read_to_string(path).map_err(|source| TokenError::File {
+            read_bounded(path, MAX_TOKEN_FILE_BYTES).map_err(|source| TokenError::File {
                 path: path.clone(),
                 source,
             })?
@@ -805,6 +833,51 @@ impl TokenRef {
         }
         Ok(Secret(value))
     }
+}
+
+/// Parser messages quote the offending value (`invalid type: string "..."`): under a token
+/// key that value may be the secret, so the message is replaced by one that names the key
+/// and the expected shape only.
+fn redact_token_error(err: ConfigError) -> ConfigError {
+    match err {
+        ConfigError::Invalid { location, message }
+            if location.key.as_deref().is_some_and(|k| {
+                ["server.read_token", "server.control_token"]
+                    .iter()
+                    .any(|t| k == *t || k.starts_with(&format!("{t}.")))
+            }) =>
+        {
+            let _ = message;
+            ConfigError::Invalid {
+                location,
+                message: "expected a table with exactly one of env = \"VARIABLE\", file = \"PATH\" or value = \"TOKEN\" (the value found is not shown: it may be a secret)".into(),
+            }
+        }
+        other => other,
+    }
+}
+
+/// Longest config file read (a config is a few kilobytes).
+pub const MAX_CONFIG_FILE_BYTES: u64 = 1 << 20;
+
+/// Longest token file read; a longer one (or `/dev/zero`) is refused without reading on.
+pub const MAX_TOKEN_FILE_BYTES: u64 = 4096;
+
+/// Reads a UTF-8 text file of at most `limit` bytes; a longer one (a device such as
+/// `/dev/zero`, a wrong path) is an error instead of unbounded memory.
+pub fn read_bounded(path: &Path, limit: u64) -> std::io::Result<String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path)?;
+    let mut bytes = Vec::new();
+    file.take(limit + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > limit {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("longer than {limit} bytes"),
+        ));
+    }
+    String::from_utf8(bytes)
+        .map_err(|_| std::io::Error::new(std::io::ErrorKind::InvalidData, "not UTF-8 text"))
 }
 
 /// The first of systemd's `$STATE_DIRECTORY` entries (colon-separated), if set.

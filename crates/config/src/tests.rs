@@ -207,3 +207,48 @@ fn a_relative_takes_folder_goes_to_the_state_directory_under_systemd() {
     );
     assert_eq!(config.takes.folder, Path::new("/srv/takes"));
 }
+
+#[test]
+fn errors_about_tokens_never_quote_the_secret() {
+    let secret = "s3cr3t-s3cr3t-s3cr3t-XYZ";
+    for text in [
+        format!("[server]\nread_token = \"{secret}\"\n"),
+        format!("[server]\ncontrol_token = \"{secret}\"\n"),
+        format!("[server]\nread_token = [\"{secret}\"]\n"),
+        format!("[server]\nread_token = {{ value = [\"{secret}\"] }}\n"),
+        format!("[server]\nread_token = {{ valu = \"{secret}\" }}\n"),
+        format!("[server]\nread_token = {{ value = \"{secret}\", env = \"X\" }}\n"),
+        format!("[server.read_token]\nvalue = \"{secret}\"\nfile = 3\n"),
+        "[server]\nread_token = { value = 1234567890123 }\n".to_owned(),
+    ] {
+        let err = parse(&text).unwrap_err();
+        let mut shown = format!("{err} {err:?}");
+        let mut source = std::error::Error::source(&err);
+        while let Some(s) = source {
+            shown.push_str(&format!(" {s} {s:?}"));
+            source = s.source();
+        }
+        assert!(!shown.contains(secret), "{text}: {shown}");
+        assert!(!shown.contains("1234567890123"), "{text}: {shown}");
+        assert!(shown.contains("_token"), "names the key: {shown}");
+    }
+}
+
+#[test]
+fn a_token_file_that_never_ends_is_refused() {
+    let err = parse("[server]\nread_token = { file = \"/dev/zero\" }\n").unwrap_err();
+    assert!(err.to_string().contains("server.read_token"), "{err}");
+}
+
+#[test]
+fn limits_above_the_hard_caps_are_refused() {
+    for (text, key) in [
+        ("[takes]\nqueue_frames = 4294967295\n", "takes.queue_frames"),
+        ("[takes]\nqueue_frames = 0\n", "takes.queue_frames"),
+        ("[server]\nmax_clients = 4294967295\n", "server.max_clients"),
+    ] {
+        let err = parse(text).unwrap_err();
+        assert_eq!(err.key(), Some(key), "{text}: {err}");
+    }
+    assert!(parse("[takes]\nqueue_frames = 3600\n[server]\nmax_clients = 512\n").is_ok());
+}

@@ -39,12 +39,14 @@ pub fn load(config: &Config) -> Result<Vec<Character>, CheckError> {
     } else {
         for (i, path) in config.characters.files.iter().enumerate() {
             let key = format!("characters.files[{i}]");
-            let text = std::fs::read_to_string(path).map_err(|e| {
-                invalid(
-                    &key,
-                    format!("cannot read character file {}: {e}", path.display()),
-                )
-            })?;
+            let text =
+                mouthpiece_config::read_bounded(path, mouthpiece_config::MAX_CONFIG_FILE_BYTES)
+                    .map_err(|e| {
+                        invalid(
+                            &key,
+                            format!("cannot read character file {}: {e}", path.display()),
+                        )
+                    })?;
             let character = Character::from_toml_str(&text).map_err(|e| {
                 invalid(
                     &key,

@@ -24,7 +24,7 @@ pub fn check(config: &Config) -> Result<(), CheckError> {
     // Characters, `[detect]` (colour ranges) and `[track]`, as the pipeline will load them.
     crate::live::setup(config)?;
     crate::capture::check_spec(config)?;
-    crate::daemon::server_config(config)?;
+    crate::hardening::check_server(config)?;
     crate::daemon::timecode_rate(config)?;
     let listen = config.server.listen.0;
     if !listen.ip().is_loopback()

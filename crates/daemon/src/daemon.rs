@@ -4,8 +4,9 @@
 //! Threads: `mouthpiece-source` (owns the source), `mouthpiece-process` (processing, takes
 //! control), `mouthpiece-take` (while a take records), and a 2-thread tokio runtime for the
 //! server, the signals and the watchdog. Start-up: validate the config, bind the port, start
-//! the threads, then `READY=1`. Signals: SIGTERM/SIGINT stop (takes closed, clients closed
-//! with 1001, exit 0 within 2 s); SIGHUP reloads characters, tokens and colour ranges;
+//! the threads, then `READY=1`. Signals: SIGTERM/SIGINT stop (a take written out to its
+//! last queued frame and synced, clients closed with 1001, exit 0 within 2 s when no take
+//! drains); SIGHUP reloads characters, tokens and colour ranges;
 //! SIGUSR1 starts a take with the default slate, SIGUSR2 stops it.
 
 use std::path::PathBuf;
@@ -24,6 +25,9 @@ use crate::pipeline::{self, Command, Processor};
 use crate::source::{self, Opener, SourceShared, SourceState};
 use crate::takes::{TakeSettings, Takes};
 
+/// How long the exit waits for a take still recording to be written out and synced.
+pub const TAKE_DRAIN_LIMIT: Duration = Duration::from_secs(20);
+
 /// Why the daemon could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
@@ -40,6 +44,12 @@ pub enum DaemonError {
     Runtime(#[source] std::io::Error),
     #[error("the server failed")]
     Server(#[from] mouthpiece_server::ServerError),
+    /// A thread of the daemon died (a panic): exit non-zero so that systemd restarts it.
+    #[error("the {thread} thread died: {message}")]
+    ThreadDied {
+        thread: &'static str,
+        message: String,
+    },
 }
 
 /// Builds what the daemon runs from a configuration; called at start and (for the reload
@@ -94,6 +104,7 @@ pub fn server_config(config: &Config) -> Result<ServerConfig, CheckError> {
             config.server.tokens.control.as_ref(),
         )?,
         allowed_origins: config.server.allowed_origins.clone(),
+        allowed_hosts: config.server.allowed_hosts.clone(),
         limits: Limits {
             max_clients: config.server.max_clients as usize,
             ..Limits::default()
@@ -249,17 +260,19 @@ async fn serve<F: Factory>(
         .watchdog_timeout()
         .map(|t| t / 2)
         .unwrap_or(Duration::from_secs(5));
-    let mut tick = tokio::time::interval(watchdog_every.min(Duration::from_secs(5)));
+    // Also how soon a dead thread is noticed.
+    let mut tick = tokio::time::interval(watchdog_every.min(Duration::from_secs(1)));
     let mut current = config;
     let mut last_status = String::new();
     let mut server_result = None;
+    let mut died: Option<&'static str> = None;
     loop {
         tokio::select! {
             _ = sigterm.recv() => { tracing::info!("SIGTERM: stopping"); break; }
             _ = sigint.recv() => { tracing::info!("SIGINT: stopping"); break; }
             _ = sighup.recv() => {
                 let _ = notifier.reloading();
-                match reload(&factory, &options, &current) {
+                match reload(&factory, &options, &current, local) {
                     Ok((config, payload, new_server)) => {
                         if commands_tx.try_send(Command::Reload(payload)).is_ok() {
                             hub.set_tokens(new_server.read_token, new_server.control_token);
@@ -278,6 +291,15 @@ async fn serve<F: Factory>(
             }
             _ = sigusr2.recv() => { let _ = commands_tx.try_send(Command::RecordStop); }
             _ = tick.tick() => {
+                // A thread that ended while nothing asked it to has died (a panic).
+                if processing.is_finished() {
+                    died = Some("processing");
+                    break;
+                }
+                if source_thread.is_finished() {
+                    died = Some("source");
+                    break;
+                }
                 // Ping only while the processing loop turns: a hung pipeline gets restarted.
                 let age = epoch.elapsed().as_millis() as u64 - heartbeat.load(Ordering::Relaxed).min(epoch.elapsed().as_millis() as u64);
                 if Duration::from_millis(age) < watchdog_every {
@@ -298,17 +320,44 @@ async fn serve<F: Factory>(
         }
     }
 
+    let mut processing = Some(processing);
+    let mut source_thread = Some(source_thread);
+    let failure = died.map(|thread| {
+        let handle = if thread == "processing" {
+            processing.take()
+        } else {
+            source_thread.take()
+        };
+        let message = match handle.map(|h| h.join()) {
+            Some(Err(payload)) => format!("panicked: {}", source::panic_message(&*payload)),
+            _ => "ended on its own".to_owned(),
+        };
+        tracing::error!("the {thread} thread died ({message}): stopping so that the service manager restarts the daemon");
+        let reason = format!("the {thread} thread died: {message}");
+        hub.set_failure(reason.clone());
+        hub.update_status(|s| s.message = Some(reason.clone()));
+        let _ = notifier.status(&reason);
+        DaemonError::ThreadDied { thread, message }
+    });
+
     // Stop: processing first (it closes the take), then the server (clients get 1001).
     let _ = notifier.stopping();
     let stopping = Instant::now();
     stop.store(true, Ordering::Release);
     shared.stop();
-    let joined = tokio::task::spawn_blocking(move || processing.join());
-    if tokio::time::timeout(Duration::from_millis(1500), joined)
-        .await
-        .is_err()
-    {
-        tracing::error!("processing thread did not stop within 1.5 s");
+    if let Some(processing) = processing {
+        // The processing thread finishes the take before it ends: every queued frame
+        // written, the file and its folder synced (its writer logs what was kept).
+        let joined = tokio::task::spawn_blocking(move || processing.join());
+        if tokio::time::timeout(TAKE_DRAIN_LIMIT, joined)
+            .await
+            .is_err()
+        {
+            tracing::error!(
+                "processing thread did not stop within {} s: the take may lack its last frames",
+                TAKE_DRAIN_LIMIT.as_secs()
+            );
+        }
     }
     let _ = shutdown_tx.send(());
     let server_result = match server_result {
@@ -317,13 +366,16 @@ async fn serve<F: Factory>(
             .await
             .ok(),
     };
-    if source_thread.is_finished() {
+    if let Some(source_thread) = source_thread.filter(|t| t.is_finished()) {
         let _ = source_thread.join();
     }
     tracing::info!(
         elapsed_ms = stopping.elapsed().as_millis() as u64,
         "stopped"
     );
+    if let Some(failure) = failure {
+        return Err(failure);
+    }
     match server_result {
         Some(Ok(Err(e))) => Err(e.into()),
         _ => Ok(()),
@@ -345,10 +397,15 @@ fn status_line(shared: &SourceShared, hub: &Hub) -> String {
 
 /// Loads the config again (same file, same CLI overrides) and validates everything a reload
 /// changes.
+///
+/// The listen address does not change before a restart, so the new tokens are checked against
+/// the address actually `bound`: a daemon serving the network never drops its tokens because
+/// the new file says loopback.
 fn reload<F: Factory>(
     factory: &F,
     options: &RunOptions,
     current: &Config,
+    bound: std::net::SocketAddr,
 ) -> Result<(Config, Box<dyn std::any::Any + Send>, ServerConfig), CheckError> {
     let mut config = match &options.config_path {
         Some(path) => Config::load(path)?,
@@ -357,6 +414,7 @@ fn reload<F: Factory>(
     apply_overrides(&mut config, &options.overrides);
     crate::check::check(&config)?;
     let server = server_config(&config)?;
+    crate::hardening::check_against(&config, &server, bound)?;
     let payload = factory.reload(&config)?;
     for (what, changed) in [
         ("source", config.source != current.source),
@@ -382,5 +440,33 @@ pub fn apply_overrides(config: &mut Config, overrides: &Overrides) {
     }
     if let Some(source) = &overrides.source {
         config.source.spec = mouthpiece_config::SourceSpec(source.clone());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_reload_is_validated_against_the_bound_address() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("mouthpiece.toml");
+        // The new file says loopback and has no tokens; the running server is on the network.
+        std::fs::write(&path, "[server]\nlisten = \"127.0.0.1:9870\"\n").unwrap();
+        let options = RunOptions {
+            config_path: Some(path.clone()),
+            ..RunOptions::default()
+        };
+        let current = Config::load(&path).unwrap();
+        let bound: std::net::SocketAddr = "0.0.0.0:9870".parse().unwrap();
+        let err = reload(&crate::live::LiveFactory, &options, &current, bound)
+            .err()
+            .expect("tokens dropped on a network-facing server");
+        let text = err.to_string();
+        assert!(text.contains("0.0.0.0:9870"), "{text}");
+        assert!(text.contains("server.listen"), "{text}");
+        // The same file is fine for a server on loopback.
+        let loopback: std::net::SocketAddr = "127.0.0.1:9870".parse().unwrap();
+        assert!(reload(&crate::live::LiveFactory, &options, &current, loopback).is_ok());
     }
 }

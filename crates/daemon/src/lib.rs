@@ -18,6 +18,7 @@ pub mod capture;
 pub mod characters;
 pub mod check;
 pub mod daemon;
+pub mod hardening;
 pub mod live;
 pub mod logging;
 pub mod notify;

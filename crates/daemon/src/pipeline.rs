@@ -204,15 +204,10 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
         while let Ok(command) = ctx.commands.try_recv() {
             handle_command(&mut processor, &mut ctx, command, frame_rate);
         }
-        if let Some(ended) = ctx.takes.poll() {
-            announce_take_end(&ctx.hub, &ended);
-        }
+        ctx.takes.poll();
     }
-    if ctx.takes.is_recording() {
-        if let Ok(ended) = ctx.takes.stop() {
-            announce_take_end(&ctx.hub, &ended);
-        }
-    }
+    // Finish every take (bounded by its queue), synced to disk, before the daemon exits.
+    ctx.takes.shutdown();
     tracing::info!(
         frames,
         overwritten = ctx.source.frames.overwritten(),
@@ -252,23 +247,31 @@ fn publish_source_state<P: Processor>(
 
 fn handle_control<P: Processor>(processor: &mut P, ctx: &mut Context, request: ControlRequest) {
     tracing::info!(client = %request.client, command = ?request.command, "control request");
-    let outcome = match request.command.clone() {
+    let command = request.command.clone();
+    // Takes answer from their writer thread once the file is open or closed.
+    let reply = move |outcome: Result<serde_json::Value, String>| {
+        let outcome = outcome.map_err(ControlFailure::new);
+        if let Err(failure) = &outcome {
+            tracing::warn!(client = %request.client, "control request failed: {}", failure.message);
+        }
+        request.reply(outcome);
+    };
+    match command {
         ControlCommand::Calibrate { duration } => {
             processor.calibrate(duration);
             ctx.hub.update_status(|s| s.calibrating = true);
-            Ok(json!({ "calibrating": true }))
+            reply(Ok(json!({ "calibrating": true })));
         }
         ControlCommand::RecordStart { slate, take } => {
             let slate = slate.unwrap_or_else(|| ctx.default_slate.clone());
-            start_take(ctx, &slate, take).map_err(ControlFailure::new)
+            start_take(ctx, &slate, take, Box::new(reply));
         }
-        ControlCommand::RecordStop => stop_take(ctx).map_err(ControlFailure::new),
-    };
-    if let Err(failure) = &outcome {
-        tracing::warn!(client = %request.client, "control request failed: {}", failure.message);
+        ControlCommand::RecordStop => stop_take(ctx, Box::new(reply)),
     }
-    request.reply(outcome);
 }
+
+/// Where the outcome of a take request goes (a client's reply, or the log).
+type TakeReply = Box<dyn FnOnce(Result<serde_json::Value, String>) + Send>;
 
 fn handle_command<P: Processor>(
     processor: &mut P,
@@ -285,69 +288,91 @@ fn handle_command<P: Processor>(
             }
             Err(e) => tracing::error!("reload rejected, old configuration kept: {e}"),
         },
-        Command::RecordStart { slate, take } => {
-            if let Err(e) = start_take(ctx, &slate, take) {
-                tracing::error!("cannot start take: {e}");
-            }
-        }
-        Command::RecordStop => {
-            if let Err(e) = stop_take(ctx) {
-                tracing::warn!("{e}");
-            }
-        }
+        Command::RecordStart { slate, take } => start_take(
+            ctx,
+            &slate,
+            take,
+            Box::new(|outcome| {
+                if let Err(e) = outcome {
+                    tracing::error!("cannot start take: {e}");
+                }
+            }),
+        ),
+        Command::RecordStop => stop_take(
+            ctx,
+            Box::new(|outcome| {
+                if let Err(e) = outcome {
+                    tracing::warn!("{e}");
+                }
+            }),
+        ),
     }
 }
 
-fn start_take(
-    ctx: &mut Context,
-    slate: &str,
-    take: Option<u32>,
-) -> Result<serde_json::Value, String> {
-    let info = ctx
-        .takes
-        .start(slate, take, &ctx.spec)
-        .map_err(|e| crate::source::error_chain(&e))?;
-    let file = info.path.display().to_string();
-    let recording = Recording {
-        slate: info.slate.clone(),
-        take: info.take,
-        file: Some(file.clone()),
-    };
-    let reply = json!({ "slate": info.slate, "take": info.take, "file": file });
-    ctx.hub.update_status(|s| {
-        s.recording = Some(recording);
-        if s.message
-            .as_deref()
-            .is_some_and(|m| m.starts_with("take stopped"))
-        {
-            s.message = None;
-        }
-    });
-    Ok(reply)
+/// Starts a take; `done` gets the reply once the writer thread has the file open.
+fn start_take(ctx: &mut Context, slate: &str, take: Option<u32>, done: TakeReply) {
+    let hub = ctx.hub.clone();
+    let hub_at_end = ctx.hub.clone();
+    ctx.takes.start(
+        slate,
+        take,
+        &ctx.spec,
+        Box::new(move |started| match started {
+            Ok(info) => {
+                let file = info.path.display().to_string();
+                let recording = Recording {
+                    slate: info.slate.clone(),
+                    take: info.take,
+                    file: Some(file.clone()),
+                };
+                hub.update_status(|s| {
+                    s.recording = Some(recording);
+                    if s.message
+                        .as_deref()
+                        .is_some_and(|m| m.starts_with("take stopped"))
+                    {
+                        s.message = None;
+                    }
+                });
+                done(Ok(
+                    json!({ "slate": info.slate, "take": info.take, "file": file }),
+                ));
+            }
+            Err(e) => done(Err(e)),
+        }),
+        Box::new(move |ended| announce_take_end(&hub_at_end, ended)),
+    );
 }
 
-fn stop_take(ctx: &mut Context) -> Result<serde_json::Value, String> {
-    let ended = ctx.takes.stop().map_err(|e| e.to_string())?;
-    announce_take_end(&ctx.hub, &ended);
-    if let Some(error) = &ended.error {
-        return Err(format!(
-            "take {} ended with an error: {error}",
-            ended.info.path.display()
-        ));
-    }
-    Ok(json!({
-        "slate": ended.info.slate,
-        "take": ended.info.take,
-        "file": ended.info.path.display().to_string(),
-        "frames": ended.frames,
-        "dropped": ended.dropped,
-    }))
+/// Stops the take; `done` gets the reply once it is closed and synced.
+fn stop_take(ctx: &mut Context, done: TakeReply) {
+    ctx.takes.stop(Box::new(move |ended| {
+        done(ended.map(|ended| {
+            let info = ended.info.as_ref();
+            json!({
+                "slate": info.map(|i| i.slate.clone()),
+                "take": info.map(|i| i.take),
+                "file": info.map(|i| i.path.display().to_string()),
+                "frames": ended.frames,
+                "dropped": ended.dropped,
+            })
+        }))
+    }));
 }
 
+/// A take ended: clear `recording` (unless a newer take is already recording) and say why
+/// when it stopped by itself.
 fn announce_take_end(hub: &Hub, ended: &TakeEnded) {
     let message = ended.error.as_ref().map(|e| format!("take stopped: {e}"));
+    let file = ended.info.as_ref().map(|i| i.path.display().to_string());
     hub.update_status(|s| {
-        s.recording = None;
+        let this_take = match (&s.recording, &file) {
+            (Some(recording), Some(file)) => recording.file.as_deref() == Some(file.as_str()),
+            _ => true,
+        };
+        if this_take {
+            s.recording = None;
+        }
         if message.is_some() {
             s.message = message;
         }

@@ -92,7 +92,16 @@ pub fn spawn(
         .spawn(move || {
             let mut open_failures = Throttle::new(throttle_interval);
             while !shared.is_stopping() {
-                let reason = match open() {
+                // A panic in a source (a library bug, arithmetic on a crafted file) is a
+                // source failure like any other: reported down, retried with backoff.
+                let opened = catch_panic(&mut open).unwrap_or_else(|panic| {
+                    Err(SourceError::Open {
+                        spec: spec.clone(),
+                        message: format!("the source panicked while opening: {panic}"),
+                        cause: None,
+                    })
+                });
+                let reason = match opened {
                     Ok(mut source) => {
                         let info = source.info().clone();
                         tracing::info!(spec = %info.spec, description = %info.description,
@@ -100,7 +109,11 @@ pub fn spawn(
                         "source open");
                         shared.set_state(SourceState::Up(info));
                         open_failures.reset();
-                        let (reason, delivered) = pump(&mut *source, &shared);
+                        let (reason, delivered) = catch_panic(|| pump(&mut *source, &shared))
+                            .unwrap_or_else(|panic| {
+                                tracing::error!(%spec, "source panicked: {panic}");
+                                (Some(format!("the source panicked: {panic}")), false)
+                            });
                         if delivered {
                             backoff.reset();
                         }
@@ -168,6 +181,20 @@ fn sleep_unless_stopped(shared: &SourceShared, total: Duration) {
     }
 }
 
+/// Runs `f`, turning a panic into its message.
+pub fn catch_panic<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| panic_message(&*p))
+}
+
+/// The message of a panic payload (`panic!("...")` gives a `&str` or a `String`).
+pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_owned())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "(no message)".into())
+}
+
 /// `error: cause: cause`, for status messages and logs.
 pub fn error_chain(err: &dyn std::error::Error) -> String {
     let mut text = err.to_string();
@@ -221,6 +248,78 @@ mod tests {
                 ))),
             }))
         }
+    }
+
+    /// A source whose reads panic, like a library bug or overflowing arithmetic would.
+    struct Panicky(SourceInfo);
+
+    impl FrameSource for Panicky {
+        fn info(&self) -> &SourceInfo {
+            &self.0
+        }
+        fn next_frame(&mut self) -> Result<Option<Frame>, SourceError> {
+            panic!("cannot convert float seconds to Duration: value is too big");
+        }
+    }
+
+    #[test]
+    fn a_panicking_source_is_reported_down_and_reopened() {
+        let mut attempt = 0;
+        let opener: Opener = Box::new(move || {
+            attempt += 1;
+            match attempt {
+                1 => panic!("open exploded"),
+                2 => Ok(Box::new(Panicky(info())) as Box<dyn FrameSource>),
+                _ => Ok(Box::new(Scripted {
+                    info: info(),
+                    frames_left: 100_000,
+                    seq: 0,
+                })),
+            }
+        });
+        let shared = SourceShared::new();
+        let ms = Duration::from_millis;
+        let thread = spawn(
+            opener,
+            "test:panicky".into(),
+            shared.clone(),
+            Backoff::new(ms(10), ms(40)),
+            ms(1000),
+        )
+        .unwrap();
+        let mut seen_down = Vec::new();
+        let mut frames = 0;
+        let mut generation = 0;
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while frames < 5 && Instant::now() < deadline {
+            if let Taken::Value(_) = shared.frames.take_timeout(ms(5)) {
+                frames += 1;
+            }
+            let (g, state) = shared.state();
+            if g != generation {
+                generation = g;
+                if let SourceState::Down { reason, .. } = state {
+                    seen_down.push(reason);
+                }
+            }
+        }
+        shared.stop();
+        thread
+            .join()
+            .expect("the source thread survives its source's panics");
+        assert!(frames >= 5, "frames flow after the panics ({frames})");
+        assert!(
+            seen_down
+                .iter()
+                .any(|r| r.contains("panicked while opening: open exploded")),
+            "{seen_down:?}"
+        );
+        assert!(
+            seen_down
+                .iter()
+                .any(|r| r.contains("panicked: cannot convert")),
+            "{seen_down:?}"
+        );
     }
 
     fn info() -> SourceInfo {

@@ -31,11 +31,11 @@ use crate::throttle::Throttle;
 /// Why a take could not start or had to stop.
 #[derive(Debug, thiserror::Error)]
 pub enum TakeError {
-    #[error("a take is already recording ({0})")]
-    AlreadyRecording(String),
+    #[error("a take is already recording")]
+    AlreadyRecording,
     #[error("no take is recording")]
     NotRecording,
-    #[error("invalid slate {0:?}: use 1-64 letters, digits, '-', '_' or '.'")]
+    #[error("invalid slate {0:?}: use 1-64 letters, digits, '-', '_' or '.', starting with a letter or digit")]
     BadSlate(String),
     #[error("cannot create the takes folder {path}")]
     Folder {
@@ -115,24 +115,67 @@ pub struct TakeInfo {
     pub started: SystemTime,
 }
 
+/// Called on the writer thread once the take's file is open (or could not be).
+pub type OnStarted = Box<dyn FnOnce(Result<TakeInfo, String>) + Send>;
+/// Called on the writer thread when a take has ended, whatever the reason (for status).
+pub type OnEnded = Box<dyn FnOnce(&TakeEnded) + Send>;
+/// Called on the writer thread when a stopped take is closed and synced (the stop's reply).
+pub type OnStopped = Box<dyn FnOnce(Result<TakeEnded, String>) + Send>;
+
 struct Active {
-    info: TakeInfo,
     queue: Sender<TakeItem>,
-    writer: JoinHandle<WriterResult>,
-    failed: Arc<Mutex<Option<String>>>,
-    stop: Arc<AtomicBool>,
+    writer: JoinHandle<()>,
+    /// Set by the writer when the take stopped by itself (write error, disk full).
+    failed: Arc<AtomicBool>,
     dropped: Arc<AtomicU64>,
+    /// The stop request's reply, handed to the writer before its queue closes.
+    on_stopped: Arc<Mutex<StopSlot>>,
 }
 
-struct WriterResult {
-    frames: u64,
-    error: Option<String>,
+/// Between a stop request and the writer's end, whichever comes first.
+enum StopSlot {
+    /// The writer is still running; the reply to give when it ends.
+    Waiting(Option<OnStopped>),
+    /// The writer has ended with this.
+    Done(Result<TakeEnded, String>),
+}
+
+impl StopSlot {
+    /// The writer's end: the reply waiting (if any) gets `result`.
+    fn finish(slot: &Mutex<StopSlot>, result: Result<TakeEnded, String>) {
+        let waiting = {
+            let mut slot = slot.lock().unwrap_or_else(|p| p.into_inner());
+            match std::mem::replace(&mut *slot, StopSlot::Done(result.clone())) {
+                StopSlot::Waiting(waiting) => waiting,
+                StopSlot::Done(_) => None,
+            }
+        };
+        if let Some(reply) = waiting {
+            reply(result);
+        }
+    }
+
+    /// A stop request: answered now if the writer has ended, else when it does.
+    fn request(slot: &Mutex<StopSlot>, reply: OnStopped) {
+        let done = {
+            let mut slot = slot.lock().unwrap_or_else(|p| p.into_inner());
+            match &mut *slot {
+                StopSlot::Waiting(waiting) => {
+                    *waiting = Some(reply);
+                    return;
+                }
+                StopSlot::Done(result) => result.clone(),
+            }
+        };
+        reply(done);
+    }
 }
 
 /// How a take ended.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TakeEnded {
-    pub info: TakeInfo,
+    /// `None` when the take never started (its file could not be created).
+    pub info: Option<TakeInfo>,
     pub frames: u64,
     /// Items dropped because the writer fell behind.
     pub dropped: u64,
@@ -140,10 +183,17 @@ pub struct TakeEnded {
     pub error: Option<String>,
 }
 
-/// The take recorder owned by the processing thread.
+/// The take recorder owned by the processing thread. It never touches the file system
+/// itself: the folder scan, the free-space check, creating the file, draining and syncing
+/// all happen on the take's writer thread, which reports back through callbacks, so
+/// starting and stopping takes never stalls the live stream.
 pub struct Takes {
     settings: TakeSettings,
     active: Option<Active>,
+    /// Writers of stopped takes still draining their queues.
+    closing: Vec<JoinHandle<()>>,
+    /// Held by a writer while it picks its take number and creates its file.
+    naming: Arc<Mutex<()>>,
     drop_warnings: Throttle,
 }
 
@@ -152,6 +202,8 @@ impl Takes {
         Takes {
             settings,
             active: None,
+            closing: Vec::new(),
+            naming: Arc::new(Mutex::new(())),
             drop_warnings: Throttle::new(Duration::from_secs(10)),
         }
     }
@@ -160,94 +212,66 @@ impl Takes {
         &self.settings
     }
 
-    pub fn current(&self) -> Option<&TakeInfo> {
-        self.active.as_ref().map(|a| &a.info)
-    }
-
     pub fn is_recording(&self) -> bool {
         self.active.is_some()
     }
 
-    /// Starts a take. `take = None` picks one more than the highest take of this slate in
-    /// the folder.
+    /// Starts a take without waiting: `started` gets its file (or why there is none) from
+    /// the writer thread, `ended` how it ended. `take = None` picks one more than the
+    /// highest take of this slate in the folder.
     pub fn start(
         &mut self,
         slate: &str,
         take: Option<u32>,
         source: &str,
-    ) -> Result<&TakeInfo, TakeError> {
-        if let Some(active) = &self.active {
-            return Err(TakeError::AlreadyRecording(
-                active.info.path.display().to_string(),
-            ));
+        started: OnStarted,
+        ended: OnEnded,
+    ) {
+        if self.active.is_some() {
+            started(Err(TakeError::AlreadyRecording.to_string()));
+            return;
         }
         if !valid_slate(slate) {
-            return Err(TakeError::BadSlate(slate.to_owned()));
+            started(Err(TakeError::BadSlate(slate.to_owned()).to_string()));
+            return;
         }
-        let folder = &self.settings.folder;
-        std::fs::create_dir_all(folder).map_err(|source| TakeError::Folder {
-            path: folder.clone(),
-            source,
-        })?;
-        if let Some(free_mb) = free_mb(folder) {
-            if free_mb < self.settings.min_free_mb {
-                return Err(TakeError::LowSpace {
-                    path: folder.clone(),
-                    free_mb,
-                    min_mb: self.settings.min_free_mb,
-                });
-            }
-        }
-        let take = take.unwrap_or_else(|| next_take(folder, slate));
-        let started = SystemTime::now();
-        let path = folder.join(file_name(slate, take, started));
-        let options = WriterOptions {
-            flush_interval: self.settings.flush,
-            ..WriterOptions::default()
-        };
-        let writer = SessionWriter::create(&path, options)?;
-        let metadata: std::collections::BTreeMap<String, String> = [
-            ("slate".to_owned(), slate.to_owned()),
-            ("take".to_owned(), take.to_string()),
-            ("started_unix_us".to_owned(), unix_us(started).to_string()),
-            (
-                "timecode_rate".to_owned(),
-                self.settings.timecode_rate.clone(),
-            ),
-            ("source".to_owned(), source.to_owned()),
-        ]
-        .into_iter()
-        .collect();
+        self.reap();
         let (queue, items) = crossbeam_channel::bounded(self.settings.queue_frames.max(1));
-        let failed = Arc::new(Mutex::new(None));
-        let stop = Arc::new(AtomicBool::new(false));
+        let failed = Arc::new(AtomicBool::new(false));
         let dropped = Arc::new(AtomicU64::new(0));
-        let thread = {
-            let failed = failed.clone();
-            let stop = stop.clone();
-            let settings = self.settings.clone();
-            std::thread::Builder::new()
-                .name("mouthpiece-take".into())
-                .spawn(move || write_take(writer, metadata, items, settings, failed, stop))
-                .map_err(TakeError::Thread)?
-        };
-        let info = TakeInfo {
+        let on_stopped = Arc::new(Mutex::new(StopSlot::Waiting(None)));
+        let job = WriterJob {
             slate: slate.to_owned(),
             take,
-            path,
+            source: source.to_owned(),
+            settings: self.settings.clone(),
+            naming: self.naming.clone(),
+            items,
+            failed: failed.clone(),
+            dropped: dropped.clone(),
             started,
+            ended,
+            on_stopped: on_stopped.clone(),
         };
-        tracing::info!(slate, take, path = %info.path.display(), "take started");
+        let writer = match std::thread::Builder::new()
+            .name("mouthpiece-take".into())
+            .spawn(move || job.run())
+        {
+            Ok(writer) => writer,
+            Err(e) => {
+                // The job (and its callbacks) went down with the failed spawn.
+                tracing::error!("cannot start the take writer thread: {e}");
+                return;
+            }
+        };
         self.drop_warnings.reset();
         self.active = Some(Active {
-            info,
             queue,
-            writer: thread,
+            writer,
             failed,
-            stop,
             dropped,
+            on_stopped,
         });
-        Ok(&self.active.as_ref().expect("just set").info)
     }
 
     /// Hands one frame and its derived data to the writer; never blocks.
@@ -268,77 +292,279 @@ impl Takes {
         }
     }
 
-    /// `Some` when the writer stopped by itself (disk full, write error): the take is over.
-    pub fn poll(&mut self) -> Option<TakeEnded> {
-        let failed = self
+    /// Notices a take that stopped by itself (its `ended` callback has told the clients)
+    /// and forgets writers that have finished. Cheap: no file system access.
+    pub fn poll(&mut self) {
+        if self
             .active
-            .as_ref()?
-            .failed
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .clone();
-        failed.map(|_| self.finish())
-    }
-
-    /// Stops the take: the writer drains its queue, writes the summary and closes the file.
-    pub fn stop(&mut self) -> Result<TakeEnded, TakeError> {
-        if self.active.is_none() {
-            return Err(TakeError::NotRecording);
+            .as_ref()
+            .is_some_and(|a| a.failed.load(Ordering::Acquire))
+        {
+            self.close_active(None);
         }
-        Ok(self.finish())
+        self.reap();
     }
 
-    fn finish(&mut self) -> TakeEnded {
-        let active = self.active.take().expect("checked by callers");
-        active.stop.store(true, Ordering::Release);
-        drop(active.queue);
-        let result = active.writer.join().unwrap_or_else(|_| WriterResult {
-            frames: 0,
-            error: Some("the take writer panicked".into()),
-        });
-        let ended = TakeEnded {
-            info: active.info,
-            frames: result.frames,
-            dropped: active.dropped.load(Ordering::Relaxed),
-            error: result.error,
-        };
-        match &ended.error {
-            None => tracing::info!(path = %ended.info.path.display(), frames = ended.frames,
-                dropped = ended.dropped, "take closed"),
-            Some(error) => {
-                tracing::error!(path = %ended.info.path.display(), frames = ended.frames,
-                "take stopped: {error}")
+    /// Stops the take without waiting: the writer drains its queue, writes the summary,
+    /// syncs the file and then calls `stopped`.
+    pub fn stop(&mut self, stopped: OnStopped) {
+        if self.active.is_none() {
+            stopped(Err(TakeError::NotRecording.to_string()));
+            return;
+        }
+        self.close_active(Some(stopped));
+    }
+
+    /// Stops the take (if any) and waits until every writer has drained its queue and
+    /// synced its file: for the daemon's exit. Bounded by the queues' length.
+    pub fn shutdown(&mut self) {
+        if self.active.is_some() {
+            self.close_active(None);
+        }
+        for writer in self.closing.drain(..) {
+            if writer.join().is_err() {
+                tracing::error!("a take writer panicked while closing its take");
             }
         }
-        ended
+    }
+
+    fn close_active(&mut self, stopped: Option<OnStopped>) {
+        let Some(active) = self.active.take() else {
+            return;
+        };
+        if let Some(stopped) = stopped {
+            StopSlot::request(&active.on_stopped, stopped);
+        }
+        // Closing the queue is the writer's signal to drain and finish.
+        drop(active.queue);
+        self.closing.push(active.writer);
+    }
+
+    fn reap(&mut self) {
+        let (done, running): (Vec<_>, Vec<_>) =
+            self.closing.drain(..).partition(|w| w.is_finished());
+        self.closing = running;
+        for writer in done {
+            if writer.join().is_err() {
+                tracing::error!("a take writer panicked");
+            }
+        }
     }
 }
 
 impl Drop for Takes {
     fn drop(&mut self) {
-        if self.active.is_some() {
-            self.finish();
+        self.shutdown();
+    }
+}
+
+/// Everything a take's writer thread needs.
+struct WriterJob {
+    slate: String,
+    take: Option<u32>,
+    source: String,
+    settings: TakeSettings,
+    naming: Arc<Mutex<()>>,
+    items: Receiver<TakeItem>,
+    failed: Arc<AtomicBool>,
+    dropped: Arc<AtomicU64>,
+    started: OnStarted,
+    ended: OnEnded,
+    on_stopped: Arc<Mutex<StopSlot>>,
+}
+
+impl WriterJob {
+    fn run(self) {
+        let opened = open_take(
+            &self.settings,
+            &self.naming,
+            &self.slate,
+            self.take,
+            &self.source,
+        );
+        let (info, writer, file) = match opened {
+            Ok(opened) => opened,
+            Err(e) => {
+                let message = crate::source::error_chain(&e);
+                tracing::error!(slate = %self.slate, "cannot start take: {message}");
+                self.failed.store(true, Ordering::Release);
+                (self.started)(Err(message.clone()));
+                let ended = TakeEnded {
+                    info: None,
+                    frames: 0,
+                    dropped: 0,
+                    error: Some(message),
+                };
+                (self.ended)(&ended);
+                StopSlot::finish(&self.on_stopped, Err(ended.error.unwrap_or_default()));
+                return;
+            }
+        };
+        tracing::info!(slate = %info.slate, take = info.take, path = %info.path.display(), "take started");
+        (self.started)(Ok(info.clone()));
+        let result = write_take(writer, self.items, &self.settings, &self.failed);
+        let synced = match &result.error {
+            None => sync_take(&file, &info.path),
+            Some(_) => Ok(()),
+        };
+        let ended = TakeEnded {
+            info: Some(info),
+            frames: result.frames,
+            dropped: self.dropped.load(Ordering::Relaxed),
+            error: result.error.or_else(|| {
+                synced
+                    .err()
+                    .map(|e| format!("cannot sync the take to disk: {e}"))
+            }),
+        };
+        let path = ended.info.as_ref().map(|i| i.path.display().to_string());
+        match &ended.error {
+            None => tracing::info!(
+                path,
+                frames = ended.frames,
+                dropped = ended.dropped,
+                "take closed and synced to disk: {} frames kept",
+                ended.frames
+            ),
+            Some(error) => {
+                tracing::error!(path, frames = ended.frames, "take stopped: {error}")
+            }
+        }
+        (self.ended)(&ended);
+        let result = match &ended.error {
+            None => Ok(ended.clone()),
+            Some(error) => Err(format!(
+                "take {} ended with an error: {error}",
+                path.unwrap_or_default()
+            )),
+        };
+        StopSlot::finish(&self.on_stopped, result);
+    }
+}
+
+/// Creates the folder, checks its free space, picks the take number and creates the file,
+/// never over an existing file or through a symbolic link.
+fn open_take(
+    settings: &TakeSettings,
+    naming: &Mutex<()>,
+    slate: &str,
+    take: Option<u32>,
+    source: &str,
+) -> Result<(TakeInfo, SessionWriter, std::fs::File), TakeError> {
+    let folder = &settings.folder;
+    std::fs::create_dir_all(folder).map_err(|source| TakeError::Folder {
+        path: folder.clone(),
+        source,
+    })?;
+    if let Some(free_mb) = free_mb(folder) {
+        if free_mb < settings.min_free_mb {
+            return Err(TakeError::LowSpace {
+                path: folder.clone(),
+                free_mb,
+                min_mb: settings.min_free_mb,
+            });
         }
     }
+    let (take, started, path, file) = {
+        // One writer at a time scans the folder and claims its name.
+        let _naming = naming.lock().unwrap_or_else(|p| p.into_inner());
+        let take = take.unwrap_or_else(|| next_take(folder, slate));
+        let started = SystemTime::now();
+        let (path, file) = create_new_take_file(folder, &file_name(slate, take, started))?;
+        (take, started, path, file)
+    };
+    let sync_handle = file.try_clone().map_err(|source| TakeError::Folder {
+        path: path.clone(),
+        source,
+    })?;
+    let options = WriterOptions {
+        flush_interval: settings.flush,
+        ..WriterOptions::default()
+    };
+    let mut writer = SessionWriter::new(
+        std::io::BufWriter::with_capacity(1 << 20, file),
+        path.display().to_string(),
+        options,
+    )?;
+    let started_unix_us = unix_us(started);
+    let metadata: std::collections::BTreeMap<String, String> = [
+        ("slate".to_owned(), slate.to_owned()),
+        ("take".to_owned(), take.to_string()),
+        ("started_unix_us".to_owned(), started_unix_us.to_string()),
+        ("timecode_rate".to_owned(), settings.timecode_rate.clone()),
+        ("source".to_owned(), source.to_owned()),
+    ]
+    .into_iter()
+    .collect();
+    writer.write_metadata("mouthpiece.take", metadata)?;
+    Ok((
+        TakeInfo {
+            slate: slate.to_owned(),
+            take,
+            path,
+            started,
+        },
+        writer,
+        sync_handle,
+    ))
+}
+
+/// Creates `name` in `folder`, or `name` with `-2`, `-3`, ... before `.mcap` when a file
+/// (or a link) of that name exists: `O_CREAT | O_EXCL` neither truncates nor follows links.
+pub fn create_new_take_file(
+    folder: &Path,
+    name: &str,
+) -> Result<(PathBuf, std::fs::File), TakeError> {
+    let stem = name.strip_suffix(".mcap").unwrap_or(name);
+    let mut last_error = None;
+    for n in 1..=1000u32 {
+        let candidate = if n == 1 {
+            name.to_owned()
+        } else {
+            format!("{stem}-{n}.mcap")
+        };
+        let path = folder.join(&candidate);
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+        {
+            Ok(file) => return Ok((path, file)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => last_error = Some(e),
+            Err(source) => return Err(TakeError::Folder { path, source }),
+        }
+    }
+    Err(TakeError::Folder {
+        path: folder.join(name),
+        source: last_error.unwrap_or_else(|| std::io::Error::other("no free file name")),
+    })
+}
+
+/// `fsync` of the take's file and of its folder (so the new name survives a power cut).
+fn sync_take(file: &std::fs::File, path: &Path) -> std::io::Result<()> {
+    file.sync_all()?;
+    if let Some(folder) = path.parent() {
+        std::fs::File::open(folder)?.sync_all()?;
+    }
+    Ok(())
+}
+
+struct WriterResult {
+    frames: u64,
+    error: Option<String>,
 }
 
 fn write_take(
     mut writer: SessionWriter,
-    metadata: std::collections::BTreeMap<String, String>,
     items: Receiver<TakeItem>,
-    settings: TakeSettings,
-    failed: Arc<Mutex<Option<String>>>,
-    stop: Arc<AtomicBool>,
+    settings: &TakeSettings,
+    failed: &AtomicBool,
 ) -> WriterResult {
     let mut frames = 0;
     let mut last_space_check = Instant::now();
-    // Written here, not in `start`: all file I/O stays off the processing thread.
-    let mut error = writer
-        .write_metadata("mouthpiece.take", metadata)
-        .err()
-        .map(|e| crate::source::error_chain(&e));
+    let mut error = None;
     // Runs until the queue is closed (stop) and drained, or a write fails.
-    for item in items.iter().take_while(|_| error.is_none()) {
+    for item in items.iter() {
         let TakeItem::Frame { frame, derived } = item;
         if let Err(e) = write_one(&mut writer, &frame, &derived) {
             error = Some(crate::source::error_chain(&e));
@@ -359,20 +585,18 @@ fn write_take(
             }
         }
     }
-    let _ = stop.load(Ordering::Acquire);
-    if let Some(message) = &error {
-        *failed.lock().unwrap_or_else(|p| p.into_inner()) = Some(message.clone());
+    if error.is_some() {
+        failed.store(true, Ordering::Release);
         // Flush what fits; the file stays readable up to its last complete chunk.
         let _ = writer.flush();
         drop(writer);
         return WriterResult { frames, error };
     }
     if let Err(e) = writer.finish() {
-        let message = crate::source::error_chain(&e);
-        *failed.lock().unwrap_or_else(|p| p.into_inner()) = Some(message.clone());
+        failed.store(true, Ordering::Release);
         return WriterResult {
             frames,
-            error: Some(message),
+            error: Some(crate::source::error_chain(&e)),
         };
     }
     WriterResult {
@@ -457,14 +681,10 @@ fn write_one(
     Ok(())
 }
 
-/// Letters, digits, `-`, `_`, `.`; 1-64 characters; not starting with `.`.
+/// The protocol's rule ([`mouthpiece_server::protocol::valid_slate`]): what a client may
+/// not ask for, the daemon does not record either.
 pub fn valid_slate(slate: &str) -> bool {
-    !slate.is_empty()
-        && slate.len() <= 64
-        && !slate.starts_with('.')
-        && slate
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+    mouthpiece_server::protocol::valid_slate(slate)
 }
 
 /// `<slate>_T<take>_<YYYYMMDDTHHMMSSZ>.mcap`
@@ -544,6 +764,38 @@ mod tests {
     use super::*;
 
     #[test]
+    fn one_slate_rule_for_protocol_config_and_takes() {
+        for (slate, ok) in [
+            ("scene4", true),
+            ("Scene_4.b-2", true),
+            ("4", true),
+            ("-rf", false),
+            (".hidden", false),
+            ("_x", false),
+            ("..", false),
+            ("", false),
+            ("a b", false),
+            ("a/b", false),
+            ("\u{e9}t\u{e9}", false),
+            (&"a".repeat(64), true),
+            (&"a".repeat(65), false),
+        ] {
+            assert_eq!(valid_slate(slate), ok, "{slate:?}");
+            assert_eq!(
+                mouthpiece_config::Slate::try_from(slate.to_owned()).is_ok(),
+                ok,
+                "config: {slate:?}"
+            );
+            let message = serde_json::json!({"type": "record", "action": "start", "slate": slate});
+            assert_eq!(
+                mouthpiece_server::protocol::parse_client_message(&message.to_string()).is_ok(),
+                ok,
+                "protocol: {slate:?}"
+            );
+        }
+    }
+
+    #[test]
     fn file_names_carry_slate_take_and_utc_time() {
         // 2026-11-22 03:04:05 UTC
         let t = UNIX_EPOCH + Duration::from_secs(1_795_316_645);
@@ -579,7 +831,7 @@ mod tests {
     #[test]
     fn slates_that_are_not_file_names_are_rejected() {
         assert!(valid_slate("scene-12_b.2"));
-        for bad in ["", "../x", ".hidden", "a b", "a/b", &"x".repeat(65)] {
+        for bad in ["", "../x", ".hidden", "-rf", "a b", "a/b", &"x".repeat(65)] {
             assert!(!valid_slate(bad), "{bad:?}");
         }
     }
@@ -672,19 +924,42 @@ mod tests {
         n
     }
 
+    const WAIT: Duration = Duration::from_secs(10);
+
+    /// Starts a take and waits for the writer thread's answer.
+    fn start_wait(takes: &mut Takes, slate: &str, take: Option<u32>) -> Result<TakeInfo, String> {
+        let (tx, rx) = crossbeam_channel::bounded(1);
+        takes.start(
+            slate,
+            take,
+            "replay:test.mcap",
+            Box::new(move |r| {
+                let _ = tx.send(r);
+            }),
+            Box::new(|_| {}),
+        );
+        rx.recv_timeout(WAIT).expect("the writer answers")
+    }
+
+    /// Stops the take and waits until it is closed.
+    fn stop_wait(takes: &mut Takes) -> Result<TakeEnded, String> {
+        let (tx, rx) = crossbeam_channel::bounded(1);
+        takes.stop(Box::new(move |r| {
+            let _ = tx.send(r);
+        }));
+        rx.recv_timeout(WAIT).expect("the writer answers")
+    }
+
     #[test]
     fn a_take_holds_raw_frames_and_every_derived_channel() {
         let dir = tempfile::tempdir().unwrap();
         let mut takes = Takes::new(settings(dir.path()));
-        let info = takes
-            .start("scene1", None, "replay:test.mcap")
-            .unwrap()
-            .clone();
+        let info = start_wait(&mut takes, "scene1", None).unwrap();
         assert_eq!(info.take, 1);
         for seq in 0..10 {
             takes.push(frame(seq), derived(seq));
         }
-        let ended = takes.stop().unwrap();
+        let ended = stop_wait(&mut takes).unwrap();
         assert_eq!((ended.frames, ended.dropped, ended.error), (10, 0, None));
         let (topics, metadata) = topics(&info.path);
         for topic in [
@@ -703,17 +978,18 @@ mod tests {
             "{metadata:?}"
         );
         // The next take of the slate counts on.
-        let next = takes.start("scene1", None, "x").unwrap().take;
+        let next = start_wait(&mut takes, "scene1", None).unwrap().take;
         assert_eq!(next, 2);
-        takes.stop().unwrap();
-        assert!(matches!(takes.stop(), Err(TakeError::NotRecording)));
+        stop_wait(&mut takes).unwrap();
+        let err = stop_wait(&mut takes).unwrap_err();
+        assert!(err.contains("no take is recording"), "{err}");
     }
 
     #[test]
     fn a_take_killed_mid_way_is_readable_up_to_its_last_flush() {
         let dir = tempfile::tempdir().unwrap();
         let mut takes = Takes::new(settings(dir.path()));
-        let path = takes.start("crash", Some(3), "x").unwrap().path.clone();
+        let path = start_wait(&mut takes, "crash", Some(3)).unwrap().path;
         // Frames 100 ms apart in capture time: every frame closes a chunk (flush = 100 ms).
         for seq in 0..8 {
             let mut f = (*frame(seq)).clone();
@@ -728,7 +1004,7 @@ mod tests {
         }
         let snapshot = dir.path().join("killed.mcap");
         std::fs::copy(&path, &snapshot).unwrap();
-        takes.stop().unwrap();
+        stop_wait(&mut takes).unwrap();
         let (topics, _) = topics(&snapshot);
         assert!(
             topics.get("/camera/depth").copied().unwrap_or(0) >= 7,
@@ -742,32 +1018,129 @@ mod tests {
 
     #[test]
     fn disk_full_stops_the_take_and_says_so() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut takes = Takes::new(settings(dir.path()));
-        // /dev/full fails every write with ENOSPC: point the take's file at it.
-        let started = SystemTime::now();
-        let name = file_name("full", 1, started);
-        std::os::unix::fs::symlink("/dev/full", dir.path().join(&name)).unwrap();
-        std::os::unix::fs::symlink(
-            "/dev/full",
-            dir.path()
-                .join(file_name("full", 1, started + Duration::from_secs(1))),
+        // /dev/full fails every write with ENOSPC.
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let writer = SessionWriter::new(
+            std::io::BufWriter::new(file),
+            "/dev/full".into(),
+            WriterOptions {
+                flush_interval: Duration::from_millis(10),
+                ..WriterOptions::default()
+            },
         )
         .unwrap();
-        takes.start("full", Some(1), "x").unwrap();
-        let deadline = Instant::now() + Duration::from_secs(10);
-        let mut ended = None;
-        let mut seq = 0;
-        while ended.is_none() && Instant::now() < deadline {
-            takes.push(frame(seq), derived(seq));
-            seq += 1;
-            std::thread::sleep(Duration::from_millis(10));
-            ended = takes.poll();
+        let (queue, items) = crossbeam_channel::bounded(64);
+        for seq in 0..10 {
+            queue
+                .send(TakeItem::Frame {
+                    frame: frame(seq),
+                    derived: derived(seq),
+                })
+                .unwrap();
         }
-        let ended = ended.expect("the take stopped by itself");
-        let error = ended.error.unwrap();
+        drop(queue);
+        let dir = tempfile::tempdir().unwrap();
+        let failed = AtomicBool::new(false);
+        let result = write_take(writer, items, &settings(dir.path()), &failed);
+        let error = result.error.unwrap();
         assert!(error.contains("No space left on device"), "{error}");
+        assert!(failed.load(Ordering::Acquire));
+    }
+
+    #[test]
+    fn a_take_that_cannot_start_says_why_and_stops_recording() {
+        let dir = tempfile::tempdir().unwrap();
+        let not_a_folder = dir.path().join("file");
+        std::fs::write(&not_a_folder, b"").unwrap();
+        let mut takes = Takes::new(settings(&not_a_folder));
+        let err = start_wait(&mut takes, "s", None).unwrap_err();
+        assert!(err.contains("takes folder"), "{err}");
+        let deadline = Instant::now() + WAIT;
+        while takes.is_recording() && Instant::now() < deadline {
+            takes.poll();
+            std::thread::sleep(Duration::from_millis(5));
+        }
         assert!(!takes.is_recording());
+        // A stop that comes after the failure is answered too.
+        let err = stop_wait(&mut takes).unwrap_err();
+        assert!(err.contains("no take"), "{err}");
+    }
+
+    #[test]
+    fn takes_never_overwrite_a_file_or_follow_a_link() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut takes = Takes::new(settings(dir.path()));
+        // Links where the next takes would go (this second and the next few), to a file
+        // that must stay untouched.
+        let victim = dir.path().join("victim");
+        std::fs::write(&victim, b"precious").unwrap();
+        let now = SystemTime::now();
+        for s in 0..3 {
+            std::os::unix::fs::symlink(
+                &victim,
+                dir.path()
+                    .join(file_name("s", 1, now + Duration::from_secs(s))),
+            )
+            .unwrap();
+        }
+        let mut paths = Vec::new();
+        for _ in 0..3 {
+            // The same slate and take number, within the same second.
+            let info = start_wait(&mut takes, "s", Some(1)).unwrap();
+            takes.push(frame(0), derived(0));
+            let ended = stop_wait(&mut takes).unwrap();
+            assert_eq!(ended.frames, 1);
+            paths.push(info.path);
+        }
+        assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+        paths.sort();
+        paths.dedup();
+        assert_eq!(paths.len(), 3, "{paths:?}");
+        for path in &paths {
+            assert!(!path.is_symlink(), "{}", path.display());
+            assert_eq!(topics(path).0.get("/camera/depth"), Some(&1));
+        }
+    }
+
+    #[test]
+    fn starting_and_stopping_never_wait_for_the_writer() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut takes = Takes::new(settings(dir.path()));
+        // The writer thread is held inside its start callback: if `start` or `stop`
+        // waited for it (file creation, draining), this test would hang.
+        let (release, held) = crossbeam_channel::bounded::<()>(1);
+        let (started_tx, started_rx) = crossbeam_channel::bounded(1);
+        takes.start(
+            "s",
+            None,
+            "x",
+            Box::new(move |r| {
+                let _ = held.recv_timeout(WAIT);
+                let _ = started_tx.send(r);
+            }),
+            Box::new(|_| {}),
+        );
+        for seq in 0..5 {
+            takes.push(frame(seq), derived(seq));
+        }
+        let (stopped_tx, stopped_rx) = crossbeam_channel::bounded(1);
+        let before = Instant::now();
+        takes.stop(Box::new(move |r| {
+            let _ = stopped_tx.send(r);
+        }));
+        assert!(before.elapsed() < Duration::from_secs(1));
+        assert!(stopped_rx.try_recv().is_err(), "not closed yet");
+        release.send(()).unwrap();
+        started_rx.recv_timeout(WAIT).unwrap().unwrap();
+        let ended = stopped_rx.recv_timeout(WAIT).unwrap().unwrap();
+        assert_eq!(
+            ended.frames, 5,
+            "frames queued before the file opened are kept"
+        );
+        takes.shutdown();
     }
 
     #[test]

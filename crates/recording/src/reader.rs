@@ -231,13 +231,21 @@ impl Iterator for MessageReader {
     }
 }
 
+/// Largest MCAP record (and decompressed chunk) read: a crafted length field is an error,
+/// not an allocation of terabytes. The writer's chunks are 8 MiB.
+pub const MAX_RECORD_BYTES: usize = 256 << 20;
+
+/// Largest colour or depth image decoded (4096 x 4096).
+pub const MAX_IMAGE_PIXELS: u64 = 4096 * 4096;
+
 fn new_linear_reader() -> LinearReader {
     // Check each chunk whole before releasing its messages: a chunk cut short by a killed
     // writer then yields nothing rather than a partial, possibly garbled, tail.
     LinearReader::new_with_options(
         LinearReaderOptions::default()
             .with_prevalidate_chunk_crcs(true)
-            .with_validate_chunk_crcs(true),
+            .with_validate_chunk_crcs(true)
+            .with_record_length_limit(MAX_RECORD_BYTES),
     )
 }
 
@@ -532,6 +540,36 @@ impl SessionReader {
                 source: None,
             });
         };
+        for (what, (w, h), k) in [
+            (
+                "colour",
+                (color.value.width, color.value.height),
+                &calibration.color,
+            ),
+            (
+                "depth",
+                (depth.value.width, depth.value.height),
+                &calibration.depth,
+            ),
+        ] {
+            if (w, h) != (k.width, k.height) {
+                return Err(RecordingError::Decode {
+                    path: self.messages.path().display().to_string(),
+                    topic: if what == "colour" {
+                        crate::TOPIC_COLOR
+                    } else {
+                        crate::TOPIC_DEPTH
+                    }
+                    .into(),
+                    log_time: color.log_time,
+                    what: format!(
+                        "{what} image is {w}x{h} but the calibration says {}x{}",
+                        k.width, k.height
+                    ),
+                    source: None,
+                });
+            }
+        }
         let ground_truth = match self.ground_truth.take() {
             Some((t, gt)) if t == color.log_time => Some(gt),
             _ => None,
@@ -568,6 +606,20 @@ impl SessionReader {
         }
     }
 
+    /// Refuses images larger than [`MAX_IMAGE_PIXELS`] before anything is allocated.
+    fn check_size(&self, msg: &RawMessage, width: u32, height: u32) -> Result<(), RecordingError> {
+        if u64::from(width) * u64::from(height) > MAX_IMAGE_PIXELS {
+            return Err(self.decode_error(
+                msg,
+                format!(
+                    "{width}x{height} image is larger than the {MAX_IMAGE_PIXELS} pixels allowed"
+                ),
+                None,
+            ));
+        }
+        Ok(())
+    }
+
     fn decode_color(&self, msg: &RawMessage) -> Result<(u64, ColorImage), RecordingError> {
         if msg.schema_name.ends_with("CompressedImage") {
             let m = CompressedImage::decode(&msg.data)
@@ -580,6 +632,14 @@ impl SessionReader {
                 ));
             }
             let mut decoder = jpeg_decoder::Decoder::new(&m.data[..]);
+            // The header first: a few bytes may claim gigapixels.
+            decoder
+                .read_info()
+                .map_err(|e| self.decode_error(msg, "bad JPEG", Some(Box::new(e))))?;
+            if let Some(info) = decoder.info() {
+                self.check_size(msg, u32::from(info.width), u32::from(info.height))?;
+            }
+            decoder.set_max_decoding_buffer_size(MAX_IMAGE_PIXELS as usize * 3);
             let pixels = decoder
                 .decode()
                 .map_err(|e| self.decode_error(msg, "bad JPEG", Some(Box::new(e))))?;
@@ -615,6 +675,7 @@ impl SessionReader {
         } else {
             let m = RawImage::decode(&msg.data)
                 .map_err(|e| self.decode_error(msg, "bad RawImage", Some(Box::new(e))))?;
+            self.check_size(msg, m.width, m.height)?;
             let (w, h) = (m.width as usize, m.height as usize);
             let step = m.step as usize;
             if step < w * 3 || m.data.len() < step * h.saturating_sub(1) + w * 3 {
@@ -666,6 +727,7 @@ impl SessionReader {
                 None,
             ));
         }
+        self.check_size(msg, m.width, m.height)?;
         let (w, h) = (m.width as usize, m.height as usize);
         let step = m.step as usize;
         if step < w * 2 || m.data.len() < step * h.saturating_sub(1) + w * 2 {

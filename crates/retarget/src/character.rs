@@ -245,10 +245,19 @@ impl Checker<'_> {
 
     fn finite(&self, key: &str, v: &Spanned<[f64; 3]>) -> Result<Vec3, Error> {
         let a = v.get_ref();
-        if a.iter().all(|c| c.is_finite()) {
-            Ok(Vec3::new(a[0], a[1], a[2]))
-        } else {
+        if !a.iter().all(|c| c.is_finite()) {
             Err(self.err(key, Some(v.span()), format!("non-finite number in {a:?}")))
+        } else if !crate::layout::coordinates_in_range(a) {
+            Err(self.err(
+                key,
+                Some(v.span()),
+                format!(
+                    "coordinate beyond {} in {a:?}",
+                    crate::layout::MAX_COORDINATE
+                ),
+            ))
+        } else {
+            Ok(Vec3::new(a[0], a[1], a[2]))
         }
     }
 }
@@ -431,6 +440,9 @@ impl RawCharacter {
     }
 }
 
+/// Largest `points_per_lip`: the two lips then hold [`crate::layout::MAX_DOT_NUMBER`] points.
+pub const MAX_POINTS_PER_LIP: usize = crate::layout::MAX_DOT_NUMBER.div_ceil(2);
+
 /// Places `points_per_lip` points (corners included) at equal arc length along each contour
 /// and orders them like the performer's dots: left corner, upper lip left to right, right
 /// corner, lower lip right to left.
@@ -442,6 +454,16 @@ fn contour_points(c: &Checker<'_>, contour: &Spanned<RawContour>) -> Result<Vec<
             "contour.points_per_lip",
             Some(contour.points_per_lip.span()),
             format!("must be at least 3 (two corners and one lip point), got {k}"),
+        ));
+    }
+    if k > MAX_POINTS_PER_LIP {
+        return Err(c.err(
+            "contour.points_per_lip",
+            Some(contour.points_per_lip.span()),
+            format!(
+                "must be at most {MAX_POINTS_PER_LIP} (dots are named up to D{}), got {k}",
+                crate::layout::MAX_DOT_NUMBER
+            ),
         ));
     }
     let polyline = |key: &str, line: &Spanned<Vec<[f64; 3]>>| -> Result<Vec<Vec3>, Error> {
@@ -460,6 +482,16 @@ fn contour_points(c: &Checker<'_>, contour: &Spanned<RawContour>) -> Result<Vec<
                     key,
                     Some(line.span()),
                     format!("non-finite number in {a:?}"),
+                ));
+            }
+            if !crate::layout::coordinates_in_range(a) {
+                return Err(c.err(
+                    key,
+                    Some(line.span()),
+                    format!(
+                        "coordinate beyond {} in {a:?}",
+                        crate::layout::MAX_COORDINATE
+                    ),
                 ));
             }
             out.push(Vec3::new(a[0], a[1], a[2]));

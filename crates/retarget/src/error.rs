@@ -59,6 +59,14 @@ pub enum Error {
         /// Name of the dot.
         dot: String,
     },
+    /// A dot position is further from the camera than any face can be.
+    #[error("dot {dot} has a coordinate beyond {limit} (metres)")]
+    CoordinateOutOfRange {
+        /// Name of the dot.
+        dot: String,
+        /// [`crate::layout::MAX_COORDINATE`].
+        limit: f64,
+    },
     /// A timestamp is NaN or infinite.
     #[error("timestamp {t} is not finite")]
     NonFiniteTime {

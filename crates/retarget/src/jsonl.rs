@@ -91,6 +91,12 @@ impl InputLine {
                         dot: name.to_string(),
                     });
                 }
+                if !crate::layout::coordinates_in_range(a) {
+                    return Err(Error::CoordinateOutOfRange {
+                        dot: name.to_string(),
+                        limit: crate::layout::MAX_COORDINATE,
+                    });
+                }
                 *slot = Some(Vec3::new(a[0], a[1], a[2]));
             }
         }

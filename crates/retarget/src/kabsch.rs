@@ -66,6 +66,9 @@ pub fn spans_plane(points: &[Vec3]) -> bool {
         let d = p - centroid;
         cov += d * d.transpose();
     }
+    if !cov.iter().all(|v| v.is_finite()) {
+        return false;
+    }
     let mut s = cov.symmetric_eigenvalues();
     s.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
     // Eigenvalues of the scatter matrix are squared singular values.
@@ -89,6 +92,10 @@ pub fn kabsch(from: &[Vec3], to: &[Vec3]) -> Option<RigidTransform> {
     let mut h = Matrix3::zeros();
     for (a, b) in from.iter().zip(to) {
         h += (a - cf) * (b - ct).transpose();
+    }
+    // Products of huge coordinates overflow to inf and NaN, on which the SVD never converges.
+    if !h.iter().all(|v| v.is_finite()) {
+        return None;
     }
     let svd = h.svd(true, true);
     let u = svd.u?;

@@ -60,6 +60,18 @@ impl PerformerLayout {
     }
 }
 
+/// Largest coordinate accepted from outside (a dot's, a character's), in its units: squares
+/// of larger ones overflow in the fits' covariance sums.
+pub const MAX_COORDINATE: f64 = 1e6;
+
+/// Whether every coordinate is finite and within [`MAX_COORDINATE`].
+pub fn coordinates_in_range(a: &[f64; 3]) -> bool {
+    a.iter().all(|c| c.abs() <= MAX_COORDINATE)
+}
+
+/// Highest dot number in a name (`D999`, `F999`); real faces carry a few dozen.
+pub const MAX_DOT_NUMBER: usize = 999;
+
 /// Parses `D3` / `F2` into a dot id, without checking it against a layout.
 pub fn parse_dot_name(name: &str) -> Option<DotId> {
     let (kind, digits) = name.split_at_checked(1)?;
@@ -67,6 +79,10 @@ pub fn parse_dot_name(name: &str) -> Option<DotId> {
         return None;
     }
     let number: usize = digits.parse().ok()?;
+    if number > MAX_DOT_NUMBER {
+        // Layouts are sized from the highest number named: a huge one is not a dot.
+        return None;
+    }
     match kind {
         "D" => Some(DotId::Lip(number - 1)),
         "F" => Some(DotId::Forehead(number - 1)),
@@ -85,6 +101,10 @@ mod tests {
         assert_eq!(parse_dot_name("D12"), Some(DotId::Lip(11)));
         assert_eq!(parse_dot_name("D0"), None);
         assert_eq!(parse_dot_name("D01"), None);
+        assert_eq!(parse_dot_name("D999"), Some(DotId::Lip(998)));
+        assert_eq!(parse_dot_name("F1000"), None);
+        assert_eq!(parse_dot_name("F18446744073709551615"), None);
+        assert_eq!(parse_dot_name("F18446744073709551616"), None);
         assert_eq!(parse_dot_name("X1"), None);
         assert_eq!(parse_dot_name("D"), None);
         assert_eq!(parse_dot_name(""), None);

@@ -41,7 +41,7 @@ impl Token {
 
     /// Reads a token from a file (surrounding whitespace ignored).
     pub fn from_file(path: &Path) -> Result<Token, ServerError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ServerError::Io {
+        let text = read_small(path).map_err(|source| ServerError::Io {
             context: format!("reading token file {}", path.display()),
             source,
         })?;
@@ -75,6 +75,23 @@ impl Token {
     pub fn expose(&self) -> &str {
         &self.0
     }
+}
+
+/// A token file of at most 4 KiB (`/dev/zero` is an error, not unbounded memory).
+fn read_small(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?
+        .take(4097)
+        .read_to_end(&mut bytes)?;
+    if bytes.len() > 4096 {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            "longer than 4096 bytes",
+        ));
+    }
+    String::from_utf8(bytes)
+        .map_err(|_| std::io::Error::new(std::io::ErrorKind::InvalidData, "not UTF-8 text"))
 }
 
 /// What a connection may do.
@@ -167,6 +184,9 @@ pub struct ServerConfig {
     pub control_token: Option<Token>,
     /// Browser origins allowed besides the server's own (`*` allows any).
     pub allowed_origins: Vec<String>,
+    /// Host names the server answers to besides `localhost`, the loopback addresses and the
+    /// address it listens on (see [`ServerConfig::host_allowed`]).
+    pub allowed_hosts: Vec<String>,
     /// Limits.
     pub limits: Limits,
     /// Serve `wss://` and `https://` with these.
@@ -180,6 +200,7 @@ impl Default for ServerConfig {
             read_token: None,
             control_token: None,
             allowed_origins: Vec::new(),
+            allowed_hosts: Vec::new(),
             limits: Limits::default(),
             tls: None,
         }
@@ -231,6 +252,12 @@ impl ServerConfig {
             Some(_) => None,
             None => Some(Access::Read),
         }
+    }
+
+    /// Whether a request's `Host` names this server listening on `local` (DNS rebinding;
+    /// see [`crate::host`]).
+    pub fn host_allowed(&self, host: Option<&str>, local: SocketAddr) -> bool {
+        crate::host::host_allowed(host, local, &self.allowed_hosts)
     }
 
     /// Whether a browser page from `origin` may connect (`host` is the request's Host).

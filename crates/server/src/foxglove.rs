@@ -233,6 +233,36 @@ struct SubscriptionRequest {
     channel_id: u32,
 }
 
+/// Most subscriptions one client may hold: each channel a few times over is plenty; every
+/// subscription costs a send per frame.
+pub const MAX_SUBSCRIPTIONS_PER_CLIENT: usize = 32;
+
+/// Parses one client text message (`subscribe`, `unsubscribe`); the error is what the
+/// client is told.
+fn parse_client_op(text: &str) -> Result<ClientOp, String> {
+    match serde_json::from_str::<Value>(text) {
+        Err(e) => Err(format!("invalid JSON: {e}")),
+        Ok(v) => {
+            let op = v.get("op").and_then(Value::as_str).unwrap_or("").to_owned();
+            serde_json::from_value::<ClientOp>(v).map_err(|e| {
+                if matches!(op.as_str(), "subscribe" | "unsubscribe") {
+                    format!("bad {op} message: {e}")
+                } else {
+                    format!(
+                        "unsupported op {op:?} (this server supports subscribe and unsubscribe)"
+                    )
+                }
+            })
+        }
+    }
+}
+
+/// Parses a client message of the Foxglove subprotocol as a session does (for fuzzing and
+/// tests): `Ok` when it is a valid `subscribe` or `unsubscribe`.
+pub fn check_client_message(text: &str) -> Result<(), String> {
+    parse_client_op(text).map(|_| ())
+}
+
 pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
     let (mut sink, mut stream) = ws.split();
     let limits = shared.config.limits.clone();
@@ -270,19 +300,7 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                 refused_in_a_row = 0;
             }
             let parsed = match message {
-                Ok(Message::Text(text)) => match serde_json::from_str::<Value>(&text) {
-                    Err(e) => Err(format!("invalid JSON: {e}")),
-                    Ok(v) => {
-                        let op = v.get("op").and_then(Value::as_str).unwrap_or("").to_owned();
-                        serde_json::from_value::<ClientOp>(v).map_err(|e| {
-                            if matches!(op.as_str(), "subscribe" | "unsubscribe") {
-                                format!("bad {op} message: {e}")
-                            } else {
-                                format!("unsupported op {op:?} (this server supports subscribe and unsubscribe)")
-                            }
-                        })
-                    }
-                },
+                Ok(Message::Text(text)) => parse_client_op(&text),
                 Ok(Message::Binary(_)) => {
                     Err("client publishing and services are not supported".into())
                 }
@@ -351,6 +369,8 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                             for s in subs {
                                 if !current.iter().any(|c| c.id == s.channel_id) {
                                     problems.push(format!("no channel with id {}", s.channel_id));
+                                } else if subscriptions.len() >= MAX_SUBSCRIPTIONS_PER_CLIENT && !subscriptions.contains_key(&s.id) {
+                                    problems.push(format!("subscription {} refused: at most {MAX_SUBSCRIPTIONS_PER_CLIENT} subscriptions per client", s.id));
                                 } else if let std::collections::btree_map::Entry::Vacant(slot) = subscriptions.entry(s.id) {
                                     slot.insert(s.channel_id);
                                 } else {
@@ -400,10 +420,15 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                             || frame.frame.capture_us.saturating_mul(1000),
                             |w| (w.max(0) as u64).saturating_mul(1000),
                         );
+                        // Each channel's payload is serialised once per frame, however many
+                        // subscriptions name it.
+                        let mut bodies: BTreeMap<u32, Option<Vec<u8>>> = BTreeMap::new();
                         for (&sub, &channel) in &subscriptions {
-                            let Some(c) = current.iter().find(|c| c.id == channel) else { continue };
-                            let Some(body) = payload(&c.kind, &frame) else { continue };
-                            send_within(&mut sink, write_timeout, Message::binary(message_data(sub, ts, &body))).await.map_err(|e| (None, e))?;
+                            let body = bodies.entry(channel).or_insert_with(|| {
+                                current.iter().find(|c| c.id == channel).and_then(|c| payload(&c.kind, &frame))
+                            });
+                            let Some(body) = body.as_deref() else { continue };
+                            send_within(&mut sink, write_timeout, Message::binary(message_data(sub, ts, body))).await.map_err(|e| (None, e))?;
                             metrics.frames_out.fetch_add(1, Ordering::Relaxed);
                         }
                         if let Some(at) = frame.published_at {

@@ -361,6 +361,8 @@ pub(crate) struct HubInner {
     /// Tokens set by [`Hub::set_tokens`] (a config reload); they replace the
     /// `ServerConfig`'s for new connections.
     tokens: Mutex<Option<(Option<crate::config::Token>, Option<crate::config::Token>)>>,
+    /// Set when a daemon thread died: `/healthz` answers 503 with it.
+    failure: Mutex<Option<String>>,
 }
 
 impl Hub {
@@ -382,6 +384,7 @@ impl Hub {
                 // The ring's slots plus frames in flight in client tasks.
                 pool_size: capacity + 64,
                 tokens: Mutex::new(None),
+                failure: Mutex::new(None),
             }),
         };
         (hub, ControlReceiver { rx })
@@ -454,6 +457,21 @@ impl Hub {
             change(s);
             *s != before
         });
+    }
+
+    /// Marks the service failed (a thread of the daemon died): `/healthz` answers 503 with
+    /// `reason` from now on.
+    pub fn set_failure(&self, reason: String) {
+        *self.inner.failure.lock().unwrap_or_else(|e| e.into_inner()) = Some(reason);
+    }
+
+    /// Why the service failed, if it did.
+    pub fn failure(&self) -> Option<String> {
+        self.inner
+            .failure
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     /// The current status.

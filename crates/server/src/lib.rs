@@ -65,6 +65,7 @@
 pub mod config;
 mod error;
 mod foxglove;
+pub mod host;
 pub mod http;
 pub mod hub;
 pub mod loadgen;
@@ -77,11 +78,20 @@ mod tls;
 
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
 pub use error::ServerError;
-pub use foxglove::{FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL, PERFORMER_CHANNEL};
+pub use foxglove::{
+    check_client_message as check_foxglove_client_message, FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL,
+    MAX_SUBSCRIPTIONS_PER_CLIENT, PERFORMER_CHANNEL,
+};
 pub use hub::{
     CharacterFrame, CharacterInfo, ControlCommand, ControlFailure, ControlOutcome, ControlReceiver,
     ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,
     StreamFrame, StreamInfo,
 };
 pub use server::run;
+
+/// Loads the certificate and key as [`run`] will, so that a configuration check refuses
+/// what serving would refuse.
+pub fn check_tls(files: &TlsFiles) -> Result<(), ServerError> {
+    tls::acceptor(files).map(|_| ())
+}
 pub use timecode::{Timecode, TimecodeRate};

@@ -518,9 +518,9 @@ pub fn parse_client_message(text: &str) -> Result<ClientMessage, ParseFailure> {
 fn validate(message: &ClientMessage) -> Result<(), String> {
     match message {
         ClientMessage::Subscribe(sub) => match sub.max_rate {
-            Some(r) if !(r.is_finite() && r > 0.0) => {
-                Err(format!("subscribe: max_rate must be a positive number, got {r}"))
-            }
+            Some(r) if !(r.is_finite() && r > 0.0) => Err(format!(
+                "subscribe: max_rate must be a positive number, got {r}"
+            )),
             _ => Ok(()),
         },
         ClientMessage::Calibrate {
@@ -533,17 +533,28 @@ fn validate(message: &ClientMessage) -> Result<(), String> {
             action: RecordAction::Start,
             slate: Some(slate),
             ..
-        } if slate.len() > 64
-            || !slate
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || "-_ .".contains(c)) =>
-        {
-            Err(format!(
-                "record: slate must be at most 64 characters of letters, digits, space, '-', '_', '.', got {slate:?}"
-            ))
-        }
+        } if !valid_slate(slate) => Err(format!("record: slate {SLATE_RULE}, got {slate:?}")),
         _ => Ok(()),
     }
+}
+
+/// The slate rule in words, for error messages.
+pub const SLATE_RULE: &str =
+    "must be 1-64 letters, digits, '-', '_' or '.', starting with a letter or digit";
+
+/// Whether `slate` may name a take: it becomes the start of a file name, so 1-64 of
+/// `A-Z a-z 0-9 - _ .`, starting with a letter or digit (not `.`: hidden, `..`; not `-`:
+/// read as an option by command-line tools). The daemon applies the same rule to slates
+/// from its configuration and its command line.
+pub fn valid_slate(slate: &str) -> bool {
+    slate.len() <= 64
+        && slate
+            .chars()
+            .next()
+            .is_some_and(|c| c.is_ascii_alphanumeric())
+        && slate
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
 #[cfg(test)]
@@ -593,7 +604,7 @@ mod tests {
         assert_eq!(sub.max_rate, Some(30.0));
         assert!(matches!(
             parse_client_message(
-                r#"{"type":"record","action":"start","slate":"scene 4","take":2}"#
+                r#"{"type":"record","action":"start","slate":"scene-4","take":2}"#
             )
             .unwrap(),
             ClientMessage::Record {

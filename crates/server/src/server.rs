@@ -38,11 +38,15 @@ pub(crate) struct Shared {
     pub(crate) shutdown: watch::Receiver<bool>,
     connections: AtomicUsize,
     tls: Option<tokio_rustls::TlsAcceptor>,
+    /// The address the listener is bound to (for the `Host` check).
+    local: SocketAddr,
+    /// Connections still in TLS + request head, oldest first (see [`Pending`]).
+    pending: Pending,
 }
 
 /// An upgrade the front door said yes to: protocol, subprotocol to name in the response,
-/// access level, `Sec-WebSocket-Accept` value.
-type Accepted = (Flavor, Option<&'static str>, Access, String);
+/// access level, `Sec-WebSocket-Accept` value, the client's place under `max_clients`.
+type Accepted = (Flavor, Option<&'static str>, Access, String, ClientCount);
 
 /// Which protocol a session speaks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -80,6 +84,8 @@ pub async fn run(
         shutdown: stop_rx,
         connections: AtomicUsize::new(0),
         tls,
+        local: addr,
+        pending: Pending::default(),
     });
     let mut tasks = JoinSet::new();
     tokio::pin!(shutdown);
@@ -90,7 +96,9 @@ pub async fn run(
             accepted = listener.accept() => match accepted {
                 Ok((stream, peer)) => {
                     let open = shared.connections.fetch_add(1, Ordering::Relaxed);
-                    if open >= shared.config.limits.max_connections {
+                    // Full: the oldest connection still in its handshake makes room, so
+                    // connections opened and left silent cannot lock everyone else out.
+                    if open >= shared.config.limits.max_connections && !shared.pending.evict_oldest() {
                         shared.connections.fetch_sub(1, Ordering::Relaxed);
                         shared.hub.inner.metrics.connections_rejected.fetch_add(1, Ordering::Relaxed);
                         debug!(%peer, "too many connections: closed");
@@ -100,9 +108,10 @@ pub async fn run(
                     let span = tracing::info_span!("conn", %peer);
                     // Created before spawning, so an aborted task still gives its slot back.
                     let open = OpenConnection(shared.clone());
+                    let handshake = shared.pending.register();
                     tasks.spawn(async move {
                         let _open = open;
-                        handle_connection(&shared, stream, peer).await;
+                        handle_connection(&shared, stream, peer, handshake).await;
                     }.instrument(span));
                 }
                 Err(e) => {
@@ -134,7 +143,74 @@ impl Drop for OpenConnection {
     }
 }
 
-async fn handle_connection(shared: &Arc<Shared>, tcp: TcpStream, peer: SocketAddr) {
+/// Connections that have not yet sent a full request head, oldest first. When
+/// `max_connections` is reached, a new connection evicts the oldest of them (it has had
+/// the longest to speak); connections past the front door are never evicted.
+#[derive(Default)]
+struct Pending {
+    queue: std::sync::Mutex<std::collections::VecDeque<(u64, Arc<tokio::sync::Notify>)>>,
+    next: std::sync::atomic::AtomicU64,
+}
+
+/// A connection's place in [`Pending`]; leaves it when dropped.
+struct Handshake<'a> {
+    pending: &'a Pending,
+    id: u64,
+    evicted: Arc<tokio::sync::Notify>,
+}
+
+impl Pending {
+    fn register(&self) -> (u64, Arc<tokio::sync::Notify>) {
+        let id = self.next.fetch_add(1, Ordering::Relaxed);
+        let evicted = Arc::new(tokio::sync::Notify::new());
+        self.queue
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push_back((id, evicted.clone()));
+        (id, evicted)
+    }
+
+    /// Tells the oldest pending connection to close; false when there is none.
+    fn evict_oldest(&self) -> bool {
+        let oldest = self
+            .queue
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .pop_front();
+        match oldest {
+            Some((_, evicted)) => {
+                evicted.notify_one();
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn remove(&self, id: u64) {
+        self.queue
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .retain(|(i, _)| *i != id);
+    }
+}
+
+impl Drop for Handshake<'_> {
+    fn drop(&mut self) {
+        self.pending.remove(self.id);
+    }
+}
+
+async fn handle_connection(
+    shared: &Arc<Shared>,
+    tcp: TcpStream,
+    peer: SocketAddr,
+    (id, evicted): (u64, Arc<tokio::sync::Notify>),
+) {
+    let handshake = Handshake {
+        pending: &shared.pending,
+        id,
+        evicted,
+    };
     let _ = tcp.set_nodelay(true);
     let limits = &shared.config.limits;
     let front = async {
@@ -162,7 +238,17 @@ async fn handle_connection(shared: &Arc<Shared>, tcp: TcpStream, peer: SocketAdd
             }
         }
     };
-    let Ok(Some((mut io, req, rest))) = tokio::time::timeout(limits.handshake_timeout, front).await
+    let front = async {
+        tokio::select! {
+            r = front => Some(r),
+            _ = handshake.evicted.notified() => {
+                debug!("closed to make room (max_connections reached while it was silent)");
+                None
+            }
+        }
+    };
+    let Ok(Some(Some((mut io, req, rest)))) =
+        tokio::time::timeout(limits.handshake_timeout, front).await
     else {
         shared
             .hub
@@ -172,6 +258,29 @@ async fn handle_connection(shared: &Arc<Shared>, tcp: TcpStream, peer: SocketAdd
             .fetch_add(1, Ordering::Relaxed);
         return;
     };
+    drop(handshake);
+    // Before anything else: a request that does not name this server (DNS rebinding).
+    if !shared.config.host_allowed(req.header("host"), shared.local) {
+        shared
+            .hub
+            .inner
+            .metrics
+            .connections_rejected
+            .fetch_add(1, Ordering::Relaxed);
+        let (status, why) = match req.header("host") {
+            None => (400, "missing Host header".to_owned()),
+            Some(host) => (
+                403,
+                format!(
+                    "host {:?} is not one of this server's names (localhost, its addresses, or the configured allowed_hosts)",
+                    host.chars().take(80).collect::<String>()
+                ),
+            ),
+        };
+        info!(status, why, "request refused");
+        let _ = http::respond_error(&mut io, status, &why).await;
+        return;
+    }
     if req.is_upgrade() {
         upgrade(shared, io, req, rest, peer).await;
     } else {
@@ -203,6 +312,11 @@ async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io
             .await
         }
         "/healthz" => {
+            if let Some(reason) = shared.hub.failure() {
+                let body = serde_json::json!({ "status": "failed", "reason": reason });
+                return http::respond(io, 503, "application/json", body.to_string().as_bytes())
+                    .await;
+            }
             let status = shared.hub.status();
             let body = serde_json::json!({
                 "status": "ok",
@@ -297,14 +411,14 @@ async fn upgrade(
                 format!("no supported subprotocol offered (supported: {SUBPROTOCOL}, {FOXGLOVE_SUBPROTOCOL})"),
             ));
         };
-        let clients = metrics.clients.load(Ordering::Relaxed);
-        if clients >= shared.config.limits.max_clients as u64 {
-            return Err((503, format!("server full ({clients} clients)")));
-        }
-        Ok((flavor, selected, access, derive_accept_key(key.as_bytes())))
+        // Checked and counted in one step, so simultaneous upgrades cannot overshoot.
+        let Some(counted) = ClientCount::reserve(shared) else {
+            return Err((503, format!("server full ({} clients)", shared.config.limits.max_clients)));
+        };
+        Ok((flavor, selected, access, derive_accept_key(key.as_bytes()), counted))
     }
     .await;
-    let (flavor, selected, access, accept) = match decision {
+    let (flavor, selected, access, accept, _counted) = match decision {
         Ok(d) => d,
         Err((status, why)) => {
             metrics.connections_rejected.fetch_add(1, Ordering::Relaxed);
@@ -328,7 +442,6 @@ async fn upgrade(
         .max_message_size(Some(limits.max_message_bytes))
         .max_frame_size(Some(limits.max_message_bytes));
     let ws = WebSocketStream::from_partially_read(io, rest, Role::Server, Some(ws_config)).await;
-    let _counted = ClientCount::new(shared);
     metrics.clients_accepted.fetch_add(1, Ordering::Relaxed);
     info!(?flavor, access = access.as_str(), "client connected");
     match flavor {
@@ -341,14 +454,19 @@ async fn upgrade(
 struct ClientCount(Arc<Shared>);
 
 impl ClientCount {
-    fn new(shared: &Arc<Shared>) -> Self {
+    /// Takes a place under `max_clients`, or `None` when the server is full.
+    fn reserve(shared: &Arc<Shared>) -> Option<Self> {
+        let max = shared.config.limits.max_clients as u64;
         shared
             .hub
             .inner
             .metrics
             .clients
-            .fetch_add(1, Ordering::Relaxed);
-        Self(shared.clone())
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < max).then_some(n + 1)
+            })
+            .ok()?;
+        Some(Self(shared.clone()))
     }
 }
 

@@ -247,16 +247,22 @@ impl Writer {
     }
 
     /// Sends a close frame with `reason` (best effort: the peer may be gone) and returns it.
+    ///
+    /// A client closed for not reading has a full socket: its close frame waits behind the
+    /// replies it has not read, for as long as one write may take (`write_timeout`), so a
+    /// client that does read them then gets the code and reason rather than a bare cut.
     async fn close(&mut self, code: CloseCode, reason: &str) -> WriterExit {
         let frame = CloseFrame {
             code,
             reason: truncate_reason(reason).into(),
         };
-        let _ = tokio::time::timeout(
-            Duration::from_secs(1),
-            self.sink.send(Message::Close(Some(frame))),
-        )
-        .await;
+        let wait = self
+            .shared
+            .config
+            .limits
+            .write_timeout
+            .max(Duration::from_secs(1));
+        let _ = tokio::time::timeout(wait, self.sink.send(Message::Close(Some(frame)))).await;
         reason.to_owned()
     }
 

@@ -182,3 +182,48 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+#[tokio::test]
+async fn subscriptions_per_client_are_capped() {
+    let server = TestServer::start(ServerConfig::default()).await;
+    let mut ws = connect(&server.url(), &["foxglove.websocket.v1"])
+        .await
+        .unwrap();
+    let adv = next_json_op(&mut ws, "advertise").await;
+    let head = adv["channels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["topic"] == "/head")
+        .unwrap()["id"]
+        .clone();
+    let cap = mouthpiece_server::MAX_SUBSCRIPTIONS_PER_CLIENT as u64;
+    let subs: Vec<Value> = (0..1000)
+        .map(|i| json!({"id": i, "channelId": head}))
+        .collect();
+    ws.send(Message::text(
+        json!({"op": "subscribe", "subscriptions": subs}).to_string(),
+    ))
+    .await
+    .unwrap();
+    let status = next_json_op(&mut ws, "status").await;
+    assert!(
+        status["message"]
+            .as_str()
+            .unwrap()
+            .contains(&format!("at most {cap} subscriptions")),
+        "{status}"
+    );
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    server.publish(0);
+    server.publish(1);
+    let mut per_frame = std::collections::BTreeMap::<u64, u64>::new();
+    while per_frame.get(&1).copied().unwrap_or(0) < cap {
+        if let Fox::Data(sub, _, p) = next(&mut ws).await {
+            assert!(u64::from(sub) < cap, "subscription {sub} beyond the cap");
+            *per_frame.entry(p["seq"].as_u64().unwrap()).or_default() += 1;
+        }
+    }
+    assert_eq!(per_frame.values().copied().collect::<Vec<_>>(), [cap, cap]);
+    server.stop().await;
+}

@@ -60,7 +60,10 @@ async fn garbage_and_oversized_heads_get_http_errors() {
             .concat(),
             431,
         ),
-        (b"POST /metrics HTTP/1.1\r\nHost: x\r\n\r\n".to_vec(), 405),
+        (
+            b"POST /metrics HTTP/1.1\r\nHost: localhost\r\n\r\n".to_vec(),
+            405,
+        ),
         (
             b"GET / HTTP/1.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\r\n".to_vec(),
             400,
@@ -330,4 +333,136 @@ async fn serves_wss_and_https_with_a_configured_certificate() {
         .await
         .unwrap_err();
     assert!(err.to_string().contains("key.pem"), "{err}");
+}
+
+/// A raw request with the given `Host` header (or none); returns status and body.
+async fn get_with_host(
+    addr: std::net::SocketAddr,
+    path: &str,
+    host: Option<&str>,
+    extra: &str,
+) -> (u16, String) {
+    let mut s = TcpStream::connect(addr).await.unwrap();
+    let host = host.map(|h| format!("Host: {h}\r\n")).unwrap_or_default();
+    s.write_all(format!("GET {path} HTTP/1.1\r\n{host}{extra}\r\n").as_bytes())
+        .await
+        .unwrap();
+    let mut buf = Vec::new();
+    let _ = tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut buf)).await;
+    parse_response(&buf)
+}
+
+#[tokio::test]
+async fn foreign_host_names_are_refused_before_anything_else() {
+    // DNS rebinding: a page at http://rebind.example:PORT whose name now resolves to
+    // 127.0.0.1 sends its own origin, which matches its own Host.
+    let config = ServerConfig {
+        allowed_hosts: vec!["booth.local".into()],
+        ..ServerConfig::default()
+    };
+    let server = TestServer::start(config).await;
+    let port = server.addr.port();
+    let upgrade = |origin: &str| {
+        format!(
+            "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n\
+             Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Protocol: mouthpiece.v1\r\nOrigin: {origin}\r\n"
+        )
+    };
+    let evil = format!("rebind.example:{port}");
+    let (status, body) = get_with_host(
+        server.addr,
+        "/",
+        Some(&evil),
+        &upgrade(&format!("http://{evil}")),
+    )
+    .await;
+    assert_eq!(status, 403, "{body}");
+    assert!(body.contains("rebind.example"), "{body}");
+    for path in ["/", "/healthz", "/metrics"] {
+        assert_eq!(
+            get_with_host(server.addr, path, Some(&evil), "").await.0,
+            403
+        );
+    }
+    assert_eq!(get_with_host(server.addr, "/", None, "").await.0, 400);
+    // The server's own names.
+    for host in [
+        format!("127.0.0.1:{port}"),
+        format!("localhost:{port}"),
+        "LOCALHOST".to_owned(),
+        format!("[::1]:{port}"),
+        format!("booth.local:{port}"),
+        "booth.local.".to_owned(),
+    ] {
+        assert_eq!(
+            get_with_host(server.addr, "/healthz", Some(&host), "")
+                .await
+                .0,
+            200,
+            "{host}"
+        );
+    }
+    let own = format!("localhost:{port}");
+    let mut s = TcpStream::connect(server.addr).await.unwrap();
+    s.write_all(
+        format!(
+            "GET / HTTP/1.1\r\nHost: {own}\r\n{}\r\n",
+            upgrade(&format!("http://{own}"))
+        )
+        .as_bytes(),
+    )
+    .await
+    .unwrap();
+    let mut buf = [0u8; 512];
+    let n = s.read(&mut buf).await.unwrap();
+    assert!(buf[..n].starts_with(b"HTTP/1.1 101"));
+    server.stop().await;
+}
+
+#[tokio::test]
+async fn a_client_that_does_not_read_its_replies_gets_1008_with_a_reason() {
+    use futures_util::{SinkExt, StreamExt};
+    use tokio_tungstenite::tungstenite::Message;
+    let config = ServerConfig {
+        limits: Limits {
+            max_messages_per_second: 1_000_000,
+            control_queue_per_client: 2,
+            ..Limits::default()
+        },
+        ..ServerConfig::default()
+    };
+    let server = TestServer::start(config).await;
+    let ws = connect_v1(&server.url()).await;
+    let (mut tx, mut rx) = ws.split();
+    // Pings with long ids: their pongs fill the socket while the client does not read.
+    let id = "i".repeat(16 * 1024);
+    let sender = tokio::spawn(async move {
+        for _ in 0..4000 {
+            let ping = json!({"type": "ping", "id": id}).to_string();
+            if tokio::time::timeout(Duration::from_secs(3), tx.send(Message::text(ping)))
+                .await
+                .map_or(true, |r| r.is_err())
+            {
+                break;
+            }
+        }
+    });
+    // Longer than a close frame used to wait behind unread data.
+    tokio::time::sleep(Duration::from_millis(2000)).await;
+    let mut close = None;
+    while let Ok(Some(message)) = tokio::time::timeout(Duration::from_secs(10), rx.next()).await {
+        match message {
+            Ok(Message::Close(frame)) => {
+                close = frame.map(|f| (u16::from(f.code), f.reason.to_string()));
+                break;
+            }
+            Ok(_) => continue,
+            Err(e) => panic!("cut without a close frame: {e}"),
+        }
+    }
+    let (code, reason) = close.expect("a close frame");
+    assert_eq!(code, 1008, "{reason}");
+    assert!(reason.contains("not reading"), "{reason}");
+    sender.abort();
+    server.stop().await;
 }

@@ -45,7 +45,7 @@ pub fn load_config(path: Option<&Path>) -> anyhow::Result<PipelineConfig> {
     let Some(path) = path else {
         return Ok(PipelineConfig::default());
     };
-    let text = std::fs::read_to_string(path)
+    let text = mouthpiece_config::read_bounded(path, mouthpiece_config::MAX_CONFIG_FILE_BYTES)
         .with_context(|| format!("cannot read configuration {}", path.display()))
         .map_err(bad_input)?;
     PipelineConfig::from_toml_str(&text)
@@ -55,7 +55,7 @@ pub fn load_config(path: Option<&Path>) -> anyhow::Result<PipelineConfig> {
 
 /// Loads a character file.
 pub fn load_character(path: &Path) -> anyhow::Result<Character> {
-    let text = std::fs::read_to_string(path)
+    let text = mouthpiece_config::read_bounded(path, mouthpiece_config::MAX_CONFIG_FILE_BYTES)
         .with_context(|| format!("cannot read character file {}", path.display()))
         .map_err(bad_input)?;
     Character::from_toml_str(&text)

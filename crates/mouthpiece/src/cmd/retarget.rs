@@ -130,9 +130,10 @@ fn is_dash(p: &Path) -> bool {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let config = args.config()?;
-    let character_src = std::fs::read_to_string(&args.character)
-        .with_context(|| format!("cannot read character file {}", args.character.display()))
-        .map_err(bad_input)?;
+    let character_src =
+        mouthpiece_config::read_bounded(&args.character, mouthpiece_config::MAX_CONFIG_FILE_BYTES)
+            .with_context(|| format!("cannot read character file {}", args.character.display()))
+            .map_err(bad_input)?;
     let character = Character::from_toml_str(&character_src)
         .with_context(|| format!("character file {}", args.character.display()))
         .map_err(bad_input)?;

@@ -1,0 +1,219 @@
+//! Writes small valid starting inputs for every fuzz target into `fuzz/corpus/<target>/`
+//! (`cargo run -p mouthpiece-fuzz-targets --example seed`). The fuzzers mutate from these;
+//! the corpora committed are these plus what the fuzzers found, minimised.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use mouthpiece_frame::{Calibration, ColorImage, DepthImage, Frame, Intrinsics};
+use mouthpiece_recording::{ColorEncoding, SessionWriter, WriterOptions};
+
+fn put(target: &str, name: &str, data: &[u8]) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fuzz/corpus")
+        .join(target);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join(name), data).unwrap();
+}
+
+fn session(color: ColorEncoding, compression: Option<mcap::Compression>) -> Vec<u8> {
+    let (w, h) = (8u32, 6u32);
+    let cal = Arc::new(Calibration::registered(Intrinsics::ideal(
+        w, h, 8.0, 8.0, 4.0, 3.0,
+    )));
+    let mut sink = std::io::Cursor::new(Vec::new());
+    {
+        let mut writer = SessionWriter::new(
+            &mut sink,
+            "seed".into(),
+            WriterOptions {
+                color,
+                compression,
+                flush_interval: Duration::from_millis(1),
+                ..WriterOptions::default()
+            },
+        )
+        .unwrap();
+        for i in 0..2u64 {
+            let mut color = ColorImage::new(w, h);
+            color
+                .data
+                .iter_mut()
+                .enumerate()
+                .for_each(|(k, v)| *v = (k * 7) as u8);
+            let mut depth = DepthImage::new(w, h);
+            depth.data.iter_mut().for_each(|v| *v = 600);
+            writer
+                .write_frame(&Frame {
+                    seq: i,
+                    device_ts_us: i * 33_333,
+                    host_rx: Instant::now(),
+                    wall_clock: None,
+                    color,
+                    depth,
+                    calibration: cal.clone(),
+                })
+                .unwrap();
+        }
+        writer.finish().unwrap();
+    }
+    sink.into_inner()
+}
+
+fn main() {
+    put("mcap", "raw.mcap", &session(ColorEncoding::Raw, None));
+    put(
+        "mcap",
+        "jpeg-zstd.mcap",
+        &session(
+            ColorEncoding::Jpeg { quality: 50 },
+            Some(mcap::Compression::Zstd),
+        ),
+    );
+    put(
+        "mcap",
+        "raw-lz4.mcap",
+        &session(ColorEncoding::Raw, Some(mcap::Compression::Lz4)),
+    );
+
+    let dir = std::env::temp_dir().join(format!("mouthpiece-seed-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let oni = dir.join("seed.oni");
+    let spec = openni2::oni_writer::OniStreamSpec {
+        width: 4,
+        height: 3,
+        fps: 30,
+        hfov: 1.0,
+        vfov: 0.8,
+    };
+    let mut writer = openni2::oni_writer::OniWriter::create(&oni, spec, spec).unwrap();
+    for i in 0..2u64 {
+        writer.write_depth(i * 33_333, &[600u16; 12]).unwrap();
+        writer.write_color(i * 33_333, &[90u8; 36]).unwrap();
+    }
+    writer.finish().unwrap();
+    put("oni", "seed.oni", &std::fs::read(&oni).unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
+
+    use mouthpiece_recording::cdr::{CameraCalibration, CompressedImage, RawImage, Time};
+    put(
+        "cdr",
+        "raw_image",
+        &RawImage {
+            timestamp: Time::from_micros(1),
+            frame_id: "depth".into(),
+            width: 2,
+            height: 1,
+            encoding: "16UC1".into(),
+            step: 4,
+            data: vec![1, 2, 3, 4],
+        }
+        .encode(),
+    );
+    put(
+        "cdr",
+        "compressed_image",
+        &CompressedImage {
+            timestamp: Time::from_micros(1),
+            frame_id: "color".into(),
+            data: vec![0xFF, 0xD8, 0xFF, 0xD9],
+            format: "jpeg".into(),
+        }
+        .encode(),
+    );
+    put(
+        "cdr",
+        "camera_calibration",
+        &CameraCalibration {
+            timestamp: Time::from_micros(1),
+            frame_id: "camera".into(),
+            width: 640,
+            height: 480,
+            distortion_model: "plumb_bob".into(),
+            d: vec![0.0; 5],
+            k: [500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0],
+            r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            p: [0.0; 12],
+        }
+        .encode(),
+    );
+
+    put(
+        "config_toml",
+        "example.toml",
+        &std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/mouthpiece.toml"))
+            .unwrap(),
+    );
+    put(
+        "config_toml",
+        "tokens.toml",
+        b"[server]\nlisten = \"0.0.0.0:9870\"\nallowed_hosts = [\"booth.local\"]\nread_token = { value = \"read-token-0123456789\" }\ncontrol_token = { env = \"NOPE\" }\n[takes]\nqueue_frames = 10\n[source]\nspec = \"replay:x.mcap?loop=1&speed=2&start=1\"\n",
+    );
+    for name in ["human", "wolf"] {
+        put(
+            "character_toml",
+            &format!("{name}.toml"),
+            &std::fs::read(
+                Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join(format!("../../config/characters/{name}.toml")),
+            )
+            .unwrap(),
+        );
+    }
+    put(
+        "character_toml",
+        "contour.toml",
+        b"name = \"c\"\nunits = \"cm\"\n[contour]\npoints_per_lip = 4\nupper = [[1, 0, 0], [0, 1, 0], [-1, 0, 0]]\nlower = [[1, 0, 0], [0, -1, 0], [-1, 0, 0]]\n",
+    );
+    put(
+        "retarget_jsonl",
+        "lines.jsonl",
+        b"{\"t\": 0.033, \"points\": {\"D1\": [0.0457, 0.0436, 0.6868], \"D2\": null, \"F1\": [-0.014, -0.053, 0.703]}, \"neutral\": true}\n{\"t\": 0.066, \"points\": {\"D3\": [0.01, 0.02, 0.6], \"F3\": [0, 0, 1]}}\n",
+    );
+    put(
+        "take_jsonl",
+        "take.jsonl",
+        b"{\"t\": 1.966667, \"seq\": 59, \"character\": \"wolf\", \"points\": {\"P1\": [0.0717, 0.0004, 0.0296], \"P2\": [0.01, 0.02, 0.03]}, \"confidence\": {\"P1\": 1.0, \"P2\": 0.0}, \"head\": {\"rotation\": [0.9995, 0.012, -0.021, 0.004], \"translation\": [0.0035, 0.0008, 0.0002]}, \"head_lost\": false, \"curve\": {\"method\": \"bspline\", \"closed\": true, \"points\": [[0.0707, -0.0010, 0.0229]]}}\n{\"t\": 2.0, \"seq\": 60, \"character\": \"wolf\", \"points\": {\"P1\": [0.07, 0.0, 0.03], \"P2\": [0.01, 0.02, 0.03]}, \"confidence\": {\"P1\": 1.0, \"P2\": 1.0}, \"head\": {\"rotation\": [1, 0, 0, 0], \"translation\": [0, 0, 0]}, \"head_lost\": true, \"curve\": {\"method\": \"ma\", \"closed\": true, \"points\": []}}\n",
+    );
+    for (name, text) in [
+        (
+            "subscribe",
+            r#"{"type":"subscribe","id":1,"characters":["wolf"],"fields":["curve","performer"],"max_rate":10,"format":"binary"}"#,
+        ),
+        (
+            "calibrate",
+            r#"{"type":"calibrate","id":2,"duration_s":1.5}"#,
+        ),
+        (
+            "record",
+            r#"{"type":"record","id":3,"action":"start","slate":"scene4","take":2}"#,
+        ),
+        ("stop", r#"{"type":"record","id":"x","action":"stop"}"#),
+        ("ping", r#"{"type":"ping","id":"p1"}"#),
+    ] {
+        put("protocol_v1", name, text.as_bytes());
+    }
+    for (name, text) in [
+        (
+            "subscribe",
+            r#"{"op":"subscribe","subscriptions":[{"id":7,"channelId":1},{"id":8,"channelId":2}]}"#,
+        ),
+        (
+            "unsubscribe",
+            r#"{"op":"unsubscribe","subscriptionIds":[7,9]}"#,
+        ),
+    ] {
+        put("protocol_foxglove", name, text.as_bytes());
+    }
+    put(
+        "http_head",
+        "upgrade",
+        b"GET /ws?token=a%2Db&x=1 HTTP/1.1\r\nHost: localhost:9870\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nOrigin: http://localhost:9870\r\nSec-WebSocket-Protocol: mouthpiece.v1, mouthpiece.token.abc\r\n\r\n",
+    );
+    put(
+        "http_head",
+        "health",
+        b"GET /healthz HTTP/1.1\r\nHost: [::1]:9870\r\nAuthorization: Bearer x\r\n\r\n",
+    );
+}

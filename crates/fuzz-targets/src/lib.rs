@@ -1,0 +1,168 @@
+//! One entry point per parser that takes outside input, shared by the coverage-guided
+//! fuzzers (`fuzz/`, built with libFuzzer's instrumentation) and by the corpus replay test
+//! (`tests/corpora.rs`, a plain `cargo test`). Each function takes arbitrary bytes and must
+//! return without panicking, aborting, hanging or allocating without bound, whatever the
+//! bytes; errors are the expected outcome for most inputs and are dropped.
+//!
+//! Files are written to a scratch directory first where the parser reads paths (MCAP
+//! sessions, `.oni` files).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Every target: its name (the corpus folder and the fuzzer binary) and its function.
+pub const TARGETS: &[(&str, fn(&[u8]))] = &[
+    ("mcap", mcap),
+    ("oni", oni),
+    ("cdr", cdr),
+    ("config_toml", config_toml),
+    ("character_toml", character_toml),
+    ("retarget_jsonl", retarget_jsonl),
+    ("take_jsonl", take_jsonl),
+    ("protocol_v1", protocol_v1),
+    ("protocol_foxglove", protocol_foxglove),
+    ("http_head", http_head),
+];
+
+/// Runs the target called `name`; `false` when there is none.
+pub fn run(name: &str, data: &[u8]) -> bool {
+    match TARGETS.iter().find(|(n, _)| *n == name) {
+        Some((_, f)) => {
+            f(data);
+            true
+        }
+        None => false,
+    }
+}
+
+/// A per-process scratch file holding `data`.
+fn scratch(name: &str, data: &[u8]) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mouthpiece-fuzz-{}", std::process::id()));
+    let _ = std::fs::create_dir_all(&dir);
+    let path = dir.join(name);
+    let mut file = std::fs::File::create(&path).expect("scratch file");
+    file.write_all(data).expect("scratch write");
+    path
+}
+
+/// An MCAP session: read every frame (at most 64), as replay and `process` do.
+pub fn mcap(data: &[u8]) {
+    let path = scratch("session.mcap", data);
+    if let Ok(mut reader) = mouthpiece_recording::SessionReader::open(&path) {
+        for _ in 0..64 {
+            match reader.next_frame() {
+                Ok(Some(_)) => {}
+                _ => break,
+            }
+        }
+    }
+    if let Ok(reader) = mouthpiece_recording::MessageReader::open(&path) {
+        for message in reader.take(256) {
+            if message.is_err() {
+                break;
+            }
+        }
+    }
+}
+
+/// An `.oni` file: list its records, repair a truncated copy, add missing cropping.
+pub fn oni(data: &[u8]) {
+    use openni2::oni_file;
+    let path = scratch("take.oni", data);
+    let _ = oni_file::list_records(&path, true);
+    let _ = oni_file::list_records(&path, false);
+    let repaired = path.with_extension("repaired.oni");
+    let _ = oni_file::repair_truncated(&path, &repaired);
+    let _ = oni_file::add_missing_cropping(&path, |_| (1.0, 0.8));
+    let _ = std::fs::remove_file(&repaired);
+}
+
+/// The three CDR message types of a session.
+pub fn cdr(data: &[u8]) {
+    use mouthpiece_recording::cdr::{CameraCalibration, CompressedImage, RawImage};
+    let _ = RawImage::decode(data);
+    let _ = CompressedImage::decode(data);
+    let _ = CameraCalibration::decode(data);
+}
+
+/// The daemon's configuration file.
+pub fn config_toml(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        if let Ok(config) =
+            mouthpiece_config::Config::parse(text, Path::new("/nonexistent/mouthpiece.toml"))
+        {
+            let _ = config.summary();
+        }
+    }
+}
+
+/// A character file.
+pub fn character_toml(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = mouthpiece_retarget::Character::from_toml_str(text);
+    }
+}
+
+/// `mouthpiece retarget` input lines, checked against a 12-dot layout as the command does.
+pub fn retarget_jsonl(data: &[u8]) {
+    use mouthpiece_retarget::jsonl::InputLine;
+    use mouthpiece_retarget::{PerformerDots, PerformerLayout};
+    let mut dots = PerformerDots::default();
+    for line in String::from_utf8_lossy(data).lines() {
+        if let Ok(input) = InputLine::parse(line) {
+            let layout = PerformerLayout {
+                lip_dots: 12,
+                forehead_dots: input.forehead_count(),
+            };
+            let _ = input.dots_into(layout, &mut dots);
+        }
+    }
+}
+
+/// A take's JSONL (what `export` reads).
+pub fn take_jsonl(data: &[u8]) {
+    let mut reader = mouthpiece_export::TakeReader::new(data, "fuzz");
+    for _ in 0..1024 {
+        match reader.next_frame() {
+            Ok(Some(_)) => {}
+            _ => break,
+        }
+    }
+}
+
+/// A `mouthpiece.v1` client message.
+pub fn protocol_v1(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = mouthpiece_server::protocol::parse_client_message(text);
+    }
+}
+
+/// A `foxglove.websocket.v1` client message.
+pub fn protocol_foxglove(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = mouthpiece_server::check_foxglove_client_message(text);
+    }
+}
+
+/// The HTTP front door: a request head, then every decision taken on it.
+pub fn http_head(data: &[u8]) {
+    use mouthpiece_server::http::read_head;
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .build()
+        .expect("runtime");
+    let mut input = data;
+    if let Ok((request, _rest)) = runtime.block_on(read_head(&mut input)) {
+        let config = mouthpiece_server::ServerConfig {
+            allowed_origins: vec!["https://app.foxglove.dev".into()],
+            allowed_hosts: vec!["booth.local".into()],
+            ..mouthpiece_server::ServerConfig::default()
+        };
+        let local = "127.0.0.1:9870".parse().expect("address");
+        let _ = config.host_allowed(request.header("host"), local);
+        let _ = config.origin_allowed(request.header("origin"), request.header("host"));
+        let _ = request.subprotocols();
+        let _ = request.query_param("token");
+        let _ = request.is_upgrade();
+        let _ = config.access_for(request.query_param("token").as_deref());
+    }
+}
