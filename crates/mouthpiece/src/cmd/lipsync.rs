@@ -21,7 +21,9 @@ use mouthpiece_retarget::{
     RigidTransform, StabilisedFrame, Vec3,
 };
 use mouthpiece_speech::{Decoder, ModelPaths, TimedPhone};
-use mouthpiece_synth::{DotLayout, MouthState};
+#[cfg(test)]
+use mouthpiece_synth::DotLayout;
+use mouthpiece_synth::MouthState;
 
 use crate::cmd::process::{load_character, smoothing};
 use crate::cmd::retarget::Smooth;
