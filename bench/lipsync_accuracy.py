@@ -18,8 +18,12 @@ measures against the truth:
 - real-time factor: audio seconds / wall seconds of the whole command (model loading
   included), one run per sentence on this machine.
 
+With --speed, instead: the whole command's real-time factor on one long input each: a 60 s
+TIMIT phone file (phones cycling through every class, 30-150 ms long) and the sentences
+concatenated into one WAV, with and without the transcript (best of 3 runs).
+
 Usage: bench/lipsync_accuracy.py [--bin target/release/mouthpiece] [--sentences sa1,sa2]
-       [--json]
+       [--json] [--speed]
 Standard library only (Python >= 3.11 for tomllib).
 """
 
@@ -181,14 +185,70 @@ def measure(binary, names, with_transcript):
     }
 
 
+def timed(cmd, runs=3):
+    best = float("inf")
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, capture_output=True, env=dict(os.environ, RUST_LOG="warn"))
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def speed(binary, names):
+    human = os.path.join(REPO, "config/characters/human.toml")
+    rows = []
+    with tempfile.TemporaryDirectory() as d:
+        cycle = ["sh", "iy", "hh", "ae", "d", "y", "er", "aa", "r", "k", "s", "uw", "t", "ih",
+                 "n", "g", "z", "w", "ao", "m", "f", "th", "pau", "ow", "ch", "l", "v"]
+        phn = os.path.join(d, "long.phn")
+        t, i = 0, 0
+        with open(phn, "w") as f:
+            while t < 60 * 16000:
+                n = 480 + (i * 7919) % 1920
+                f.write(f"{t} {t + n} {cycle[i % len(cycle)]}\n")
+                t, i = t + n, i + 1
+        wall = timed([binary, "lipsync", "--character", human, "--phonemes", phn,
+                      "--out", os.path.join(d, "p.jsonl")])
+        rows.append(("phone file (TIMIT .phn) -> 60 fps take", 60.0, wall))
+        frames, rate, texts = b"", 16000, []
+        for name in names:
+            wav, _, _ = festival(SENTENCES[name], d, name)
+            with wave.open(wav) as w:
+                rate = w.getframerate()
+                frames += w.readframes(w.getnframes())
+            texts.append(SENTENCES[name])
+        long_wav = os.path.join(d, "long.wav")
+        with wave.open(long_wav, "wb") as w:
+            w.setnchannels(1)
+            w.setsampwidth(2)
+            w.setframerate(rate)
+            w.writeframes(frames)
+        seconds = len(frames) / 2 / rate
+        for label, extra in (("audio + transcript (alignment)", ["--transcript", " ".join(texts)]),
+                             ("audio, no transcript (recognition)", [])):
+            wall = timed([binary, "lipsync", "--character", human, "--audio", long_wav,
+                          "--out", os.path.join(d, "a.jsonl")] + extra,
+                         runs=3 if extra else 1)
+            rows.append((label, seconds, wall))
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bin", default=os.path.join(REPO, "target/release/mouthpiece"))
     ap.add_argument("--sentences", default=",".join(SENTENCES))
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--modes", default="transcript,recognition")
+    ap.add_argument("--speed", action="store_true")
     a = ap.parse_args()
     names = a.sentences.split(",")
+    if a.speed:
+        print(f"load average before: {os.getloadavg()[0]:.1f}")
+        print("| input | length | wall | real time |")
+        print("|---|---|---|---|")
+        for label, seconds, wall in speed(a.bin, names):
+            print(f"| {label} | {seconds:.1f} s | {wall:.3f} s | {seconds / wall:.0f}x |")
+        return
     results = [measure(a.bin, names, m == "transcript") for m in a.modes.split(",")]
     if a.json:
         json.dump(results, sys.stdout)

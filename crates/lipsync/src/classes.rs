@@ -219,9 +219,18 @@ target = { closed = 1.0 }
             (SMALL.replace("\"b\"", "\"h#\""), "already in class"),
             (SMALL.replace("closed = 1.0", "shut = 1.0"), "unknown pose"),
             (SMALL.replace("closed = 1.0", "closed = 1.5"), "within 0..1"),
-            (SMALL.replace("name = \"sil\"", "name = \"quiet\""), "no class named"),
-            (SMALL.replace("\"sil\", \"h#\"", "\"h#\""), "must list \"sil\""),
-            (SMALL.replace("name = \"m\"", "name = \"sil\""), "used twice"),
+            (
+                SMALL.replace("name = \"sil\"", "name = \"quiet\""),
+                "no class named",
+            ),
+            (
+                SMALL.replace("\"sil\", \"h#\"", "\"h#\""),
+                "must list \"sil\"",
+            ),
+            (
+                SMALL.replace("name = \"m\"", "name = \"sil\""),
+                "used twice",
+            ),
         ];
         for (text, expect) in bad {
             let err = ClassTable::from_toml_str(&text, "c.toml").unwrap_err();

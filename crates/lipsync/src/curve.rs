@@ -29,7 +29,10 @@ impl StageCurve {
     /// From control points `(u, w)`: at least two, u strictly increasing from 0 to 1, w finite.
     pub fn from_points(points: &[(f64, f64)]) -> Result<Self, String> {
         if points.len() < 2 {
-            return Err(format!("needs at least 2 control points, got {}", points.len()));
+            return Err(format!(
+                "needs at least 2 control points, got {}",
+                points.len()
+            ));
         }
         if points[0].0 != 0.0 || points[points.len() - 1].0 != 1.0 {
             return Err("control points must run from u = 0 to u = 1".into());
@@ -115,7 +118,10 @@ mod tests {
         for i in 0..n {
             let (a, b) = (i as f64 / n as f64, (i + 1) as f64 / n as f64);
             let (wa, wb) = (c.at(a), c.at(b));
-            assert!((-1e-12..=1.0 + 1e-12).contains(&wa), "overshoot {wa} at {a}");
+            assert!(
+                (-1e-12..=1.0 + 1e-12).contains(&wa),
+                "overshoot {wa} at {a}"
+            );
             let slope = (wb - wa) * n as f64;
             // C¹: no slope jumps between neighbouring steps (second derivative is bounded).
             assert!((slope - prev_slope).abs() < 0.05, "slope jump at {a}");
@@ -130,7 +136,9 @@ mod tests {
     fn rejects_bad_points() {
         assert!(StageCurve::from_points(&[(0.0, 1.0)]).is_err());
         assert!(StageCurve::from_points(&[(0.1, 1.0), (1.0, 1.0)]).is_err());
-        assert!(StageCurve::from_points(&[(0.0, 1.0), (0.5, 1.0), (0.5, 1.0), (1.0, 0.0)]).is_err());
+        assert!(
+            StageCurve::from_points(&[(0.0, 1.0), (0.5, 1.0), (0.5, 1.0), (1.0, 0.0)]).is_err()
+        );
         assert!(StageCurve::from_points(&[(0.0, f64::NAN), (1.0, 1.0)]).is_err());
     }
 }

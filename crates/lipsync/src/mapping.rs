@@ -128,7 +128,11 @@ mod tests {
     #[test]
     fn change_stage_is_the_last_t_of_a_long_phone() {
         let (t, s) = table();
-        let phones = [span(0.0, 1.0, "sil"), span(1.0, 1.2, "m"), span(1.2, 1.5, "aa")];
+        let phones = [
+            span(0.0, 1.0, "sil"),
+            span(1.0, 1.2, "m"),
+            span(1.2, 1.5, "aa"),
+        ];
         let classes = t.classify(&phones, "x").unwrap();
         let placed = map_phones(&phones, &classes, &s, t.silence(), 0.04).unwrap();
         let m = placed[1];
@@ -144,7 +148,10 @@ mod tests {
         }
         // Change stage: moving within [1.16, 1.20], arriving at the vowel's target at 1.20.
         m.eval(seg, 1.18, &mut w);
-        assert!((w[0] - 0.5).abs() < 1e-9 && (w[1] - 0.5).abs() < 1e-9, "{w:?}");
+        assert!(
+            (w[0] - 0.5).abs() < 1e-9 && (w[1] - 0.5).abs() < 1e-9,
+            "{w:?}"
+        );
         m.eval(seg, 1.2, &mut w);
         assert_eq!(w, [0.0, 1.0]);
         // The last phone moves towards silence.
@@ -154,7 +161,11 @@ mod tests {
     #[test]
     fn short_phone_starts_its_change_stage_early() {
         let (t, s) = table();
-        let phones = [span(0.0, 0.5, "aa"), span(0.5, 0.52, "m"), span(0.52, 0.8, "aa")];
+        let phones = [
+            span(0.0, 0.5, "aa"),
+            span(0.5, 0.52, "m"),
+            span(0.52, 0.8, "aa"),
+        ];
         let classes = t.classify(&phones, "x").unwrap();
         let placed = map_phones(&phones, &classes, &s, t.silence(), 0.04).unwrap();
         let m = placed[1];

@@ -101,7 +101,13 @@ fn number(word: &str, source_name: &str, line: usize, what: &str) -> Result<f64,
     word.parse::<f64>()
         .ok()
         .filter(|v| v.is_finite())
-        .ok_or_else(|| parse_err(source_name, line, format!("{what} {word:?} is not a number")))
+        .ok_or_else(|| {
+            parse_err(
+                source_name,
+                line,
+                format!("{what} {word:?} is not a number"),
+            )
+        })
 }
 
 /// `start end phone [more…]` per line, times in units of `1 / per_second` seconds.
@@ -186,8 +192,13 @@ fn read_jsonl(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error> {
         if line.trim().is_empty() {
             continue;
         }
-        let p: JsonPhone = serde_json::from_str(line)
-            .map_err(|e| parse_err(source_name, n, format!("expected {{start, end, phone}}: {e}")))?;
+        let p: JsonPhone = serde_json::from_str(line).map_err(|e| {
+            parse_err(
+                source_name,
+                n,
+                format!("expected {{start, end, phone}}: {e}"),
+            )
+        })?;
         if !(p.start.is_finite() && p.end.is_finite()) {
             return Err(parse_err(source_name, n, "times must be finite numbers"));
         }
@@ -237,7 +248,10 @@ fn textgrid_tokens(text: &str) -> Result<Vec<(Token, usize)>, (usize, String)> {
                     }
                 }
                 if !closed {
-                    return Err((n, "unterminated string (labels must fit on one line)".into()));
+                    return Err((
+                        n,
+                        "unterminated string (labels must fit on one line)".into(),
+                    ));
                 }
                 out.push((Token::Text(s), n));
             } else if c == '!' {
@@ -334,7 +348,11 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
                     spans.push(PhoneSpan {
                         start,
                         end,
-                        phone: if phone.is_empty() { "sil".into() } else { phone },
+                        phone: if phone.is_empty() {
+                            "sil".into()
+                        } else {
+                            phone
+                        },
                         line,
                     });
                 }
@@ -361,7 +379,10 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
             "phones" | "phone" | "phonemes" | "phoneme"
         )
     };
-    let chosen = match interval_tiers.iter().position(|(name, ..)| is_phone_tier(name)) {
+    let chosen = match interval_tiers
+        .iter()
+        .position(|(name, ..)| is_phone_tier(name))
+    {
         Some(i) => i,
         None if interval_tiers.len() == 1 => 0,
         None => {
@@ -389,7 +410,10 @@ pub fn check(raw: Vec<PhoneSpan>, source_name: &str) -> Result<Vec<PhoneSpan>, E
             return Err(parse_err(
                 source_name,
                 p.line,
-                format!("phone {:?} starts at a negative time {} s", p.phone, p.start),
+                format!(
+                    "phone {:?} starts at a negative time {} s",
+                    p.phone, p.start
+                ),
             ));
         }
         if p.end < p.start {
@@ -457,8 +481,12 @@ mod tests {
 
     #[test]
     fn timit_phn() {
-        let v = read("0 3050 h#\n3050 4559 sh\n4559 5723 ix\n", PhoneFormat::Timit, "a.phn")
-            .unwrap();
+        let v = read(
+            "0 3050 h#\n3050 4559 sh\n4559 5723 ix\n",
+            PhoneFormat::Timit,
+            "a.phn",
+        )
+        .unwrap();
         assert_eq!(
             phones(&v),
             [
@@ -475,11 +503,16 @@ mod tests {
         let htk = "0 2000000 sil\n2000000 3500000 SH -12.5\n";
         let v = read(htk, PhoneFormat::Label, "a.lab").unwrap();
         assert_eq!(phones(&v), [(0.0, 0.2, "sil"), (0.2, 0.35, "sh")]);
-        let fest = "separator ;\nnfields 1\n#\n    0.2100 100 pau\n    0.3499 100 sh\n 0.41 100 iy\n";
+        let fest =
+            "separator ;\nnfields 1\n#\n    0.2100 100 pau\n    0.3499 100 sh\n 0.41 100 iy\n";
         let v = read(fest, PhoneFormat::Label, "a.segs").unwrap();
         assert_eq!(
             phones(&v),
-            [(0.0, 0.21, "pau"), (0.21, 0.3499, "sh"), (0.3499, 0.41, "iy")]
+            [
+                (0.0, 0.21, "pau"),
+                (0.21, 0.3499, "sh"),
+                (0.3499, 0.41, "iy")
+            ]
         );
         assert_eq!(v[2].line, 6);
     }
@@ -557,7 +590,14 @@ item []:
         assert!(err.to_string().starts_with("x.phn:2:"), "{err}");
         let err = read("0 100 sh\n50 200 iy\n", PhoneFormat::Timit, "x.phn").unwrap_err();
         assert!(
-            matches!(err, Error::Overlap { line: 2, previous_line: 1, .. }),
+            matches!(
+                err,
+                Error::Overlap {
+                    line: 2,
+                    previous_line: 1,
+                    ..
+                }
+            ),
             "{err}"
         );
         let err = read("0 1oo sh\n", PhoneFormat::Timit, "x.phn").unwrap_err();
@@ -568,8 +608,12 @@ item []:
 
     #[test]
     fn gaps_become_silence_and_zero_length_phones_go() {
-        let v = read("0 1600 sh\n1600 1600 t\n3200 4800 iy\n", PhoneFormat::Timit, "g.phn")
-            .unwrap();
+        let v = read(
+            "0 1600 sh\n1600 1600 t\n3200 4800 iy\n",
+            PhoneFormat::Timit,
+            "g.phn",
+        )
+        .unwrap();
         assert_eq!(
             phones(&v),
             [(0.0, 0.1, "sh"), (0.1, 0.2, "sil"), (0.2, 0.3, "iy")]

@@ -74,19 +74,17 @@ impl BasicPoses {
             forehead: file.neutral.forehead,
             poses: file.pose,
         };
-        poses
-            .check()
-            .map_err(|(key, what)| Error::Config {
-                source_name: source_name.to_string(),
-                key,
-                what,
-            })?;
+        poses.check().map_err(|(key, what)| Error::Config {
+            source_name: source_name.to_string(),
+            key,
+            what,
+        })?;
         Ok(poses)
     }
 
     fn check(&self) -> Result<(), (String, String)> {
         let n = self.neutral_lip.len();
-        if n < 4 || n % 2 != 0 {
+        if n < 4 || !n.is_multiple_of(2) {
             return Err((
                 "neutral.lip".into(),
                 format!("needs an even number ≥ 4 of lip dots, got {n}"),
@@ -107,7 +105,10 @@ impl BasicPoses {
             if p.displacement.len() != n {
                 return Err((
                     format!("{key}.displacement"),
-                    format!("needs {n} entries (one per lip dot), got {}", p.displacement.len()),
+                    format!(
+                        "needs {n} entries (one per lip dot), got {}",
+                        p.displacement.len()
+                    ),
                 ));
             }
             if !p
@@ -219,7 +220,12 @@ mod tests {
 
     fn poses() -> BasicPoses {
         BasicPoses {
-            neutral_lip: vec![[0.02, 0.0, 0.0], [0.0, 0.005, 0.0], [-0.02, 0.0, 0.0], [0.0, -0.006, 0.0]],
+            neutral_lip: vec![
+                [0.02, 0.0, 0.0],
+                [0.0, 0.005, 0.0],
+                [-0.02, 0.0, 0.0],
+                [0.0, -0.006, 0.0],
+            ],
             forehead: vec![[0.03, 0.1, 0.0], [-0.03, 0.1, 0.0], [0.0, 0.12, 0.0]],
             poses: vec![
                 Pose {
@@ -229,7 +235,12 @@ mod tests {
                 },
                 Pose {
                     name: "round".into(),
-                    displacement: vec![[-0.004, 0.0, 0.002], [0.0; 3], [0.004, 0.0, 0.002], [0.0; 3]],
+                    displacement: vec![
+                        [-0.004, 0.0, 0.002],
+                        [0.0; 3],
+                        [0.004, 0.0, 0.002],
+                        [0.0; 3],
+                    ],
                     mouth: BTreeMap::new(),
                 },
             ],

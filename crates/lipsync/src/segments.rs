@@ -198,8 +198,7 @@ impl SegmentTable {
                     out[p] = StageCurve::from_points(&pts).map_err(|e| config(&key, e))?;
                 }
             }
-            self.set(table, a, b, segment)
-                .map_err(|e| config("", e))?;
+            self.set(table, a, b, segment).map_err(|e| config("", e))?;
         }
         Ok(())
     }
@@ -251,11 +250,18 @@ target = { open = 1.0, closed = 0.0 }
         assert_eq!(segs.get(1, 2).change[1].last(), 1.0);
         let bad = ok.replace("[[0, 1], [0.5", "[[0, 0.5], [0.5");
         let err = segs.apply_overrides(&table, &bad, "o.toml").unwrap_err();
-        assert!(err.to_string().contains("must start at class \"m\""), "{err}");
+        assert!(
+            err.to_string().contains("must start at class \"m\""),
+            "{err}"
+        );
         let bad = ok.replace("stable.closed = [[0, 1], [0.5, 0.9], [1, 0.8]]\n", "");
         let mut fresh = SegmentTable::generate(&table);
         let err = fresh.apply_overrides(&table, &bad, "o.toml").unwrap_err();
-        assert!(err.to_string().contains("must start where stable.closed ends"), "{err}");
+        assert!(
+            err.to_string()
+                .contains("must start where stable.closed ends"),
+            "{err}"
+        );
         let bad = ok.replace("to = \"aa\"", "to = \"ee\"");
         let err = segs.apply_overrides(&table, &bad, "o.toml").unwrap_err();
         assert!(err.to_string().contains("unknown class \"ee\""), "{err}");

@@ -61,14 +61,20 @@ fn stitched_curves_are_c0_everywhere_and_c1_without_short_phones() {
     eprintln!("long phones only: largest step {step:.2e}, largest slope change {kink:.3} /s");
     assert!(step <= slope_bound * dt * 1.001, "C0: step {step}");
     // C1: the slope changes by at most the curvature bound × dt between sample steps.
-    assert!(kink <= curvature_bound * dt * 1.01, "C1: slope change {kink}");
+    assert!(
+        kink <= curvature_bound * dt * 1.01,
+        "C1: slope change {kink}"
+    );
 
     let mixed = phones(&table, 2, true);
     let w = weights_for_phones(&mixed, "mixed", &table, &segs, T, FPS).unwrap();
     let (step, kink) = steps(&w);
     eprintln!("with short phones: largest step {step:.2e}, largest slope change {kink:.3} /s");
     // C0: overlaps are ≥ 10 ms, so the blend adds at most 1 / 10 ms to the slope.
-    assert!(step <= (slope_bound + 100.0) * dt * 1.001, "C0: step {step}");
+    assert!(
+        step <= (slope_bound + 100.0) * dt * 1.001,
+        "C0: step {step}"
+    );
     // Not C1 (nor G1): at the start of a blend the slope jumps by r′ (cᵢ − c).
     assert!(
         kink > 10.0 * curvature_bound * dt,

@@ -78,12 +78,20 @@ fn random_case(seed: u64) -> Case {
             for p in 0..k {
                 let mid = rng.random_range(0.0..1.0);
                 stable.push(
-                    StageCurve::from_points(&curve_points(&mut rng, table.classes[a].target[p], mid))
-                        .unwrap(),
+                    StageCurve::from_points(&curve_points(
+                        &mut rng,
+                        table.classes[a].target[p],
+                        mid,
+                    ))
+                    .unwrap(),
                 );
                 change.push(
-                    StageCurve::from_points(&curve_points(&mut rng, mid, table.classes[b].target[p]))
-                        .unwrap(),
+                    StageCurve::from_points(&curve_points(
+                        &mut rng,
+                        mid,
+                        table.classes[b].target[p],
+                    ))
+                    .unwrap(),
                 );
             }
             let pts = |c: &StageCurve| c.points().map(|(u, w)| json!([u, w])).collect::<Vec<_>>();
@@ -94,7 +102,9 @@ fn random_case(seed: u64) -> Case {
                     "change": change.iter().map(pts).collect::<Vec<_>>(),
                 }),
             );
-            segments.set(&table, a, b, Segment { stable, change }).unwrap();
+            segments
+                .set(&table, a, b, Segment { stable, change })
+                .unwrap();
         }
     }
     let count = rng.random_range(1..=25);
@@ -178,10 +188,17 @@ fn mapping_and_stitching_match_numpy_to_1e_9() {
         for (k, row) in values.iter().enumerate() {
             for (p, v) in row.as_array().unwrap().iter().enumerate() {
                 let (a, b) = (w.sample(k)[p], v.as_f64().unwrap());
-                assert!((a - b).abs() <= 1e-9, "sample {k} pose {p}: {a} vs numpy {b}");
+                assert!(
+                    (a - b).abs() <= 1e-9,
+                    "sample {k} pose {p}: {a} vs numpy {b}"
+                );
                 compared += 1;
             }
-            assert_eq!(w.owner[k] as u64, owner[k].as_u64().unwrap(), "owner of sample {k}");
+            assert_eq!(
+                w.owner[k] as u64,
+                owner[k].as_u64().unwrap(),
+                "owner of sample {k}"
+            );
         }
     }
     assert!(compared > 10_000, "{compared} values compared");

@@ -59,7 +59,11 @@ fn points(v: &Value) -> Vec<[f64; 3]> {
         .values()
         .map(|p| {
             let a = p.as_array().unwrap();
-            [a[0].as_f64().unwrap(), a[1].as_f64().unwrap(), a[2].as_f64().unwrap()]
+            [
+                a[0].as_f64().unwrap(),
+                a[1].as_f64().unwrap(),
+                a[2].as_f64().unwrap(),
+            ]
         })
         .collect()
 }
@@ -152,7 +156,10 @@ fn expect_bad_input(args: &[&str], file: &Path, expect: &str, out: &Path) {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
-    assert!(err.contains(expect), "{args:?}: expected {expect:?} in {err}");
+    assert!(
+        err.contains(expect),
+        "{args:?}: expected {expect:?} in {err}"
+    );
     assert!(!out.exists(), "nothing written");
 }
 
@@ -173,11 +180,29 @@ fn bad_input_exits_2_naming_file_and_line_and_writes_nothing() {
         &out,
     );
     let overlap = f("o.lab", b"0 2000000 sil\n1000000 3000000 aa\n");
-    expect_bad_input(&["--phonemes"], &overlap, &format!("{}:2:", overlap.display()), &out);
-    let backwards = f("b.jsonl", b"{\"start\": 0.5, \"end\": 0.2, \"phone\": \"aa\"}\n");
-    expect_bad_input(&["--phonemes"], &backwards, "ends (0.2 s) before it starts", &out);
+    expect_bad_input(
+        &["--phonemes"],
+        &overlap,
+        &format!("{}:2:", overlap.display()),
+        &out,
+    );
+    let backwards = f(
+        "b.jsonl",
+        b"{\"start\": 0.5, \"end\": 0.2, \"phone\": \"aa\"}\n",
+    );
+    expect_bad_input(
+        &["--phonemes"],
+        &backwards,
+        "ends (0.2 s) before it starts",
+        &out,
+    );
     let wav = f("x.wav", b"RIFF\x10\x00\x00\x00WAVEjunk");
-    expect_bad_input(&["--audio"], &wav, &format!("{}: cannot read WAV audio", wav.display()), &out);
+    expect_bad_input(
+        &["--audio"],
+        &wav,
+        &format!("{}: cannot read WAV audio", wav.display()),
+        &out,
+    );
     // An empty transcript (the audio is fine: Festival is not needed for this).
     let mut good = std::io::Cursor::new(Vec::new());
     {
@@ -197,7 +222,10 @@ fn bad_input_exits_2_naming_file_and_line_and_writes_nothing() {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(err.contains("--transcript: the transcript is empty"), "{err}");
+    assert!(
+        err.contains("--transcript: the transcript is empty"),
+        "{err}"
+    );
     assert!(!out.exists());
 }
 
@@ -262,5 +290,8 @@ fn festival_speech_through_pocketsphinx_meets_the_targets() {
     let recognised = &results[1];
     assert_eq!(recognised["mode"], "recognition");
     assert!(get(recognised, "phones_matched") >= 0.4, "{recognised}");
-    assert!(get(recognised, "dominant_class_share") >= 0.4, "{recognised}");
+    assert!(
+        get(recognised, "dominant_class_share") >= 0.4,
+        "{recognised}"
+    );
 }

@@ -251,8 +251,7 @@ impl Decoder {
             if sys::ps_start_utt(self.ps.as_ptr()) < 0 {
                 return Err(fail("cannot start an utterance"));
             }
-            if sys::ps_process_raw(self.ps.as_ptr(), samples.as_ptr(), samples.len(), 0, 1) < 0
-            {
+            if sys::ps_process_raw(self.ps.as_ptr(), samples.as_ptr(), samples.len(), 0, 1) < 0 {
                 sys::ps_end_utt(self.ps.as_ptr());
                 return Err(fail("cannot process the audio"));
             }
@@ -266,7 +265,9 @@ impl Decoder {
         unsafe {
             let mut score: i32 = 0;
             if sys::ps_get_hyp(self.ps.as_ptr(), &mut score).is_null() {
-                return Err(fail("no hypothesis: the search found no path through the audio"));
+                return Err(fail(
+                    "no hypothesis: the search found no path through the audio",
+                ));
             }
             let mut seg = sys::ps_seg_iter(self.ps.as_ptr());
             while !seg.is_null() {
@@ -402,6 +403,9 @@ mod tests {
     fn missing_model_is_named() {
         let m = ModelPaths::en_us(Path::new("/nonexistent/model"));
         let err = Decoder::aligner(&m).unwrap_err();
-        assert!(err.to_string().contains("/nonexistent/model/en-us"), "{err}");
+        assert!(
+            err.to_string().contains("/nonexistent/model/en-us"),
+            "{err}"
+        );
     }
 }

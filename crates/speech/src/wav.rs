@@ -126,7 +126,10 @@ mod tests {
             .fold(0.0, f64::max);
         assert!(err < 0.01, "tone error {err}");
         let gone = resample(&sine(44_100.0, 12_000.0, 44_100), 44_100.0, 16_000.0);
-        let rms = (gone[200..gone.len() - 200].iter().map(|v| v * v).sum::<f64>()
+        let rms = (gone[200..gone.len() - 200]
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
             / (gone.len() - 400) as f64)
             .sqrt();
         assert!(rms < 0.01, "alias rms {rms}");
@@ -152,8 +155,7 @@ mod tests {
         assert_eq!(samples.len(), 16000);
         let peak = samples[100..15900].iter().map(|s| s.abs()).max().unwrap();
         assert!((15000..17000).contains(&peak), "peak {peak}");
-        let err = read_16k(std::io::Cursor::new(b"RIFF nonsense".to_vec()), "bad.wav")
-            .unwrap_err();
+        let err = read_16k(std::io::Cursor::new(b"RIFF nonsense".to_vec()), "bad.wav").unwrap_err();
         assert!(err.to_string().starts_with("bad.wav: "), "{err}");
     }
 }

@@ -35,10 +35,13 @@ pub const DEFAULT_CLASSES: &str = include_str!("../../../../config/lipsync/class
 pub const DEFAULT_POSES: &str = include_str!("../../../../config/lipsync/poses.toml");
 
 #[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct Args {
+    #[command(subcommand)]
+    pub action: Option<Action>,
     /// Character file (TOML).
-    #[arg(long)]
-    pub character: PathBuf,
+    #[arg(long, required = true)]
+    pub character: Option<PathBuf>,
     /// Phone timing file: TIMIT `.phn`, Praat `.TextGrid`, HTK/Festival `.lab` (or `.segs`),
     /// or `.jsonl` of `{start, end, phone}`.
     #[arg(long, conflicts_with = "audio", required_unless_present = "audio")]
@@ -57,8 +60,8 @@ pub struct Args {
     #[arg(long, default_value_t = mouthpiece_lipsync::DEFAULT_T_CHANGE)]
     pub t_change: f64,
     /// Output take (JSONL).
-    #[arg(long)]
-    pub out: PathBuf,
+    #[arg(long, required = true)]
+    pub out: Option<PathBuf>,
     /// Also write the basic-pose weight curves as CSV (`t,phone,class,<pose>…`).
     #[arg(long)]
     pub weights: Option<PathBuf>,
@@ -80,6 +83,13 @@ pub struct Args {
     /// Shape smoothing that makes each line's `curve`.
     #[arg(long, value_enum, default_value = "bspline")]
     pub smooth: Smooth,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum Action {
+    /// Capture a booth's own basic poses from a recorded session in which the actor holds
+    /// each pose (marked by time ranges).
+    Poses(crate::cmd::lipsync_poses::PosesArgs),
 }
 
 fn read_text(path: &Path, what: &str) -> anyhow::Result<String> {
@@ -105,12 +115,18 @@ impl Tables {
     ) -> anyhow::Result<Self> {
         let (text, name) = match classes {
             Some(p) => (read_text(p, "class table")?, p.display().to_string()),
-            None => (DEFAULT_CLASSES.to_string(), "config/lipsync/classes.toml".into()),
+            None => (
+                DEFAULT_CLASSES.to_string(),
+                "config/lipsync/classes.toml".into(),
+            ),
         };
         let classes = ClassTable::from_toml_str(&text, &name).map_err(bad_input)?;
         let (text, pose_name) = match poses {
             Some(p) => (read_text(p, "pose file")?, p.display().to_string()),
-            None => (DEFAULT_POSES.to_string(), "config/lipsync/poses.toml".into()),
+            None => (
+                DEFAULT_POSES.to_string(),
+                "config/lipsync/poses.toml".into(),
+            ),
         };
         let poses = BasicPoses::from_toml_str(&text, &pose_name).map_err(bad_input)?;
         let order = poses.order_for(&classes, &pose_name).map_err(bad_input)?;
@@ -138,7 +154,10 @@ fn is_filler(name: &str) -> bool {
 }
 
 /// Recognised or aligned phones → checked phone spans (fillers become silence).
-pub fn spans_from_decoder(phones: &[TimedPhone], source_name: &str) -> anyhow::Result<Vec<PhoneSpan>> {
+pub fn spans_from_decoder(
+    phones: &[TimedPhone],
+    source_name: &str,
+) -> anyhow::Result<Vec<PhoneSpan>> {
     let raw: Vec<PhoneSpan> = phones
         .iter()
         .enumerate()
@@ -171,7 +190,10 @@ fn input_phones(args: &Args) -> anyhow::Result<(Vec<PhoneSpan>, String)> {
         let spans = phones::read(&text, format, &name).map_err(bad_input)?;
         return Ok((spans, name));
     }
-    let path = args.audio.as_ref().expect("clap requires --phonemes or --audio");
+    let path = args
+        .audio
+        .as_ref()
+        .expect("clap requires --phonemes or --audio");
     let name = path.display().to_string();
     let transcript = match &args.transcript {
         None => None,
@@ -183,8 +205,8 @@ fn input_phones(args: &Args) -> anyhow::Result<(Vec<PhoneSpan>, String)> {
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open audio {name}"))
         .map_err(bad_input)?;
-    let samples =
-        mouthpiece_speech::wav::read_16k(std::io::BufReader::new(file), &name).map_err(bad_input)?;
+    let samples = mouthpiece_speech::wav::read_16k(std::io::BufReader::new(file), &name)
+        .map_err(bad_input)?;
     let model = ModelPaths::en_us(&args.model);
     let speech_err = |e: mouthpiece_speech::Error| match e {
         mouthpiece_speech::Error::Init { .. } | mouthpiece_speech::Error::Decode { .. } => {
@@ -256,7 +278,11 @@ pub fn write_take(
         tables
             .poses
             .displacement(weights.sample(k), &tables.order, &mut displacement);
-        for (d, (base, off)) in performer.lip.iter_mut().zip(neutral.lip.iter().zip(&displacement)) {
+        for (d, (base, off)) in performer
+            .lip
+            .iter_mut()
+            .zip(neutral.lip.iter().zip(&displacement))
+        {
             *d = base + Vec3::new(off[0], off[1], off[2]);
         }
         let frame = retarget.apply(&performer);
@@ -275,7 +301,11 @@ pub fn write_take(
 }
 
 /// The weight curves as CSV: `t,phone,class,<pose>…` (the dominant phone and its class).
-pub fn weights_csv(weights: &Weights, phones: &[PhoneSpan], tables: &Tables) -> anyhow::Result<String> {
+pub fn weights_csv(
+    weights: &Weights,
+    phones: &[PhoneSpan],
+    tables: &Tables,
+) -> anyhow::Result<String> {
     let classes = tables.classes.classify(phones, "phones")?;
     let mut s = String::from("t,phone,class");
     for p in &tables.classes.poses {
@@ -322,12 +352,20 @@ fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<mouthpiece_export::Pe
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(Action::Poses(poses)) = args.action {
+        return crate::cmd::lipsync_poses::run(poses);
+    }
+    let (Some(character), Some(out)) = (&args.character, &args.out) else {
+        return Err(bad_input(anyhow::anyhow!(
+            "--character and --out are required"
+        )));
+    };
     let tables = Tables::load(
         args.classes.as_deref(),
         args.poses.as_deref(),
         args.segments.as_deref(),
     )?;
-    let character = load_character(&args.character)?;
+    let character = load_character(character)?;
     let (phones, source) = input_phones(&args)?;
     let weights = mouthpiece_lipsync::weights_for_phones(
         &phones,
@@ -346,7 +384,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .as_ref()
         .map(|_| weights_csv(&weights, &phones, &tables))
         .transpose()?;
-    let mut pending = vec![write_file(&args.out, &take)?];
+    let mut pending = vec![write_file(out, &take)?];
     if let (Some(path), Some(csv)) = (&args.weights, csv) {
         pending.push(write_file(path, csv.as_bytes())?);
     }
@@ -437,7 +475,10 @@ pub fn poses_from_synth() -> anyhow::Result<BasicPoses> {
         .collect();
     Ok(BasicPoses {
         neutral_lip: neutral.lip.iter().map(|p| arr(*p)).collect(),
-        forehead: forehead.iter().map(|p| arr(frame.to_mouth(&v(p)))).collect(),
+        forehead: forehead
+            .iter()
+            .map(|p| arr(frame.to_mouth(&v(p))))
+            .collect(),
         poses,
     })
 }
@@ -536,7 +577,10 @@ mod tests {
     fn shipped_poses_are_derived_from_the_synthetic_mouth() {
         let derived = poses_from_synth().unwrap();
         if std::env::var_os("MOUTHPIECE_WRITE_POSES").is_some() {
-            let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/lipsync/poses.toml");
+            let path = concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/../../config/lipsync/poses.toml"
+            );
             let text = derived.to_toml_string(
                 "Basic lip poses for lip sync: the neutral dots and each key pose's lip-dot\n\
                  displacements, performer mouth frame (x to the performer's left corner, y up,\n\
@@ -564,9 +608,18 @@ mod tests {
         }
         // The poses move the mouth the way their names say (mouth frame: y up, x left).
         let get = |n: &str| derived.poses.iter().find(|p| p.name == n).unwrap();
-        assert!(get("open").displacement[9][1] < -0.005, "open: lower lip down");
-        assert!(get("spread").displacement[0][0] > 0.003, "spread: left corner out");
-        assert!(get("round").displacement[0][0] < -0.003, "round: left corner in");
+        assert!(
+            get("open").displacement[9][1] < -0.005,
+            "open: lower lip down"
+        );
+        assert!(
+            get("spread").displacement[0][0] > 0.003,
+            "spread: left corner out"
+        );
+        assert!(
+            get("round").displacement[0][0] < -0.003,
+            "round: left corner in"
+        );
     }
 
     #[test]

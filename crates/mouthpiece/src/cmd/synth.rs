@@ -126,10 +126,12 @@ fn speech_keys(
     };
     let (text, name) = match poses {
         Some(p) => (read(p)?, p.display().to_string()),
-        None => (DEFAULT_POSES.to_string(), "config/lipsync/poses.toml".to_string()),
+        None => (
+            DEFAULT_POSES.to_string(),
+            "config/lipsync/poses.toml".to_string(),
+        ),
     };
-    let poses =
-        mouthpiece_lipsync::BasicPoses::from_toml_str(&text, &name).map_err(bad_input)?;
+    let poses = mouthpiece_lipsync::BasicPoses::from_toml_str(&text, &name).map_err(bad_input)?;
     let csv = read(path)?;
     let mut keys = vec![(0.0, mouthpiece_synth::MouthState::default())];
     keys.extend(mouth_keys_from_weights(
