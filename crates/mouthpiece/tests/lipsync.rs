@@ -295,3 +295,93 @@ fn festival_speech_through_pocketsphinx_meets_the_targets() {
         "{recognised}"
     );
 }
+
+/// The loop through the camera: a weights CSV holding each shipped pose drives the synthetic
+/// performer (`synth --speech`, mild head motion); `lipsync poses` captures the poses back
+/// from the rendered session through detection, tracking and head-motion removal; they match
+/// the shipped poses within tracking error.
+#[test]
+fn synth_driven_by_weights_and_poses_captured_back_match_the_shipped_poses() {
+    use std::fmt::Write as _;
+    let dir = tempfile::tempdir().unwrap();
+    let names = ["closed", "open", "spread", "round", "bite"];
+    let mut csv = String::from("t,closed,open,spread,round,bite\n");
+    let mut marks = String::new();
+    for k in 0..=104 {
+        let t = k as f64 * 0.05;
+        let (i, local) = ((t / 1.0).floor() as usize, t % 1.0);
+        let w = (local / 0.2).min(1.0).min((1.0 - local) / 0.2).clamp(0.0, 1.0);
+        let row: Vec<String> = (0..5)
+            .map(|p| if p == i { format!("{w}") } else { "0".into() })
+            .collect();
+        writeln!(csv, "{t},{}", row.join(",")).unwrap();
+    }
+    // The poses that roll the lower lip in (closed, bite) hide its dots from the camera: they
+    // are held in the session but not captured.
+    for (i, name) in names.iter().enumerate().filter(|(i, _)| (1..=3).contains(i)) {
+        // The synthetic session starts with 1.5 s of neutral before the weights.
+        let start = 1.5 + i as f64 + 0.3;
+        writeln!(marks, "{name} = [{start}, {}]", start + 0.4).unwrap();
+    }
+    let csv_path = dir.path().join("w.csv");
+    std::fs::write(&csv_path, csv).unwrap();
+    let marks_path = dir.path().join("marks.toml");
+    std::fs::write(&marks_path, marks).unwrap();
+    let session = dir.path().join("s.mcap");
+    run_ok(
+        mouthpiece()
+            .args(["synth", "--out"])
+            .arg(&session)
+            .args(["--seconds", "6.7", "--seed", "3"])
+            .arg("--speech")
+            .arg(&csv_path),
+    );
+    let out = dir.path().join("captured.toml");
+    run_ok(
+        mouthpiece()
+            .args(["lipsync", "poses"])
+            .arg(&session)
+            .arg("--marks")
+            .arg(&marks_path)
+            .arg("--out")
+            .arg(&out),
+    );
+    let captured: toml::Value = toml::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let shipped: toml::Value = toml::from_str(
+        &std::fs::read_to_string(repo().join("config/lipsync/poses.toml")).unwrap(),
+    )
+    .unwrap();
+    let disp = |v: &toml::Value, name: &str| -> Vec<[f64; 3]> {
+        let pose = v["pose"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"].as_str() == Some(name))
+            .unwrap();
+        pose["displacement"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|d| {
+                let a = d.as_array().unwrap();
+                [0, 1, 2].map(|k| a[k].as_float().unwrap())
+            })
+            .collect()
+    };
+    for name in &names[1..=3] {
+        let (c, s) = (disp(&captured, name), disp(&shipped, name));
+        let err = c
+            .iter()
+            .zip(&s)
+            .map(|(a, b)| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
+        let size = s
+            .iter()
+            .map(|b| b.iter().map(|x| x * x).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
+        eprintln!("{name}: largest dot error {:.2} mm of a {:.1} mm pose", err * 1e3, size * 1e3);
+        // Measured: open 1.0 mm, spread 1.1 mm, round 1.7 mm (Kinect-style depth noise, mild
+        // head motion).
+        assert!(err < 2.5e-3 && err < 0.3 * size, "{name}: {err} m (pose {size} m)");
+    }
+}

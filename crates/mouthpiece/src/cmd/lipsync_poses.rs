@@ -1,9 +1,11 @@
 //! `mouthpiece lipsync poses SESSION --marks FILE`: a booth's own basic poses, captured from a
 //! recorded session in which the actor holds each pose. The whole camera pipeline (detect,
-//! track, calibrate, head-motion removal) runs over the session; for each pose, the lip dots
-//! in the neutral mouth frame are averaged over the frames inside its marked time range (every
-//! lip dot seen), and the pose is that mean minus the neutral `D⁰`. The neutral is the
-//! tracker's calibration (the still, closed mouth at the start of the session).
+//! track, calibrate, head-motion removal) runs over the session; for each pose, each lip dot
+//! in the neutral mouth frame is averaged over the frames inside the pose's marked time range
+//! in which that dot is seen, and the pose is that mean minus the neutral `D⁰`. The neutral is
+//! the tracker's calibration (the still, closed mouth at the start of the session). A dot
+//! never seen during a pose (a lower lip rolled in hides its dots) is an error naming the pose
+//! and the dot: such poses cannot be captured by the camera and are kept from the defaults.
 //!
 //! Marks (TOML): one `name = [start_s, end_s]` per pose, session seconds:
 //! ```toml
@@ -74,7 +76,8 @@ pub fn capture(
     let mut pipeline =
         Pipeline::new(config, character, CharacterSettings::default()).map_err(bad_input)?;
     let mut input = Input::open(session)?;
-    let mut sums: Vec<(Vec<Vec3>, usize)> = Vec::new();
+    // Per pose: per dot (sum, frames seen).
+    let mut sums: Vec<Vec<(Vec3, usize)>> = Vec::new();
     while let Some(frame) = input
         .next_frame()
         .with_context(|| format!("reading {}", session.display()))?
@@ -85,18 +88,20 @@ pub fn capture(
         let Some(stabilised) = &tracked.stabilised else {
             continue;
         };
-        if stabilised.confidence.iter().any(|&c| c < 1.0) {
-            continue;
-        }
         if sums.is_empty() {
-            sums = vec![(vec![Vec3::zeros(); stabilised.lip.len()], 0); marks.len()];
+            sums = vec![vec![(Vec3::zeros(), 0); stabilised.lip.len()]; marks.len()];
         }
         for (k, (_, a, b)) in marks.iter().enumerate() {
             if (*a..=*b).contains(&tracked.t) {
-                for (s, d) in sums[k].0.iter_mut().zip(&stabilised.lip) {
-                    *s += d;
+                for ((s, n), (d, &c)) in sums[k]
+                    .iter_mut()
+                    .zip(stabilised.lip.iter().zip(&stabilised.confidence))
+                {
+                    if c >= 1.0 {
+                        *s += d;
+                        *n += 1;
+                    }
                 }
-                sums[k].1 += 1;
             }
         }
     }
@@ -109,23 +114,28 @@ pub fn capture(
     let arr = |p: &Vec3| [p.x, p.y, p.z];
     let mut poses = Vec::with_capacity(marks.len());
     for (k, (name, a, b)) in marks.iter().enumerate() {
-        let (sum, n) = sums.get(k).cloned().unwrap_or_default();
-        if n == 0 {
-            return Err(bad_input(anyhow::anyhow!(
-                "{}: pose {name:?}: no frame within [{a}, {b}] s with every lip dot seen",
-                session.display()
-            )));
+        let dots = sums
+            .get(k)
+            .cloned()
+            .unwrap_or_else(|| vec![(Vec3::zeros(), 0); neutral.lip.len()]);
+        let mut displacement = Vec::with_capacity(dots.len());
+        for (d, ((sum, n), d0)) in dots.iter().zip(&neutral.lip).enumerate() {
+            if *n == 0 {
+                return Err(bad_input(anyhow::anyhow!(
+                    "{}: pose {name:?}: dot D{} is not seen within [{a}, {b}] s",
+                    session.display(),
+                    d + 1
+                )));
+            }
+            displacement.push(arr(&(sum / *n as f64 - d0)));
         }
+        let frames = dots.iter().map(|(_, n)| *n).min().unwrap_or(0);
         poses.push(Pose {
             name: name.clone(),
-            displacement: sum
-                .iter()
-                .zip(&neutral.lip)
-                .map(|(s, d0)| arr(&(s / n as f64 - d0)))
-                .collect(),
+            displacement,
             mouth: BTreeMap::new(),
         });
-        tracing::info!(pose = %name, frames = n, "pose captured");
+        tracing::info!(pose = %name, frames, "pose captured");
     }
     let forehead: Vec<[f64; 3]> = neutral
         .forehead_camera
