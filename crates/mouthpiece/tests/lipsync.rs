@@ -310,7 +310,10 @@ fn synth_driven_by_weights_and_poses_captured_back_match_the_shipped_poses() {
     for k in 0..=104 {
         let t = k as f64 * 0.05;
         let (i, local) = ((t / 1.0).floor() as usize, t % 1.0);
-        let w = (local / 0.2).min(1.0).min((1.0 - local) / 0.2).clamp(0.0, 1.0);
+        let w = (local / 0.2)
+            .min(1.0)
+            .min((1.0 - local) / 0.2)
+            .clamp(0.0, 1.0);
         let row: Vec<String> = (0..5)
             .map(|p| if p == i { format!("{w}") } else { "0".into() })
             .collect();
@@ -318,7 +321,11 @@ fn synth_driven_by_weights_and_poses_captured_back_match_the_shipped_poses() {
     }
     // The poses that roll the lower lip in (closed, bite) hide its dots from the camera: they
     // are held in the session but not captured.
-    for (i, name) in names.iter().enumerate().filter(|(i, _)| (1..=3).contains(i)) {
+    for (i, name) in names
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| (1..=3).contains(i))
+    {
         // The synthetic session starts with 1.5 s of neutral before the weights.
         let start = 1.5 + i as f64 + 0.3;
         writeln!(marks, "{name} = [{start}, {}]", start + 0.4).unwrap();
@@ -347,10 +354,9 @@ fn synth_driven_by_weights_and_poses_captured_back_match_the_shipped_poses() {
             .arg(&out),
     );
     let captured: toml::Value = toml::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    let shipped: toml::Value = toml::from_str(
-        &std::fs::read_to_string(repo().join("config/lipsync/poses.toml")).unwrap(),
-    )
-    .unwrap();
+    let shipped: toml::Value =
+        toml::from_str(&std::fs::read_to_string(repo().join("config/lipsync/poses.toml")).unwrap())
+            .unwrap();
     let disp = |v: &toml::Value, name: &str| -> Vec<[f64; 3]> {
         let pose = v["pose"]
             .as_array()
@@ -379,9 +385,16 @@ fn synth_driven_by_weights_and_poses_captured_back_match_the_shipped_poses() {
             .iter()
             .map(|b| b.iter().map(|x| x * x).sum::<f64>().sqrt())
             .fold(0.0, f64::max);
-        eprintln!("{name}: largest dot error {:.2} mm of a {:.1} mm pose", err * 1e3, size * 1e3);
+        eprintln!(
+            "{name}: largest dot error {:.2} mm of a {:.1} mm pose",
+            err * 1e3,
+            size * 1e3
+        );
         // Measured: open 1.0 mm, spread 1.1 mm, round 1.7 mm (Kinect-style depth noise, mild
         // head motion).
-        assert!(err < 2.5e-3 && err < 0.3 * size, "{name}: {err} m (pose {size} m)");
+        assert!(
+            err < 2.5e-3 && err < 0.3 * size,
+            "{name}: {err} m (pose {size} m)"
+        );
     }
 }
