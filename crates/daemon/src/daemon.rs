@@ -459,9 +459,9 @@ mod tests {
         };
         let current = Config::load(&path).unwrap();
         let bound: std::net::SocketAddr = "0.0.0.0:9870".parse().unwrap();
-        let err = reload(&crate::live::LiveFactory, &options, &current, bound)
-            .err()
-            .expect("tokens dropped on a network-facing server");
+        let Err(err) = reload(&crate::live::LiveFactory, &options, &current, bound) else {
+            panic!("tokens dropped on a network-facing server");
+        };
         let text = err.to_string();
         assert!(text.contains("0.0.0.0:9870"), "{text}");
         assert!(text.contains("server.listen"), "{text}");

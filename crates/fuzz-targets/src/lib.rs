@@ -10,8 +10,11 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+/// A fuzz target: arbitrary bytes in, nothing out, never a panic.
+pub type Target = fn(&[u8]);
+
 /// Every target: its name (the corpus folder and the fuzzer binary) and its function.
-pub const TARGETS: &[(&str, fn(&[u8]))] = &[
+pub const TARGETS: &[(&str, Target)] = &[
     ("mcap", mcap),
     ("oni", oni),
     ("cdr", cdr),
