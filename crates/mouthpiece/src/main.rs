@@ -42,6 +42,9 @@ enum Command {
     /// `[detect]` TOML snippet).
     #[command(name = "tune-colours")]
     TuneColours(cmd::tune_colours::Args),
+    /// Bind a character's mesh to its mouth points (skin weights, skinned GLB); train and
+    /// evaluate the binding network.
+    Bind(cmd::bind::Args),
 }
 
 fn main() -> ExitCode {
@@ -58,6 +61,7 @@ fn main() -> ExitCode {
         Command::Devices(args) => cmd::devices::run(args),
         Command::Export(args) => cmd::export::run(args),
         Command::TuneColours(args) => cmd::tune_colours::run(args),
+        Command::Bind(args) => cmd::bind::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
