@@ -393,13 +393,15 @@ pub fn vertex_influences(row: &[f64; JOINTS]) -> ([u8; 4], [f32; 4]) {
 }
 
 /// Writes the mesh (original vertices, model frame) skinned to the rig's joints with
-/// `weights` (one row per original vertex) as a GLB.
+/// `weights` (one row per original vertex) as a GLB; `placement` puts the mouth frame in
+/// the file's coordinates.
 pub fn write_skinned_glb(
     out: &Path,
     mesh: &Mesh,
     normals: &[[f64; 3]],
     weights: &Weights,
     rig: &MouthRig,
+    placement: &Isometry3<f64>,
     generator: &str,
 ) -> Result<(), BindError> {
     let n = mesh.len();
@@ -543,7 +545,6 @@ pub fn write_skinned_glb(
     ));
 
     // joints: root (identity) → mouth (placement) → points (rest, mouth frame)
-    let placement: Isometry3<f64> = *rig.placement();
     let point_nodes: Vec<json::Index<json::Node>> = rig
         .points()
         .iter()

@@ -28,8 +28,9 @@ pub mod weights;
 
 use std::path::Path;
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
+pub use mouthpiece_export::ModelUp;
 use mouthpiece_export::MouthRig;
 
 pub use error::BindError;
@@ -44,11 +45,24 @@ pub const POINT_DISTANCE_LIMIT: f64 = 0.1;
 pub const SHIPPED_NETWORK: &[u8] = include_bytes!("../model/network.bin");
 
 /// How to compute the weights.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Method {
-    Network,
+#[derive(Clone, Copy, Debug)]
+pub enum Method<'a> {
+    Network(&'a Network),
     Heat,
     Distance,
+}
+
+/// Where the mouth frame sits in the mesh file's coordinates: the character's placement,
+/// after the model frame's axes are turned into glTF's when the model is Z-up (as the export
+/// does: glTF's (x, y, z) = model's (x, z, −y)).
+pub fn file_placement(rig: &MouthRig, model_up: ModelUp) -> Isometry3<f64> {
+    let conversion = match model_up {
+        ModelUp::Y => UnitQuaternion::identity(),
+        ModelUp::Z => {
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -std::f64::consts::FRAC_PI_2)
+        }
+    };
+    Isometry3::from_parts(Default::default(), conversion) * rig.placement()
 }
 
 /// A mesh prepared for binding: in the mouth frame, in mouth widths.
@@ -64,7 +78,7 @@ pub struct Prepared {
 /// Takes a mesh in the character's model frame into its mouth frame (mouth-width units),
 /// and checks that it can be bound: the rig has the twelve points, the mesh is valid, and
 /// every point lies near the surface.
-pub fn prepare(rig: &MouthRig, welded: &Mesh) -> Result<Prepared, BindError> {
+pub fn prepare(rig: &MouthRig, model_up: ModelUp, welded: &Mesh) -> Result<Prepared, BindError> {
     if rig.points().len() != procedural::POINTS {
         return Err(BindError::BadArgument(format!(
             "the character has {} mouth points; binding needs the 12 points P1…P12",
@@ -73,7 +87,7 @@ pub fn prepare(rig: &MouthRig, welded: &Mesh) -> Result<Prepared, BindError> {
     }
     welded.validate()?;
     let width = rig.mouth_width();
-    let inverse = rig.placement().inverse();
+    let inverse = file_placement(rig, model_up).inverse();
     let mesh = welded.map_positions(|p| {
         let q = inverse * Point3::from(p);
         [q.x / width, q.y / width, q.z / width]
@@ -102,7 +116,7 @@ pub fn prepare(rig: &MouthRig, welded: &Mesh) -> Result<Prepared, BindError> {
 }
 
 /// Skin weights of a prepared mesh (one row per welded vertex, at most four influences).
-pub fn compute_weights(prepared: &Prepared, method: Method, network: &Network) -> Weights {
+pub fn compute_weights(prepared: &Prepared, method: Method) -> Weights {
     let points = prepared.points.map(Vector3::from);
     let mut weights = match method {
         Method::Distance => {
@@ -113,7 +127,9 @@ pub fn compute_weights(prepared: &Prepared, method: Method, network: &Network) -
             &weights::joint_distances(&prepared.mesh, &points),
             1.0,
         ),
-        Method::Network => network.predict(&network::Graph::new(&prepared.mesh, &prepared.points)),
+        Method::Network(network) => {
+            network.predict(&network::Graph::new(&prepared.mesh, &prepared.points))
+        }
     };
     weights.limit_influences();
     weights
@@ -125,7 +141,7 @@ pub struct BindSummary {
     pub vertices: usize,
     pub welded_vertices: usize,
     pub triangles: usize,
-    /// Vertices with a non-zero weight on some mouth point.
+    /// Vertices with a weight of at least 1 % on some mouth point.
     pub moving_vertices: usize,
 }
 
@@ -134,12 +150,12 @@ pub fn bind(
     rig: &MouthRig,
     mesh_path: &Path,
     out: &Path,
+    model_up: ModelUp,
     method: Method,
-    network: &Network,
 ) -> Result<BindSummary, BindError> {
     let loaded = gltf_io::read_mesh(mesh_path)?;
-    let prepared = prepare(rig, &loaded.welded)?;
-    let welded_weights = compute_weights(&prepared, method, network);
+    let prepared = prepare(rig, model_up, &loaded.welded)?;
+    let welded_weights = compute_weights(&prepared, method);
     let welded_normals = loaded.welded.normals();
     let weights = Weights {
         rows: loaded
@@ -159,6 +175,7 @@ pub fn bind(
         &normals,
         &weights,
         rig,
+        &file_placement(rig, model_up),
         &format!("mouthpiece bind {}", env!("CARGO_PKG_VERSION")),
     )?;
     Ok(BindSummary {
@@ -168,14 +185,20 @@ pub fn bind(
         moving_vertices: welded_weights
             .rows
             .iter()
-            .filter(|r| r[..procedural::POINTS].iter().any(|&w| w > 0.0))
+            .filter(|r| r[..procedural::POINTS].iter().any(|&w| w >= 0.01))
             .count(),
     })
 }
 
 /// A procedural head around a character's mouth, in the character's model frame and units
-/// (the meshes shipped in `config/characters/`). `snout` 0 is a human face, 1 a long muzzle.
-pub fn character_head(rig: &MouthRig, snout: f64, resolution: usize) -> Result<Mesh, BindError> {
+/// (the meshes shipped in `config/characters/`), its axes turned into glTF's for a Z-up
+/// model. `snout` 0 is a human face, 1 a long muzzle.
+pub fn character_head(
+    rig: &MouthRig,
+    model_up: ModelUp,
+    snout: f64,
+    resolution: usize,
+) -> Result<Mesh, BindError> {
     if rig.points().len() != procedural::POINTS {
         return Err(BindError::BadArgument(format!(
             "the character has {} mouth points; a head needs the 12 points P1…P12",
@@ -190,7 +213,7 @@ pub fn character_head(rig: &MouthRig, snout: f64, resolution: usize) -> Result<M
     let width = rig.mouth_width();
     let points = std::array::from_fn(|k| rig.points()[k].rest.map(|c| c / width));
     let head = procedural::HeadParams::around_points(points, snout, resolution).build();
-    let placement = *rig.placement();
+    let placement = file_placement(rig, model_up);
     Ok(head.mesh.map_positions(|p| {
         let q = placement * Point3::new(p[0] * width, p[1] * width, p[2] * width);
         [q.x, q.y, q.z]

@@ -10,7 +10,7 @@ use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 use mouthpiece_export::onto_rig::parse_glb;
-use mouthpiece_export::MouthRig;
+use mouthpiece_export::{ModelUp, MouthRig};
 use serde_json::Value;
 
 fn repo() -> PathBuf {
@@ -185,7 +185,7 @@ impl Glb {
 fn human_and_wolf_bind_with_every_method_into_valid_skinned_glbs() {
     let dir = tempfile::tempdir().unwrap();
     let model = tiny_model();
-    for name in ["human", "wolf"] {
+    for (name, up) in [("human", "y"), ("wolf", "z")] {
         for method in ["network", "heat", "distance"] {
             let out = dir.path().join(format!("{name}-{method}.glb"));
             ok(&[
@@ -200,6 +200,8 @@ fn human_and_wolf_bind_with_every_method_into_valid_skinned_glbs() {
                 method,
                 "--model",
                 s(&model),
+                "--model-up",
+                up,
             ]);
             let glb = Glb::read(&out);
             let mut names = vec!["root".to_owned(), "mouth".to_owned()];
@@ -229,7 +231,8 @@ fn human_and_wolf_bind_with_every_method_into_valid_skinned_glbs() {
             let ibm =
                 glb.accessor(glb.doc["skins"][0]["inverseBindMatrices"].as_u64().unwrap() as usize);
             let rig = MouthRig::load_character(&character(name)).unwrap();
-            let placement = rig.placement().to_homogeneous();
+            let up = if up == "z" { ModelUp::Z } else { ModelUp::Y };
+            let placement = mouthpiece_bind::file_placement(&rig, up).to_homogeneous();
             for (k, m) in ibm.iter().enumerate() {
                 let world = match k {
                     0 => nalgebra::Matrix4::identity(),
@@ -393,6 +396,8 @@ fn a_take_plays_on_the_bound_wolf_in_blender_where_mouthpiece_skins_it() {
         s(&rigged),
         "--method",
         "heat",
+        "--model-up",
+        "z",
     ]);
     let take_path = dir.path().join("take.jsonl");
     let take = write_take(&take_path, &rig, 40);
@@ -418,7 +423,7 @@ fn a_take_plays_on_the_bound_wolf_in_blender_where_mouthpiece_skins_it() {
     order.sort_by(|&a, &b| weights[b][1].total_cmp(&weights[a][1]));
     let probes: Vec<usize> = order.into_iter().take(3).collect();
     let (t, points) = &take[27];
-    let rotation = rig.placement().rotation;
+    let rotation = mouthpiece_bind::file_placement(&rig, ModelUp::Z).rotation;
     let expected: Vec<[f64; 3]> = probes
         .iter()
         .map(|&v| {

@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{anyhow, Context as _};
 use mouthpiece_bind::network::Widths;
 use mouthpiece_bind::training::{self, TrainOptions};
-use mouthpiece_bind::{BindError, Method, Network};
+use mouthpiece_bind::{BindError, Method, ModelUp, Network};
 use mouthpiece_export::MouthRig;
 
 use crate::exit::bad_input;
@@ -33,6 +33,25 @@ pub struct Args {
     /// Network weights (from `bind train`); the shipped network by default.
     #[arg(long)]
     pub model: Option<PathBuf>,
+    /// Up axis of the character's model frame: `y` (glTF's) or `z` (Blender's; the mesh
+    /// file then holds it in glTF's axes, as Blender's glTF exporter writes it).
+    #[arg(long, value_enum, default_value = "y")]
+    pub model_up: UpArg,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum UpArg {
+    Y,
+    Z,
+}
+
+impl From<UpArg> for ModelUp {
+    fn from(up: UpArg) -> Self {
+        match up {
+            UpArg::Y => ModelUp::Y,
+            UpArg::Z => ModelUp::Z,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -65,6 +84,9 @@ pub struct HeadArgs {
     /// Mesh density (12·R vertices around each ring).
     #[arg(long, default_value_t = 4)]
     pub resolution: usize,
+    /// Up axis of the character's model frame (`z`: the GLB is written in glTF's axes).
+    #[arg(long, value_enum, default_value = "y")]
+    pub model_up: UpArg,
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -155,22 +177,26 @@ fn bind(args: Args) -> anyhow::Result<()> {
         )));
     };
     let rig = load_rig(&character)?;
-    let network = load_network(args.model.as_deref())?;
-    let method = match args.method {
-        MethodArg::Network => Method::Network,
-        MethodArg::Heat => Method::Heat,
-        MethodArg::Distance => Method::Distance,
+    let network = match args.method {
+        MethodArg::Network => Some(load_network(args.model.as_deref())?),
+        _ => None,
+    };
+    let method = match (&network, args.method) {
+        (Some(network), _) => Method::Network(network),
+        (None, MethodArg::Heat) => Method::Heat,
+        _ => Method::Distance,
     };
     let start = Instant::now();
-    let summary = mouthpiece_bind::bind(&rig, &mesh, &out, method, &network).map_err(bind_error)?;
+    let summary = mouthpiece_bind::bind(&rig, &mesh, &out, args.model_up.into(), method)
+        .map_err(bind_error)?;
     eprintln!(
-        "wrote {}: {} vertices ({} after merging seams), {} triangles, {} follow the mouth; {:?} in {:.2} s",
+        "wrote {}: {} vertices ({} after merging seams), {} triangles, {} follow the mouth; {:?} weights in {:.2} s",
         out.display(),
         summary.vertices,
         summary.welded_vertices,
         summary.triangles,
         summary.moving_vertices,
-        method,
+        args.method,
         start.elapsed().as_secs_f64()
     );
     Ok(())
@@ -179,7 +205,8 @@ fn bind(args: Args) -> anyhow::Result<()> {
 fn head(args: HeadArgs) -> anyhow::Result<()> {
     let rig = load_rig(&args.character)?;
     let mesh =
-        mouthpiece_bind::character_head(&rig, args.snout, args.resolution).map_err(bind_error)?;
+        mouthpiece_bind::character_head(&rig, args.model_up.into(), args.snout, args.resolution)
+            .map_err(bind_error)?;
     let name = rig.character().unwrap_or("head").to_owned();
     mouthpiece_bind::gltf_io::write_plain_glb(&args.out, &mesh, &name).map_err(bind_error)?;
     eprintln!(
