@@ -167,7 +167,7 @@ pub fn heat_weights(mesh: &Mesh, distances: &[[f64; POINTS]], mouth_width: f64) 
         for v in 0..n {
             x[v] = if nearest[v] == j { 1.0 } else { 0.0 };
         }
-        laplacian.solve_cg(&heat, &b, &mut x, 1e-8, 4 * n.max(100));
+        laplacian.solve_cg(&heat, &b, &mut x, 1e-6, 4 * n.max(100));
         for v in 0..n {
             rows[v][j] = x[v].max(0.0);
         }

@@ -57,7 +57,8 @@ fn tiny_model() -> PathBuf {
             ok(&[
                 "bind",
                 "train",
-                "--tiny",
+                "--widths",
+                "tiny",
                 "--heads",
                 "2",
                 "--epochs",
