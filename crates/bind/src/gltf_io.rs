@@ -219,7 +219,7 @@ fn read_primitives(
                 .collect(),
             None => (0..count as u32).collect(),
         };
-        if indices.len() % 3 != 0 {
+        if !indices.len().is_multiple_of(3) {
             return Err(format!(
                 "{here}: {} indices is not a whole number of triangles",
                 indices.len()
@@ -418,7 +418,7 @@ pub fn write_skinned_glb(
                 bin: &mut Vec<u8>,
                 bytes: Vec<u8>,
                 target: Option<json::buffer::Target>| {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let offset = bin.len();
@@ -633,7 +633,7 @@ pub fn write_skinned_glb(
         nodes: vec![root_joint, mesh_node],
     });
     root.scene = Some(scene);
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     root.push(json::Buffer {

@@ -16,6 +16,9 @@
 //! - [`eval`]: KL divergence and skinned-deformation error.
 //! - [`training`]: data sets of procedural heads, training and the evaluation table.
 
+// Numerical code over vertices × joints: index loops read like the formulas they implement.
+#![allow(clippy::needless_range_loop)]
+
 mod error;
 pub mod eval;
 pub mod gltf_io;

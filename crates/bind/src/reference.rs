@@ -82,7 +82,7 @@ pub fn simplex_least_squares(
 /// The mouth states the references are fitted over: the pure states and
 /// [`FIT_STATES`] random ones from a fixed seed.
 pub fn fit_states() -> Vec<MouthState> {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x5eed_0f_5717);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x005e_ed0f_5717);
     MouthState::set(FIT_STATES, &mut rng)
 }
 

@@ -80,7 +80,7 @@ pub fn limit_row(row: &mut [f64; JOINTS], k: usize) {
         row[j] = 0.0;
     }
     for v in row.iter_mut() {
-        if !(*v > 0.0) {
+        if v.is_nan() || *v <= 0.0 {
             *v = 0.0;
         }
     }

@@ -173,7 +173,7 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
             let view = &take_root.buffer_views[view_index.value()];
             let start = view.byte_offset.map_or(0, |o| o.0) as usize;
             let end = start + view.byte_length.0 as usize;
-            while bin.len() % 4 != 0 {
+            while !bin.len().is_multiple_of(4) {
                 bin.push(0);
             }
             let offset = bin.len();
@@ -217,7 +217,7 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
         name: Some("take".into()),
         samplers: samplers_out,
     });
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     root.buffers[0].byte_length = USize64(bin.len() as u64);
