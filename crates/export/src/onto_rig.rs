@@ -144,7 +144,7 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
             )),
         }
     };
-    let mut copied_accessors: std::collections::HashMap<u32, json::Index<json::Accessor>> =
+    let mut copied_accessors: std::collections::HashMap<usize, json::Index<json::Accessor>> =
         Default::default();
     let mut channels_out = Vec::new();
     let mut samplers_out = Vec::new();
@@ -164,9 +164,10 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
     }
     let mut copy_accessor = |root: &mut json::Root,
                              bin: &mut Vec<u8>,
-                             index: json::Index<json::Accessor>| {
-        if let Some(&done) = copied_accessors.get(&index.value().try_into().unwrap_or(u32::MAX)) {
-            return done;
+                             index: json::Index<json::Accessor>|
+     -> Result<json::Index<json::Accessor>, ExportError> {
+        if let Some(&done) = copied_accessors.get(&index.value()) {
+            return Ok(done);
         }
         let mut accessor = take_root.accessors[index.value()].clone();
         if let Some(view_index) = accessor.buffer_view {
@@ -177,20 +178,24 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
                 bin.push(0);
             }
             let offset = bin.len();
-            bin.extend_from_slice(&take.bin[start..end]);
+            let bytes = take
+                .bin
+                .get(start..end)
+                .ok_or_else(|| rig_error(take_glb, "a buffer view runs past the binary chunk"))?;
+            bin.extend_from_slice(bytes);
             let mut view = view.clone();
             view.buffer = json::Index::new(0);
             view.byte_offset = Some(USize64(offset as u64));
             accessor.buffer_view = Some(root.push(view));
         }
         let new = root.push(accessor);
-        copied_accessors.insert(index.value() as u32, new);
-        new
+        copied_accessors.insert(index.value(), new);
+        Ok(new)
     };
     for (channel, target) in animation.channels.iter().zip(targets) {
         let sampler = &animation.samplers[channel.sampler.value()];
-        let input = copy_accessor(&mut root, &mut bin, sampler.input);
-        let output = copy_accessor(&mut root, &mut bin, sampler.output);
+        let input = copy_accessor(&mut root, &mut bin, sampler.input)?;
+        let output = copy_accessor(&mut root, &mut bin, sampler.output)?;
         let index = json::Index::new(samplers_out.len() as u32);
         samplers_out.push(json::animation::Sampler {
             input,
