@@ -16,12 +16,14 @@ pub const ROOT: usize = POINTS;
 /// Influences a bound vertex may have.
 pub const MAX_INFLUENCES: usize = 4;
 
-/// Distance baseline: how fast a joint's weight falls off, in mouth widths. A fifth of the
-/// spacing between neighbouring points (about 0.25 mouth widths), so a vertex between two
-/// points blends them and one on a point follows it.
-pub const DISTANCE_FALLOFF: f64 = 0.05;
-/// Distance baseline: the root acts as a joint at this distance from every vertex (mouth
-/// widths), so vertices farther than this from all points stay with the head.
+/// Distance baseline: how fast a joint's weight falls off, in mouth widths: about 0.4 of the
+/// spacing between neighbouring points (0.25 mouth widths), so a vertex between two points
+/// blends them and one on a point follows it. Chosen as the best of 0.025…0.2 on the
+/// network's training heads (`examples/baseline_sweep.rs`, docs/bind.md), never the held-out.
+pub const DISTANCE_FALLOFF: f64 = 0.1;
+/// Distance and heat baselines: the root acts as a joint at this distance from every vertex
+/// (mouth widths), so vertices farther than this from all points stay with the head. The best
+/// of 0.3, 0.6, 1.0 for both baselines on the training heads (same sweep).
 pub const ROOT_DISTANCE: f64 = 0.6;
 /// Heat baseline: the heat a joint puts into the vertices it is nearest to,
 /// `c / d²` (Baran & Popović 2007 use 1).
@@ -108,14 +110,24 @@ pub fn joint_distances(mesh: &Mesh, points: &[Vector3<f64>; POINTS]) -> Vec<[f64
 /// The distance baseline: `softmax(−d_j / σ)` over the joints, the root at a fixed
 /// distance, with d in mouth widths and σ = [`DISTANCE_FALLOFF`].
 pub fn distance_weights(distances: &[[f64; POINTS]], mouth_width: f64) -> Weights {
+    distance_weights_with(distances, mouth_width, DISTANCE_FALLOFF, ROOT_DISTANCE)
+}
+
+/// [`distance_weights`] with other constants (`bench`'s sweep of them).
+pub fn distance_weights_with(
+    distances: &[[f64; POINTS]],
+    mouth_width: f64,
+    falloff: f64,
+    root_distance: f64,
+) -> Weights {
     let rows = distances
         .iter()
         .map(|d| {
             let mut scores = [0.0; JOINTS];
             for j in 0..POINTS {
-                scores[j] = -d[j] / mouth_width / DISTANCE_FALLOFF;
+                scores[j] = -d[j] / mouth_width / falloff;
             }
-            scores[ROOT] = -ROOT_DISTANCE / DISTANCE_FALLOFF;
+            scores[ROOT] = -root_distance / falloff;
             softmax(&scores)
         })
         .collect();
@@ -140,12 +152,22 @@ pub fn softmax(scores: &[f64; JOINTS]) -> [f64; JOINTS] {
 /// a joint at [`ROOT_DISTANCE`] mouth widths from every vertex, so the head is its
 /// region. Joints are points, not bones, so "nearest" is the nearest point.
 pub fn heat_weights(mesh: &Mesh, distances: &[[f64; POINTS]], mouth_width: f64) -> Weights {
+    heat_weights_with(mesh, distances, mouth_width, ROOT_DISTANCE)
+}
+
+/// [`heat_weights`] with another root distance (`bench`'s sweep of it).
+pub fn heat_weights_with(
+    mesh: &Mesh,
+    distances: &[[f64; POINTS]],
+    mouth_width: f64,
+    root_distance: f64,
+) -> Weights {
     let n = mesh.len();
     let (laplacian, area) = mesh.cotangent_laplacian();
     let mut nearest = vec![ROOT; n];
     let mut heat = vec![0.0; n];
     for v in 0..n {
-        let mut best = ROOT_DISTANCE * mouth_width;
+        let mut best = root_distance * mouth_width;
         for j in 0..POINTS {
             if distances[v][j] < best {
                 best = distances[v][j];
