@@ -528,3 +528,55 @@ fn export_rig_refuses_a_mesh_that_is_not_a_rig() {
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("no skin"), "{err}");
 }
+
+#[test]
+fn head_writes_a_valid_mesh_and_evaluate_prints_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = dir.path().join("head.glb");
+    ok(&[
+        "bind",
+        "head",
+        "--character",
+        s(&character("human")),
+        "--resolution",
+        "1",
+        "--out",
+        s(&head),
+    ]);
+    assert_valid(&head);
+    let out = mouthpiece(&[
+        "bind",
+        "evaluate",
+        "--heads",
+        "1",
+        "--model",
+        s(&tiny_model()),
+        "--character",
+        s(&character("wolf")),
+        "--snout",
+        "1",
+    ]);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for method in ["network", "heat", "distance", "reference"] {
+        assert!(
+            table.contains(&format!("| **mean** | **{method}** |")),
+            "{table}"
+        );
+        assert!(table.contains(&format!("| wolf | {method} |")), "{table}");
+    }
+    // the held-out heads' seed is not a training seed
+    let o = mouthpiece(&[
+        "bind",
+        "train",
+        "--seed",
+        "1319952",
+        "--out",
+        s(&dir.path().join("x.bin")),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+}
