@@ -69,6 +69,16 @@ pub enum ExportError {
         #[source]
         cause: io::Error,
     },
+    /// A rigged glTF (`export --rig`) that the take cannot be written onto.
+    #[error("rig {}: {problem}", path.display())]
+    Rig { path: PathBuf, problem: String },
+    /// The rigged glTF cannot be read.
+    #[error("reading the rig {}", path.display())]
+    RigRead {
+        path: PathBuf,
+        #[source]
+        cause: io::Error,
+    },
     /// Serialising the glTF JSON failed (does not happen for well-formed documents).
     #[error("serialising the glTF document")]
     Serialize(#[source] serde_json::Error),
@@ -88,6 +98,8 @@ impl ExportError {
                 | Self::BadRig(_)
                 | Self::BadTolerance(_)
                 | Self::TooLargeForGlb { .. }
+                | Self::Rig { .. }
+                | Self::RigRead { .. }
         ) || matches!(self, Self::Read { cause, .. } if cause.kind() == io::ErrorKind::InvalidData)
     }
 

@@ -13,6 +13,7 @@
 //!   assembled at the end. Memory is constant in the number of frames.
 //! - [`reduce`]: the [`Reducer`], streaming key reduction within a tolerance.
 //! - [`csv`]: the streaming [`CsvWriter`].
+//! - [`onto_rig`]: a take's animation copied onto a rigged mesh (`export --rig`).
 //!
 //! The writers take frames from any source, so a recording turned into frames by the
 //! processing pipeline feeds them the same way as a JSONL file.
@@ -20,6 +21,7 @@
 pub mod csv;
 mod error;
 pub mod gltf;
+pub mod onto_rig;
 mod output;
 pub mod reduce;
 pub mod rig;
@@ -28,6 +30,7 @@ pub mod take;
 pub use csv::{CsvSummary, CsvWriter};
 pub use error::ExportError;
 pub use gltf::{GltfLayout, GltfOptions, GltfSummary, GltfWriter, ModelUp};
+pub use onto_rig::{animate_rig, RigSummary};
 pub use output::PendingFile;
 pub use reduce::Reducer;
 pub use rig::{MouthRig, RigPoint};

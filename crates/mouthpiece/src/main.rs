@@ -42,6 +42,9 @@ enum Command {
     /// `[detect]` TOML snippet).
     #[command(name = "tune-colours")]
     TuneColours(cmd::tune_colours::Args),
+    /// Bind a character's mesh to its mouth points (skin weights, skinned GLB); train and
+    /// evaluate the binding network.
+    Bind(cmd::bind::Args),
     /// Speech to a take: phone files or WAV audio (PocketSphinx) → viseme weight curves → the
     /// character's mouth (JSONL, the format of `process`).
     Lipsync(cmd::lipsync::Args),
@@ -61,6 +64,7 @@ fn main() -> ExitCode {
         Command::Devices(args) => cmd::devices::run(args),
         Command::Export(args) => cmd::export::run(args),
         Command::TuneColours(args) => cmd::tune_colours::run(args),
+        Command::Bind(args) => cmd::bind::run(args),
         Command::Lipsync(args) => cmd::lipsync::run(args),
     };
     match result {

@@ -55,6 +55,10 @@ pub struct Args {
     /// Leave the point nodes empty (no small marker mesh).
     #[arg(long)]
     pub no_markers: bool,
+    /// GLB only: write the take onto this rigged mesh (from `mouthpiece bind`) instead of
+    /// onto bare point nodes: the output is the rig with the take's animation on its joints.
+    #[arg(long, value_name = "RIGGED_GLB")]
+    pub rig: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -107,6 +111,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.curve && format == Format::Csv {
         return Err(bad_input(anyhow!(
             "--curve applies to glTF; CSV has the points only"
+        )));
+    }
+    if args.rig.is_some() && format != Format::Glb {
+        return Err(bad_input(anyhow!(
+            "--rig writes a GLB: give --out NAME.glb"
         )));
     }
     if args.embed && format != Format::Gltf {
@@ -170,15 +179,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 },
                 reduce: args.reduce,
                 curve: args.curve,
-                markers: !args.no_markers,
+                markers: !args.no_markers && args.rig.is_none(),
             };
             let dir = spool_dir(&args.out);
+            // With --rig the take goes to a temporary GLB first, then onto the rig.
+            let rig_stage = match &args.rig {
+                Some(_) => {
+                    Some(tempfile::tempdir_in(&dir).context("creating a temporary directory")?)
+                }
+                None => None,
+            };
+            let take_out = match &rig_stage {
+                Some(stage) => stage.path().join("take.glb"),
+                None => args.out.clone(),
+            };
             let mut writer = GltfWriter::new(rig, options, &dir).map_err(export_error)?;
             while let Some(frame) = frames.next()? {
                 writer.push(&frame).map_err(export_error)?;
             }
             progress.set_message("writing the buffer");
-            let summary = writer.finish(&args.out).map_err(export_error)?;
+            let mut summary = writer.finish(&take_out).map_err(export_error)?;
+            if let Some(rigged) = &args.rig {
+                let onto = mouthpiece_export::animate_rig(rigged, &take_out, &args.out)
+                    .map_err(export_error)?;
+                summary.files = vec![args.out.clone()];
+                eprintln!(
+                    "{} animation channels on the joints of {}",
+                    onto.channels,
+                    rigged.display()
+                );
+            }
             progress.finish_and_clear();
             let files: Vec<String> = summary
                 .files

@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod bind;
 pub mod check_config;
 pub mod devices;
 pub mod evaluate;

@@ -1,0 +1,771 @@
+//! Reading a mesh from glTF/GLB, and writing the bound, skinned glTF.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use gltf_json as json;
+use json::validation::{Checked::Valid, USize64};
+use nalgebra::{Isometry3, Matrix4, Point3, Translation3};
+
+use mouthpiece_export::onto_rig::{parse_glb, write_glb};
+use mouthpiece_export::{MouthRig, PendingFile};
+
+use crate::mesh::Mesh;
+use crate::weights::{Weights, JOINTS, MAX_INFLUENCES, ROOT};
+use crate::BindError;
+
+/// Largest mesh file accepted (a mouth's head is far smaller; this guards memory).
+pub const MAX_FILE_BYTES: u64 = 256 * 1024 * 1024;
+
+/// A mesh as read: the triangles as they are in the file, and the same surface with
+/// vertices at identical positions merged (files split vertices along UV seams and hard
+/// edges; the binders need the connected surface).
+#[derive(Clone, Debug)]
+pub struct LoadedMesh {
+    /// The file's vertices (all primitives of all mesh nodes, in the scene's frame).
+    pub original: Mesh,
+    /// Vertices at identical positions merged.
+    pub welded: Mesh,
+    /// For each original vertex, its welded vertex.
+    pub to_welded: Vec<u32>,
+}
+
+/// Reads every triangle primitive of the default scene (or of all meshes when there is no
+/// scene), placed by its node's world transform.
+pub fn read_mesh(path: &Path) -> Result<LoadedMesh, BindError> {
+    let size = std::fs::metadata(path)
+        .map_err(|cause| BindError::Read {
+            path: path.to_path_buf(),
+            cause,
+        })?
+        .len();
+    if size > MAX_FILE_BYTES {
+        return Err(BindError::TooLarge {
+            path: path.to_path_buf(),
+            size,
+            limit: MAX_FILE_BYTES,
+        });
+    }
+    let bytes = std::fs::read(path).map_err(|cause| BindError::Read {
+        path: path.to_path_buf(),
+        cause,
+    })?;
+    let not_gltf = |problem: String| BindError::NotGltf {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let bad = |problem: String| BindError::BadMesh {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let (json_bytes, glb_bin) = if bytes.starts_with(b"glTF") {
+        let glb = parse_glb(&bytes).map_err(not_gltf)?;
+        (glb.json, Some(glb.bin))
+    } else {
+        (bytes, None)
+    };
+    let root: json::Root =
+        serde_json::from_slice(&json_bytes).map_err(|e| not_gltf(format!("JSON: {e}")))?;
+    let mut buffers = Vec::new();
+    for (i, buffer) in root.buffers.iter().enumerate() {
+        let data = match &buffer.uri {
+            None => glb_bin
+                .clone()
+                .ok_or_else(|| bad(format!("buffer {i} has no uri and the file is not GLB")))?,
+            Some(uri) if uri.starts_with("data:") => {
+                let (_, b64) = uri
+                    .split_once(";base64,")
+                    .ok_or_else(|| bad(format!("buffer {i}: a data URI that is not base64")))?;
+                use base64::Engine as _;
+                base64::engine::general_purpose::STANDARD
+                    .decode(b64)
+                    .map_err(|e| bad(format!("buffer {i}: base64: {e}")))?
+            }
+            Some(uri) => {
+                let file = path.parent().unwrap_or(Path::new(".")).join(uri);
+                std::fs::read(&file).map_err(|cause| BindError::Read { path: file, cause })?
+            }
+        };
+        if (data.len() as u64) < buffer.byte_length.0 {
+            return Err(bad(format!(
+                "buffer {i} has {} bytes, its byteLength says {}",
+                data.len(),
+                buffer.byte_length.0
+            )));
+        }
+        buffers.push(data);
+    }
+    let mut positions = Vec::new();
+    let mut triangles = Vec::new();
+    let mut visit: Vec<(usize, Matrix4<f64>)> = match root.scene.or(if root.scenes.is_empty() {
+        None
+    } else {
+        Some(json::Index::new(0))
+    }) {
+        Some(scene) => root
+            .scenes
+            .get(scene.value())
+            .ok_or_else(|| bad("the default scene does not exist".into()))?
+            .nodes
+            .iter()
+            .map(|n| (n.value(), Matrix4::identity()))
+            .collect(),
+        None => Vec::new(),
+    };
+    let mut meshes_seen = 0;
+    let mut guard = 0;
+    while let Some((node_index, parent)) = visit.pop() {
+        guard += 1;
+        if guard > 100_000 {
+            return Err(bad("the node hierarchy has a cycle or is too deep".into()));
+        }
+        let node = root
+            .nodes
+            .get(node_index)
+            .ok_or_else(|| bad(format!("node {node_index} does not exist")))?;
+        let world = parent * node_matrix(node);
+        if let Some(mesh) = node.mesh {
+            meshes_seen += 1;
+            read_primitives(
+                &root,
+                &buffers,
+                mesh.value(),
+                &world,
+                &mut positions,
+                &mut triangles,
+            )
+            .map_err(bad)?;
+        }
+        for child in node.children.iter().flatten() {
+            visit.push((child.value(), world));
+        }
+    }
+    if meshes_seen == 0 {
+        for m in 0..root.meshes.len() {
+            read_primitives(
+                &root,
+                &buffers,
+                m,
+                &Matrix4::identity(),
+                &mut positions,
+                &mut triangles,
+            )
+            .map_err(bad)?;
+        }
+    }
+    let original = Mesh {
+        positions,
+        triangles,
+    };
+    let (welded, to_welded) = weld(&original);
+    Ok(LoadedMesh {
+        original,
+        welded,
+        to_welded,
+    })
+}
+
+fn node_matrix(node: &json::Node) -> Matrix4<f64> {
+    if let Some(m) = node.matrix {
+        return Matrix4::from_column_slice(&m.map(f64::from));
+    }
+    let t = node.translation.unwrap_or([0.0; 3]).map(f64::from);
+    let r = node
+        .rotation
+        .map_or([0.0, 0.0, 0.0, 1.0], |q| q.0)
+        .map(f64::from);
+    let s = node.scale.unwrap_or([1.0; 3]).map(f64::from);
+    let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        r[3], r[0], r[1], r[2],
+    ));
+    Matrix4::new_translation(&nalgebra::Vector3::from(t))
+        * q.to_homogeneous()
+        * Matrix4::new_nonuniform_scaling(&nalgebra::Vector3::from(s))
+}
+
+fn read_primitives(
+    root: &json::Root,
+    buffers: &[Vec<u8>],
+    mesh: usize,
+    world: &Matrix4<f64>,
+    positions: &mut Vec<[f64; 3]>,
+    triangles: &mut Vec<[u32; 3]>,
+) -> Result<(), String> {
+    let m = root
+        .meshes
+        .get(mesh)
+        .ok_or(format!("mesh {mesh} does not exist"))?;
+    for (p, prim) in m.primitives.iter().enumerate() {
+        let here = format!("mesh {mesh} primitive {p}");
+        match prim.mode {
+            Valid(json::mesh::Mode::Triangles) => {}
+            _ => continue,
+        }
+        let pos = prim
+            .attributes
+            .get(&Valid(json::mesh::Semantic::Positions))
+            .ok_or(format!("{here} has no POSITION"))?;
+        let base = positions.len() as u32;
+        let values = read_accessor(root, buffers, pos.value(), &here)?;
+        let count = values.len() / 3;
+        for v in values.chunks_exact(3) {
+            let q = world.transform_point(&Point3::new(v[0], v[1], v[2]));
+            positions.push([q.x, q.y, q.z]);
+        }
+        let indices: Vec<u32> = match prim.indices {
+            Some(i) => read_accessor(root, buffers, i.value(), &here)?
+                .into_iter()
+                .map(|v| v as u32)
+                .collect(),
+            None => (0..count as u32).collect(),
+        };
+        if !indices.len().is_multiple_of(3) {
+            return Err(format!(
+                "{here}: {} indices is not a whole number of triangles",
+                indices.len()
+            ));
+        }
+        for t in indices.chunks_exact(3) {
+            if let Some(&bad) = t.iter().find(|&&i| i as usize >= count) {
+                return Err(format!("{here}: index {bad} past its {count} vertices"));
+            }
+            triangles.push([base + t[0], base + t[1], base + t[2]]);
+        }
+    }
+    Ok(())
+}
+
+/// An accessor's components as f64 (FLOAT, and unsigned integer index types).
+fn read_accessor(
+    root: &json::Root,
+    buffers: &[Vec<u8>],
+    index: usize,
+    here: &str,
+) -> Result<Vec<f64>, String> {
+    use json::accessor::{ComponentType as C, Type};
+    let a = root
+        .accessors
+        .get(index)
+        .ok_or(format!("{here}: accessor {index} does not exist"))?;
+    let components = match a.type_ {
+        Valid(Type::Scalar) => 1,
+        Valid(Type::Vec2) => 2,
+        Valid(Type::Vec3) => 3,
+        Valid(Type::Vec4) => 4,
+        _ => return Err(format!("{here}: accessor {index} has an unsupported type")),
+    };
+    let (size, kind) = match a.component_type {
+        Valid(json::accessor::GenericComponentType(c)) => (
+            match c {
+                C::U8 | C::I8 => 1,
+                C::U16 | C::I16 => 2,
+                C::U32 | C::F32 => 4,
+            },
+            c,
+        ),
+        _ => {
+            return Err(format!(
+                "{here}: accessor {index} has an invalid component type"
+            ))
+        }
+    };
+    let count = a.count.0 as usize;
+    let Some(view_index) = a.buffer_view else {
+        return Ok(vec![0.0; count * components]);
+    };
+    if a.sparse.is_some() {
+        return Err(format!(
+            "{here}: accessor {index} is sparse (not supported)"
+        ));
+    }
+    let view = root.buffer_views.get(view_index.value()).ok_or(format!(
+        "{here}: buffer view {} does not exist",
+        view_index.value()
+    ))?;
+    let data = buffers.get(view.buffer.value()).ok_or(format!(
+        "{here}: buffer {} does not exist",
+        view.buffer.value()
+    ))?;
+    let element = size * components;
+    let stride = view.byte_stride.map_or(element, |s| s.0);
+    let start =
+        view.byte_offset.map_or(0, |o| o.0 as usize) + a.byte_offset.map_or(0, |o| o.0 as usize);
+    let end = if count == 0 {
+        start
+    } else {
+        start + stride * (count - 1) + element
+    };
+    let view_end = view.byte_offset.map_or(0, |o| o.0 as usize) + view.byte_length.0 as usize;
+    if end > view_end || view_end > data.len() {
+        return Err(format!("{here}: accessor {index} runs past its buffer"));
+    }
+    let mut out = Vec::with_capacity(count * components);
+    for e in 0..count {
+        for c in 0..components {
+            let at = start + e * stride + c * size;
+            let b = &data[at..at + size];
+            out.push(match kind {
+                C::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
+                C::U32 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
+                C::U16 => u16::from_le_bytes([b[0], b[1]]) as f64,
+                C::U8 => b[0] as f64,
+                C::I16 => i16::from_le_bytes([b[0], b[1]]) as f64,
+                C::I8 => b[0] as i8 as f64,
+            });
+        }
+    }
+    if out.iter().any(|v| !v.is_finite()) {
+        return Err(format!(
+            "{here}: accessor {index} holds a non-finite number"
+        ));
+    }
+    Ok(out)
+}
+
+/// Merges vertices with bit-identical positions; drops triangles that collapse.
+pub fn weld(mesh: &Mesh) -> (Mesh, Vec<u32>) {
+    let mut index: HashMap<[u64; 3], u32> = HashMap::with_capacity(mesh.len());
+    let mut positions = Vec::new();
+    let to_welded: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            *index.entry(p.map(f64::to_bits)).or_insert_with(|| {
+                positions.push(*p);
+                (positions.len() - 1) as u32
+            })
+        })
+        .collect();
+    let triangles = mesh
+        .triangles
+        .iter()
+        .map(|t| t.map(|i| to_welded[i as usize]))
+        .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+        .collect();
+    (
+        Mesh {
+            positions,
+            triangles,
+        },
+        to_welded,
+    )
+}
+
+/// The joints of a bound mesh, in skin order: `root`, `mouth`, then the points.
+pub fn joint_names(rig: &MouthRig) -> Vec<String> {
+    let mut names = vec!["root".to_owned(), "mouth".to_owned()];
+    names.extend(rig.names());
+    names
+}
+
+/// Skin column of a weight column (points, then root) → glTF joint index.
+fn skin_joint(column: usize) -> u8 {
+    if column == ROOT {
+        0
+    } else {
+        (column + 2) as u8
+    }
+}
+
+/// One vertex's four (joint, weight) pairs as glTF stores them: weights in f32 summing to 1
+/// (the rounding residue goes to the largest), unused slots joint 0 with weight 0.
+pub fn vertex_influences(row: &[f64; JOINTS]) -> ([u8; 4], [f32; 4]) {
+    let mut order: Vec<usize> = (0..JOINTS).filter(|&j| row[j] > 0.0).collect();
+    order.sort_by(|&a, &b| row[b].total_cmp(&row[a]).then(a.cmp(&b)));
+    order.truncate(MAX_INFLUENCES);
+    let mut joints = [0u8; 4];
+    let mut weights = [0f32; 4];
+    for (slot, &j) in order.iter().enumerate() {
+        joints[slot] = skin_joint(j);
+        weights[slot] = row[j] as f32;
+    }
+    let sum: f32 = weights.iter().sum();
+    if sum > 0.0 {
+        for w in &mut weights {
+            *w /= sum;
+        }
+        let residue = 1.0 - weights.iter().sum::<f32>();
+        weights[0] += residue;
+    } else {
+        weights[0] = 1.0;
+    }
+    (joints, weights)
+}
+
+/// Writes the mesh (original vertices, model frame) skinned to the rig's joints with
+/// `weights` (one row per original vertex) as a GLB; `placement` puts the mouth frame in
+/// the file's coordinates.
+pub fn write_skinned_glb(
+    out: &Path,
+    mesh: &Mesh,
+    normals: &[[f64; 3]],
+    weights: &Weights,
+    rig: &MouthRig,
+    placement: &Isometry3<f64>,
+    generator: &str,
+) -> Result<(), BindError> {
+    let n = mesh.len();
+    let mut bin: Vec<u8> = Vec::new();
+    let mut root = json::Root {
+        asset: json::Asset {
+            generator: Some(generator.to_owned()),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let buffer = json::Index::<json::Buffer>::new(0);
+    let view = |root: &mut json::Root,
+                bin: &mut Vec<u8>,
+                bytes: Vec<u8>,
+                target: Option<json::buffer::Target>| {
+        while !bin.len().is_multiple_of(4) {
+            bin.push(0);
+        }
+        let offset = bin.len();
+        let len = bytes.len();
+        bin.extend(bytes);
+        root.push(json::buffer::View {
+            buffer,
+            byte_length: USize64(len as u64),
+            byte_offset: Some(USize64(offset as u64)),
+            byte_stride: None,
+            extensions: None,
+            extras: Default::default(),
+            name: None,
+            target: target.map(Valid),
+        })
+    };
+    let accessor =
+        |view, count: usize, ty, ct, bounds: Option<(json::Value, json::Value)>| json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64(count as u64),
+            component_type: Valid(json::accessor::GenericComponentType(ct)),
+            extensions: None,
+            extras: Default::default(),
+            type_: Valid(ty),
+            min: bounds.as_ref().map(|b| b.0.clone()),
+            max: bounds.map(|b| b.1),
+            name: None,
+            normalized: false,
+            sparse: None,
+        };
+    use json::accessor::{ComponentType as C, Type as T};
+    let f32s = |v: &mut Vec<u8>, x: f32| v.extend_from_slice(&x.to_le_bytes());
+    // positions
+    let mut bytes = Vec::with_capacity(12 * n);
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in &mesh.positions {
+        for k in 0..3 {
+            let c = p[k] as f32;
+            lo[k] = lo[k].min(c);
+            hi[k] = hi[k].max(c);
+            f32s(&mut bytes, c);
+        }
+    }
+    let v = view(
+        &mut root,
+        &mut bin,
+        bytes,
+        Some(json::buffer::Target::ArrayBuffer),
+    );
+    let positions = root.push(accessor(
+        v,
+        n,
+        T::Vec3,
+        C::F32,
+        Some((
+            json::Value::from(lo.to_vec()),
+            json::Value::from(hi.to_vec()),
+        )),
+    ));
+    let mut bytes = Vec::with_capacity(12 * n);
+    for nrm in normals {
+        let len = (nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]).sqrt();
+        let unit = if len > 0.0 {
+            nrm.map(|c| c / len)
+        } else {
+            [0.0, 0.0, 1.0]
+        };
+        let unit = unit.map(|c| c as f32);
+        let l32 = (unit[0] * unit[0] + unit[1] * unit[1] + unit[2] * unit[2]).sqrt();
+        for c in unit {
+            f32s(&mut bytes, c / l32);
+        }
+    }
+    let v = view(
+        &mut root,
+        &mut bin,
+        bytes,
+        Some(json::buffer::Target::ArrayBuffer),
+    );
+    let normals_acc = root.push(accessor(v, n, T::Vec3, C::F32, None));
+    let mut joint_bytes = Vec::with_capacity(4 * n);
+    let mut weight_bytes = Vec::with_capacity(16 * n);
+    for row in &weights.rows {
+        let (j, w) = vertex_influences(row);
+        joint_bytes.extend_from_slice(&j);
+        for x in w {
+            f32s(&mut weight_bytes, x);
+        }
+    }
+    let v = view(
+        &mut root,
+        &mut bin,
+        joint_bytes,
+        Some(json::buffer::Target::ArrayBuffer),
+    );
+    let joints_acc = root.push(accessor(v, n, T::Vec4, C::U8, None));
+    let v = view(
+        &mut root,
+        &mut bin,
+        weight_bytes,
+        Some(json::buffer::Target::ArrayBuffer),
+    );
+    let weights_acc = root.push(accessor(v, n, T::Vec4, C::F32, None));
+    let mut bytes = Vec::with_capacity(12 * mesh.triangles.len());
+    for t in &mesh.triangles {
+        for &i in t {
+            bytes.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    let v = view(
+        &mut root,
+        &mut bin,
+        bytes,
+        Some(json::buffer::Target::ElementArrayBuffer),
+    );
+    let indices = root.push(accessor(
+        v,
+        3 * mesh.triangles.len(),
+        T::Scalar,
+        C::U32,
+        None,
+    ));
+
+    // joints: root (identity) → mouth (placement) → points (rest, mouth frame)
+    let point_nodes: Vec<json::Index<json::Node>> = rig
+        .points()
+        .iter()
+        .map(|p| {
+            root.push(json::Node {
+                name: Some(p.name.clone()),
+                translation: Some(p.rest.map(|c| c as f32)),
+                ..Default::default()
+            })
+        })
+        .collect();
+    let q = placement.rotation.coords.map(|c| c as f32).normalize();
+    let t = placement.translation.vector.map(|c| c as f32);
+    let mouth = root.push(json::Node {
+        name: Some("mouth".into()),
+        translation: (t.norm() > 0.0).then(|| t.into()),
+        rotation: (q.w.abs() < 1.0).then(|| json::scene::UnitQuaternion([q.x, q.y, q.z, q.w])),
+        children: Some(point_nodes.clone()),
+        ..Default::default()
+    });
+    let root_joint = root.push(json::Node {
+        name: Some("root".into()),
+        children: Some(vec![mouth]),
+        ..Default::default()
+    });
+    // inverse bind matrices, from the same f32 TRS the nodes carry
+    let q64 = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        q.w as f64, q.x as f64, q.y as f64, q.z as f64,
+    ));
+    let mouth_world = Isometry3::from_parts(Translation3::from(t.map(|c| c as f64)), q64);
+    let mut worlds = vec![Isometry3::identity(), mouth_world];
+    for p in rig.points() {
+        let rest = p.rest.map(|c| c as f32 as f64);
+        worlds.push(mouth_world * Translation3::new(rest[0], rest[1], rest[2]));
+    }
+    let mut bytes = Vec::with_capacity(64 * worlds.len());
+    for w in &worlds {
+        let inv = w.inverse().to_homogeneous();
+        for c in inv.as_slice() {
+            f32s(&mut bytes, *c as f32);
+        }
+    }
+    let v = view(&mut root, &mut bin, bytes, None);
+    let ibm = root.push(accessor(v, worlds.len(), T::Mat4, C::F32, None));
+    let mut joints = vec![root_joint, mouth];
+    joints.extend(point_nodes);
+    let skin = root.push(json::Skin {
+        extensions: None,
+        extras: Default::default(),
+        inverse_bind_matrices: Some(ibm),
+        joints,
+        name: Some(format!("{} mouth", rig.character().unwrap_or("character"))),
+        skeleton: Some(root_joint),
+    });
+    let mesh_index = root.push(json::Mesh {
+        extensions: None,
+        extras: Default::default(),
+        name: Some("head".into()),
+        primitives: vec![json::mesh::Primitive {
+            attributes: [
+                (Valid(json::mesh::Semantic::Positions), positions),
+                (Valid(json::mesh::Semantic::Normals), normals_acc),
+                (Valid(json::mesh::Semantic::Joints(0)), joints_acc),
+                (Valid(json::mesh::Semantic::Weights(0)), weights_acc),
+            ]
+            .into(),
+            extensions: None,
+            extras: Default::default(),
+            indices: Some(indices),
+            material: None,
+            mode: Valid(json::mesh::Mode::Triangles),
+            targets: None,
+        }],
+        weights: None,
+    });
+    let mesh_node = root.push(json::Node {
+        name: Some("head".into()),
+        mesh: Some(mesh_index),
+        skin: Some(skin),
+        ..Default::default()
+    });
+    let scene = root.push(json::Scene {
+        extensions: None,
+        extras: Default::default(),
+        name: Some(rig.character().unwrap_or("character").to_owned()),
+        nodes: vec![root_joint, mesh_node],
+    });
+    root.scene = Some(scene);
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    root.push(json::Buffer {
+        byte_length: USize64(bin.len() as u64),
+        extensions: None,
+        extras: Default::default(),
+        name: None,
+        uri: None,
+    });
+    let text = serde_json::to_vec(&root).map_err(|e| BindError::Write {
+        path: out.to_path_buf(),
+        cause: std::io::Error::other(e),
+    })?;
+    let err = |cause| BindError::Write {
+        path: out.to_path_buf(),
+        cause,
+    };
+    let mut pending = PendingFile::create(out).map_err(err)?;
+    write_glb(&text, &bin, &mut pending).map_err(err)?;
+    pending.commit().map_err(err)?;
+    Ok(())
+}
+
+/// Writes an unskinned mesh as GLB (the shipped character heads).
+pub fn write_plain_glb(out: &Path, mesh: &Mesh, name: &str) -> Result<(), BindError> {
+    let mut root = json::Root::default();
+    root.asset.generator = Some("mouthpiece bind head".into());
+    let mut bin = Vec::new();
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in &mesh.positions {
+        for k in 0..3 {
+            let c = p[k] as f32;
+            lo[k] = lo[k].min(c);
+            hi[k] = hi[k].max(c);
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    let pos_len = bin.len();
+    for t in &mesh.triangles {
+        for &i in t {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    let buffer = root.push(json::Buffer {
+        byte_length: USize64(bin.len() as u64),
+        extensions: None,
+        extras: Default::default(),
+        name: None,
+        uri: None,
+    });
+    let mk_view = |offset: usize, len: usize, target| json::buffer::View {
+        buffer,
+        byte_length: USize64(len as u64),
+        byte_offset: Some(USize64(offset as u64)),
+        byte_stride: None,
+        extensions: None,
+        extras: Default::default(),
+        name: None,
+        target: Some(Valid(target)),
+    };
+    let pv = root.push(mk_view(0, pos_len, json::buffer::Target::ArrayBuffer));
+    let iv = root.push(mk_view(
+        pos_len,
+        bin.len() - pos_len,
+        json::buffer::Target::ElementArrayBuffer,
+    ));
+    use json::accessor::{ComponentType as C, GenericComponentType as G, Type as T};
+    let pa = root.push(json::Accessor {
+        buffer_view: Some(pv),
+        byte_offset: None,
+        count: USize64(mesh.len() as u64),
+        component_type: Valid(G(C::F32)),
+        extensions: None,
+        extras: Default::default(),
+        type_: Valid(T::Vec3),
+        min: Some(json::Value::from(lo.to_vec())),
+        max: Some(json::Value::from(hi.to_vec())),
+        name: None,
+        normalized: false,
+        sparse: None,
+    });
+    let ia = root.push(json::Accessor {
+        buffer_view: Some(iv),
+        byte_offset: None,
+        count: USize64(3 * mesh.triangles.len() as u64),
+        component_type: Valid(G(C::U32)),
+        extensions: None,
+        extras: Default::default(),
+        type_: Valid(T::Scalar),
+        min: None,
+        max: None,
+        name: None,
+        normalized: false,
+        sparse: None,
+    });
+    let m = root.push(json::Mesh {
+        extensions: None,
+        extras: Default::default(),
+        name: Some(name.to_owned()),
+        primitives: vec![json::mesh::Primitive {
+            attributes: [(Valid(json::mesh::Semantic::Positions), pa)].into(),
+            extensions: None,
+            extras: Default::default(),
+            indices: Some(ia),
+            material: None,
+            mode: Valid(json::mesh::Mode::Triangles),
+            targets: None,
+        }],
+        weights: None,
+    });
+    let node = root.push(json::Node {
+        name: Some(name.to_owned()),
+        mesh: Some(m),
+        ..Default::default()
+    });
+    let scene = root.push(json::Scene {
+        extensions: None,
+        extras: Default::default(),
+        name: Some(name.to_owned()),
+        nodes: vec![node],
+    });
+    root.scene = Some(scene);
+    let text = serde_json::to_vec(&root).map_err(|e| BindError::Write {
+        path: out.to_path_buf(),
+        cause: std::io::Error::other(e),
+    })?;
+    let err = |cause| BindError::Write {
+        path: out.to_path_buf(),
+        cause,
+    };
+    let mut pending = PendingFile::create(out).map_err(err)?;
+    write_glb(&text, &bin, &mut pending).map_err(err)?;
+    pending.commit().map_err(err)
+}

@@ -1,0 +1,229 @@
+//! mouthpiece-bind: a character's mesh bound to its mouth points.
+//!
+//! One joint per mouth point (`P1` …, at the neutral points) under a `mouth` joint placed at
+//! the character's mouth frame, under a `root` joint that holds the rest of the head still.
+//! Each vertex gets at most four skin weights summing to 1, from one of three binders:
+//!
+//! - [`network`]: a graph network trained on procedural heads against reference weights;
+//! - [`weights::heat_weights`]: heat diffusion over the surface (Baran & Popović 2007);
+//! - [`weights::distance_weights`]: a softmax of the negative distance to each point.
+//!
+//! # Layout
+//! - [`mesh`]: the triangle mesh, its checks, normals, cotangent Laplacian, sparse solver.
+//! - [`gltf_io`]: reading glTF/GLB meshes, writing the skinned GLB.
+//! - [`procedural`]: the family of procedural heads with their analytic mouth motion.
+//! - [`reference`]: reference weights (least squares over the probability simplex).
+//! - [`eval`]: KL divergence and skinned-deformation error.
+//! - [`training`]: data sets of procedural heads, training and the evaluation table.
+
+// Numerical code over vertices × joints: index loops read like the formulas they implement.
+#![allow(clippy::needless_range_loop)]
+
+mod error;
+pub mod eval;
+pub mod gltf_io;
+pub mod mesh;
+pub mod network;
+pub mod procedural;
+pub mod reference;
+pub mod training;
+pub mod weights;
+
+use std::path::Path;
+
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+
+pub use mouthpiece_export::ModelUp;
+use mouthpiece_export::MouthRig;
+
+pub use error::BindError;
+pub use mesh::Mesh;
+pub use network::Network;
+pub use weights::Weights;
+
+/// A mouth point may lie at most this far (mouth widths) from the nearest vertex.
+pub const POINT_DISTANCE_LIMIT: f64 = 0.1;
+
+/// The trained network shipped with mouthpiece (`mouthpiece bind train`, see docs/bind.md).
+pub const SHIPPED_NETWORK: &[u8] = include_bytes!("../model/network.bin");
+
+/// How to compute the weights.
+#[derive(Clone, Copy, Debug)]
+pub enum Method<'a> {
+    Network(&'a Network),
+    Heat,
+    Distance,
+}
+
+/// Where the mouth frame sits in the mesh file's coordinates: the character's placement,
+/// after the model frame's axes are turned into glTF's when the model is Z-up (as the export
+/// does: glTF's (x, y, z) = model's (x, z, −y)).
+pub fn file_placement(rig: &MouthRig, model_up: ModelUp) -> Isometry3<f64> {
+    let conversion = match model_up {
+        ModelUp::Y => UnitQuaternion::identity(),
+        ModelUp::Z => {
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -std::f64::consts::FRAC_PI_2)
+        }
+    };
+    Isometry3::from_parts(Default::default(), conversion) * rig.placement()
+}
+
+/// A mesh prepared for binding: in the mouth frame, in mouth widths.
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    pub rig: MouthRig,
+    /// The welded mesh in the mouth frame, mouth-width units.
+    pub mesh: Mesh,
+    /// The mouth points in the same frame and units.
+    pub points: [[f64; 3]; procedural::POINTS],
+}
+
+/// Takes a mesh in the character's model frame into its mouth frame (mouth-width units),
+/// and checks that it can be bound: the rig has the twelve points, the mesh is valid, and
+/// every point lies near the surface.
+pub fn prepare(rig: &MouthRig, model_up: ModelUp, welded: &Mesh) -> Result<Prepared, BindError> {
+    if rig.points().len() != procedural::POINTS {
+        return Err(BindError::BadArgument(format!(
+            "the character has {} mouth points; binding needs the 12 points P1…P12",
+            rig.points().len()
+        )));
+    }
+    welded.validate()?;
+    let width = rig.mouth_width();
+    let inverse = file_placement(rig, model_up).inverse();
+    let mesh = welded.map_positions(|p| {
+        let q = inverse * Point3::from(p);
+        [q.x / width, q.y / width, q.z / width]
+    });
+    let points: [[f64; 3]; procedural::POINTS] =
+        std::array::from_fn(|k| rig.points()[k].rest.map(|c| c / width));
+    for (k, p) in points.iter().enumerate() {
+        let p = Vector3::from(*p);
+        let nearest = (0..mesh.len())
+            .map(|v| (mesh.vertex(v) - p).norm())
+            .fold(f64::INFINITY, f64::min);
+        if nearest > POINT_DISTANCE_LIMIT {
+            return Err(BindError::PointFarFromMesh {
+                name: rig.points()[k].name.clone(),
+                distance: nearest * width,
+                limit: POINT_DISTANCE_LIMIT * width,
+                fraction: POINT_DISTANCE_LIMIT,
+            });
+        }
+    }
+    Ok(Prepared {
+        rig: rig.clone(),
+        mesh,
+        points,
+    })
+}
+
+/// Skin weights of a prepared mesh (one row per welded vertex, at most four influences).
+pub fn compute_weights(prepared: &Prepared, method: Method) -> Weights {
+    let points = prepared.points.map(Vector3::from);
+    let mut weights = match method {
+        Method::Distance => {
+            weights::distance_weights(&weights::joint_distances(&prepared.mesh, &points), 1.0)
+        }
+        Method::Heat => weights::heat_weights(
+            &prepared.mesh,
+            &weights::joint_distances(&prepared.mesh, &points),
+            1.0,
+        ),
+        Method::Network(network) => {
+            network.predict(&network::Graph::new(&prepared.mesh, &prepared.points))
+        }
+    };
+    weights.limit_influences();
+    weights
+}
+
+/// What [`bind`] did.
+#[derive(Clone, Debug)]
+pub struct BindSummary {
+    pub vertices: usize,
+    pub welded_vertices: usize,
+    pub triangles: usize,
+    /// Vertices with a weight of at least 1 % on some mouth point.
+    pub moving_vertices: usize,
+}
+
+/// Binds the mesh file to the character's mouth and writes the skinned GLB.
+pub fn bind(
+    rig: &MouthRig,
+    mesh_path: &Path,
+    out: &Path,
+    model_up: ModelUp,
+    method: Method,
+) -> Result<BindSummary, BindError> {
+    let loaded = gltf_io::read_mesh(mesh_path)?;
+    let prepared = prepare(rig, model_up, &loaded.welded)?;
+    let welded_weights = compute_weights(&prepared, method);
+    let welded_normals = loaded.welded.normals();
+    let weights = Weights {
+        rows: loaded
+            .to_welded
+            .iter()
+            .map(|&w| welded_weights.rows[w as usize])
+            .collect(),
+    };
+    let normals: Vec<[f64; 3]> = loaded
+        .to_welded
+        .iter()
+        .map(|&w| welded_normals[w as usize].into())
+        .collect();
+    gltf_io::write_skinned_glb(
+        out,
+        &loaded.original,
+        &normals,
+        &weights,
+        rig,
+        &file_placement(rig, model_up),
+        &format!("mouthpiece bind {}", env!("CARGO_PKG_VERSION")),
+    )?;
+    Ok(BindSummary {
+        vertices: loaded.original.len(),
+        welded_vertices: loaded.welded.len(),
+        triangles: loaded.original.triangles.len(),
+        moving_vertices: welded_weights
+            .rows
+            .iter()
+            .filter(|r| r[..procedural::POINTS].iter().any(|&w| w >= 0.01))
+            .count(),
+    })
+}
+
+/// A procedural head around a character's mouth, in the character's model frame and units
+/// (the meshes shipped in `config/characters/`), its axes turned into glTF's for a Z-up
+/// model. `snout` 0 is a human face, 1 a long muzzle.
+pub fn character_head(
+    rig: &MouthRig,
+    model_up: ModelUp,
+    snout: f64,
+    resolution: usize,
+) -> Result<Mesh, BindError> {
+    if rig.points().len() != procedural::POINTS {
+        return Err(BindError::BadArgument(format!(
+            "the character has {} mouth points; a head needs the 12 points P1…P12",
+            rig.points().len()
+        )));
+    }
+    if !(0.0..=1.0).contains(&snout) || resolution == 0 {
+        return Err(BindError::BadArgument(format!(
+            "snout must be in 0…1 (got {snout}) and the resolution at least 1 (got {resolution})"
+        )));
+    }
+    let width = rig.mouth_width();
+    let points = std::array::from_fn(|k| rig.points()[k].rest.map(|c| c / width));
+    let head = procedural::HeadParams::around_points(points, snout, resolution).build();
+    let placement = file_placement(rig, model_up);
+    Ok(head.mesh.map_positions(|p| {
+        let q = placement * Point3::new(p[0] * width, p[1] * width, p[2] * width);
+        [q.x, q.y, q.z]
+    }))
+}
+
+/// The shipped network.
+pub fn shipped_network() -> Result<Network, BindError> {
+    Network::from_bytes(SHIPPED_NETWORK, Path::new("<shipped network>"))
+}

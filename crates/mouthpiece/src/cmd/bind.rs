@@ -1,0 +1,307 @@
+//! `mouthpiece bind`: a character's mesh bound to its mouth points (skin weights, skinned
+//! GLB); `bind head` makes a procedural head for a character, `bind train` trains the
+//! network, `bind evaluate` measures it against the baselines.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{anyhow, Context as _};
+use mouthpiece_bind::network::Widths;
+use mouthpiece_bind::training::{self, TrainOptions};
+use mouthpiece_bind::{BindError, Method, ModelUp, Network};
+use mouthpiece_export::MouthRig;
+
+use crate::exit::bad_input;
+
+#[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct Args {
+    #[command(subcommand)]
+    pub action: Option<Action>,
+    /// Character file (TOML): the mouth points the joints go to, and the mouth's placement.
+    #[arg(long, required = true)]
+    pub character: Option<PathBuf>,
+    /// The mesh (glTF or GLB) in the character's model frame and units.
+    #[arg(long, required = true)]
+    pub mesh: Option<PathBuf>,
+    /// Output: the skinned mesh as GLB.
+    #[arg(long, required = true)]
+    pub out: Option<PathBuf>,
+    /// How to compute the skin weights.
+    #[arg(long, value_enum, default_value = "network")]
+    pub method: MethodArg,
+    /// Network weights (from `bind train`); the shipped network by default.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Up axis of the character's model frame: `y` (glTF's) or `z` (Blender's; the mesh
+    /// file then holds it in glTF's axes, as Blender's glTF exporter writes it).
+    #[arg(long, value_enum, default_value = "y")]
+    pub model_up: UpArg,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum UpArg {
+    Y,
+    Z,
+}
+
+impl From<UpArg> for ModelUp {
+    fn from(up: UpArg) -> Self {
+        match up {
+            UpArg::Y => ModelUp::Y,
+            UpArg::Z => ModelUp::Z,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MethodArg {
+    /// The trained graph network.
+    Network,
+    /// Heat diffusion over the surface (Blender's "automatic weights").
+    Heat,
+    /// Softmax of the negative distance to each point.
+    Distance,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum Action {
+    /// Write a procedural head around a character's mouth (GLB, model frame and units).
+    Head(HeadArgs),
+    /// Train the network on procedural heads against their reference weights.
+    Train(TrainArgs),
+    /// Measure the network and the baselines on held-out heads (Markdown table on stdout).
+    Evaluate(EvaluateArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct HeadArgs {
+    #[arg(long)]
+    pub character: PathBuf,
+    /// 0: a human face around the mouth; 1: a long muzzle.
+    #[arg(long, default_value_t = 0.0)]
+    pub snout: f64,
+    /// Mesh density (12·R vertices around each ring).
+    #[arg(long, default_value_t = 4)]
+    pub resolution: usize,
+    /// Up axis of the character's model frame (`z`: the GLB is written in glTF's axes).
+    #[arg(long, value_enum, default_value = "y")]
+    pub model_up: UpArg,
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct TrainArgs {
+    /// Where to write the network's weights.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed for the training heads, the initial weights and the order: same seed, same
+    /// weights.
+    #[arg(long)]
+    pub seed: u64,
+    /// Procedural heads to train on.
+    #[arg(long, default_value_t = 16)]
+    pub heads: usize,
+    #[arg(long, default_value_t = 150)]
+    pub epochs: usize,
+    /// Adam's learning rate (halved for the last third of the epochs).
+    #[arg(long, default_value_t = 3e-3)]
+    pub rate: f32,
+    /// Layer widths: `paper` (first layer 64, concatenation 576), `small` (32, 160; the
+    /// shipped network), `tiny` (for tests).
+    #[arg(long, value_enum, default_value = "small")]
+    pub widths: WidthsArg,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum WidthsArg {
+    Paper,
+    Small,
+    Tiny,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct EvaluateArgs {
+    /// Network weights; the shipped network by default.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Held-out random heads (drawn from a seed the training never uses).
+    #[arg(long, default_value_t = 8)]
+    pub heads: usize,
+    /// Characters whose mouths are also held out (repeat); each with a --snout.
+    #[arg(long)]
+    pub character: Vec<PathBuf>,
+    /// Snout (0 human … 1 muzzle) of each --character's head, in order.
+    #[arg(long)]
+    pub snout: Vec<f64>,
+}
+
+/// Held-out random heads come from this seed stream; training seeds must differ.
+const HELD_OUT_SEED: u64 = 1_319_952;
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.action {
+        Some(Action::Head(a)) => head(a),
+        Some(Action::Train(a)) => train(a),
+        Some(Action::Evaluate(a)) => evaluate(a),
+        None => bind(args),
+    }
+}
+
+fn bind_error(err: BindError) -> anyhow::Error {
+    if err.is_bad_input() {
+        bad_input(err)
+    } else {
+        err.into()
+    }
+}
+
+fn load_network(model: Option<&Path>) -> anyhow::Result<Network> {
+    match model {
+        Some(path) => {
+            let bytes = std::fs::read(path)
+                .with_context(|| format!("reading the model {}", path.display()))
+                .map_err(bad_input)?;
+            Network::from_bytes(&bytes, path).map_err(bind_error)
+        }
+        None => mouthpiece_bind::shipped_network().map_err(anyhow::Error::from),
+    }
+}
+
+fn load_rig(path: &Path) -> anyhow::Result<MouthRig> {
+    MouthRig::load_character(path).map_err(|e| {
+        if e.is_bad_input() {
+            bad_input(e)
+        } else {
+            e.into()
+        }
+    })
+}
+
+fn bind(args: Args) -> anyhow::Result<()> {
+    let (Some(character), Some(mesh), Some(out)) = (args.character, args.mesh, args.out) else {
+        return Err(bad_input(anyhow!(
+            "bind needs --character, --mesh and --out"
+        )));
+    };
+    let rig = load_rig(&character)?;
+    let network = match args.method {
+        MethodArg::Network => Some(load_network(args.model.as_deref())?),
+        _ => None,
+    };
+    let method = match (&network, args.method) {
+        (Some(network), _) => Method::Network(network),
+        (None, MethodArg::Heat) => Method::Heat,
+        _ => Method::Distance,
+    };
+    let start = Instant::now();
+    let summary = mouthpiece_bind::bind(&rig, &mesh, &out, args.model_up.into(), method)
+        .map_err(bind_error)?;
+    eprintln!(
+        "wrote {}: {} vertices ({} after merging seams), {} triangles, {} follow the mouth; {:?} weights in {:.2} s",
+        out.display(),
+        summary.vertices,
+        summary.welded_vertices,
+        summary.triangles,
+        summary.moving_vertices,
+        args.method,
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn head(args: HeadArgs) -> anyhow::Result<()> {
+    let rig = load_rig(&args.character)?;
+    let mesh =
+        mouthpiece_bind::character_head(&rig, args.model_up.into(), args.snout, args.resolution)
+            .map_err(bind_error)?;
+    let name = rig.character().unwrap_or("head").to_owned();
+    mouthpiece_bind::gltf_io::write_plain_glb(&args.out, &mesh, &name).map_err(bind_error)?;
+    eprintln!(
+        "wrote {}: {} vertices, {} triangles",
+        args.out.display(),
+        mesh.len(),
+        mesh.triangles.len()
+    );
+    Ok(())
+}
+
+fn train(args: TrainArgs) -> anyhow::Result<()> {
+    if args.seed == HELD_OUT_SEED {
+        return Err(bad_input(anyhow!(
+            "seed {HELD_OUT_SEED} is the held-out heads' seed"
+        )));
+    }
+    if !(args.rate > 0.0 && args.rate.is_finite()) {
+        return Err(bad_input(anyhow!("--rate must be a positive number")));
+    }
+    let start = Instant::now();
+    let cases = training::random_cases("train", args.heads, args.seed);
+    let vertices: usize = cases.iter().map(|c| c.head.mesh.len()).sum();
+    eprintln!(
+        "{} training heads, {vertices} vertices, references in {:.1} s",
+        cases.len(),
+        start.elapsed().as_secs_f64()
+    );
+    let options = TrainOptions {
+        widths: match args.widths {
+            WidthsArg::Paper => Widths::PAPER,
+            WidthsArg::Small => Widths::SMALL,
+            WidthsArg::Tiny => Widths::TINY,
+        },
+        seed: args.seed,
+        epochs: args.epochs,
+        rate: args.rate,
+    };
+    let net = training::train(&cases, options, |epoch, loss| {
+        if epoch % 10 == 0 || epoch + 1 == args.epochs {
+            eprintln!(
+                "epoch {epoch}: mean KL {loss:.4} ({:.0} s)",
+                start.elapsed().as_secs_f64()
+            );
+        }
+    })
+    .map_err(bind_error)?;
+    net.save(&args.out).map_err(bind_error)?;
+    eprintln!(
+        "wrote {}: {} parameters, {:.0} s",
+        args.out.display(),
+        net.parameter_count(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
+    if args.character.len() != args.snout.len() {
+        return Err(bad_input(anyhow!(
+            "give one --snout per --character ({} characters, {} snouts)",
+            args.character.len(),
+            args.snout.len()
+        )));
+    }
+    let network = load_network(args.model.as_deref())?;
+    let mut characters = Vec::new();
+    for (path, &snout) in args.character.iter().zip(&args.snout) {
+        let rig = load_rig(path)?;
+        if rig.points().len() != 12 {
+            return Err(bad_input(anyhow!(
+                "{}: binding needs the 12 points P1…P12",
+                path.display()
+            )));
+        }
+        let w = rig.mouth_width();
+        let points = std::array::from_fn(|k| rig.points()[k].rest.map(|c| c / w));
+        characters.push((
+            rig.character().unwrap_or("character").to_owned(),
+            points,
+            snout,
+        ));
+    }
+    let mut cases = training::random_cases("held-out ", args.heads, HELD_OUT_SEED);
+    cases.extend(training::character_cases(&characters));
+    let rows = training::evaluate(&cases, &network);
+    print!("{}", training::table(&rows));
+    Ok(())
+}

@@ -1,0 +1,582 @@
+//! `mouthpiece bind` and `export --rig` end to end, judged by independent tools: Khronos'
+//! glTF-Validator (npm `gltf-validator`) and Blender importing the rigged, animated mesh
+//! headless (`tests/blender/skinned_vertex.py`).
+//!
+//! External tools come from `scripts/test` (Debian packages `nodejs`, `npm`, `blender`,
+//! `python3-numpy`; the npm package is installed here on first use if it is missing).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+use mouthpiece_export::onto_rig::parse_glb;
+use mouthpiece_export::{ModelUp, MouthRig};
+use serde_json::Value;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .unwrap()
+}
+
+fn mouthpiece(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run mouthpiece")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = mouthpiece(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "mouthpiece {args:?} failed: {stderr}");
+    stderr
+}
+
+fn character(name: &str) -> PathBuf {
+    repo().join(format!("config/characters/{name}.toml"))
+}
+
+fn shipped_head(name: &str) -> PathBuf {
+    repo().join(format!("config/characters/{name}-head.glb"))
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A tiny network trained here (the tests never use the long training).
+fn tiny_model() -> PathBuf {
+    static MODEL: OnceLock<PathBuf> = OnceLock::new();
+    MODEL
+        .get_or_init(|| {
+            let dir = tempfile::tempdir().unwrap().keep();
+            let path = dir.join("tiny.bin");
+            ok(&[
+                "bind",
+                "train",
+                "--widths",
+                "tiny",
+                "--heads",
+                "2",
+                "--epochs",
+                "3",
+                "--seed",
+                "11",
+                "--out",
+                s(&path),
+            ]);
+            path
+        })
+        .clone()
+}
+
+/// The Khronos validator, installed into tests/js/node_modules from the committed lock file.
+fn validator_script() -> PathBuf {
+    static READY: OnceLock<PathBuf> = OnceLock::new();
+    READY
+        .get_or_init(|| {
+            let js = repo().join("tests/js");
+            if !js.join("node_modules/gltf-validator/package.json").exists() {
+                let status = Command::new("npm")
+                    .args(["ci", "--silent", "--no-audit", "--no-fund"])
+                    .current_dir(&js)
+                    .status()
+                    .expect("npm (Debian package `npm`, installed by scripts/test)");
+                assert!(status.success(), "npm ci in tests/js failed");
+            }
+            js.join("validate-gltf.js")
+        })
+        .clone()
+}
+
+/// glTF-Validator's report must be clean: no errors, warnings, infos or hints.
+fn assert_valid(path: &Path) {
+    let out = Command::new("node")
+        .arg(validator_script())
+        .arg(path)
+        .output()
+        .expect("node (Debian package `nodejs`)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "validator failed: {stdout}");
+    let report: Value = serde_json::from_str(stdout.trim()).unwrap();
+    let issues = &report["issues"];
+    for kind in ["numErrors", "numWarnings", "numInfos", "numHints"] {
+        assert_eq!(
+            issues[kind],
+            0,
+            "{}: validator {kind}: {}",
+            path.display(),
+            serde_json::to_string_pretty(&issues["messages"]).unwrap()
+        );
+    }
+}
+
+/// A GLB's document and one accessor's components as f64.
+struct Glb {
+    doc: Value,
+    bin: Vec<u8>,
+}
+
+impl Glb {
+    fn read(path: &Path) -> Self {
+        let glb = parse_glb(&std::fs::read(path).unwrap()).unwrap();
+        Self {
+            doc: serde_json::from_slice(&glb.json).unwrap(),
+            bin: glb.bin,
+        }
+    }
+
+    fn accessor(&self, index: usize) -> Vec<Vec<f64>> {
+        let a = &self.doc["accessors"][index];
+        let view = &self.doc["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
+        let start = view["byteOffset"].as_u64().unwrap_or(0) as usize
+            + a["byteOffset"].as_u64().unwrap_or(0) as usize;
+        let n = match a["type"].as_str().unwrap() {
+            "SCALAR" => 1,
+            "VEC3" => 3,
+            "VEC4" => 4,
+            "MAT4" => 16,
+            t => panic!("type {t}"),
+        };
+        let (size, read): (usize, fn(&[u8]) -> f64) = match a["componentType"].as_u64().unwrap() {
+            5126 => (4, |b| f32::from_le_bytes(b.try_into().unwrap()) as f64),
+            5121 => (1, |b| b[0] as f64),
+            5125 => (4, |b| u32::from_le_bytes(b.try_into().unwrap()) as f64),
+            c => panic!("component type {c}"),
+        };
+        let count = a["count"].as_u64().unwrap() as usize;
+        (0..count)
+            .map(|e| {
+                (0..n)
+                    .map(|c| {
+                        let at = start + (e * n + c) * size;
+                        read(&self.bin[at..at + size])
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    fn attribute(&self, name: &str) -> Vec<Vec<f64>> {
+        let index = self.doc["meshes"][0]["primitives"][0]["attributes"][name]
+            .as_u64()
+            .unwrap_or_else(|| panic!("no {name}"));
+        self.accessor(index as usize)
+    }
+
+    fn joint_names(&self) -> Vec<String> {
+        self.doc["skins"][0]["joints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|j| {
+                self.doc["nodes"][j.as_u64().unwrap() as usize]["name"]
+                    .as_str()
+                    .unwrap()
+                    .to_owned()
+            })
+            .collect()
+    }
+}
+
+#[test]
+fn human_and_wolf_bind_with_every_method_into_valid_skinned_glbs() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = tiny_model();
+    for (name, up) in [("human", "y"), ("wolf", "z")] {
+        for method in ["network", "heat", "distance"] {
+            let out = dir.path().join(format!("{name}-{method}.glb"));
+            ok(&[
+                "bind",
+                "--character",
+                s(&character(name)),
+                "--mesh",
+                s(&shipped_head(name)),
+                "--out",
+                s(&out),
+                "--method",
+                method,
+                "--model",
+                s(&model),
+                "--model-up",
+                up,
+            ]);
+            let glb = Glb::read(&out);
+            let mut names = vec!["root".to_owned(), "mouth".to_owned()];
+            names.extend((1..=12).map(|k| format!("P{k}")));
+            assert_eq!(glb.joint_names(), names);
+            let weights = glb.attribute("WEIGHTS_0");
+            let joints = glb.attribute("JOINTS_0");
+            assert_eq!(weights.len(), glb.attribute("POSITION").len());
+            let mut moving = 0;
+            for (w, j) in weights.iter().zip(&joints) {
+                let sum: f64 = w.iter().sum();
+                assert!(
+                    (sum - 1.0).abs() <= 1e-6,
+                    "{name} {method}: row sums to {sum}"
+                );
+                assert!(w.iter().all(|&x| x >= 0.0));
+                assert!(w.iter().filter(|&&x| x > 0.0).count() <= 4);
+                if w.iter().zip(j).any(|(&x, &k)| x > 0.0 && k >= 2.0) {
+                    moving += 1;
+                }
+            }
+            assert!(
+                moving > 12,
+                "{name} {method}: only {moving} vertices follow the mouth"
+            );
+            // every joint's rest world transform times its inverse bind matrix is the identity
+            let ibm =
+                glb.accessor(glb.doc["skins"][0]["inverseBindMatrices"].as_u64().unwrap() as usize);
+            let rig = MouthRig::load_character(&character(name)).unwrap();
+            let up = if up == "z" { ModelUp::Z } else { ModelUp::Y };
+            let placement = mouthpiece_bind::file_placement(&rig, up).to_homogeneous();
+            for (k, m) in ibm.iter().enumerate() {
+                let world = match k {
+                    0 => nalgebra::Matrix4::identity(),
+                    1 => placement,
+                    _ => {
+                        let r = rig.points()[k - 2].rest;
+                        placement * nalgebra::Matrix4::new_translation(&r.into())
+                    }
+                };
+                let product = world * nalgebra::Matrix4::from_column_slice(m);
+                assert!(
+                    (product - nalgebra::Matrix4::identity()).abs().max() < 1e-5,
+                    "{name}: joint {k}: world · inverse bind = {product}"
+                );
+            }
+        }
+        assert_valid(&dir.path().join(format!("{name}-network.glb")));
+    }
+}
+
+/// Writes a GLB with the given positions and triangles (through `bind head`'s writer).
+fn write_mesh(path: &Path, positions: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) {
+    let mesh = mouthpiece_bind::Mesh {
+        positions,
+        triangles,
+    };
+    mouthpiece_bind::gltf_io::write_plain_glb(path, &mesh, "test").unwrap();
+}
+
+#[test]
+fn bad_meshes_exit_2_saying_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let human = character("human");
+    let bind = |mesh: &Path| {
+        let out = dir.path().join("out.glb");
+        let o = mouthpiece(&[
+            "bind",
+            "--character",
+            s(&human),
+            "--mesh",
+            s(mesh),
+            "--out",
+            s(&out),
+            "--method",
+            "distance",
+        ]);
+        assert!(!out.exists(), "an output was written for a bad mesh");
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    // no triangles
+    let empty = dir.path().join("empty.glb");
+    write_mesh(&empty, vec![[0.0; 3]; 3], vec![]);
+    let (code, err) = bind(&empty);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("no triangles"), "{err}");
+    // non-manifold: three triangles on one edge
+    let fan = dir.path().join("fan.glb");
+    write_mesh(
+        &fan,
+        vec![
+            [0.0; 3],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ],
+        vec![[0, 1, 2], [0, 1, 3], [0, 1, 4]],
+    );
+    let (code, err) = bind(&fan);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("non-manifold") && err.contains("vertices 0 and 1"),
+        "{err}"
+    );
+    // the wolf's head is nowhere near the human's mouth
+    let (code, err) = bind(&shipped_head("wolf"));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("mouth point P1") && err.contains("nearest vertex"),
+        "{err}"
+    );
+    // not glTF
+    let junk = dir.path().join("junk.glb");
+    std::fs::write(&junk, b"solid cube\n").unwrap();
+    let (code, err) = bind(&junk);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("not a glTF/GLB"), "{err}");
+    // huge (a sparse file: no disk used)
+    let huge = dir.path().join("huge.glb");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(mouthpiece_bind::gltf_io::MAX_FILE_BYTES + 1)
+        .unwrap();
+    let (code, err) = bind(&huge);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("more than the"), "{err}");
+}
+
+/// A take for `rig`: its points moving in the mouth frame, `frames` frames at 30 fps.
+fn write_take(path: &Path, rig: &MouthRig, frames: usize) -> Vec<(f64, Vec<[f64; 3]>)> {
+    let w = rig.mouth_width();
+    let mut text = String::new();
+    let mut take = Vec::new();
+    for seq in 0..frames {
+        let t = seq as f64 / 30.0;
+        let open = 0.5 - 0.5 * (2.0 * std::f64::consts::PI * 0.8 * t).cos();
+        let pts: Vec<[f64; 3]> = rig
+            .points()
+            .iter()
+            .enumerate()
+            .map(|(k, p)| {
+                let lower = k >= 7;
+                let r = p.rest;
+                [
+                    r[0] * (1.0 - 0.1 * open),
+                    r[1] - if lower {
+                        0.25 * w * open
+                    } else {
+                        -0.05 * w * open
+                    },
+                    r[2] + 0.03 * w * (3.0 * t + k as f64).sin(),
+                ]
+            })
+            .collect();
+        let field = |f: &dyn Fn(usize) -> String| -> String {
+            let entries: Vec<String> = (0..pts.len())
+                .map(|k| format!("\"{}\": {}", rig.points()[k].name, f(k)))
+                .collect();
+            format!("{{{}}}", entries.join(", "))
+        };
+        text.push_str(&format!(
+            "{{\"t\": {t:?}, \"seq\": {seq}, \"character\": \"{}\", \"points\": {}, \"confidence\": {}, \
+             \"head\": {{\"rotation\": [1.0, 0.0, 0.0, 0.0], \"translation\": [0.0, 0.0, 0.6]}}, \
+             \"head_lost\": false, \"curve\": null}}\n",
+            rig.character().unwrap(),
+            field(&|k| serde_json::json!(pts[k]).to_string()),
+            field(&|_| "1.0".to_owned()),
+        ));
+        take.push((t, pts));
+    }
+    std::fs::write(path, text).unwrap();
+    take
+}
+
+#[test]
+fn a_take_plays_on_the_bound_wolf_in_blender_where_mouthpiece_skins_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let wolf = character("wolf");
+    let rig = MouthRig::load_character(&wolf).unwrap();
+    let rigged = dir.path().join("wolf-rigged.glb");
+    ok(&[
+        "bind",
+        "--character",
+        s(&wolf),
+        "--mesh",
+        s(&shipped_head("wolf")),
+        "--out",
+        s(&rigged),
+        "--method",
+        "heat",
+        "--model-up",
+        "z",
+    ]);
+    let take_path = dir.path().join("take.jsonl");
+    let take = write_take(&take_path, &rig, 40);
+    let animated = dir.path().join("wolf-take.glb");
+    ok(&[
+        "export",
+        s(&take_path),
+        "--character",
+        s(&wolf),
+        "--rig",
+        s(&rigged),
+        "--out",
+        s(&animated),
+    ]);
+    assert_valid(&animated);
+
+    // Lip vertices: the most mixed ones (largest second weight) among those on the mouth.
+    let glb = Glb::read(&animated);
+    let positions = glb.attribute("POSITION");
+    let weights = glb.attribute("WEIGHTS_0");
+    let joints = glb.attribute("JOINTS_0");
+    let mut order: Vec<usize> = (0..positions.len()).collect();
+    order.sort_by(|&a, &b| weights[b][1].total_cmp(&weights[a][1]));
+    let probes: Vec<usize> = order.into_iter().take(3).collect();
+    let (t, points) = &take[27];
+    let rotation = mouthpiece_bind::file_placement(&rig, ModelUp::Z).rotation;
+    let expected: Vec<[f64; 3]> = probes
+        .iter()
+        .map(|&v| {
+            let mut d = nalgebra::Vector3::zeros();
+            for slot in 0..4 {
+                let j = joints[v][slot] as usize;
+                if j >= 2 {
+                    let k = j - 2;
+                    let now = nalgebra::Vector3::from(points[k]);
+                    let rest = nalgebra::Vector3::from(rig.points()[k].rest);
+                    d += weights[v][slot] * (now - rest);
+                }
+            }
+            let moved = nalgebra::Vector3::new(positions[v][0], positions[v][1], positions[v][2])
+                + rotation * d;
+            [moved.x, moved.y, moved.z]
+        })
+        .collect();
+    for (&v, e) in probes.iter().zip(&expected) {
+        let rest = nalgebra::Vector3::new(positions[v][0], positions[v][1], positions[v][2]);
+        assert!(
+            (nalgebra::Vector3::from(*e) - rest).norm() > 0.01 * rig.mouth_width(),
+            "probe vertex {v} hardly moves: the test would prove nothing"
+        );
+    }
+
+    let script = repo().join("tests/blender/skinned_vertex.py");
+    let mut cmd = Command::new("blender");
+    cmd.args([
+        "-b",
+        "--factory-startup",
+        "--python-exit-code",
+        "1",
+        "--python",
+    ])
+    .arg(script)
+    .arg("--")
+    .arg(&animated)
+    .arg(format!("{t:?}"));
+    for &v in &probes {
+        cmd.arg(format!(
+            "{},{},{}",
+            positions[v][0], positions[v][1], positions[v][2]
+        ));
+    }
+    let out = cmd
+        .output()
+        .expect("blender (Debian package `blender`, installed by scripts/test)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "blender failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let line = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("SKINNED "))
+        .unwrap_or_else(|| panic!("no SKINNED line from Blender:\n{stdout}"));
+    let report: Value = serde_json::from_str(line).unwrap();
+    let tolerance = 1e-4 * rig.mouth_width();
+    for (i, e) in expected.iter().enumerate() {
+        let got = &report["vertices"][i];
+        assert!(
+            got["rest_distance"].as_f64().unwrap() < 1e-6,
+            "Blender's nearest vertex is not the probe: {got}"
+        );
+        let at: Vec<f64> = got["at"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_f64().unwrap())
+            .collect();
+        let err = ((at[0] - e[0]).powi(2) + (at[1] - e[1]).powi(2) + (at[2] - e[2]).powi(2)).sqrt();
+        assert!(
+            err <= tolerance,
+            "vertex {}: Blender {at:?}, mouthpiece {e:?}: {err} apart (tolerance {tolerance})",
+            probes[i]
+        );
+    }
+}
+
+#[test]
+fn export_rig_refuses_a_mesh_that_is_not_a_rig() {
+    let dir = tempfile::tempdir().unwrap();
+    let wolf = character("wolf");
+    let rig = MouthRig::load_character(&wolf).unwrap();
+    let take_path = dir.path().join("take.jsonl");
+    write_take(&take_path, &rig, 3);
+    let out = dir.path().join("x.glb");
+    let o = mouthpiece(&[
+        "export",
+        s(&take_path),
+        "--character",
+        s(&wolf),
+        "--rig",
+        s(&shipped_head("wolf")),
+        "--out",
+        s(&out),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("no skin"), "{err}");
+}
+
+#[test]
+fn head_writes_a_valid_mesh_and_evaluate_prints_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = dir.path().join("head.glb");
+    ok(&[
+        "bind",
+        "head",
+        "--character",
+        s(&character("human")),
+        "--resolution",
+        "1",
+        "--out",
+        s(&head),
+    ]);
+    assert_valid(&head);
+    let out = mouthpiece(&[
+        "bind",
+        "evaluate",
+        "--heads",
+        "1",
+        "--model",
+        s(&tiny_model()),
+        "--character",
+        s(&character("wolf")),
+        "--snout",
+        "1",
+    ]);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for method in ["network", "heat", "distance", "reference"] {
+        assert!(
+            table.contains(&format!("| **mean** | **{method}** |")),
+            "{table}"
+        );
+        assert!(table.contains(&format!("| wolf | {method} |")), "{table}");
+    }
+    // the held-out heads' seed is not a training seed
+    let o = mouthpiece(&[
+        "bind",
+        "train",
+        "--seed",
+        "1319952",
+        "--out",
+        s(&dir.path().join("x.bin")),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+}
