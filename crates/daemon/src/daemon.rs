@@ -293,14 +293,7 @@ fn reload<F: Factory>(
     factory: &F,
     options: &RunOptions,
     current: &Config,
-) -> Result<
-    (
-        Config,
-        <F::Processor as Processor>::Reload,
-        ServerConfig,
-    ),
-    CheckError,
-> {
+) -> Result<(Config, <F::Processor as Processor>::Reload, ServerConfig), CheckError> {
     let mut config = match &options.config_path {
         Some(path) => Config::load(path)?,
         None => Config::embedded(),

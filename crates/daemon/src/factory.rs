@@ -17,10 +17,8 @@ pub trait Factory: Send + Sync + 'static {
     /// The processor for `config`.
     fn processor(&self, config: &Config) -> Result<Self::Processor, CheckError>;
     /// A validated reload for a running processor (characters, colour ranges, settings).
-    fn reload(
-        &self,
-        config: &Config,
-    ) -> Result<<Self::Processor as Processor>::Reload, CheckError>;
+    fn reload(&self, config: &Config)
+        -> Result<<Self::Processor as Processor>::Reload, CheckError>;
     /// Opens the configured source (called again after every loss); a live source that
     /// delivers nothing for `stall_timeout` is reported lost.
     fn opener(&self, spec: &str, stall_timeout: Duration) -> Opener;

@@ -33,7 +33,10 @@ pub fn setup(config: &Config) -> Result<Setup, CheckError> {
         message,
     };
     for (section, result) in [
-        ("detect", pipeline.detect.validate().map_err(TrackError::from)),
+        (
+            "detect",
+            pipeline.detect.validate().map_err(TrackError::from),
+        ),
         ("track", pipeline.track.validate()),
         ("retarget", pipeline.retarget.validate()),
     ] {
@@ -274,18 +277,14 @@ impl Processor for LiveProcessor {
     }
 
     fn reload(&mut self, setup: Setup) -> Result<(), String> {
-        if setup.config.detect != self.config.detect || setup.config.track != self.config.track
-        {
+        if setup.config.detect != self.config.detect || setup.config.track != self.config.track {
             // New colour ranges or tracking settings: a new pipeline, which calibrates afresh.
             self.pipeline = Pipeline::for_characters(setup.config.clone(), setup.characters)
                 .map_err(|e| crate::source::error_chain(&e))?;
             self.dot_names = TrackedFrame::names(self.pipeline.tracker().layout());
         } else {
             self.pipeline
-                .set_characters(
-                    setup.characters,
-                    setup.config.retarget.character_settings(),
-                )
+                .set_characters(setup.characters, setup.config.retarget.character_settings())
                 .map_err(|e| crate::source::error_chain(&e))?;
         }
         self.config = setup.config;

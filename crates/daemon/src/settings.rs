@@ -52,4 +52,3 @@ pub fn timecode_rate(config: &Config) -> Result<TimecodeRate, CheckError> {
             message: e.to_string(),
         })
 }
-

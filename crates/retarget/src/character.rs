@@ -314,7 +314,7 @@ impl RawCharacter {
                                 .iter()
                                 .zip(&spans)
                                 .find(|(n, _)| point_number(n, names.len()).is_none())
-                                .or_else(|| names.iter().zip(&spans).last())
+                                .or_else(|| names.iter().zip(&spans).next_back())
                                 .expect("at least 4 points");
                             return Err(c.err(
                                 format!("points.{}", odd.0),
@@ -644,10 +644,7 @@ P4 = [10.0, 4.5, 2.0]
     fn points_are_ordered_by_name_not_by_the_files_order() {
         let human = include_str!("../../../config/characters/human.toml");
         let (head, table) = human.split_once("[points]").unwrap();
-        let mut lines: Vec<&str> = table
-            .lines()
-            .filter(|l| l.starts_with('P'))
-            .collect();
+        let mut lines: Vec<&str> = table.lines().filter(|l| l.starts_with('P')).collect();
         lines.sort_unstable(); // P1, P10, P11, P12, P2, ...
         assert!(lines[1].starts_with("P10"));
         let sorted = format!("{head}[points]\n{}\n", lines.join("\n"));
@@ -672,12 +669,16 @@ P4 = [10.0, 4.5, 2.0]
         let src = "name = \"o\"\n[points]\nleft = [1, 0, 0]\ntop = [0, 1, 0]\nright = [-1, 0, 0]\nbottom = [0, -1, 0]\n";
         let (key, line, reason) = invalid(src);
         assert_eq!((key.as_str(), line), ("points.left", Some(3)));
-        assert!(reason.contains("[map]") && reason.contains("P1..P4"), "{reason}");
+        assert!(
+            reason.contains("[map]") && reason.contains("P1..P4"),
+            "{reason}"
+        );
         // P0 or P5 of four points, or a name twice over in another spelling, do not say it
         // either.
         let (key, _, _) = invalid("name = \"o\"\n[points]\nP1 = [1, 0, 0]\nP2 = [0, 1, 0]\nP3 = [-1, 0, 0]\nP5 = [0, -1, 0]\n");
         assert_eq!(key, "points.P5");
-        let mapped = format!("{src}[map]\nD1 = \"left\"\nD2 = \"top\"\nD3 = \"right\"\nD4 = \"bottom\"\n");
+        let mapped =
+            format!("{src}[map]\nD1 = \"left\"\nD2 = \"top\"\nD3 = \"right\"\nD4 = \"bottom\"\n");
         let c = Character::from_toml_str(&mapped).unwrap();
         assert_eq!(c.driver, [0, 1, 2, 3]);
         assert_relative_eq!(c.neutral[0], Vec3::new(1.0, 0.0, 0.0));

@@ -57,10 +57,7 @@ impl SessionClock {
             let t = last_t + step;
             self.origin = Some((device_ts_us, t));
             self.last = Some((device_ts_us, t));
-            return Tick {
-                t,
-                restarted: true,
-            };
+            return Tick { t, restarted: true };
         }
         let t = origin_t + (device_ts_us - origin_us) as f64 * 1e-6;
         if t > last_t {

@@ -1838,8 +1838,7 @@ impl Tracker {
         };
         // Keep just over the calibration span.
         while self.window.len() > 2
-            && span(&self.window) - (self.window[1].0 - self.window[0].0)
-                >= self.calibration_s
+            && span(&self.window) - (self.window[1].0 - self.window[0].0) >= self.calibration_s
         {
             self.window.pop_front();
             self.window_crops.pop_front();

@@ -538,7 +538,10 @@ mod tests {
         );
         assert_eq!(settings.one_euro.unwrap().min_cutoff, 1.0);
         assert_eq!(
-            PipelineConfig::default().retarget.character_settings().smoothing,
+            PipelineConfig::default()
+                .retarget
+                .character_settings()
+                .smoothing,
             ShapeSmoothing::BSpline {
                 samples_per_span: 8
             }

@@ -595,7 +595,10 @@ fn the_example_config_lists_the_defaults() {
     let config = crate::pipeline::PipelineConfig::from_toml_str(text).unwrap();
     assert_eq!(config.detect, DetectConfig::default());
     assert_eq!(config.track, TrackConfig::default());
-    assert_eq!(config.retarget, crate::pipeline::RetargetSettings::default());
+    assert_eq!(
+        config.retarget,
+        crate::pipeline::RetargetSettings::default()
+    );
 }
 
 /// A source that restarts (a replay reopened from its start: the device clock goes back) is
@@ -613,14 +616,17 @@ fn a_restarted_source_is_tracked_on_with_the_same_neutral_pose() {
         let out = tr.process(&render(seq, &still, &[])).unwrap();
         assert!(out.t > last_t, "session time {} after {last_t}", out.t);
         assert!(!out.status.calibrating, "frame {seq}: recalibrating");
-        if tracked_at.is_none() && out.stabilised.is_some() && out.status.dots_missing.is_empty()
-        {
+        if tracked_at.is_none() && out.stabilised.is_some() && out.status.dots_missing.is_empty() {
             tracked_at = Some(seq);
         }
     }
     let at = tracked_at.expect("tracked again");
     assert!(at < 30, "tracked again after {at} frames");
-    assert_eq!(tr.neutral().unwrap().mouth_width(), width, "neutral pose kept");
+    assert_eq!(
+        tr.neutral().unwrap().mouth_width(),
+        width,
+        "neutral pose kept"
+    );
 }
 
 /// After a restart with another performer in view (forehead dots elsewhere on the forehead),

@@ -160,7 +160,10 @@ fn gt_dots(gt: &GroundTruth, layout: PerformerLayout) -> PerformerDots {
 
 /// The synthetic performer must wear the dots the configuration's `[track]` expects (a bad
 /// input, exit code 2).
-fn check_layout(layout: &mouthpiece_synth::DotLayout, config: &PipelineConfig) -> anyhow::Result<()> {
+fn check_layout(
+    layout: &mouthpiece_synth::DotLayout,
+    config: &PipelineConfig,
+) -> anyhow::Result<()> {
     let (lip, forehead) = (config.track.lip_dots, config.track.forehead_dots);
     if layout.lip_dots != lip || layout.forehead.len() != forehead {
         return Err(bad_input(anyhow::anyhow!(
