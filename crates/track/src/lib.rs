@@ -769,6 +769,24 @@ impl Tracker {
 
         let n = self.layout.lip_dots;
         let mut names = self.name_candidates(cands, &k, &found.blobs);
+        // After a restart, on the first full naming and before the forehead surface fit
+        // (which places the forehead dots on the neutral triangle): the same performer?
+        if self.check_performer && self.tracks.is_none() && names.iter().all(Option::is_some) {
+            self.check_performer = false;
+            let now: Small<Vec3> = names[n..]
+                .iter()
+                .map(|c| cands[c.expect("all named")].point)
+                .collect();
+            let same = self
+                .neutral()
+                .is_none_or(|neutral| same_performer(&neutral.forehead_camera, &now));
+            if !same {
+                tracing::info!(
+                    "the forehead dots are not where the neutral pose had them: another performer; recalibrating"
+                );
+                self.calibrate();
+            }
+        }
         let view = DepthView {
             depth,
             scale,
@@ -1748,17 +1766,6 @@ impl Tracker {
                     .collect(),
             );
             tracing::info!("all dots named from geometry; tracking");
-            if std::mem::take(&mut self.check_performer) {
-                let same = self.neutral().is_none_or(|neutral| {
-                    same_performer(&neutral.forehead_camera, &self.reference_forehead)
-                });
-                if !same {
-                    tracing::info!(
-                        "the forehead dots are not where the neutral pose had them: another performer; recalibrating"
-                    );
-                    self.calibrate();
-                }
-            }
             return;
         }
         if self.frames_without_names > self.config.lost_after_frames {
