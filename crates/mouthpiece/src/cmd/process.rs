@@ -13,8 +13,10 @@ use std::time::Instant;
 use anyhow::Context as _;
 use mouthpiece_frame::{Frame, FrameSource};
 use mouthpiece_recording::SessionReader;
-use mouthpiece_retarget::Character;
-use mouthpiece_track::pipeline::{Pipeline, PipelineConfig, Smooth as ConfigSmooth};
+use mouthpiece_retarget::{Character, ShapeSmoothing};
+use mouthpiece_track::pipeline::{
+    Pipeline, PipelineConfig, RetargetSettings, Smooth as ConfigSmooth,
+};
 
 use crate::cmd::retarget::Smooth;
 use crate::exit::bad_input;
@@ -62,6 +64,16 @@ pub fn load_character(path: &Path) -> anyhow::Result<Character> {
     Character::from_toml_str(&text)
         .with_context(|| format!("character file {}", path.display()))
         .map_err(bad_input)
+}
+
+/// The shape smoothing `--smooth` names, with the configuration's default parameters
+/// (`[retarget]`: moving averages over 1 neighbour, alpha 0.5, 8 B-spline samples a span).
+pub(crate) fn smoothing(smooth: Smooth) -> ShapeSmoothing {
+    RetargetSettings {
+        smooth: config_smooth(smooth),
+        ..RetargetSettings::default()
+    }
+    .smoothing()
 }
 
 /// The configuration's `smooth` value for the command line's `--smooth`.
