@@ -21,7 +21,7 @@ use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use crate::metrics::Metrics;
 use crate::timecode::{Timecode, TimecodeRate};
 
-/// Head pose of one frame (method §10): current = R · neutral + t, camera frame.
+/// Head pose of one frame (docs/method.md §10): current = R · neutral + t, camera frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HeadPose {
     /// Unit quaternion `[w, x, y, z]`.
@@ -51,7 +51,7 @@ pub struct CharacterFrame {
     pub points: Vec<[f32; 3]>,
     /// Per point, 0 (missing, last value held) ..= 1.
     pub confidence: Vec<f32>,
-    /// The smoothed closed curve through the points (method §8), if the daemon computes it.
+    /// The smoothed closed curve through the points (docs/method.md §8), if the daemon computes it.
     pub curve: Option<Vec<[f32; 3]>>,
 }
 

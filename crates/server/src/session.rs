@@ -640,6 +640,13 @@ fn control(
             .is_ok();
     }
     info!(?command, "control request");
+    // A calibration is answered once the neutral pose is taken: wait its duration longer.
+    let longer = match &command {
+        ControlCommand::Calibrate {
+            duration: Some(duration),
+        } => *duration,
+        _ => Duration::ZERO,
+    };
     let pending = match shared.hub.request_control(command, peer.to_string()) {
         Ok(rx) => rx,
         Err(ControlQueueError::Full) => {
@@ -660,7 +667,7 @@ fn control(
         }
     };
     let out = out.clone();
-    let wait = shared.config.limits.control_timeout;
+    let wait = shared.config.limits.control_timeout + longer;
     tokio::spawn(async move {
         let answer = match tokio::time::timeout(wait, pending).await {
             Ok(Ok(Ok(detail))) => protocol::to_json(&ServerMessage::Result(ResultMessage {
