@@ -3,6 +3,8 @@
 //! # Layout
 //! - [`source`]: the source thread: opens the source, feeds the [`slot`], reopens a lost
 //!   source with [`backoff`];
+//! - [`console`]: what the booth console page needs: the preview's image and dots, health
+//!   figures, the calibration report;
 //! - [`live`]: the processor: detect + track (3D dots, names, head pose, neutral
 //!   calibration) + retarget for every configured character;
 //! - [`slot`]: the latest-frame slot between the source thread and processing (newest wins);
@@ -17,6 +19,7 @@ pub mod backoff;
 pub mod capture;
 pub mod characters;
 pub mod check;
+pub mod console;
 pub mod daemon;
 pub mod live;
 pub mod logging;

@@ -106,6 +106,7 @@ async fn server_messages_match_the_published_schemas() {
             slate: "scene 4".into(),
             take: 2,
             file: Some("takes/scene 4_2.mcap".into()),
+            started_wall_us: Some(1_763_781_131_123_456),
         });
     });
     server
