@@ -325,6 +325,13 @@ impl Processor for LiveProcessor {
                 .collect(),
             frame_rate,
             source: source.to_owned(),
+            mouth_frame: self.tracker.neutral().map(|n| {
+                let rotation = nalgebra::UnitQuaternion::from_matrix(&n.frame.axes);
+                mouthpiece_server::FramePose {
+                    rotation: [rotation.w, rotation.i, rotation.j, rotation.k],
+                    translation: [n.frame.origin.x, n.frame.origin.y, n.frame.origin.z],
+                }
+            }),
         }
     }
 

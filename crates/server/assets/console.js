@@ -21,6 +21,8 @@
     lagged: 0,
     fps: 0,
     latencyMs: null,
+    // The last capture-to-page latencies, ms (for measurements: bench/console_latency.py).
+    latencyLog: [],
     errors: [],
     access: null,
     preview: { images: 0, overlay: null, width: 0, height: 0, toCanvas: null, drawnAt: null },
@@ -166,7 +168,10 @@
     while (arrivals.length && now - arrivals[0] > 1000) arrivals.shift();
     state.fps = arrivals.length;
     if (frame.wall_us) {
-      latencies.push([now, Date.now() - frame.wall_us / 1000]);
+      const latency = Date.now() - frame.wall_us / 1000;
+      state.latencyLog.push(latency);
+      if (state.latencyLog.length > 3000) state.latencyLog.shift();
+      latencies.push([now, latency]);
       while (latencies.length && now - latencies[0][0] > 1000) latencies.shift();
       const sorted = latencies.map((l) => l[1]).sort((a, b) => a - b);
       state.latencyMs = sorted[Math.floor(sorted.length / 2)];
@@ -222,18 +227,21 @@
     const r = 4 * dpr;
     cctx.font = `${Math.round(11 * dpr)}px system-ui, sans-serif`;
     cctx.textBaseline = "middle";
+    // Labels first, then the dots over them: a dot is never hidden by a neighbour's label.
     for (const d of overlay.dots) {
       const [x, y] = toCanvas(d.x, d.y);
-      const colour = DOT_COLOURS[d.state] || "#ffffff";
+      cctx.fillStyle = DOT_COLOURS[d.state] || "#ffffff";
+      cctx.fillText(d.name, x + r + 3 * dpr, y - r - 2 * dpr);
+    }
+    for (const d of overlay.dots) {
+      const [x, y] = toCanvas(d.x, d.y);
       cctx.beginPath();
       cctx.arc(x, y, r, 0, 2 * Math.PI);
-      cctx.fillStyle = colour;
+      cctx.fillStyle = DOT_COLOURS[d.state] || "#ffffff";
       cctx.fill();
       cctx.lineWidth = 1 * dpr;
       cctx.strokeStyle = "#000";
       cctx.stroke();
-      cctx.fillStyle = colour;
-      cctx.fillText(d.name, x + r + 3 * dpr, y - r - 2 * dpr);
     }
     state.preview.overlay = overlay;
     state.preview.width = overlay.width;

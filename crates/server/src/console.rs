@@ -57,6 +57,15 @@ pub struct TakeSummary {
     pub error: Option<String>,
 }
 
+/// A frame's pose in its parent frame: `parent = R · child + t`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FramePose {
+    /// Unit quaternion `[w, x, y, z]`.
+    pub rotation: [f64; 4],
+    /// Translation, metres.
+    pub translation: [f64; 3],
+}
+
 /// The `health` message.
 #[derive(Debug, Serialize)]
 pub(crate) struct HealthMessage<'a> {

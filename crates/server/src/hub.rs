@@ -193,6 +193,10 @@ pub struct StreamInfo {
     pub frame_rate: f64,
     /// Where frames come from (free text: `replay recordings/demo.mcap`, `openni2 ...`).
     pub source: String,
+    /// The performer's neutral mouth frame in the neutral head's (camera) coordinates, once
+    /// calibrated: where `performer` points and the head pose meet.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mouth_frame: Option<crate::console::FramePose>,
 }
 
 /// The take being recorded.

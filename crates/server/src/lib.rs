@@ -68,6 +68,7 @@ pub mod config;
 pub mod console;
 mod error;
 mod foxglove;
+pub mod foxglove_scene;
 pub mod http;
 pub mod hub;
 pub mod loadgen;
@@ -80,7 +81,7 @@ pub mod timecode;
 mod tls;
 
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
-pub use console::{CalibrationReport, Health, TakeSummary};
+pub use console::{CalibrationReport, FramePose, Health, TakeSummary};
 pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
 pub use error::ServerError;
 pub use foxglove::{FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL, PERFORMER_CHANNEL};
