@@ -304,7 +304,11 @@ mod tests {
     fn overlay_states_and_search_region() {
         let names: Vec<String> = ["D1", "D2", "F1"].iter().map(|s| s.to_string()).collect();
         let mut places = DotPlaces::default();
-        places.update(&[Some([100.0, 100.0]), Some([120.0, 100.0]), Some([110.0, 50.0])]);
+        places.update(&[
+            Some([100.0, 100.0]),
+            Some([120.0, 100.0]),
+            Some([110.0, 50.0]),
+        ]);
         let o = places.overlay(&names, |_| None, 20.0, [640, 480]);
         assert!(o.dots.iter().all(|d| d.state == DotState::Tracked));
         assert!(o.search.is_none(), "all found: no search region");

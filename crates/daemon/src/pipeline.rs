@@ -395,7 +395,11 @@ fn announce_take_end(hub: &Hub, ended: &TakeEnded) {
         take: ended.info.take,
         file: ended.info.path.display().to_string(),
         frames: ended.frames,
-        seconds: ended.info.started.elapsed().map_or(0.0, |d| d.as_secs_f64()),
+        seconds: ended
+            .info
+            .started
+            .elapsed()
+            .map_or(0.0, |d| d.as_secs_f64()),
         error: ended.error.clone(),
     });
     let message = ended.error.as_ref().map(|e| format!("take stopped: {e}"));

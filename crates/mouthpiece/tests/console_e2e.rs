@@ -189,16 +189,27 @@ fn the_console_shows_the_camera_with_dots_calibrates_records_and_recovers() {
         v["health"] == true && v["access"] == "control"
     });
     let tiles = s["tiles"].as_str().unwrap();
-    for what in ["source", "dots found", "frame rate", "latency", "clients", "free disk"] {
+    for what in [
+        "source",
+        "dots found",
+        "frame rate",
+        "latency",
+        "clients",
+        "free disk",
+    ] {
         assert!(tiles.contains(what), "status shows {what}: {tiles}");
     }
     assert_eq!(s["controls_hidden"], false, "{s}");
 
     // Calibrate from the page: the result is shown.
     driver.script("document.getElementById('calibrate').click(); return null;");
-    let s = wait_until(&driver, "calibration result", Duration::from_secs(30), STATE, |v| {
-        v["calibration"] == "done"
-    });
+    let s = wait_until(
+        &driver,
+        "calibration result",
+        Duration::from_secs(30),
+        STATE,
+        |v| v["calibration"] == "done",
+    );
     let said = s["said"].as_str().unwrap();
     assert!(
         said.contains("mouth width") && said.contains("lip wobble"),
@@ -215,9 +226,13 @@ fn the_console_shows_the_camera_with_dots_calibrates_records_and_recovers() {
     });
     std::thread::sleep(Duration::from_millis(1500));
     driver.script("document.dispatchEvent(new KeyboardEvent('keydown', {key: 'r'})); return null;");
-    let s = wait_until(&driver, "take listed", Duration::from_secs(10), STATE, |v| {
-        v["recording"] == false && v["takes"].as_array().is_some_and(|t| !t.is_empty())
-    });
+    let s = wait_until(
+        &driver,
+        "take listed",
+        Duration::from_secs(10),
+        STATE,
+        |v| v["recording"] == false && v["takes"].as_array().is_some_and(|t| !t.is_empty()),
+    );
     assert_eq!(s["errors"], 0, "{s}");
     let take = &s["takes"][0];
     assert_eq!(take[0], "booth", "{s}");
@@ -242,21 +257,33 @@ fn the_console_shows_the_camera_with_dots_calibrates_records_and_recovers() {
         &format!("http://127.0.0.1:{port}/?token={READ}"),
         profile_ro.path(),
     );
-    let ro = wait_until(&reader_page, "read-only page", Duration::from_secs(20), STATE, |v| {
-        v["access"] == "read" && v["images"].as_u64().unwrap_or(0) >= 1
-    });
+    let ro = wait_until(
+        &reader_page,
+        "read-only page",
+        Duration::from_secs(20),
+        STATE,
+        |v| v["access"] == "read" && v["images"].as_u64().unwrap_or(0) >= 1,
+    );
     assert_eq!(ro["controls_hidden"], true, "{ro}");
     assert_eq!(ro["readonly_hidden"], false, "{ro}");
     drop(reader_page);
 
     // The daemon restarts: the page reconnects and the image flows again.
     daemon.stop();
-    wait_until(&driver, "disconnected", Duration::from_secs(10), STATE, |v| {
-        v["connected"] == false
-    });
+    wait_until(
+        &driver,
+        "disconnected",
+        Duration::from_secs(10),
+        STATE,
+        |v| v["connected"] == false,
+    );
     let before = driver.script(STATE)["images"].as_u64().unwrap();
     let _daemon = Daemon::start(dir.path(), port);
-    wait_until(&driver, "reconnected", Duration::from_secs(30), STATE, |v| {
-        v["connected"] == true && v["images"].as_u64().unwrap_or(0) > before + 2
-    });
+    wait_until(
+        &driver,
+        "reconnected",
+        Duration::from_secs(30),
+        STATE,
+        |v| v["connected"] == true && v["images"].as_u64().unwrap_or(0) > before + 2,
+    );
 }

@@ -149,9 +149,7 @@ fn spheres_and_loop(
     scale: f64,
     line: Value,
 ) -> (Vec<Value>, Value) {
-    let p3 = |p: &[f32; 3]| {
-        json!({"x": f64::from(p[0]) * scale, "y": f64::from(p[1]) * scale, "z": f64::from(p[2]) * scale})
-    };
+    let p3 = |p: &[f32; 3]| json!({"x": f64::from(p[0]) * scale, "y": f64::from(p[1]) * scale, "z": f64::from(p[2]) * scale});
     let spheres = points
         .iter()
         .enumerate()
@@ -490,7 +488,10 @@ mod tests {
         let a = image_annotations(&preview(), 1_500_000_001);
         assert_eq!(a["circles"][0]["position"], json!({"x": 50.0, "y": 30.0}));
         assert_eq!(a["texts"][0]["text"], "D3");
-        assert_eq!(a["circles"][0]["timestamp"], json!({"sec": 1, "nsec": 500_000_001}));
+        assert_eq!(
+            a["circles"][0]["timestamp"],
+            json!({"sec": 1, "nsec": 500_000_001})
+        );
         assert_eq!(a["points"][0]["points"][2], json!({"x": 90.0, "y": 45.0}));
         let image = compressed_image(&preview(), 0);
         assert_eq!(image["data"], "/9j/2Q==");

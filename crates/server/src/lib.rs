@@ -82,7 +82,6 @@ mod tls;
 
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
 pub use console::{CalibrationReport, FramePose, Health, TakeSummary};
-pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
 pub use error::ServerError;
 pub use foxglove::{FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL, PERFORMER_CHANNEL};
 pub use hub::{
@@ -90,5 +89,6 @@ pub use hub::{
     ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,
     StreamFrame, StreamInfo,
 };
+pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
 pub use server::run;
 pub use timecode::{Timecode, TimecodeRate};

@@ -480,9 +480,7 @@ fn encoder_loop(shared: Weak<PreviewShared>) {
         let started = Instant::now();
         match encode(&input, request.max_width, PREVIEW_JPEG_QUALITY) {
             Ok(encoded) => {
-                strong
-                    .encode_time
-                    .observe(started.elapsed().as_secs_f64());
+                strong.encode_time.observe(started.elapsed().as_secs_f64());
                 strong.counters.encoded.fetch_add(1, Ordering::Relaxed);
                 strong
                     .counters
@@ -585,7 +583,10 @@ pub(crate) fn render_metrics(shared: &PreviewShared, out: &mut String) {
             "gauge",
         ),
     ] {
-        let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}\n{name} {value}");
+        let _ = writeln!(
+            out,
+            "# HELP {name} {help}\n# TYPE {name} {kind}\n{name} {value}"
+        );
     }
     shared.encode_time.render(
         out,
@@ -861,7 +862,9 @@ mod tests {
             &hub.inner.preview,
             PreviewRequest::new(Some(10.0), None).unwrap(),
         );
-        let due = (0..60).filter(|i| hub.preview_due(f64::from(*i) / 60.0)).count();
+        let due = (0..60)
+            .filter(|i| hub.preview_due(f64::from(*i) / 60.0))
+            .count();
         assert_eq!(due, 10, "one second at 60 fps, 10 images asked for");
         let mut gate = RateGate::new(5.0);
         let sent = (0..60).filter(|i| gate.admit(f64::from(*i) / 60.0)).count();

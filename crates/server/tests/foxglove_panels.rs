@@ -180,7 +180,8 @@ async fn foxglove_studio_panels_get_image_annotations_scene_and_transforms() {
         .iter()
         .map(|p| p["pose"]["position"]["x"].as_f64().unwrap())
         .collect();
-    let width = xs.iter().cloned().fold(f64::MIN, f64::max) - xs.iter().cloned().fold(f64::MAX, f64::min);
+    let width =
+        xs.iter().cloned().fold(f64::MIN, f64::max) - xs.iter().cloned().fold(f64::MAX, f64::min);
     assert!((width - 0.09).abs() < 0.01, "wolf width {width} m");
 
     // The transform tree camera -> head -> mouth -> characters.

@@ -143,9 +143,12 @@ async fn server_messages_match_the_published_schemas() {
 
     // The console's messages: health, the calibration and take list in status, a preview
     // image (its overlay JSON is checked like a message).
-    let mut console = connect(&server.url(), &["mouthpiece.v1", "mouthpiece.token.read-token-0123456789"])
-        .await
-        .unwrap();
+    let mut console = connect(
+        &server.url(),
+        &["mouthpiece.v1", "mouthpiece.token.read-token-0123456789"],
+    )
+    .await
+    .unwrap();
     for m in [
         json!({"type": "subscribe", "id": "c", "fields": ["health"]}),
         json!({"type": "preview", "id": "p", "max_rate": 5, "max_width": 160}),
@@ -169,12 +172,14 @@ async fn server_messages_match_the_published_schemas() {
         preview_result |= v["type"] == "result" && v["request"] == "preview";
         log.push(v);
     }
-    server.hub.set_calibration(mouthpiece_server::CalibrationReport {
-        wall_us: 1_763_781_131_123_456,
-        frames: 30,
-        mouth_width_mm: 52.5,
-        lip_wobble_mm: 0.21,
-    });
+    server
+        .hub
+        .set_calibration(mouthpiece_server::CalibrationReport {
+            wall_us: 1_763_781_131_123_456,
+            frames: 30,
+            mouth_width_mm: 52.5,
+            lip_wobble_mm: 0.21,
+        });
     server.hub.add_take(mouthpiece_server::TakeSummary {
         slate: "scene 4".into(),
         take: 2,
@@ -221,12 +226,18 @@ async fn server_messages_match_the_published_schemas() {
         let deadline = std::time::Instant::now() + Duration::from_millis(500);
         while std::time::Instant::now() < deadline {
             use futures_util::StreamExt;
-            let Ok(Some(Ok(m))) = tokio::time::timeout(Duration::from_millis(100), console.next()).await else {
+            let Ok(Some(Ok(m))) =
+                tokio::time::timeout(Duration::from_millis(100), console.next()).await
+            else {
                 continue;
             };
             if let Message::Binary(b) = m {
                 assert_eq!(&b[..4], b"MPP1");
-                assert_eq!(u16::from_le_bytes([b[40], b[41]]), 160, "downscaled to max_width");
+                assert_eq!(
+                    u16::from_le_bytes([b[40], b[41]]),
+                    160,
+                    "downscaled to max_width"
+                );
                 let len = u32::from_le_bytes(b[48..52].try_into().unwrap()) as usize;
                 break 'image serde_json::from_slice::<Value>(&b[56..56 + len]).unwrap();
             }
