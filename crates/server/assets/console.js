@@ -61,7 +61,7 @@
 
   function previewWidth() {
     const dpr = window.devicePixelRatio || 1;
-    return Math.max(64, Math.min(640, Math.round(camera.clientWidth * dpr)));
+    return Math.max(320, Math.min(640, Math.round(camera.clientWidth * dpr)));
   }
 
   function connect() {
@@ -233,15 +233,21 @@
       cctx.fillStyle = DOT_COLOURS[d.state] || "#ffffff";
       cctx.fillText(d.name, x + r + 3 * dpr, y - r - 2 * dpr);
     }
+    // Dark rims first, then every dot's colour over them: close dots never hide each
+    // other's centre behind a rim.
+    cctx.fillStyle = "#000";
+    for (const d of overlay.dots) {
+      const [x, y] = toCanvas(d.x, d.y);
+      cctx.beginPath();
+      cctx.arc(x, y, r + 1.5 * dpr, 0, 2 * Math.PI);
+      cctx.fill();
+    }
     for (const d of overlay.dots) {
       const [x, y] = toCanvas(d.x, d.y);
       cctx.beginPath();
       cctx.arc(x, y, r, 0, 2 * Math.PI);
       cctx.fillStyle = DOT_COLOURS[d.state] || "#ffffff";
       cctx.fill();
-      cctx.lineWidth = 1 * dpr;
-      cctx.strokeStyle = "#000";
-      cctx.stroke();
     }
     state.preview.overlay = overlay;
     state.preview.width = overlay.width;

@@ -394,7 +394,7 @@ impl Hub {
             return false;
         };
         let period = 1.0 / request.max_rate;
-        let due = match demand.next_due {
+        match demand.next_due {
             // Not yet due, unless time went back (a replay looped).
             Some(due) if t < due && due - t <= period => false,
             Some(due) if t >= due && t - due < period => {
@@ -405,8 +405,7 @@ impl Hub {
                 demand.next_due = Some(t + period);
                 true
             }
-        };
-        due
+        }
     }
 
     /// Hands a frame to the preview encoder. Never blocks: an image still waiting to be
