@@ -90,14 +90,18 @@ fn wait_until(
 }
 
 /// The pixel under each dot the page drew last, read in the same script turn as the overlay
-/// (no image can be drawn in between).
+/// (no image can be drawn in between), and how far (canvas pixels) its nearest neighbour is:
+/// a dot whose disc overlaps another's is covered by whichever is drawn last.
 const DOT_PIXELS: &str = "const p = window.mouthpiece && window.mouthpiece.preview; \
     if (!p || !p.overlay) return null; \
     const c = document.getElementById('camera').getContext('2d'); \
+    const at = p.overlay.dots.map(d => p.toCanvas(d.x, d.y)); \
     return {images: p.images, width: p.width, source_width: p.overlay.source_width, \
-      dots: p.overlay.dots.map(d => { const [x, y] = p.toCanvas(d.x, d.y); \
+      dots: p.overlay.dots.map((d, i) => { const [x, y] = at[i]; \
         const px = c.getImageData(Math.round(x), Math.round(y), 1, 1).data; \
-        return {name: d.name, state: d.state, rgb: [px[0], px[1], px[2]]}; })};";
+        const near = Math.min(...at.filter((_, j) => j !== i) \
+          .map(([u, v]) => Math.hypot(u - x, v - y))); \
+        return {name: d.name, state: d.state, rgb: [px[0], px[1], px[2]], nearest: near}; })};";
 
 const STATE: &str = "const m = window.mouthpiece; if (!m) return null; \
     return {connected: m.connected, access: m.access, images: m.preview.images, \
@@ -141,6 +145,14 @@ fn the_console_shows_the_camera_with_dots_calibrates_records_and_recovers() {
         &format!("http://127.0.0.1:{port}/?token={CONTROL}&countdown=0"),
         profile.path(),
     );
+    // A desktop-sized window: the 320x240 camera image is drawn about 2.5 times enlarged,
+    // so the lip dots' discs lie apart.
+    driver.call(
+        "POST",
+        "/window/rect",
+        Some(serde_json::json!({"width": 1600, "height": 1200})),
+    );
+    driver.call("POST", "/refresh", Some(serde_json::json!({})));
 
     // The camera image arrives, with the dots drawn where the overlay places them.
     let shown = wait_until(
@@ -156,7 +168,15 @@ fn the_console_shows_the_camera_with_dots_calibrates_records_and_recovers() {
         },
     );
     assert_eq!(shown["source_width"], 320, "{shown}");
-    for dot in shown["dots"].as_array().unwrap() {
+    // Dots whose centre no other disc (radius 4 px, rim 5.5 px) reaches.
+    let isolated: Vec<&Value> = shown["dots"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|d| d["nearest"].as_f64().unwrap_or(0.0) > 6.0)
+        .collect();
+    assert!(isolated.len() >= 10, "too few dots apart to check: {shown}");
+    for dot in isolated {
         let rgb: Vec<i64> = dot["rgb"]
             .as_array()
             .unwrap()
