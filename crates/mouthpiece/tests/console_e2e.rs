@@ -109,7 +109,7 @@ const STATE: &str = "const m = window.mouthpiece; if (!m) return null; \
       recording: !!(m.status && m.status.recording), \
       takes: m.status ? (m.status.takes || []).map(t => [t.slate, t.take, t.file, t.frames]) : [], \
       take_input: document.getElementById('take').value, \
-      error: document.getElementById('error').textContent, errors: m.errors.length, \
+      shown_error: document.getElementById('error').textContent, errors: m.errors.length, frames: m.frames, \
       controls_hidden: document.getElementById('controls').hidden, \
       readonly_hidden: document.getElementById('readonly').hidden, \
       tiles: document.getElementById('status').textContent, \
