@@ -42,6 +42,9 @@ enum Command {
     /// `[detect]` TOML snippet).
     #[command(name = "tune-colours")]
     TuneColours(cmd::tune_colours::Args),
+    /// Speech to a take: phone files or WAV audio (PocketSphinx) → viseme weight curves → the
+    /// character's mouth (JSONL, the format of `process`).
+    Lipsync(cmd::lipsync::Args),
 }
 
 fn main() -> ExitCode {
@@ -58,6 +61,7 @@ fn main() -> ExitCode {
         Command::Devices(args) => cmd::devices::run(args),
         Command::Export(args) => cmd::export::run(args),
         Command::TuneColours(args) => cmd::tune_colours::run(args),
+        Command::Lipsync(args) => cmd::lipsync::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

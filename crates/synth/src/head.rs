@@ -118,6 +118,11 @@ fn radius(a: f64, v: f64) -> f64 {
     r
 }
 
+/// The axis position `zc` that puts the lip seam at z = 0 (what [`Geometry::new`] uses).
+pub fn seam_zc() -> f64 {
+    -surface(0.0, 0.0, 0.0)[2]
+}
+
 /// Axis position: chosen so the lips meet at z ≈ 0 (see [`Geometry::new`]).
 fn surface(a: f64, v: f64, zc: f64) -> [f64; 3] {
     let r = radius(a, v);

@@ -20,6 +20,7 @@
 //! - lip dots: [`LIP_DOT_RGB`], green, hue ≈ 66 (rendered: [`LIP_DOT_HUE_RANGE_CV`]);
 //! - forehead dots: [`FOREHEAD_DOT_RGB`], blue, hue ≈ 111 (rendered: [`FOREHEAD_DOT_HUE_RANGE_CV`]).
 
+mod dots;
 mod head;
 mod layout;
 mod motion;
@@ -33,6 +34,7 @@ use std::time::Instant;
 use mouthpiece_frame::{Calibration, Extrinsics, Frame, Intrinsics};
 pub use mouthpiece_recording::{GroundTruth, HeadPose};
 
+pub use dots::dot_positions;
 pub use layout::{DotLayout, ForeheadDot};
 pub use motion::{HeadState, MouthState};
 
@@ -261,6 +263,12 @@ impl Synth {
     /// The mouth and head at time `t` (what frame `t * fps` shows).
     pub fn state_at(&self, t: f64) -> (MouthState, HeadState) {
         (self.speech.at(t), self.head.at(t))
+    }
+
+    /// Drives the mouth from keyed states instead of the seed's speech (a lip-sync take);
+    /// keys must be in time order. Between keys the mouth eases as it does between the seed's.
+    pub fn set_speech(&mut self, keys: Vec<(f64, MouthState)>) {
+        self.speech = motion::SpeechTrack::from_keys(keys);
     }
 
     /// Renders the next frame. Deterministic: frame `i` of a seed is always the same.

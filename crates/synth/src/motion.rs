@@ -102,6 +102,13 @@ impl SpeechTrack {
         Self { keys }
     }
 
+    /// A track through given keys (times increasing), e.g. the mouth states of a lip-sync
+    /// take's samples.
+    pub fn from_keys(keys: Vec<(f64, MouthState)>) -> Self {
+        assert!(!keys.is_empty(), "a speech track needs at least one key");
+        Self { keys }
+    }
+
     /// The mouth at time `t` (smooth: cosine easing between keys).
     pub fn at(&self, t: f64) -> MouthState {
         let i = self.keys.partition_point(|(kt, _)| *kt <= t);

@@ -4,6 +4,8 @@ pub mod check_config;
 pub mod devices;
 pub mod evaluate;
 pub mod export;
+pub mod lipsync;
+pub mod lipsync_poses;
 pub mod process;
 pub mod record;
 pub mod retarget;

@@ -63,7 +63,7 @@ pub fn load_character(path: &Path) -> anyhow::Result<Character> {
         .map_err(bad_input)
 }
 
-fn smoothing(smooth: Smooth) -> ShapeSmoothing {
+pub(crate) fn smoothing(smooth: Smooth) -> ShapeSmoothing {
     match smooth {
         Smooth::None => ShapeSmoothing::None,
         Smooth::Ma => ShapeSmoothing::MovingAverage {

@@ -74,6 +74,14 @@ pub struct Args {
     /// Turn off colour sensor effects (noise, exposure drift, motion blur, uneven light).
     #[arg(long)]
     pub no_colour_effects: bool,
+    /// Drive the mouth from a lip-sync weights CSV (`mouthpiece lipsync --weights`) instead
+    /// of the seed's speech: each sample's mouth is Σ wᵢ · (pose i's mouth state), after the
+    /// neutral lead-in.
+    #[arg(long)]
+    pub speech: Option<PathBuf>,
+    /// The basic poses whose mouth states `--speech` blends (default: the shipped ones).
+    #[arg(long, requires = "speech")]
+    pub poses: Option<PathBuf>,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -102,6 +110,37 @@ fn parse_distortion(s: &str) -> Result<[f64; 5], String> {
         .collect::<Result<_, _>>()?;
     v.try_into()
         .map_err(|v: Vec<f64>| format!("expected 5 values K1,K2,P1,P2,K3, got {}", v.len()))
+}
+
+/// `--speech`: a weights CSV → mouth keys after the neutral lead-in.
+fn speech_keys(
+    path: &std::path::Path,
+    poses: Option<&std::path::Path>,
+    neutral_seconds: f64,
+) -> anyhow::Result<Vec<(f64, mouthpiece_synth::MouthState)>> {
+    use crate::cmd::lipsync::{mouth_keys_from_weights, DEFAULT_POSES};
+    let read = |p: &std::path::Path| {
+        std::fs::read_to_string(p)
+            .with_context(|| format!("cannot read {}", p.display()))
+            .map_err(bad_input)
+    };
+    let (text, name) = match poses {
+        Some(p) => (read(p)?, p.display().to_string()),
+        None => (
+            DEFAULT_POSES.to_string(),
+            "config/lipsync/poses.toml".to_string(),
+        ),
+    };
+    let poses = mouthpiece_lipsync::BasicPoses::from_toml_str(&text, &name).map_err(bad_input)?;
+    let csv = read(path)?;
+    let mut keys = vec![(0.0, mouthpiece_synth::MouthState::default())];
+    keys.extend(mouth_keys_from_weights(
+        &csv,
+        &path.display().to_string(),
+        &poses,
+        neutral_seconds,
+    )?);
+    Ok(keys)
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -145,7 +184,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config.layout = DotLayout::from_file(path).map_err(bad_input)?;
     }
     let calibration = config.calibration();
+    let neutral_seconds = config.neutral_seconds;
     let mut synth = Synth::new(config).map_err(bad_input)?;
+    if let Some(path) = &args.speech {
+        synth.set_speech(speech_keys(path, args.poses.as_deref(), neutral_seconds)?);
+    }
     let started = Instant::now();
     let total = synth.frame_count();
     let is_oni = args

@@ -1,0 +1,638 @@
+//! `mouthpiece lipsync`: speech → a take. Phones with times (from a phone file, or from a WAV
+//! file through PocketSphinx, aligned to a transcript or recognised) → viseme classes →
+//! stitched basic-pose weight curves (`mouthpiece-lipsync`) → the performer's lip dots
+//! `D⁰ + Σ wᵢ · poseᵢ` in the mouth frame → the retarget core onto the character → one take
+//! line per sample, the format of `mouthpiece process` (so `export` reads it). Method and
+//! figures: `docs/lipsync.md`.
+//!
+//! Everything is computed before anything is written; outputs are written beside their
+//! destination and renamed into place, so bad input leaves no file.
+
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use mouthpiece_lipsync::phones::{self, PhoneFormat};
+use mouthpiece_lipsync::{BasicPoses, ClassTable, PhoneSpan, SegmentTable, Weights};
+use mouthpiece_retarget::jsonl::OutputLine;
+use mouthpiece_retarget::{
+    CharacterRetarget, CharacterSettings, NeutralPose, PerformerLayout, RetargetOutput,
+    RigidTransform, StabilisedFrame, Vec3,
+};
+use mouthpiece_speech::{Decoder, ModelPaths, TimedPhone};
+#[cfg(test)]
+use mouthpiece_synth::DotLayout;
+use mouthpiece_synth::MouthState;
+
+use crate::cmd::process::{load_character, smoothing};
+use crate::cmd::retarget::Smooth;
+use crate::exit::bad_input;
+
+/// The shipped class table.
+pub const DEFAULT_CLASSES: &str = include_str!("../../../../config/lipsync/classes.toml");
+/// The shipped basic poses (derived from the synthetic performer: [`poses_from_synth`]).
+pub const DEFAULT_POSES: &str = include_str!("../../../../config/lipsync/poses.toml");
+
+#[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct Args {
+    #[command(subcommand)]
+    pub action: Option<Action>,
+    /// Character file (TOML).
+    #[arg(long, required = true)]
+    pub character: Option<PathBuf>,
+    /// Phone timing file: TIMIT `.phn`, Praat `.TextGrid`, HTK/Festival `.lab` (or `.segs`),
+    /// or `.jsonl` of `{start, end, phone}`.
+    #[arg(long, conflicts_with = "audio", required_unless_present = "audio")]
+    pub phonemes: Option<PathBuf>,
+    /// Speech as a WAV file (any rate; the first channel): phones from PocketSphinx.
+    #[arg(long)]
+    pub audio: Option<PathBuf>,
+    /// What the audio says: the text, or `@FILE` to read it from a file. With it the phones
+    /// are aligned to the transcript; without it they are recognised.
+    #[arg(long, requires = "audio")]
+    pub transcript: Option<String>,
+    /// Samples per second of the take.
+    #[arg(long, default_value_t = 60.0)]
+    pub fps: f64,
+    /// Length T of the change stage, seconds (0.03–0.05).
+    #[arg(long, default_value_t = mouthpiece_lipsync::DEFAULT_T_CHANGE)]
+    pub t_change: f64,
+    /// Output take (JSONL).
+    #[arg(long, required = true)]
+    pub out: Option<PathBuf>,
+    /// Also write the basic-pose weight curves as CSV (`t,phone,class,<pose>…`).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Also write the phones used (recognised, aligned or read) as JSONL `{start, end, phone}`.
+    #[arg(long)]
+    pub phones_out: Option<PathBuf>,
+    /// Class table (TOML); default: the shipped one (config/lipsync/classes.toml).
+    #[arg(long)]
+    pub classes: Option<PathBuf>,
+    /// Basic poses (TOML); default: the shipped ones (config/lipsync/poses.toml).
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
+    /// Segment overrides (TOML, control points per class pair and pose).
+    #[arg(long)]
+    pub segments: Option<PathBuf>,
+    /// PocketSphinx model directory (Debian's pocketsphinx-en-us layout).
+    #[arg(long, default_value = "/usr/share/pocketsphinx/model/en-us")]
+    pub model: PathBuf,
+    /// Shape smoothing that makes each line's `curve`.
+    #[arg(long, value_enum, default_value = "bspline")]
+    pub smooth: Smooth,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum Action {
+    /// Capture a booth's own basic poses from a recorded session in which the actor holds
+    /// each pose (marked by time ranges).
+    Poses(crate::cmd::lipsync_poses::PosesArgs),
+}
+
+fn read_text(path: &Path, what: &str) -> anyhow::Result<String> {
+    std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read {what} {}", path.display()))
+        .map_err(bad_input)
+}
+
+/// The method's tables: classes, segments (with overrides), poses.
+pub struct Tables {
+    pub classes: ClassTable,
+    pub segments: SegmentTable,
+    pub poses: BasicPoses,
+    /// `poses.poses[order[i]]` is the class table's key pose i.
+    pub order: Vec<usize>,
+}
+
+impl Tables {
+    pub fn load(
+        classes: Option<&Path>,
+        poses: Option<&Path>,
+        segments: Option<&Path>,
+    ) -> anyhow::Result<Self> {
+        let (text, name) = match classes {
+            Some(p) => (read_text(p, "class table")?, p.display().to_string()),
+            None => (
+                DEFAULT_CLASSES.to_string(),
+                "config/lipsync/classes.toml".into(),
+            ),
+        };
+        let classes = ClassTable::from_toml_str(&text, &name).map_err(bad_input)?;
+        let (text, pose_name) = match poses {
+            Some(p) => (read_text(p, "pose file")?, p.display().to_string()),
+            None => (
+                DEFAULT_POSES.to_string(),
+                "config/lipsync/poses.toml".into(),
+            ),
+        };
+        let poses = BasicPoses::from_toml_str(&text, &pose_name).map_err(bad_input)?;
+        let order = poses.order_for(&classes, &pose_name).map_err(bad_input)?;
+        let mut table = SegmentTable::generate(&classes);
+        if let Some(p) = segments {
+            let text = read_text(p, "segment overrides")?;
+            table
+                .apply_overrides(&classes, &text, &p.display().to_string())
+                .map_err(bad_input)?;
+        }
+        Ok(Self {
+            classes,
+            segments: table,
+            poses,
+            order,
+        })
+    }
+}
+
+/// Recogniser names that are not speech sounds: silence and fillers.
+fn is_filler(name: &str) -> bool {
+    name.eq_ignore_ascii_case("sil")
+        || name.starts_with(['<', '+', '[', '('])
+        || name.eq_ignore_ascii_case("</s>")
+}
+
+/// Recognised or aligned phones → checked phone spans (fillers become silence).
+pub fn spans_from_decoder(
+    phones: &[TimedPhone],
+    source_name: &str,
+) -> anyhow::Result<Vec<PhoneSpan>> {
+    let raw: Vec<PhoneSpan> = phones
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.end > p.start)
+        .map(|(i, p)| PhoneSpan {
+            start: p.start,
+            end: p.end,
+            phone: if is_filler(&p.phone) {
+                "sil".into()
+            } else {
+                phones::normalise(&p.phone)
+            },
+            line: i + 1,
+        })
+        .collect();
+    Ok(phones::check(raw, source_name)?)
+}
+
+/// Reads the phones from `--phonemes` or `--audio` (+ `--transcript`).
+fn input_phones(args: &Args) -> anyhow::Result<(Vec<PhoneSpan>, String)> {
+    if let Some(path) = &args.phonemes {
+        let name = path.display().to_string();
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+        let format = PhoneFormat::from_extension(ext).ok_or_else(|| {
+            bad_input(anyhow::anyhow!(
+                "{name}: unknown phone file type (expected .phn, .TextGrid, .lab, .segs or .jsonl)"
+            ))
+        })?;
+        let text = read_text(path, "phone file")?;
+        let spans = phones::read(&text, format, &name).map_err(bad_input)?;
+        return Ok((spans, name));
+    }
+    let path = args
+        .audio
+        .as_ref()
+        .expect("clap requires --phonemes or --audio");
+    let name = path.display().to_string();
+    let transcript = match &args.transcript {
+        None => None,
+        Some(t) => Some(match t.strip_prefix('@') {
+            Some(file) => (read_text(Path::new(file), "transcript")?, file.to_string()),
+            None => (t.clone(), "--transcript".to_string()),
+        }),
+    };
+    let file = std::fs::File::open(path)
+        .with_context(|| format!("cannot open audio {name}"))
+        .map_err(bad_input)?;
+    let samples = mouthpiece_speech::wav::read_16k(std::io::BufReader::new(file), &name)
+        .map_err(bad_input)?;
+    let model = ModelPaths::en_us(&args.model);
+    let speech_err = |e: mouthpiece_speech::Error| match e {
+        mouthpiece_speech::Error::Init { .. } | mouthpiece_speech::Error::Decode { .. } => {
+            anyhow::Error::new(e)
+        }
+        other => bad_input(other),
+    };
+    let decoded = match &transcript {
+        Some((text, source)) => {
+            let mut d = Decoder::aligner(&model).map_err(speech_err)?;
+            d.align(&samples, text, source).map_err(speech_err)?
+        }
+        None => {
+            let mut d = Decoder::phone_recognizer(&model).map_err(speech_err)?;
+            d.recognize_phones(&samples).map_err(speech_err)?
+        }
+    };
+    let source = format!("{name} (PocketSphinx)");
+    let spans = spans_from_decoder(&decoded, &source)?;
+    Ok((spans, source))
+}
+
+/// The performer's neutral pose of a pose file (its mouth frame is the file's frame).
+pub fn neutral_of(poses: &BasicPoses) -> anyhow::Result<NeutralPose> {
+    let v = |p: &[f64; 3]| Some(Vec3::new(p[0], p[1], p[2]));
+    let layout = PerformerLayout {
+        lip_dots: poses.lip_dots(),
+        forehead_dots: poses.forehead.len(),
+    };
+    NeutralPose::from_positions(
+        layout,
+        poses.neutral_lip.iter().map(v).collect(),
+        poses.forehead.iter().map(v).collect(),
+        1,
+    )
+    .context("the basic poses' neutral dots")
+    .map_err(bad_input)
+}
+
+/// Weight curves → take lines for a character, written to `out`.
+pub fn write_take(
+    weights: &Weights,
+    tables: &Tables,
+    character: mouthpiece_retarget::Character,
+    smooth: Smooth,
+    out: &mut dyn Write,
+) -> anyhow::Result<()> {
+    let neutral = neutral_of(&tables.poses)?;
+    let settings = CharacterSettings {
+        smoothing: smoothing(smooth),
+        one_euro: None,
+    };
+    let mut line = OutputLine::for_character(&character, &settings.smoothing);
+    let mut retarget = CharacterRetarget::new(character, &neutral, settings)
+        .context("character and basic poses")
+        .map_err(bad_input)?;
+    let n = tables.poses.lip_dots();
+    let mut performer = StabilisedFrame {
+        t: 0.0,
+        lip: neutral.lip.clone(),
+        confidence: vec![1.0; n],
+        head: RigidTransform::IDENTITY,
+        head_lost: false,
+    };
+    let mut displacement = vec![[0.0; 3]; n];
+    for k in 0..weights.len() {
+        performer.t = weights.time(k);
+        // D = D⁰ + Σ wᵢ poseᵢ, in the mouth frame (blend from a zero neutral: displacement).
+        tables
+            .poses
+            .displacement(weights.sample(k), &tables.order, &mut displacement);
+        for (d, (base, off)) in performer
+            .lip
+            .iter_mut()
+            .zip(neutral.lip.iter().zip(&displacement))
+        {
+            *d = base + Vec3::new(off[0], off[1], off[2]);
+        }
+        let frame = retarget.apply(&performer);
+        line.update(
+            k as u64,
+            &RetargetOutput {
+                performer: &performer,
+                character: frame,
+            },
+        );
+        serde_json::to_writer(&mut *out, &line).context("cannot write the take")?;
+        out.write_all(b"\n").context("cannot write the take")?;
+    }
+    out.flush().context("cannot write the take")?;
+    Ok(())
+}
+
+/// The weight curves as CSV: `t,phone,class,<pose>…` (the dominant phone and its class).
+pub fn weights_csv(
+    weights: &Weights,
+    phones: &[PhoneSpan],
+    tables: &Tables,
+) -> anyhow::Result<String> {
+    let classes = tables.classes.classify(phones, "phones")?;
+    let mut s = String::from("t,phone,class");
+    for p in &tables.classes.poses {
+        let _ = write!(s, ",{p}");
+    }
+    s.push('\n');
+    for k in 0..weights.len() {
+        let owner = weights.owner[k];
+        let _ = write!(
+            s,
+            "{:.6},{},{}",
+            weights.time(k),
+            phones[owner].phone,
+            tables.classes.classes[classes[owner]].name
+        );
+        for w in weights.sample(k) {
+            let _ = write!(s, ",{w:.9}");
+        }
+        s.push('\n');
+    }
+    Ok(s)
+}
+
+/// Phones as JSONL `{start, end, phone}` (what `--phonemes` reads).
+pub fn phones_jsonl(phones: &[PhoneSpan]) -> String {
+    let mut s = String::new();
+    for p in phones {
+        let _ = writeln!(
+            s,
+            "{}",
+            serde_json::json!({"start": p.start, "end": p.end, "phone": p.phone})
+        );
+    }
+    s
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<mouthpiece_export::PendingFile> {
+    let mut f = mouthpiece_export::PendingFile::create(path)
+        .with_context(|| format!("cannot create {}", path.display()))
+        .map_err(bad_input)?;
+    f.write_all(bytes)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(f)
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(Action::Poses(poses)) = args.action {
+        return crate::cmd::lipsync_poses::run(poses);
+    }
+    let (Some(character), Some(out)) = (&args.character, &args.out) else {
+        return Err(bad_input(anyhow::anyhow!(
+            "--character and --out are required"
+        )));
+    };
+    let tables = Tables::load(
+        args.classes.as_deref(),
+        args.poses.as_deref(),
+        args.segments.as_deref(),
+    )?;
+    let character = load_character(character)?;
+    let (phones, source) = input_phones(&args)?;
+    let weights = mouthpiece_lipsync::weights_for_phones(
+        &phones,
+        &source,
+        &tables.classes,
+        &tables.segments,
+        args.t_change,
+        args.fps,
+    )
+    .map_err(bad_input)?;
+    // Everything is computed (in memory) before any file is created.
+    let mut take = Vec::with_capacity(weights.len() * 600);
+    write_take(&weights, &tables, character, args.smooth, &mut take)?;
+    let csv = args
+        .weights
+        .as_ref()
+        .map(|_| weights_csv(&weights, &phones, &tables))
+        .transpose()?;
+    let mut pending = vec![write_file(out, &take)?];
+    if let (Some(path), Some(csv)) = (&args.weights, csv) {
+        pending.push(write_file(path, csv.as_bytes())?);
+    }
+    if let Some(path) = &args.phones_out {
+        pending.push(write_file(path, phones_jsonl(&phones).as_bytes())?);
+    }
+    for f in pending {
+        f.commit().context("cannot write the outputs")?;
+    }
+    tracing::info!(
+        phones = phones.len(),
+        samples = weights.len(),
+        seconds = format!("{:.2}", weights.time(weights.len().saturating_sub(1))),
+        "lipsync take written"
+    );
+    Ok(())
+}
+
+/// The synthetic performer's mouth state for each default key pose (the shipped pose file
+/// is these states' dot displacements, [`poses_from_synth`]).
+#[cfg(test)]
+pub fn synth_pose_states() -> Vec<(&'static str, MouthState)> {
+    let s = |jaw, spread, round, raise, roll_in| MouthState {
+        jaw,
+        spread,
+        round,
+        raise,
+        roll_in,
+    };
+    vec![
+        // Lips pressed, the lower lip rolled in a little: m, b, p.
+        ("closed", s(0.0, 0.0, 0.0, 0.0, 1.0)),
+        // Jaw open, upper lip raised: "ah".
+        ("open", s(0.2, 0.0, 0.0, 0.3, 0.0)),
+        // Corners out, upper lip raised, teeth nearly together: "ee".
+        ("spread", s(0.06, 1.0, 0.0, 0.5, 0.0)),
+        // Corners in, lips forward: "oo", "w".
+        ("round", s(0.05, 0.0, 1.0, 0.0, 0.0)),
+        // Lower lip up under the upper teeth, upper lip raised: f, v.
+        ("bite", s(0.03, 0.0, 0.0, 0.3, 0.6)),
+    ]
+}
+
+/// The default basic poses from the synthetic performer's mouth model: its dots for each
+/// state in [`synth_pose_states`], in the mouth frame of its neutral pose.
+#[cfg(test)]
+pub fn poses_from_synth() -> anyhow::Result<BasicPoses> {
+    let layout = DotLayout::default();
+    let v = |p: &[f64; 3]| Vec3::new(p[0], p[1], p[2]);
+    let (lip, forehead) = mouthpiece_synth::dot_positions(&layout, &MouthState::default());
+    let neutral = NeutralPose::from_positions(
+        PerformerLayout {
+            lip_dots: lip.len(),
+            forehead_dots: forehead.len(),
+        },
+        lip.iter().map(|p| Some(v(p))).collect(),
+        forehead.iter().map(|p| Some(v(p))).collect(),
+        1,
+    )?;
+    let frame = neutral.frame;
+    let arr = |p: Vec3| [p.x, p.y, p.z];
+    let poses = synth_pose_states()
+        .into_iter()
+        .map(|(name, state)| {
+            let (moved, _) = mouthpiece_synth::dot_positions(&layout, &state);
+            let displacement = moved
+                .iter()
+                .zip(&lip)
+                .map(|(m, l)| arr(frame.to_mouth(&v(m)) - frame.to_mouth(&v(l))))
+                .collect();
+            let mouth = [
+                ("jaw", state.jaw),
+                ("spread", state.spread),
+                ("round", state.round),
+                ("raise", state.raise),
+                ("roll_in", state.roll_in),
+            ]
+            .into_iter()
+            .filter(|(_, x)| *x != 0.0)
+            .map(|(k, x)| (k.to_string(), x))
+            .collect();
+            mouthpiece_lipsync::poses::Pose {
+                name: name.to_string(),
+                displacement,
+                mouth,
+            }
+        })
+        .collect();
+    Ok(BasicPoses {
+        neutral_lip: neutral.lip.iter().map(|p| arr(*p)).collect(),
+        forehead: forehead
+            .iter()
+            .map(|p| arr(frame.to_mouth(&v(p))))
+            .collect(),
+        poses,
+    })
+}
+
+/// A lip-sync weights CSV (`t,…,<pose>…`) → the synthetic performer's mouth states, keyed
+/// at `t + offset`: Σ wᵢ · stateᵢ over the poses that carry a `mouth` state.
+pub fn mouth_keys_from_weights(
+    csv: &str,
+    source_name: &str,
+    poses: &BasicPoses,
+    offset: f64,
+) -> anyhow::Result<Vec<(f64, MouthState)>> {
+    let mut lines = csv.lines().enumerate();
+    let (_, header) = lines
+        .next()
+        .ok_or_else(|| bad_input(anyhow::anyhow!("{source_name}: empty weights file")))?;
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    if columns.first() != Some(&"t") {
+        return Err(bad_input(anyhow::anyhow!(
+            "{source_name}:1: the first column must be `t`"
+        )));
+    }
+    // (column, pose state) for every column naming a pose with a mouth state.
+    let mut used = Vec::new();
+    for (c, name) in columns.iter().enumerate().skip(1) {
+        if let Some(p) = poses.poses.iter().find(|p| p.name == *name) {
+            let get = |k: &str| p.mouth.get(k).copied().unwrap_or(0.0);
+            used.push((
+                c,
+                MouthState {
+                    jaw: get("jaw"),
+                    spread: get("spread"),
+                    round: get("round"),
+                    raise: get("raise"),
+                    roll_in: get("roll_in"),
+                },
+            ));
+        }
+    }
+    if used.is_empty() {
+        return Err(bad_input(anyhow::anyhow!(
+            "{source_name}:1: no column names a pose with a mouth state (poses: {:?})",
+            poses.poses.iter().map(|p| &p.name).collect::<Vec<_>>()
+        )));
+    }
+    let mut keys: Vec<(f64, MouthState)> = Vec::new();
+    for (i, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let cells: Vec<&str> = line.split(',').collect();
+        let num = |c: usize| -> anyhow::Result<f64> {
+            cells
+                .get(c)
+                .and_then(|s| s.trim().parse::<f64>().ok())
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    bad_input(anyhow::anyhow!(
+                        "{source_name}:{}: column {:?} is not a number",
+                        i + 1,
+                        columns[c]
+                    ))
+                })
+        };
+        let t = num(0)? + offset;
+        if keys.last().is_some_and(|(prev, _)| t <= *prev) {
+            return Err(bad_input(anyhow::anyhow!(
+                "{source_name}:{}: times must increase",
+                i + 1
+            )));
+        }
+        let mut m = MouthState::default();
+        for (c, state) in &used {
+            let w = num(*c)?;
+            m.jaw += w * state.jaw;
+            m.spread += w * state.spread;
+            m.round += w * state.round;
+            m.raise += w * state.raise;
+            m.roll_in += w * state.roll_in;
+        }
+        keys.push((t, m));
+    }
+    if keys.is_empty() {
+        return Err(bad_input(anyhow::anyhow!("{source_name}: no samples")));
+    }
+    Ok(keys)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The shipped poses are the synthetic performer's (set `MOUTHPIECE_WRITE_POSES=1` to
+    /// rewrite config/lipsync/poses.toml after changing the mouth model or the states).
+    #[test]
+    fn shipped_poses_are_derived_from_the_synthetic_mouth() {
+        let derived = poses_from_synth().unwrap();
+        if std::env::var_os("MOUTHPIECE_WRITE_POSES").is_some() {
+            let path = concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/../../config/lipsync/poses.toml"
+            );
+            let text = derived.to_toml_string(
+                "Basic lip poses for lip sync: the neutral dots and each key pose's lip-dot\n\
+                 displacements, performer mouth frame (x to the performer's left corner, y up,\n\
+                 z out of the mouth), metres. Derived from the synthetic performer's mouth model\n\
+                 (`mouth` = its state); regenerate with MOUTHPIECE_WRITE_POSES=1 cargo test -p\n\
+                 mouthpiece shipped_poses. A booth can use its own (docs/lipsync.md).",
+            );
+            std::fs::write(path, text).unwrap();
+        }
+        let shipped = BasicPoses::from_toml_str(DEFAULT_POSES, "poses.toml").unwrap();
+        assert_eq!(shipped.poses.len(), 5);
+        let close = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+            a.len() == b.len()
+                && a.iter()
+                    .flatten()
+                    .zip(b.iter().flatten())
+                    .all(|(x, y)| (x - y).abs() < 1e-9)
+        };
+        assert!(close(&shipped.neutral_lip, &derived.neutral_lip));
+        assert!(close(&shipped.forehead, &derived.forehead));
+        for (s, d) in shipped.poses.iter().zip(&derived.poses) {
+            assert_eq!(s.name, d.name);
+            assert_eq!(s.mouth, d.mouth);
+            assert!(close(&s.displacement, &d.displacement), "pose {}", s.name);
+        }
+        // The poses move the mouth the way their names say (mouth frame: y up, x left).
+        let get = |n: &str| derived.poses.iter().find(|p| p.name == n).unwrap();
+        assert!(
+            get("open").displacement[9][1] < -0.005,
+            "open: lower lip down"
+        );
+        assert!(
+            get("spread").displacement[0][0] > 0.003,
+            "spread: left corner out"
+        );
+        assert!(
+            get("round").displacement[0][0] < -0.003,
+            "round: left corner in"
+        );
+    }
+
+    #[test]
+    fn weights_csv_drives_the_synthetic_mouth() {
+        let poses = BasicPoses::from_toml_str(DEFAULT_POSES, "poses.toml").unwrap();
+        let csv = "t,phone,class,closed,open,spread,round,bite\n0.0,sil,sil,0,0,0,0,0\n0.5,aa,open,0,1,0,0,0\n";
+        let keys = mouth_keys_from_weights(csv, "w.csv", &poses, 1.5).unwrap();
+        assert_eq!(keys.len(), 2);
+        assert_eq!(keys[0], (1.5, MouthState::default()));
+        assert_eq!(keys[1].0, 2.0);
+        assert!((keys[1].1.jaw - 0.2).abs() < 1e-12);
+        let bad = csv.replace("0.5,aa", "0.5x,aa");
+        let err = mouth_keys_from_weights(&bad, "w.csv", &poses, 0.0).unwrap_err();
+        assert!(err.to_string().contains("w.csv:3"), "{err}");
+    }
+}

@@ -1,0 +1,54 @@
+//! Phones and their times from speech, fully offline.
+//!
+//! - [`wav`]: a WAV file (any rate, any PCM or float format; the first channel) → 16 kHz
+//!   16-bit samples, the rate of the acoustic model.
+//! - [`Decoder`]: CMU PocketSphinx (Debian's 5prealpha library and `en-us` model) behind a safe
+//!   API. Every unsafe call into the library is in this crate's `decoder` module.
+//!   - [`Decoder::recognize_phones`]: phone recognition with the model's phone bigram
+//!     ("allphone" search): no transcript needed.
+//!   - [`Decoder::align`]: forced alignment to a transcript. The 5prealpha API has no aligner,
+//!     so each word's dictionary pronunciations become a grammar (JSGF) whose *words are single
+//!     phones*: the recogniser can only walk the transcript's phones, in order, with optional
+//!     silence between them, and its word segmentation is the phone segmentation.
+
+mod decoder;
+pub mod wav;
+
+pub use decoder::{Decoder, ModelPaths, TimedPhone};
+
+/// The acoustic model's sample rate.
+pub const MODEL_RATE: u32 = 16_000;
+
+/// What can go wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The WAV file cannot be read.
+    #[error("{path}: cannot read WAV audio")]
+    Wav {
+        path: String,
+        #[source]
+        source: hound::Error,
+    },
+    /// The WAV file reads but is unusable (no samples, unsupported format).
+    #[error("{path}: {what}")]
+    BadAudio { path: String, what: String },
+    /// A model file is missing.
+    #[error("PocketSphinx model file {path} not found (install Debian's pocketsphinx-en-us, or pass the model directory)")]
+    ModelMissing { path: String },
+    /// The library refused to start (bad model files, bad settings).
+    #[error("PocketSphinx could not start: {what}")]
+    Init { what: String },
+    /// The transcript has no words.
+    #[error("{source_name}: the transcript is empty")]
+    EmptyTranscript { source_name: String },
+    /// A transcript word the pronunciation dictionary does not have.
+    #[error("{source_name}: word {word:?} is not in the pronunciation dictionary {dict}")]
+    UnknownWord {
+        source_name: String,
+        word: String,
+        dict: String,
+    },
+    /// Decoding failed or found nothing.
+    #[error("PocketSphinx: {what}")]
+    Decode { what: String },
+}
