@@ -874,7 +874,11 @@ impl OpenNiSource {
                 }
                 let ts = rec_ts + state.loop_offset_us;
                 state.last_ts_us = ts;
-                return self.build_frame(d, c, ts).map(Some);
+                // Received when handed out (after the pacing sleep), as a camera's frame.
+                return self.build_frame(d, c, ts).map(|mut f| {
+                    f.host_rx = Instant::now();
+                    Some(f)
+                });
             }
             let Kind::Replay(state) = &mut self.kind else {
                 unreachable!()

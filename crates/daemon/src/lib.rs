@@ -3,6 +3,8 @@
 //! # Layout
 //! - [`source`]: the source thread: opens the source, feeds the [`slot`], reopens a lost
 //!   source with [`backoff`];
+//! - [`console`]: what the booth console page needs: the preview's image and dots, health
+//!   figures, the calibration report;
 //! - [`live`]: the processor: the frame pipeline (`mouthpiece_track::pipeline`: detect +
 //!   track + retarget) for every configured character;
 //! - [`pipeline`]: the processing thread around a [`pipeline::Processor`];
@@ -21,6 +23,7 @@ pub mod backoff;
 pub mod capture;
 pub mod characters;
 pub mod check;
+pub mod console;
 pub mod daemon;
 pub mod error;
 pub mod factory;

@@ -101,6 +101,12 @@ pub struct LiveProcessor {
     dot_names: Vec<String>,
     info_changed: bool,
     errors: Throttle,
+    /// Where the dots are in the image (for the console's preview).
+    places: crate::console::DotPlaces,
+    /// The last frames' dots, to judge a new neutral pose on.
+    history: crate::console::DotHistory,
+    /// How good the neutral pose taken on the last frame was, until collected.
+    calibration_report: Option<mouthpiece_server::CalibrationReport>,
 }
 
 impl LiveProcessor {
@@ -114,6 +120,9 @@ impl LiveProcessor {
             dot_names,
             info_changed: true,
             errors: Throttle::new(Duration::from_secs(10)),
+            places: Default::default(),
+            history: Default::default(),
+            calibration_report: None,
         })
     }
 
@@ -179,6 +188,23 @@ impl Processor for LiveProcessor {
                 .chain(dots.forehead.iter())
                 .map(|d| d.map(|p| [p.x, p.y, p.z])),
         );
+        self.places.update(&tracked.pixels);
+        self.history.push(
+            tracked.t,
+            dots.lip.iter().chain(dots.forehead.iter()).copied(),
+            self.config.track.calibration_s + 0.5,
+        );
+        if tracked.status.neutral_taken {
+            if let Some(neutral) = self.pipeline.tracker().neutral() {
+                let wobble = crate::console::lip_wobble(neutral, self.history.last(neutral.frames));
+                self.calibration_report = Some(mouthpiece_server::CalibrationReport {
+                    wall_us: 0,
+                    frames: neutral.frames,
+                    mouth_width_mm: neutral.mouth_width() * 1e3,
+                    lip_wobble_mm: wobble.map_or(f64::NAN, |w| w * 1e3),
+                });
+            }
+        }
         let Some(stab) = &tracked.stabilised else {
             // Not calibrated yet: every character at rest, confidence 0.
             self.at_rest(out);
@@ -269,11 +295,46 @@ impl Processor for LiveProcessor {
                 .collect(),
             frame_rate,
             source: source.to_owned(),
+            mouth_frame: self.pipeline.tracker().neutral().map(|n| {
+                let rotation = nalgebra::UnitQuaternion::from_matrix(&n.frame.axes);
+                mouthpiece_server::FramePose {
+                    rotation: [rotation.w, rotation.i, rotation.j, rotation.k],
+                    translation: [n.frame.origin.x, n.frame.origin.y, n.frame.origin.z],
+                }
+            }),
         }
     }
 
     fn performer_names(&self) -> &[String] {
         &self.dot_names
+    }
+
+    fn preview_overlay(&self, frame: &Frame) -> mouthpiece_server::Overlay {
+        let k = frame.calibration.color;
+        let n = self.pipeline.tracker().layout().lip_dots;
+        // A missing dot is placed where the stream carries it: its held place in the neutral
+        // mouth frame (lip) or its neutral place (forehead), moved with the head.
+        let predicted = |i: usize| -> Option<[f64; 2]> {
+            let neutral = self.pipeline.tracker().neutral()?;
+            let stab = self.pipeline.tracked().stabilised.as_ref()?;
+            let rest = if i < n {
+                neutral.frame.to_parent(stab.lip.get(i)?)
+            } else {
+                (*neutral.forehead_camera.get(i - n)?)?
+            };
+            let p = stab.head.apply(&rest);
+            k.project([p.x, p.y, p.z])
+        };
+        self.places.overlay(
+            &self.dot_names,
+            predicted,
+            self.config.track.roi_margin_px,
+            [frame.color.width, frame.color.height],
+        )
+    }
+
+    fn take_calibration_report(&mut self) -> Option<mouthpiece_server::CalibrationReport> {
+        self.calibration_report.take()
     }
 
     fn reload(&mut self, setup: Setup) -> Result<(), String> {

@@ -79,6 +79,18 @@ pub trait Processor: Send {
     /// Applies a reloaded configuration (characters, colour ranges); the old one stays on
     /// error.
     fn reload(&mut self, update: Self::Reload) -> Result<(), String>;
+
+    /// The dots on the last frame's camera image, for the console's preview (called only
+    /// when a preview image is due).
+    fn preview_overlay(&self, _frame: &Frame) -> mouthpiece_server::Overlay {
+        mouthpiece_server::Overlay::default()
+    }
+
+    /// How good the neutral pose taken on the last frame was, once (`wall_us` is set by
+    /// the caller).
+    fn take_calibration_report(&mut self) -> Option<mouthpiece_server::CalibrationReport> {
+        None
+    }
 }
 
 /// Requests from the daemon itself (signals, start-up options) to the processing thread.
@@ -174,6 +186,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
     let mut calibrating = None;
     let mut frame_rate = 0.0;
     let mut frames = 0u64;
+    let mut health = crate::console::HealthMeter::new(ctx.takes.settings().folder.clone());
     tracing::info!("processing thread started");
     loop {
         ctx.heartbeat
@@ -209,6 +222,34 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                 out.stream.processing = Some(started.elapsed());
                 let seq = ctx.hub.publish(&out.stream);
                 tracing::trace!(seq, device_ts_us = frame.device_ts_us, "frame processed");
+                health.frame(
+                    processor.performer_names().len(),
+                    out.flags.dots_missing,
+                    started.elapsed(),
+                    frame.host_rx.elapsed(),
+                    [frame.color.width, frame.color.height],
+                );
+                if let Some(mut report) = processor.take_calibration_report() {
+                    report.wall_us = wall_us;
+                    tracing::info!(?report, "calibration report");
+                    ctx.hub.set_calibration(report);
+                }
+                let preview_due = ctx.hub.preview_due(out.stream.t);
+                let frame = if preview_due || ctx.takes.is_recording() {
+                    Some(Arc::new(frame))
+                } else {
+                    None
+                };
+                if let (true, Some(frame)) = (preview_due, &frame) {
+                    ctx.hub.offer_preview(mouthpiece_server::PreviewInput {
+                        seq,
+                        t: out.stream.t,
+                        capture_us: out.stream.capture_us,
+                        wall_us: out.stream.wall_us,
+                        image: Arc::new(crate::console::FrameImage(frame.clone())),
+                        overlay: processor.preview_overlay(frame),
+                    });
+                }
                 if out.flags.neutral_taken {
                     pending.taken(seq);
                 }
@@ -218,7 +259,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                     ctx.hub.update_status(|s| s.calibrating = now);
                     tracing::info!(calibrating = now, "calibration state");
                 }
-                if ctx.takes.is_recording() {
+                if let (true, Some(frame)) = (ctx.takes.is_recording(), frame) {
                     let info = ctx.hub.info();
                     let derived = derive(
                         processor.performer_names(),
@@ -228,7 +269,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                         wall_us,
                         ctx.timecode_rate,
                     );
-                    ctx.takes.push(Arc::new(frame), Box::new(derived));
+                    ctx.takes.push(frame, Box::new(derived));
                 }
             }
             Taken::Empty => {
@@ -273,6 +314,9 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
         }
         if let Some(ended) = ctx.takes.poll() {
             announce_take_end(&ctx.hub, &ended);
+        }
+        if let Some(figures) = health.tick(Instant::now()) {
+            ctx.hub.set_health(figures);
         }
     }
     if ctx.takes.is_recording() {
@@ -386,6 +430,7 @@ fn start_take<R>(
         slate: info.slate.clone(),
         take: info.take,
         file: Some(file.clone()),
+        started_wall_us: Some(crate::takes::unix_us(info.started)),
     };
     let reply = json!({ "slate": info.slate, "take": info.take, "file": file });
     ctx.hub.update_status(|s| {
@@ -419,6 +464,18 @@ fn stop_take<R>(ctx: &mut Context<R>) -> Result<serde_json::Value, String> {
 }
 
 fn announce_take_end(hub: &Hub, ended: &TakeEnded) {
+    hub.add_take(mouthpiece_server::TakeSummary {
+        slate: ended.info.slate.clone(),
+        take: ended.info.take,
+        file: ended.info.path.display().to_string(),
+        frames: ended.frames,
+        seconds: ended
+            .info
+            .started
+            .elapsed()
+            .map_or(0.0, |d| d.as_secs_f64()),
+        error: ended.error.clone(),
+    });
     let message = ended.error.as_ref().map(|e| format!("take stopped: {e}"));
     hub.update_status(|s| {
         s.recording = None;

@@ -59,16 +59,21 @@
 //! - `session`: one `mouthpiece.v1` client (reader task + writer loop).
 //! - `foxglove`: one `foxglove.websocket.v1` client.
 //! - [`metrics`]: counters and histograms for `/metrics`.
+//! - [`preview`]: the opt-in camera preview (downscaled JPEG with the dots, latest only).
+//! - [`console`]: health figures, the last calibration and the session's takes.
 //! - [`timecode`]: SMPTE time-of-day timecode.
 //! - [`loadgen`]: the load tool behind `mouthpiece-loadgen` and the load tests.
 
 pub mod config;
+pub mod console;
 mod error;
 mod foxglove;
+pub mod foxglove_scene;
 pub mod http;
 pub mod hub;
 pub mod loadgen;
 pub mod metrics;
+pub mod preview;
 pub mod protocol;
 mod server;
 mod session;
@@ -76,6 +81,7 @@ pub mod timecode;
 mod tls;
 
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
+pub use console::{CalibrationReport, FramePose, Health, TakeSummary};
 pub use error::ServerError;
 pub use foxglove::{FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL, PERFORMER_CHANNEL};
 pub use hub::{
@@ -83,5 +89,6 @@ pub use hub::{
     ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,
     StreamFrame, StreamInfo,
 };
+pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
 pub use server::run;
 pub use timecode::{Timecode, TimecodeRate};
