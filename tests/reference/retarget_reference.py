@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent reference of mouthpiece's retarget (method.md §2–§6, §8), in numpy/scipy.
+"""Independent reference of mouthpiece's retarget (docs/method.md §2–§6, §8), in numpy/scipy.
 
 Written from the method text, not from the Rust code, to check `mouthpiece retarget`:
 
@@ -55,6 +55,10 @@ def load_character(path):
         names = [f"P{i + 1}" for i in range(len(pts))]
     else:
         names = list(doc["points"].keys())  # tomllib keeps document order
+        # Names P1..PN (in any order) place the points by number; other names keep the
+        # document's order and need a [map].
+        if sorted(names) == sorted(f"P{i + 1}" for i in range(len(names))):
+            names = [f"P{i + 1}" for i in range(len(names))]
         pts = np.array([doc["points"][n] for n in names], float)
     n = len(names)
     if "map" in doc:

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference values for mouthpiece's shape smoothing (method.md §8), computed with scipy.
+"""Reference values for mouthpiece's shape smoothing (docs/method.md §8), computed with scipy.
 
 Writes tests/reference/smoothing_fixtures.json, read by crates/retarget/tests/smoothing.rs:
 - Savitzky-Golay 5-point quadratic on a closed loop: scipy.signal.savgol_filter(window 5,

@@ -118,9 +118,10 @@ impl FrameSource for McapReplay {
     }
 
     fn next_frame(&mut self) -> Result<Option<Frame>, SourceError> {
-        if let Some(first) = self.first.take() {
+        if let Some(mut first) = self.first.take() {
             let t = self.last_log_time;
             self.pace(t);
+            first.host_rx = Instant::now();
             return Ok(Some(first));
         }
         match self
@@ -128,8 +129,11 @@ impl FrameSource for McapReplay {
             .next_frame()
             .map_err(|e| recording_error(&self.spec, e))?
         {
-            Some(sf) => {
+            Some(mut sf) => {
                 self.pace(sf.log_time);
+                // Received when handed out, as a camera's frame would be: the decoding and
+                // the pacing sleep before this are not part of the capture-to-client time.
+                sf.frame.host_rx = Instant::now();
                 Ok(Some(sf.frame))
             }
             None => {
@@ -140,5 +144,57 @@ impl FrameSource for McapReplay {
                 Ok(None)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mouthpiece_frame::{Calibration, ColorImage, DepthImage, Intrinsics};
+    use mouthpiece_recording::{SessionWriter, WriterOptions};
+    use std::sync::Arc;
+
+    /// A replayed frame counts as received when it is handed out, after the pacing sleep,
+    /// as a camera's frame would: otherwise capture-to-client latency includes the sleep.
+    #[test]
+    fn paced_frames_are_stamped_when_handed_out() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.mcap");
+        let mut writer = SessionWriter::create(&path, WriterOptions::default()).unwrap();
+        let calibration = Arc::new(Calibration::registered(Intrinsics::ideal(
+            8, 8, 8.0, 8.0, 4.0, 4.0,
+        )));
+        for i in 0..3u64 {
+            writer
+                .write_frame(&Frame {
+                    seq: i,
+                    device_ts_us: i * 33_333,
+                    host_rx: Instant::now(),
+                    wall_clock: None,
+                    color: ColorImage::new(8, 8),
+                    depth: DepthImage::new(8, 8),
+                    calibration: calibration.clone(),
+                })
+                .unwrap();
+        }
+        writer.finish().unwrap();
+        // A quarter of recorded speed: frames 133 ms apart.
+        let spec = ReplaySpec {
+            speed: Some(0.25),
+            ..ReplaySpec::new(&path)
+        };
+        let mut replay = McapReplay::open(&spec, &CaptureConfig::default()).unwrap();
+        let before_first = Instant::now();
+        let first = replay.next_frame().unwrap().unwrap();
+        assert!(first.host_rx >= before_first);
+        let second = replay.next_frame().unwrap().unwrap();
+        let handed_out = Instant::now();
+        // Due 133 ms after the first frame's anchor, which was set after `before_first`.
+        assert!(
+            second.host_rx >= before_first + Duration::from_millis(130),
+            "stamped {:?} after the first call began: before the pacing sleep",
+            second.host_rx - before_first
+        );
+        assert!(second.host_rx <= handed_out);
     }
 }

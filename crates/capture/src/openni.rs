@@ -649,7 +649,7 @@ impl OpenNiSource {
 
     /// Replay only: continue from `t` after the start of the recording. Forward seeks read
     /// and drop frames; backward seeks reopen the file and read forward (OpenNI2's seek
-    /// command crashes its player, upstream OpenNI/OpenNI2#51).
+    /// command crashes its player, an upstream OpenNI2 bug).
     pub fn seek(&mut self, t: Duration) -> Result<(), SourceError> {
         let target = t.as_micros() as u64;
         let Kind::Replay(state) = &mut self.kind else {
@@ -874,7 +874,11 @@ impl OpenNiSource {
                 }
                 let ts = rec_ts + state.loop_offset_us;
                 state.last_ts_us = ts;
-                return self.build_frame(d, c, ts).map(Some);
+                // Received when handed out (after the pacing sleep), as a camera's frame.
+                return self.build_frame(d, c, ts).map(|mut f| {
+                    f.host_rx = Instant::now();
+                    Some(f)
+                });
             }
             let Kind::Replay(state) = &mut self.kind else {
                 unreachable!()

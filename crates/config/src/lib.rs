@@ -18,7 +18,7 @@
 //! Tokens come from the environment or a file (or, discouraged, the file itself) and are held
 //! as [`Secret`], whose `Debug` and `Display` never show the value.
 //!
-//! The `[detect]` section belongs to the detector (issue 5); it is kept as written and parsed
+//! The `[detect]` section belongs to the detector; it is kept as written and parsed
 //! into the detector's own config type with [`Config::extract`], which keeps the file's
 //! line numbers in its errors; so is `[track]` (labels, neutral calibration seconds).
 
@@ -157,11 +157,14 @@ pub struct Config {
     pub takes: TakesConfig,
     pub timecode: TimecodeConfig,
     pub logging: LoggingConfig,
-    /// The detector's section (issue 5), parsed by [`Config::extract`].
+    /// The detector's section, parsed by [`Config::extract`].
     pub detect: toml::Table,
-    /// The tracker's section (issue 5: labels, calibration seconds), parsed by
+    /// The tracker's section (labels, calibration seconds), parsed by
     /// [`Config::extract`].
     pub track: toml::Table,
+    /// How the characters' outputs are made (shape smoothing, temporal filter), parsed by
+    /// [`Config::extract`] like `[detect]` and `[track]`.
+    pub retarget: toml::Table,
     /// Where this configuration came from, with its text (for [`Config::extract`]).
     #[serde(skip)]
     pub origin: Origin,
@@ -178,6 +181,7 @@ impl Default for Config {
             logging: LoggingConfig::default(),
             detect: toml::Table::new(),
             track: toml::Table::new(),
+            retarget: toml::Table::new(),
             origin: Origin::Embedded,
         }
     }
@@ -305,7 +309,7 @@ impl TryFrom<f64> for PositiveSeconds {
     }
 }
 
-/// `[server]`: the WebSocket/HTTP server (issue 6).
+/// `[server]`: the WebSocket/HTTP server.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ServerConfig {
@@ -404,7 +408,7 @@ pub struct Tokens {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CharactersConfig {
-    /// Character files (TOML, issue 2). Empty = the built-in human and wolf.
+    /// Character files (TOML). Empty = the built-in human and wolf.
     pub files: Vec<PathBuf>,
 }
 

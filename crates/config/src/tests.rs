@@ -20,10 +20,12 @@ fn the_documented_example_is_the_default() {
     ));
     expected.takes.folder = dir.join("takes");
     expected.origin = config.origin.clone();
-    // `[detect]` and `[track]` are the pipeline crates' tables, kept here as TOML: the example
-    // lists their defaults, checked against those crates' own in mouthpiece-track's tests.
+    // `[detect]`, `[track]` and `[retarget]` are the pipeline's tables, kept here as TOML: the
+    // example lists their defaults, checked against the pipeline's own in mouthpiece-track's
+    // tests.
     expected.detect = config.detect.clone();
     expected.track = config.track.clone();
+    expected.retarget = config.retarget.clone();
     assert_eq!(config, expected);
 }
 

@@ -5,7 +5,7 @@ use std::time::Duration;
 use mouthpiece_capture::{open_source, CaptureConfig, SourceSpec};
 use mouthpiece_config::Config;
 
-use crate::check::CheckError;
+use crate::error::CheckError;
 use crate::source::Opener;
 
 /// Opens `spec` again on every call (the source thread calls it after each loss).

@@ -5,7 +5,7 @@
 use mouthpiece_config::Config;
 use mouthpiece_retarget::Character;
 
-use crate::check::CheckError;
+use crate::error::CheckError;
 
 /// The built-in characters: the repository's `config/characters/` at build time.
 pub const BUILTIN: [(&str, &str); 2] = [

@@ -1,17 +1,10 @@
 //! Checks of a loaded [`Config`] that need more than the config crate knows: the log
-//! filter's syntax, the character files, the detector's section. Run at start, on reload and
+//! filter's syntax, the character files, the `[detect]`, `[track]` and `[retarget]` sections. Run at start, on reload and
 //! by `mouthpiece check-config`.
 
-use mouthpiece_config::{Config, ConfigError, Location};
+use mouthpiece_config::{Config, Location};
 
-/// Why a config that parsed is still unusable.
-#[derive(Debug, thiserror::Error)]
-pub enum CheckError {
-    #[error(transparent)]
-    Config(#[from] ConfigError),
-    #[error("{location}: {message}")]
-    Invalid { location: Location, message: String },
-}
+pub use crate::error::CheckError;
 
 /// Everything a config must satisfy before the daemon uses it.
 pub fn check(config: &Config) -> Result<(), CheckError> {
@@ -25,7 +18,7 @@ pub fn check(config: &Config) -> Result<(), CheckError> {
     crate::live::setup(config)?;
     crate::capture::check_spec(config)?;
     crate::hardening::check_server(config)?;
-    crate::daemon::timecode_rate(config)?;
+    crate::settings::timecode_rate(config)?;
     let listen = config.server.listen.0;
     if !listen.ip().is_loopback()
         && (config.server.tokens.read.is_none() || config.server.tokens.control.is_none())

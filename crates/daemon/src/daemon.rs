@@ -15,14 +15,14 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use mouthpiece_config::Config;
-use mouthpiece_server::{Hub, HubConfig, Limits, ServerConfig, TimecodeRate, TlsFiles, Token};
+use mouthpiece_server::{Hub, HubConfig, ServerConfig, TimecodeRate};
 use tokio::signal::unix::{signal, SignalKind};
 
 use crate::backoff::Backoff;
-use crate::check::CheckError;
+use crate::error::CheckError;
 use crate::notify::Notifier;
 use crate::pipeline::{self, Command, Processor};
-use crate::source::{self, Opener, SourceShared, SourceState};
+use crate::source::{self, SourceShared, SourceState};
 use crate::takes::{TakeSettings, Takes};
 
 /// How long the exit waits for a take still recording to be written out and synced.
@@ -52,18 +52,7 @@ pub enum DaemonError {
     },
 }
 
-/// Builds what the daemon runs from a configuration; called at start and (for the reload
-/// payload) on every SIGHUP.
-pub trait Factory: Send + Sync + 'static {
-    type Processor: Processor + 'static;
-    /// The processor for `config`.
-    fn processor(&self, config: &Config) -> Result<Self::Processor, CheckError>;
-    /// A validated reload for a running processor (characters, colour ranges).
-    fn reload(&self, config: &Config) -> Result<Box<dyn std::any::Any + Send>, CheckError>;
-    /// Opens the configured source (called again after every loss); a live source that
-    /// delivers nothing for `stall_timeout` is reported lost.
-    fn opener(&self, spec: &str, stall_timeout: Duration) -> Opener;
-}
+pub use crate::factory::Factory;
 
 /// Start-up options from the command line.
 #[derive(Debug, Clone, Default)]
@@ -83,53 +72,7 @@ pub struct Overrides {
     pub source: Option<String>,
 }
 
-/// The server's settings from the config (tokens checked for the server's rules).
-pub fn server_config(config: &Config) -> Result<ServerConfig, CheckError> {
-    let token = |key: &str,
-                 secret: Option<&mouthpiece_config::Secret>|
-     -> Result<Option<Token>, CheckError> {
-        secret
-            .map(|s| Token::new(s.expose()))
-            .transpose()
-            .map_err(|e| CheckError::Invalid {
-                location: config.locate(key),
-                message: e.to_string(),
-            })
-    };
-    Ok(ServerConfig {
-        name: "mouthpiece".into(),
-        read_token: token("server.read_token", config.server.tokens.read.as_ref())?,
-        control_token: token(
-            "server.control_token",
-            config.server.tokens.control.as_ref(),
-        )?,
-        allowed_origins: config.server.allowed_origins.clone(),
-        allowed_hosts: config.server.allowed_hosts.clone(),
-        limits: Limits {
-            max_clients: config.server.max_clients as usize,
-            ..Limits::default()
-        },
-        tls: match (&config.server.tls_cert, &config.server.tls_key) {
-            (Some(cert), Some(key)) => Some(TlsFiles {
-                cert: cert.clone(),
-                key: key.clone(),
-            }),
-            _ => None,
-        },
-    })
-}
-
-pub fn timecode_rate(config: &Config) -> Result<TimecodeRate, CheckError> {
-    config
-        .timecode
-        .rate
-        .0
-        .parse::<TimecodeRate>()
-        .map_err(|e| CheckError::Invalid {
-            location: config.locate("timecode.rate"),
-            message: e.to_string(),
-        })
-}
+pub use crate::settings::{server_config, timecode_rate};
 
 /// Runs the daemon until SIGTERM or SIGINT.
 pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Result<(), DaemonError> {
@@ -406,7 +349,7 @@ fn reload<F: Factory>(
     options: &RunOptions,
     current: &Config,
     bound: std::net::SocketAddr,
-) -> Result<(Config, Box<dyn std::any::Any + Send>, ServerConfig), CheckError> {
+) -> Result<(Config, <F::Processor as Processor>::Reload, ServerConfig), CheckError> {
     let mut config = match &options.config_path {
         Some(path) => Config::load(path)?,
         None => Config::embedded(),

@@ -10,7 +10,7 @@ use crate::check::CheckError;
 /// on `config`'s listen address: limits within the hard caps, tokens where they are needed,
 /// TLS files that load.
 pub fn check_server(config: &Config) -> Result<mouthpiece_server::ServerConfig, CheckError> {
-    let server = crate::daemon::server_config(config)?;
+    let server = crate::settings::server_config(config)?;
     check_against(config, &server, config.server.listen.0)?;
     if let Some(files) = &server.tls {
         mouthpiece_server::check_tls(files).map_err(|e| CheckError::Invalid {

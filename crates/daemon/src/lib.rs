@@ -3,8 +3,14 @@
 //! # Layout
 //! - [`source`]: the source thread: opens the source, feeds the [`slot`], reopens a lost
 //!   source with [`backoff`];
-//! - [`live`]: the processor: detect + track (3D dots, names, head pose, neutral
-//!   calibration) + retarget for every configured character;
+//! - [`console`]: what the booth console page needs: the preview's image and dots, health
+//!   figures, the calibration report;
+//! - [`live`]: the processor: the frame pipeline (`mouthpiece_track::pipeline`: detect +
+//!   track + retarget) for every configured character;
+//! - [`pipeline`]: the processing thread around a [`pipeline::Processor`];
+//! - [`factory`]: builds the processor and its reloads from a configuration;
+//! - [`check`]: everything a configuration must satisfy; [`error`], [`settings`]: leaf
+//!   modules the checks and the daemon share (no module imports one that imports it back);
 //! - [`slot`]: the latest-frame slot between the source thread and processing (newest wins);
 //! - [`notify`]: systemd's notify protocol (READY, STATUS, WATCHDOG, STOPPING);
 //! - [`throttle`]: repeated warnings at most once per interval;
@@ -17,12 +23,16 @@ pub mod backoff;
 pub mod capture;
 pub mod characters;
 pub mod check;
+pub mod console;
 pub mod daemon;
+pub mod error;
+pub mod factory;
 pub mod hardening;
 pub mod live;
 pub mod logging;
 pub mod notify;
 pub mod pipeline;
+pub mod settings;
 pub mod slot;
 pub mod source;
 pub mod takes;

@@ -36,6 +36,8 @@ pub struct Flags {
     pub dots_missing: usize,
     /// No dot of any colour found at all.
     pub no_dots: bool,
+    /// This frame completed a neutral calibration (answers waiting `calibrate` requests).
+    pub neutral_taken: bool,
 }
 
 /// What a processor fills per frame; reused from frame to frame.
@@ -51,11 +53,18 @@ pub struct Output {
 /// Turns a frame into the stream's per-frame result. The real one is detect + track +
 /// retarget; the trait keeps the daemon independent of how.
 pub trait Processor: Send {
+    /// A validated new configuration for the processor ([`crate::factory::Factory::reload`]).
+    type Reload: Send + 'static;
+
     /// Processes `frame` into `out`, reusing `out`'s buffers.
     fn process(&mut self, frame: &Frame, out: &mut Output);
 
-    /// Starts a new neutral calibration.
+    /// Starts a new neutral calibration over `duration` of still, closed mouth (`None`: the
+    /// configured length); the frame that takes the pose sets [`Flags::neutral_taken`].
     fn calibrate(&mut self, duration: Option<Duration>);
+
+    /// The source was reopened (its clock may have started again). Default: nothing.
+    fn source_restarted(&mut self) {}
 
     /// Characters, point names and frame rate for `hello`.
     fn stream_info(&self, frame_rate: f64, source: &str) -> StreamInfo;
@@ -69,14 +78,26 @@ pub trait Processor: Send {
 
     /// Applies a reloaded configuration (characters, colour ranges); the old one stays on
     /// error.
-    fn reload(&mut self, update: Box<dyn std::any::Any + Send>) -> Result<(), String>;
+    fn reload(&mut self, update: Self::Reload) -> Result<(), String>;
+
+    /// The dots on the last frame's camera image, for the console's preview (called only
+    /// when a preview image is due).
+    fn preview_overlay(&self, _frame: &Frame) -> mouthpiece_server::Overlay {
+        mouthpiece_server::Overlay::default()
+    }
+
+    /// How good the neutral pose taken on the last frame was, once (`wall_us` is set by
+    /// the caller).
+    fn take_calibration_report(&mut self) -> Option<mouthpiece_server::CalibrationReport> {
+        None
+    }
 }
 
 /// Requests from the daemon itself (signals, start-up options) to the processing thread.
 #[derive(Debug)]
-pub enum Command {
+pub enum Command<R> {
     /// A validated new configuration for the processor (see [`Processor::reload`]).
-    Reload(Box<dyn std::any::Any + Send>),
+    Reload(R),
     RecordStart {
         slate: String,
         take: Option<u32>,
@@ -84,13 +105,13 @@ pub enum Command {
     RecordStop,
 }
 
-/// Everything the processing thread needs.
-pub struct Context {
+/// Everything the processing thread needs (`R`: the processor's reload payload).
+pub struct Context<R> {
     pub source: Arc<SourceShared>,
     pub spec: String,
     pub hub: Hub,
     pub control: ControlReceiver,
-    pub commands: Receiver<Command>,
+    pub commands: Receiver<Command<R>>,
     pub takes: Takes,
     pub default_slate: String,
     pub timecode_rate: TimecodeRate,
@@ -104,14 +125,60 @@ pub struct Context {
 /// Starts the processing thread.
 pub fn spawn<P: Processor + 'static>(
     processor: P,
-    ctx: Context,
+    ctx: Context<P::Reload>,
 ) -> std::io::Result<JoinHandle<()>> {
     std::thread::Builder::new()
         .name("mouthpiece-process".into())
         .spawn(move || run(processor, ctx))
 }
 
-fn run<P: Processor>(mut processor: P, mut ctx: Context) {
+/// How long a `calibrate` request waits for a still, closed mouth beyond its duration
+/// before it is answered with an error (the calibration itself goes on; `status` says when it
+/// ends). Twenty seconds are a few attempts at holding still; the server waits for the answer
+/// for its control timeout plus the duration.
+pub const CALIBRATE_ANSWER_GRACE: Duration = Duration::from_secs(20);
+
+/// `calibrate` requests waiting for the neutral pose, each with the time it gives up.
+#[derive(Default)]
+struct PendingCalibrations {
+    waiting: Vec<(ControlRequest, Instant)>,
+}
+
+impl PendingCalibrations {
+    fn push(&mut self, request: ControlRequest, duration: Option<Duration>) {
+        let wait = duration.unwrap_or(Duration::from_secs(1)) + CALIBRATE_ANSWER_GRACE;
+        self.waiting.push((request, Instant::now() + wait));
+    }
+
+    /// Answers every waiting request: the neutral pose was taken.
+    fn taken(&mut self, seq: u64) {
+        for (request, _) in self.waiting.drain(..) {
+            tracing::info!(client = %request.client, "calibration done");
+            request.reply(Ok(json!({ "calibrated": true, "seq": seq })));
+        }
+    }
+
+    /// Answers the requests that waited too long.
+    fn expire(&mut self, now: Instant) {
+        let mut i = 0;
+        while i < self.waiting.len() {
+            if self.waiting[i].1 <= now {
+                let (request, _) = self.waiting.swap_remove(i);
+                let failure = ControlFailure::new(
+                    "no still, closed mouth long enough yet; the calibration goes on (see status) and the previous neutral pose stays in use until it ends",
+                );
+                tracing::warn!(client = %request.client, "calibrate: {}", failure.message);
+                request.reply(Err(failure));
+            } else {
+                i += 1;
+            }
+        }
+    }
+}
+
+fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
+    let mut pending = PendingCalibrations::default();
+    let mut up_before = false;
     let mut out = Output::default();
     let mut seen_generation = u64::MAX;
     let mut last_frame: Option<Instant> = None;
@@ -119,6 +186,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
     let mut calibrating = None;
     let mut frame_rate = 0.0;
     let mut frames = 0u64;
+    let mut health = crate::console::HealthMeter::new(ctx.takes.settings().folder.clone());
     tracing::info!("processing thread started");
     loop {
         ctx.heartbeat
@@ -139,6 +207,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
                 let wall = SystemTime::now() - frame.host_rx.elapsed();
                 frame.wall_clock = Some(wall);
                 let wall_us = crate::takes::unix_us(wall);
+                out.flags.neutral_taken = false;
                 processor.process(&frame, &mut out);
                 if processor.take_info_changed() {
                     ctx.hub
@@ -153,13 +222,44 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
                 out.stream.processing = Some(started.elapsed());
                 let seq = ctx.hub.publish(&out.stream);
                 tracing::trace!(seq, device_ts_us = frame.device_ts_us, "frame processed");
+                health.frame(
+                    processor.performer_names().len(),
+                    out.flags.dots_missing,
+                    started.elapsed(),
+                    frame.host_rx.elapsed(),
+                    [frame.color.width, frame.color.height],
+                );
+                if let Some(mut report) = processor.take_calibration_report() {
+                    report.wall_us = wall_us;
+                    tracing::info!(?report, "calibration report");
+                    ctx.hub.set_calibration(report);
+                }
+                let preview_due = ctx.hub.preview_due(out.stream.t);
+                let frame = if preview_due || ctx.takes.is_recording() {
+                    Some(Arc::new(frame))
+                } else {
+                    None
+                };
+                if let (true, Some(frame)) = (preview_due, &frame) {
+                    ctx.hub.offer_preview(mouthpiece_server::PreviewInput {
+                        seq,
+                        t: out.stream.t,
+                        capture_us: out.stream.capture_us,
+                        wall_us: out.stream.wall_us,
+                        image: Arc::new(crate::console::FrameImage(frame.clone())),
+                        overlay: processor.preview_overlay(frame),
+                    });
+                }
+                if out.flags.neutral_taken {
+                    pending.taken(seq);
+                }
                 if calibrating != Some(out.flags.calibrating) {
                     calibrating = Some(out.flags.calibrating);
                     let now = out.flags.calibrating;
                     ctx.hub.update_status(|s| s.calibrating = now);
                     tracing::info!(calibrating = now, "calibration state");
                 }
-                if ctx.takes.is_recording() {
+                if let (true, Some(frame)) = (ctx.takes.is_recording(), frame) {
                     let info = ctx.hub.info();
                     let derived = derive(
                         processor.performer_names(),
@@ -169,7 +269,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
                         wall_us,
                         ctx.timecode_rate,
                     );
-                    ctx.takes.push(Arc::new(frame), Box::new(derived));
+                    ctx.takes.push(frame, Box::new(derived));
                 }
             }
             Taken::Empty => {
@@ -196,15 +296,26 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
         if generation != seen_generation && !stalled {
             seen_generation = generation;
             let (_, state) = ctx.source.state();
+            if let SourceState::Up(_) = state {
+                if up_before {
+                    // Reopened: the source's clock may have started again.
+                    processor.source_restarted();
+                }
+                up_before = true;
+            }
             publish_source_state(&ctx, &processor, &state, &mut frame_rate);
         }
         while let Some(request) = ctx.control.try_recv() {
-            handle_control(&mut processor, &mut ctx, request);
+            handle_control(&mut processor, &mut ctx, &mut pending, request);
         }
+        pending.expire(Instant::now());
         while let Ok(command) = ctx.commands.try_recv() {
             handle_command(&mut processor, &mut ctx, command, frame_rate);
         }
         ctx.takes.poll();
+        if let Some(figures) = health.tick(Instant::now()) {
+            ctx.hub.set_health(figures);
+        }
     }
     // Finish every take (bounded by its queue), synced to disk, before the daemon exits.
     ctx.takes.shutdown();
@@ -216,7 +327,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context) {
 }
 
 fn publish_source_state<P: Processor>(
-    ctx: &Context,
+    ctx: &Context<P::Reload>,
     processor: &P,
     state: &SourceState,
     frame_rate: &mut f64,
@@ -245,9 +356,21 @@ fn publish_source_state<P: Processor>(
     }
 }
 
-fn handle_control<P: Processor>(processor: &mut P, ctx: &mut Context, request: ControlRequest) {
+fn handle_control<P: Processor>(
+    processor: &mut P,
+    ctx: &mut Context<P::Reload>,
+    pending: &mut PendingCalibrations,
+    request: ControlRequest,
+) {
     tracing::info!(client = %request.client, command = ?request.command, "control request");
     let command = request.command.clone();
+    if let ControlCommand::Calibrate { duration } = command {
+        processor.calibrate(duration);
+        ctx.hub.update_status(|s| s.calibrating = true);
+        // Answered once the neutral pose is taken (or given up on).
+        pending.push(request, duration);
+        return;
+    }
     // Takes answer from their writer thread once the file is open or closed.
     let reply = move |outcome: Result<serde_json::Value, String>| {
         let outcome = outcome.map_err(ControlFailure::new);
@@ -257,11 +380,7 @@ fn handle_control<P: Processor>(processor: &mut P, ctx: &mut Context, request: C
         request.reply(outcome);
     };
     match command {
-        ControlCommand::Calibrate { duration } => {
-            processor.calibrate(duration);
-            ctx.hub.update_status(|s| s.calibrating = true);
-            reply(Ok(json!({ "calibrating": true })));
-        }
+        ControlCommand::Calibrate { .. } => {}
         ControlCommand::RecordStart { slate, take } => {
             let slate = slate.unwrap_or_else(|| ctx.default_slate.clone());
             start_take(ctx, &slate, take, Box::new(reply));
@@ -275,8 +394,8 @@ type TakeReply = Box<dyn FnOnce(Result<serde_json::Value, String>) + Send>;
 
 fn handle_command<P: Processor>(
     processor: &mut P,
-    ctx: &mut Context,
-    command: Command,
+    ctx: &mut Context<P::Reload>,
+    command: Command<P::Reload>,
     frame_rate: f64,
 ) {
     match command {
@@ -310,7 +429,7 @@ fn handle_command<P: Processor>(
 }
 
 /// Starts a take; `done` gets the reply once the writer thread has the file open.
-fn start_take(ctx: &mut Context, slate: &str, take: Option<u32>, done: TakeReply) {
+fn start_take<R>(ctx: &mut Context<R>, slate: &str, take: Option<u32>, done: TakeReply) {
     let hub = ctx.hub.clone();
     let hub_at_end = ctx.hub.clone();
     ctx.takes.start(
@@ -324,6 +443,7 @@ fn start_take(ctx: &mut Context, slate: &str, take: Option<u32>, done: TakeReply
                     slate: info.slate.clone(),
                     take: info.take,
                     file: Some(file.clone()),
+                    started_wall_us: Some(crate::takes::unix_us(info.started)),
                 };
                 hub.update_status(|s| {
                     s.recording = Some(recording);
@@ -345,7 +465,7 @@ fn start_take(ctx: &mut Context, slate: &str, take: Option<u32>, done: TakeReply
 }
 
 /// Stops the take; `done` gets the reply once it is closed and synced.
-fn stop_take(ctx: &mut Context, done: TakeReply) {
+fn stop_take<R>(ctx: &mut Context<R>, done: TakeReply) {
     ctx.takes.stop(Box::new(move |ended| {
         done(ended.map(|ended| {
             let info = ended.info.as_ref();
@@ -363,6 +483,17 @@ fn stop_take(ctx: &mut Context, done: TakeReply) {
 /// A take ended: clear `recording` (unless a newer take is already recording) and say why
 /// when it stopped by itself.
 fn announce_take_end(hub: &Hub, ended: &TakeEnded) {
+    // A take whose file was never created has nothing to list.
+    if let Some(info) = &ended.info {
+        hub.add_take(mouthpiece_server::TakeSummary {
+            slate: info.slate.clone(),
+            take: info.take,
+            file: info.path.display().to_string(),
+            frames: ended.frames,
+            seconds: info.started.elapsed().map_or(0.0, |d| d.as_secs_f64()),
+            error: ended.error.clone(),
+        });
+    }
     let message = ended.error.as_ref().map(|e| format!("take stopped: {e}"));
     let file = ended.info.as_ref().map(|i| i.path.display().to_string());
     hub.update_status(|s| {

@@ -31,6 +31,9 @@ struct PanickingFactory;
 struct PanickingProcessor(mouthpiece_daemon::live::LiveProcessor);
 
 impl mouthpiece_daemon::pipeline::Processor for PanickingProcessor {
+    type Reload =
+        <mouthpiece_daemon::live::LiveProcessor as mouthpiece_daemon::pipeline::Processor>::Reload;
+
     fn process(
         &mut self,
         _frame: &mouthpiece_frame::Frame,
@@ -50,7 +53,7 @@ impl mouthpiece_daemon::pipeline::Processor for PanickingProcessor {
     fn performer_names(&self) -> &[String] {
         self.0.performer_names()
     }
-    fn reload(&mut self, update: Box<dyn std::any::Any + Send>) -> Result<(), String> {
+    fn reload(&mut self, update: Self::Reload) -> Result<(), String> {
         self.0.reload(update)
     }
 }
@@ -60,7 +63,7 @@ impl mouthpiece_daemon::daemon::Factory for PanickingFactory {
     fn processor(
         &self,
         config: &Config,
-    ) -> Result<PanickingProcessor, mouthpiece_daemon::check::CheckError> {
+    ) -> Result<PanickingProcessor, mouthpiece_daemon::error::CheckError> {
         mouthpiece_daemon::live::LiveFactory
             .processor(config)
             .map(PanickingProcessor)
@@ -68,7 +71,10 @@ impl mouthpiece_daemon::daemon::Factory for PanickingFactory {
     fn reload(
         &self,
         config: &Config,
-    ) -> Result<Box<dyn std::any::Any + Send>, mouthpiece_daemon::check::CheckError> {
+    ) -> Result<
+        <PanickingProcessor as mouthpiece_daemon::pipeline::Processor>::Reload,
+        mouthpiece_daemon::error::CheckError,
+    > {
         mouthpiece_daemon::live::LiveFactory.reload(config)
     }
     fn opener(

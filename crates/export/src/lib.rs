@@ -1,4 +1,4 @@
-//! mouthpiece-export: a take as keyframe animation (method.md §9).
+//! mouthpiece-export: a take as keyframe animation (docs/method.md §9).
 //!
 //! A take is the stream `mouthpiece retarget` or `mouthpiece process` writes: one JSON line
 //! per time step with the character's mouth points in its mouth frame. This crate turns it

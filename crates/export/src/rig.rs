@@ -22,7 +22,7 @@ pub struct RigPoint {
 
 /// The character's mouth as the export sees it.
 ///
-/// The animation moves the points in the mouth frame (method.md §2: origin between the
+/// The animation moves the points in the mouth frame (docs/method.md §2: origin between the
 /// corners, x towards the character's left corner, y up, z out of the mouth), which is where
 /// `retarget` reports them. `placement` carries the mouth frame into the character's model
 /// frame (`model = placement · mouth`); it becomes the `mouth` node's transform, so the

@@ -6,7 +6,7 @@
 //! the capture backends and the detector depend on the same definitions without depending
 //! on each other.
 //!
-//! Conventions (see `shared/method.md` §10):
+//! Conventions (see `docs/method.md` §10):
 //! - colour is BGR8, row-major, tightly packed (`width * 3` bytes a row), OpenCV's order;
 //! - depth is `u16` in device units (`Calibration::depth_scale_m` metres each; 1 mm by
 //!   default), 0 = no reading, row-major;

@@ -800,3 +800,98 @@ async fn the_embedded_default_shows_the_performer_and_the_wolf_moving() {
     assert_ne!(a["wolf"], b["wolf"], "the wolf moves on the page");
     assert!(redrawn, "the canvas changes between two moments");
 }
+
+/// The human's points in a `frame` message when every one is seen.
+fn tracked_human(frame: &Value) -> Option<Vec<[f64; 3]>> {
+    let human = frame["characters"]
+        .as_array()?
+        .iter()
+        .find(|c| c["name"] == "human")?;
+    let seen = human["confidence"]
+        .as_array()?
+        .iter()
+        .all(|c| c.as_f64() > Some(0.5));
+    seen.then(|| {
+        human["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| [0, 1, 2].map(|k| p[k].as_f64().unwrap()))
+            .collect()
+    })
+}
+
+/// `calibrate` is answered when the neutral pose has been taken over its `duration_s` (not at
+/// once); a replay without `loop=1` that ends and is reopened starts its clock again: the
+/// status shows the source going down and up, and soon after it is back the characters are
+/// tracked again (new points every frame, not the last ones repeated), on the neutral pose
+/// already taken.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn calibrate_answers_once_calibrated_and_a_reopened_replay_is_tracked_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    // 1.5 s of still, closed mouth, then speech.
+    let synth = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(["synth", "--seconds", "3", "--seed", "1", "--out"])
+        .arg(&session)
+        .output()
+        .unwrap();
+    assert!(
+        synth.status.success(),
+        "{}",
+        String::from_utf8_lossy(&synth.stderr)
+    );
+    let spec = format!("replay:{}", session.display());
+    let daemon = Daemon::start_with_dir(dir, &spec, "", &[], &[]);
+    let mut ws = daemon.connect().await;
+    wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await;
+    let asked = Instant::now();
+    send(
+        &mut ws,
+        json!({"type": "calibrate", "id": 7, "duration_s": 0.5}),
+    )
+    .await;
+    let answer = wait_for(&mut ws, Duration::from_secs(20), |v| {
+        v["id"] == 7 && (v["type"] == "result" || v["type"] == "error")
+    })
+    .await;
+    let waited = asked.elapsed();
+    assert_eq!(answer["type"], "result", "{answer}\n{}", daemon.log());
+    assert_eq!(answer["detail"]["calibrated"], true, "{answer}");
+    assert!(
+        waited >= Duration::from_millis(450),
+        "answered after {waited:?}, before half a second of frames"
+    );
+
+    // The replay ends after 3 s and is reopened 0.2 s later, its clock back at 0.
+    wait_for(&mut ws, Duration::from_secs(10), |v| {
+        v["type"] == "status" && v["source"] == "down"
+    })
+    .await;
+    wait_for(&mut ws, Duration::from_secs(10), |v| {
+        v["type"] == "status" && v["source"] == "up"
+    })
+    .await;
+    let up = Instant::now();
+    let mut previous: Option<Vec<[f64; 3]>> = None;
+    loop {
+        let f = wait_for(&mut ws, Duration::from_secs(5), |v| v["type"] == "frame").await;
+        let now = tracked_human(&f);
+        if let (Some(a), Some(b)) = (&previous, &now) {
+            if a != b {
+                break;
+            }
+        }
+        previous = now;
+        assert!(
+            up.elapsed() < Duration::from_secs(3),
+            "not tracked again after the restart: {f}\n{}",
+            daemon.log()
+        );
+    }
+    assert!(
+        !daemon.log().contains("recalibrating"),
+        "the same performer kept the neutral pose\n{}",
+        daemon.log()
+    );
+}

@@ -3,7 +3,7 @@
 //! # Design
 //!
 //! OpenNI2 is process-global and not thread-safe in practice (its drivers run their own
-//! threads and several teardown paths race with them; `../../shared/platform-notes.md`).
+//! threads, and several of its teardown paths race with them).
 //! This crate therefore runs **one OpenNI thread per process** (`openni2`), started on first
 //! use, that owns every native handle and makes every OpenNI call, teardown included:
 //!

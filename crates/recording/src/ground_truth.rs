@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 /// The rigid motion carrying the neutral head onto the current one:
-/// `current = R · neutral + t`, camera frame, metres (method §10).
+/// `current = R · neutral + t`, camera frame, metres (docs/method.md §10).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct HeadPose {
     /// Unit quaternion `[w, x, y, z]`.

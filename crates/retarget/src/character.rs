@@ -1,4 +1,4 @@
-//! Character files (method.md §7): a character's neutral mouth points, where its mouth frame
+//! Character files (docs/method.md §7): a character's neutral mouth points, where its mouth frame
 //! is, which performer dot drives which point, and how the deformation `M` is chosen.
 //!
 //! The format is documented in `docs/retarget.md`. Parsing is strict: unknown keys, non-finite
@@ -15,7 +15,7 @@ use crate::layout::{parse_dot_name, DotId, PerformerLayout};
 use crate::named::Named;
 use crate::{Error, MouthFrame, Vec3};
 
-/// How the deformation parameters `M` are chosen (method.md §5).
+/// How the deformation parameters `M` are chosen (docs/method.md §5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum MMode {
@@ -60,11 +60,12 @@ pub struct Character {
     pub name: String,
     /// Units of its coordinates, if given.
     pub units: Option<Units>,
-    /// Point names in order around the mouth (the file's order, or `P1..PN` from contours).
+    /// Point names in order around the mouth: `P1..PN` by number (whatever the file's order),
+    /// the file's order when a `[map]` says which dot drives which, or `P1..PN` from contours.
     pub point_names: Vec<String>,
     /// The neutral points as given (model frame, or already a mouth frame).
     pub model_points: Vec<Vec3>,
-    /// The mouth frame within the model frame (method.md §2).
+    /// The mouth frame within the model frame (docs/method.md §2).
     pub frame: MouthFrame,
     /// `P⁰`: the neutral points in the mouth frame.
     pub neutral: Vec<Vec3>,
@@ -309,7 +310,35 @@ impl RawCharacter {
                             format!("a mouth needs at least 4 points, got {}", names.len()),
                         ));
                     }
-                    (names, values, spans)
+                    // A TOML table has no order: the names say which point is which.
+                    match order_by_name(&names) {
+                        Some(order) => (
+                            order.iter().map(|&i| names[i].clone()).collect(),
+                            order.iter().map(|&i| values[i]).collect(),
+                            order.iter().map(|&i| spans[i].clone()).collect(),
+                        ),
+                        None if self.map.is_some() => (names, values, spans),
+                        None => {
+                            let odd = names
+                                .iter()
+                                .zip(&spans)
+                                .find(|(n, _)| point_number(n, names.len()).is_none())
+                                .or_else(|| names.iter().zip(&spans).next_back())
+                                .expect("at least 4 points");
+                            return Err(c.err(
+                                format!("points.{}", odd.0),
+                                odd.1.clone(),
+                                format!(
+                                    "point names do not say which point is which: name them P1..P{n} \
+                                     (P1 the left corner, the upper lip left to right, P{r} the right \
+                                     corner, the lower lip right to left), or give a [map] from the \
+                                     dots D1..D{n} to the names, or use [contour]",
+                                    n = names.len(),
+                                    r = names.len() / 2 + 1
+                                ),
+                            ));
+                        }
+                    }
                 }
                 (None, Some(contour)) => {
                     let pts = contour_points(&c, contour)?;
@@ -442,6 +471,31 @@ impl RawCharacter {
 
 /// Largest `points_per_lip`: the two lips then hold [`crate::layout::MAX_DOT_NUMBER`] points.
 pub const MAX_POINTS_PER_LIP: usize = crate::layout::MAX_DOT_NUMBER.div_ceil(2);
+/// `k - 1` for a point named `Pk` with `1 <= k <= n`.
+fn point_number(name: &str, n: usize) -> Option<usize> {
+    let digits = name.strip_prefix('P')?;
+    if digits.starts_with('0') || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    let k: usize = digits.parse().ok()?;
+    (1..=n).contains(&k).then(|| k - 1)
+}
+
+/// When the names are exactly `P1..PN` (in any order), the file's indices in name order: the
+/// points' order around the mouth (and with it the corners and the default map `Dk -> Pk`)
+/// follows the names, never the file's order. `None` when the names are anything else.
+fn order_by_name(names: &[String]) -> Option<Vec<usize>> {
+    let n = names.len();
+    let mut order = vec![usize::MAX; n];
+    for (i, name) in names.iter().enumerate() {
+        let k = point_number(name, n)?;
+        if order[k] != usize::MAX {
+            return None;
+        }
+        order[k] = i;
+    }
+    Some(order)
+}
 
 /// Places `points_per_lip` points (corners included) at equal arc length along each contour
 /// and orders them like the performer's dots: left corner, upper lip left to right, right
@@ -615,13 +669,50 @@ P4 = [10.0, 4.5, 2.0]
         }
     }
 
+    /// The human character as a serialiser that sorts keys writes it (P1, P10, P11, P12,
+    /// P2, ...) is the same character: names, not the file's order, place the points.
     #[test]
-    fn file_order_is_kept() {
+    fn points_are_ordered_by_name_not_by_the_files_order() {
+        let human = include_str!("../../../config/characters/human.toml");
+        let (head, table) = human.split_once("[points]").unwrap();
+        let mut lines: Vec<&str> = table.lines().filter(|l| l.starts_with('P')).collect();
+        lines.sort_unstable(); // P1, P10, P11, P12, P2, ...
+        assert!(lines[1].starts_with("P10"));
+        let sorted = format!("{head}[points]\n{}\n", lines.join("\n"));
+        let want = Character::from_toml_str(human).unwrap();
+        let got = Character::from_toml_str(&sorted).unwrap();
+        assert_eq!(got.point_names, want.point_names);
+        assert_eq!(got.driver, want.driver);
+        for (a, b) in got.neutral.iter().zip(&want.neutral) {
+            assert_relative_eq!(a, b, epsilon = 1e-12);
+        }
         let src = "name = \"o\"\n[points]\nP3 = [-1, 0, 0]\nP1 = [1, 0, 0]\nP2 = [0, 1, 0]\nP4 = [0, -1, 0]\n";
         let c = Character::from_toml_str(src).unwrap();
-        assert_eq!(c.point_names, ["P3", "P1", "P2", "P4"]);
-        // Corners are the points driven by D1 and D3 (of 4): P3 and P2 here.
+        assert_eq!(c.point_names, ["P1", "P2", "P3", "P4"]);
+        // Corners are the points driven by D1 and D3 (of 4): P1 and P3.
         assert_relative_eq!(c.neutral[0], Vec3::new(c.mouth_width() / 2.0, 0.0, 0.0));
+        assert_relative_eq!(c.mouth_width(), 2.0);
+    }
+
+    /// Names that do not say which point is which need a `[map]` (or `[contour]`).
+    #[test]
+    fn free_point_names_need_a_map() {
+        let src = "name = \"o\"\n[points]\nleft = [1, 0, 0]\ntop = [0, 1, 0]\nright = [-1, 0, 0]\nbottom = [0, -1, 0]\n";
+        let (key, line, reason) = invalid(src);
+        assert_eq!((key.as_str(), line), ("points.left", Some(3)));
+        assert!(
+            reason.contains("[map]") && reason.contains("P1..P4"),
+            "{reason}"
+        );
+        // P0 or P5 of four points, or a name twice over in another spelling, do not say it
+        // either.
+        let (key, _, _) = invalid("name = \"o\"\n[points]\nP1 = [1, 0, 0]\nP2 = [0, 1, 0]\nP3 = [-1, 0, 0]\nP5 = [0, -1, 0]\n");
+        assert_eq!(key, "points.P5");
+        let mapped =
+            format!("{src}[map]\nD1 = \"left\"\nD2 = \"top\"\nD3 = \"right\"\nD4 = \"bottom\"\n");
+        let c = Character::from_toml_str(&mapped).unwrap();
+        assert_eq!(c.driver, [0, 1, 2, 3]);
+        assert_relative_eq!(c.neutral[0], Vec3::new(1.0, 0.0, 0.0));
     }
 
     #[test]

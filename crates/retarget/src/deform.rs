@@ -1,4 +1,4 @@
-//! Deformation parameters `M_n` (method.md §5): how far each character point moves per unit
+//! Deformation parameters `M_n` (docs/method.md §5): how far each character point moves per unit
 //! of its performer dot's motion, per axis.
 
 use crate::character::MMode;

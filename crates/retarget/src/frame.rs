@@ -1,4 +1,4 @@
-//! The mouth frame (method.md §2): origin between the corners, x towards the subject's left
+//! The mouth frame (docs/method.md §2): origin between the corners, x towards the subject's left
 //! corner, y up (made orthogonal to x), z = x × y out of the mouth.
 
 use nalgebra::Matrix3;

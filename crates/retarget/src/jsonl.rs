@@ -104,7 +104,7 @@ impl InputLine {
     }
 }
 
-/// Head pose on the wire (method.md §10): `current = R · neutral + t`, camera frame.
+/// Head pose on the wire (docs/method.md §10): `current = R · neutral + t`, camera frame.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct HeadPose {
     /// Unit quaternion `[w, x, y, z]`, `w ≥ 0`.

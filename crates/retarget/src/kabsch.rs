@@ -1,4 +1,4 @@
-//! Rigid alignment of two point sets by least squares (method.md §4): Kabsch with the
+//! Rigid alignment of two point sets by least squares (docs/method.md §4): Kabsch with the
 //! reflection fix, i.e. Umeyama without scale.
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion};

@@ -1,4 +1,4 @@
-//! Performer dot names and their order (method.md §1).
+//! Performer dot names and their order (docs/method.md §1).
 
 /// How many dots the performer wears. Lip dots `D1..DN` walk once around the mouth: `D1` is
 /// the performer's left corner, `D2..` the upper lip from left to right, `D⌊N/2⌋+1` the right

@@ -1,4 +1,4 @@
-//! mouthpiece's retarget core: the mathematics of `../shared/method.md` §2–§8, with no I/O
+//! mouthpiece's retarget core: the mathematics of `docs/method.md` §2–§8, with no I/O
 //! and no async.
 //!
 //! # Layout

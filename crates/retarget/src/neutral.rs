@@ -1,4 +1,4 @@
-//! The performer's neutral pose (method.md §3): per-dot robust averages over the calibration
+//! The performer's neutral pose (docs/method.md §3): per-dot robust averages over the calibration
 //! frames, the forehead reference shape, and the performer's mouth frame.
 
 use crate::kabsch::spans_plane;

@@ -1,4 +1,4 @@
-//! The streaming retarget (method.md §4–§6, §8): per time step, remove the head's motion from
+//! The streaming retarget (docs/method.md §4–§6, §8): per time step, remove the head's motion from
 //! the performer's dots ([`Stabiliser`]), then move each character's points
 //! ([`CharacterRetarget`]). [`Retargeter`] chains the two for one character.
 //!
@@ -227,7 +227,7 @@ pub struct CharacterFrame {
     pub curve: Vec<Vec3>,
 }
 
-/// Moves one character's points from stabilised performer dots (method.md §6).
+/// Moves one character's points from stabilised performer dots (docs/method.md §6).
 #[derive(Debug, Clone)]
 pub struct CharacterRetarget {
     character: Character,
@@ -240,7 +240,7 @@ pub struct CharacterRetarget {
 }
 
 impl CharacterRetarget {
-    /// Binds a character to a performer's neutral pose: computes `M` (method.md §5).
+    /// Binds a character to a performer's neutral pose: computes `M` (docs/method.md §5).
     pub fn new(
         character: Character,
         neutral: &NeutralPose,
@@ -297,6 +297,12 @@ impl CharacterRetarget {
     /// The settings.
     pub fn settings(&self) -> &CharacterSettings {
         &self.settings
+    }
+
+    /// The last [`CharacterRetarget::apply`]'s result (the neutral pose, confidence 0,
+    /// before the first).
+    pub fn output(&self) -> &CharacterFrame {
+        &self.out
     }
 
     /// `Pᵐ = P⁰ + (Dᵐ − D⁰) ⊙ M` for every point, then the optional One Euro filter and the

@@ -1,4 +1,4 @@
-//! Shape smoothing across the points of one time step (method.md §8). The points, in order
+//! Shape smoothing across the points of one time step (docs/method.md §8). The points, in order
 //! around the mouth, form a closed loop; every method here wraps around it. The result is the
 //! `curve` output; the points themselves stay unsmoothed.
 

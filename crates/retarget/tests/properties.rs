@@ -1,4 +1,4 @@
-//! Property tests of the retarget core (issue 2): invariance to head motion, the identity
+//! Property tests of the retarget core: invariance to head motion, the identity
 //! character, closed form = recursion, Kabsch recovering rotations.
 
 use mouthpiece_retarget::kabsch::kabsch;

@@ -24,7 +24,9 @@ use tokio_tungstenite::tungstenite::protocol::CloseFrame;
 use tokio_tungstenite::tungstenite::{Error as WsError, Message};
 use tracing::{debug, info, warn};
 
+use crate::foxglove_scene as scene;
 use crate::hub::{PublishedFrame, StreamInfo};
+use crate::preview::{ClientPreview, PreviewRequest};
 use crate::server::{Shared, Ws};
 use crate::session::truncate_reason;
 
@@ -52,6 +54,12 @@ enum ChannelKind {
     Head,
     Performer,
     Character(String),
+    /// `foxglove.CompressedImage`, `foxglove.ImageAnnotations`, `foxglove.SceneUpdate`,
+    /// `foxglove.FrameTransforms` (see [`crate::foxglove_scene`]).
+    Image,
+    Annotations,
+    Scene,
+    Transforms,
 }
 
 fn channels(info: &StreamInfo) -> Vec<Channel> {
@@ -67,6 +75,22 @@ fn channels(info: &StreamInfo) -> Vec<Channel> {
             kind: ChannelKind::Performer,
         },
     ];
+    for (id, topic, kind) in [
+        (scene::IMAGE_CHANNEL, "/camera/image", ChannelKind::Image),
+        (
+            scene::ANNOTATIONS_CHANNEL,
+            "/camera/annotations",
+            ChannelKind::Annotations,
+        ),
+        (scene::SCENE_CHANNEL, "/scene", ChannelKind::Scene),
+        (scene::TRANSFORMS_CHANNEL, "/tf", ChannelKind::Transforms),
+    ] {
+        list.push(Channel {
+            id,
+            topic: topic.into(),
+            kind,
+        });
+    }
     for (i, c) in info.characters.iter().enumerate() {
         list.push(Channel {
             id: FIRST_CHARACTER_CHANNEL + i as u32,
@@ -88,6 +112,16 @@ fn point_schema(with_confidence: bool) -> Value {
 }
 
 fn schema(kind: &ChannelKind) -> (String, Value) {
+    let well_known = match kind {
+        ChannelKind::Image => scene::schema(scene::IMAGE_CHANNEL),
+        ChannelKind::Annotations => scene::schema(scene::ANNOTATIONS_CHANNEL),
+        ChannelKind::Scene => scene::schema(scene::SCENE_CHANNEL),
+        ChannelKind::Transforms => scene::schema(scene::TRANSFORMS_CHANNEL),
+        _ => None,
+    };
+    if let Some((name, schema)) = well_known {
+        return (name.to_owned(), schema);
+    }
     let common = json!({
         "seq": {"type": "integer", "description": "frame number in the stream"},
         "t": {"type": "number", "description": "seconds since the start of the stream"},
@@ -122,6 +156,10 @@ fn schema(kind: &ChannelKind) -> (String, Value) {
             }),
             vec!["name", "points"],
         ),
+        ChannelKind::Image
+        | ChannelKind::Annotations
+        | ChannelKind::Scene
+        | ChannelKind::Transforms => unreachable!("well-known schemas are returned above"),
     };
     for (k, v) in common.as_object().into_iter().flatten() {
         props[k] = v.clone();
@@ -155,9 +193,21 @@ fn xyz(p: &[f32; 3]) -> Value {
 }
 
 /// The JSON payload of one channel for one frame; `None` when the frame has no such data.
-fn payload(kind: &ChannelKind, frame: &PublishedFrame) -> Option<Vec<u8>> {
+fn payload(
+    kind: &ChannelKind,
+    frame: &PublishedFrame,
+    info: &StreamInfo,
+    timestamp_ns: u64,
+) -> Option<Vec<u8>> {
     let f = &frame.frame;
     let mut value = match kind {
+        ChannelKind::Scene => {
+            return serde_json::to_vec(&scene::scene_update(frame, info, timestamp_ns)).ok()
+        }
+        ChannelKind::Transforms => {
+            return serde_json::to_vec(&scene::frame_transforms(frame, info, timestamp_ns)).ok()
+        }
+        ChannelKind::Image | ChannelKind::Annotations => return None,
         ChannelKind::Head => {
             let [w, x, y, z] = f.head.rotation;
             json!({
@@ -333,6 +383,9 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
     let mut shutdown = shared.shutdown.clone();
     let info = info_rx.borrow_and_update().clone();
     let mut current = channels(&info);
+    let mut current_info = info.clone();
+    // The image channels draw on the camera preview, at the preview's default rate and size.
+    let mut preview: Option<ClientPreview> = None;
     let server_info = json!({
         "op": "serverInfo",
         "name": shared.config.name,
@@ -381,6 +434,7 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                                 frames = Some(hub.inner.frames.subscribe());
                             }
                             debug!(?subscriptions, "foxglove subscriptions");
+                            update_preview(&hub, &subscriptions, &mut preview);
                             (!problems.is_empty()).then(|| status(ERROR, &problems.join("; ")))
                         }
                         Ok(ClientOp::Unsubscribe { subscription_ids }) => {
@@ -390,6 +444,7 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                             if subscriptions.is_empty() {
                                 frames = None;
                             }
+                            update_preview(&hub, &subscriptions, &mut preview);
                             None
                         }
                     };
@@ -399,6 +454,7 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                 }
                 Ok(()) = info_rx.changed() => {
                     let info = info_rx.borrow_and_update().clone();
+                    current_info = info.clone();
                     let next = channels(&info);
                     if next != current {
                         let gone: Vec<u32> = current.iter().map(|c| c.id).collect();
@@ -406,6 +462,7 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                         send_within(&mut sink, write_timeout, Message::text(text)).await.map_err(|e| (None, e))?;
                         subscriptions.retain(|_, ch| next.iter().any(|c| c.id == *ch));
                         current = next;
+                        update_preview(&hub, &subscriptions, &mut preview);
                         send_within(&mut sink, write_timeout, Message::text(advertise(&current))).await.map_err(|e| (None, e))?;
                     }
                 }
@@ -425,7 +482,7 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                         let mut bodies: BTreeMap<u32, Option<Vec<u8>>> = BTreeMap::new();
                         for (&sub, &channel) in &subscriptions {
                             let body = bodies.entry(channel).or_insert_with(|| {
-                                current.iter().find(|c| c.id == channel).and_then(|c| payload(&c.kind, &frame))
+                                current.iter().find(|c| c.id == channel).and_then(|c| payload(&c.kind, &frame, &current_info, ts))
                             });
                             let Some(body) = body.as_deref() else { continue };
                             send_within(&mut sink, write_timeout, Message::binary(message_data(sub, ts, body))).await.map_err(|e| (None, e))?;
@@ -456,6 +513,22 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                         return Err((Some(CloseCode::Away), "stream ended".into()));
                     }
                 },
+                image = crate::preview::next_image(&mut preview) => {
+                    let ts = image.wall_us.map_or_else(
+                        || image.capture_us.saturating_mul(1000),
+                        |w| (w.max(0) as u64).saturating_mul(1000),
+                    );
+                    for (&sub, &channel) in &subscriptions {
+                        let body = match channel {
+                            scene::IMAGE_CHANNEL => scene::compressed_image(&image, ts),
+                            scene::ANNOTATIONS_CHANNEL => scene::image_annotations(&image, ts),
+                            _ => continue,
+                        };
+                        let Ok(body) = serde_json::to_vec(&body) else { continue };
+                        send_within(&mut sink, write_timeout, Message::binary(message_data(sub, ts, &body))).await.map_err(|e| (None, e))?;
+                        hub.inner.preview.counters.sent.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
                 _ = ping.tick() => {
                     let heard_ms = last_heard.load(Ordering::Relaxed);
                     let silent = started.elapsed().saturating_sub(Duration::from_millis(heard_ms));
@@ -490,6 +563,22 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
         }
     };
     info!(%peer, reason, "foxglove client disconnected");
+}
+
+/// Registers with the camera preview while a subscription is to an image channel.
+fn update_preview(
+    hub: &crate::hub::Hub,
+    subscriptions: &BTreeMap<u32, u32>,
+    preview: &mut Option<ClientPreview>,
+) {
+    let wants = subscriptions
+        .values()
+        .any(|c| *c == scene::IMAGE_CHANNEL || *c == scene::ANNOTATIONS_CHANNEL);
+    match (wants, preview.is_some()) {
+        (true, false) => *preview = Some(ClientPreview::start(hub, PreviewRequest::default())),
+        (false, true) => *preview = None,
+        _ => {}
+    }
 }
 
 async fn send_within(

@@ -21,7 +21,7 @@ use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use crate::metrics::Metrics;
 use crate::timecode::{Timecode, TimecodeRate};
 
-/// Head pose of one frame (method §10): current = R · neutral + t, camera frame.
+/// Head pose of one frame (docs/method.md §10): current = R · neutral + t, camera frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HeadPose {
     /// Unit quaternion `[w, x, y, z]`.
@@ -51,7 +51,7 @@ pub struct CharacterFrame {
     pub points: Vec<[f32; 3]>,
     /// Per point, 0 (missing, last value held) ..= 1.
     pub confidence: Vec<f32>,
-    /// The smoothed closed curve through the points (method §8), if the daemon computes it.
+    /// The smoothed closed curve through the points (docs/method.md §8), if the daemon computes it.
     pub curve: Option<Vec<[f32; 3]>>,
 }
 
@@ -193,6 +193,10 @@ pub struct StreamInfo {
     pub frame_rate: f64,
     /// Where frames come from (free text: `replay recordings/demo.mcap`, `openni2 ...`).
     pub source: String,
+    /// The performer's neutral mouth frame in the neutral head's (camera) coordinates, once
+    /// calibrated: where `performer` points and the head pose meet.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mouth_frame: Option<crate::console::FramePose>,
 }
 
 /// The take being recorded.
@@ -205,6 +209,9 @@ pub struct Recording {
     /// File being written, if the daemon tells.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub file: Option<String>,
+    /// When the take started, Unix microseconds (for the elapsed time), if the daemon tells.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub started_wall_us: Option<i64>,
 }
 
 /// Whether frames are flowing from the source.
@@ -239,6 +246,10 @@ pub struct Status {
     pub recording: Option<Recording>,
     /// Free text (why the source is down, disk full, ...).
     pub message: Option<String>,
+    /// The last neutral calibration, once there was one.
+    pub calibration: Option<crate::console::CalibrationReport>,
+    /// Takes recorded in this run of the daemon, oldest first.
+    pub takes: Vec<crate::console::TakeSummary>,
 }
 
 /// A control action requested by a client.
@@ -363,6 +374,10 @@ pub(crate) struct HubInner {
     tokens: Mutex<Option<(Option<crate::config::Token>, Option<crate::config::Token>)>>,
     /// Set when a daemon thread died: `/healthz` answers 503 with it.
     failure: Mutex<Option<String>>,
+    /// The camera preview (images, demand, encoder).
+    pub(crate) preview: Arc<crate::preview::PreviewShared>,
+    /// Health figures, latest only.
+    pub(crate) health: watch::Sender<crate::console::Health>,
 }
 
 impl Hub {
@@ -385,6 +400,8 @@ impl Hub {
                 pool_size: capacity + 64,
                 tokens: Mutex::new(None),
                 failure: Mutex::new(None),
+                preview: Arc::new(crate::preview::PreviewShared::new()),
+                health: watch::Sender::new(crate::console::Health::default()),
             }),
         };
         (hub, ControlReceiver { rx })
@@ -536,7 +553,9 @@ impl Hub {
 
     /// Prometheus text of the server's metrics (what `/metrics` serves).
     pub fn metrics_text(&self) -> String {
-        self.inner.metrics.render()
+        let mut text = self.inner.metrics.render();
+        crate::preview::render_metrics(&self.inner.preview, &mut text);
+        text
     }
 
     /// Queues a control request for the daemon; the answer comes back on the returned slot.

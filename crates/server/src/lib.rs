@@ -59,17 +59,22 @@
 //! - `session`: one `mouthpiece.v1` client (reader task + writer loop).
 //! - `foxglove`: one `foxglove.websocket.v1` client.
 //! - [`metrics`]: counters and histograms for `/metrics`.
+//! - [`preview`]: the opt-in camera preview (downscaled JPEG with the dots, latest only).
+//! - [`console`]: health figures, the last calibration and the session's takes.
 //! - [`timecode`]: SMPTE time-of-day timecode.
 //! - [`loadgen`]: the load tool behind `mouthpiece-loadgen` and the load tests.
 
 pub mod config;
+pub mod console;
 mod error;
 mod foxglove;
+pub mod foxglove_scene;
 pub mod host;
 pub mod http;
 pub mod hub;
 pub mod loadgen;
 pub mod metrics;
+pub mod preview;
 pub mod protocol;
 mod server;
 mod session;
@@ -77,6 +82,7 @@ pub mod timecode;
 mod tls;
 
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
+pub use console::{CalibrationReport, FramePose, Health, TakeSummary};
 pub use error::ServerError;
 pub use foxglove::{
     check_client_message as check_foxglove_client_message, FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL,
@@ -87,6 +93,7 @@ pub use hub::{
     ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,
     StreamFrame, StreamInfo,
 };
+pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
 pub use server::run;
 
 /// Loads the certificate and key as [`run`] will, so that a configuration check refuses

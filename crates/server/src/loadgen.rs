@@ -116,6 +116,11 @@ pub fn synthetic_info(frame_rate: f64) -> StreamInfo {
         performer_points: (1..=POINTS).map(|i| format!("D{i}")).collect(),
         frame_rate,
         source: "synthetic (mouthpiece-server loadgen)".into(),
+        // A mouth 60 cm in front of the camera, 8 cm below the head's centre.
+        mouth_frame: Some(crate::console::FramePose {
+            rotation: [0.0, 1.0, 0.0, 0.0],
+            translation: [0.0, 0.08, 0.6],
+        }),
     }
 }
 

@@ -34,7 +34,7 @@ impl Histogram {
             .fetch_add((seconds * 1e9) as u64, Ordering::Relaxed);
     }
 
-    fn render(&self, out: &mut String, name: &str, help: &str) {
+    pub(crate) fn render(&self, out: &mut String, name: &str, help: &str) {
         let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} histogram");
         let mut cumulative = 0;
         for (bound, bucket) in BUCKETS.iter().zip(&self.buckets) {
@@ -73,6 +73,8 @@ pub struct Metrics {
     pub processing: Histogram,
     /// Publish to written-to-socket, per frame per client.
     pub fanout_latency: Histogram,
+    /// Capture (the frame's `wall_us`) to written-to-socket, per frame per client.
+    pub capture_latency: Histogram,
 }
 
 impl Metrics {
@@ -151,6 +153,11 @@ impl Metrics {
             &mut out,
             "mouthpiece_fanout_latency_seconds",
             "From publish to written to a client socket.",
+        );
+        self.capture_latency.render(
+            &mut out,
+            "mouthpiece_capture_latency_seconds",
+            "From capture (the frame's wall_us) to written to a client socket.",
         );
         out
     }

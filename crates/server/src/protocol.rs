@@ -67,6 +67,26 @@ pub enum ClientMessage {
         #[serde(default)]
         id: Option<RequestId>,
     },
+    /// Start, change or stop the camera preview (binary `MPP1` messages).
+    Preview(PreviewSubscribe),
+}
+
+/// The `preview` request.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PreviewSubscribe {
+    /// Echoed in the `result`.
+    #[serde(default)]
+    pub id: Option<RequestId>,
+    /// `false` stops the preview (default `true`).
+    #[serde(default)]
+    pub enable: Option<bool>,
+    /// Images per second, at most 15 (default 10).
+    #[serde(default)]
+    pub max_rate: Option<f64>,
+    /// Widest image, pixels, 64–1280 (default 480); never wider than the camera's.
+    #[serde(default)]
+    pub max_width: Option<u32>,
 }
 
 /// `record` actions.
@@ -87,6 +107,8 @@ pub enum OptionalField {
     Curve,
     /// The performer's lip dots (head motion removed, performer mouth frame).
     Performer,
+    /// Not part of `frame`: a `health` message about once a second.
+    Health,
 }
 
 /// Frame encoding of a subscription.
@@ -247,6 +269,27 @@ pub struct StatusMessage<'a> {
     /// Frames this client lost since the previous `lagged` notice (only on lag notices).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lagged: Option<u64>,
+    /// The last neutral calibration.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<&'a crate::console::CalibrationReport>,
+    /// Takes recorded in this run of the daemon.
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    pub takes: &'a [crate::console::TakeSummary],
+}
+
+impl<'a> StatusMessage<'a> {
+    /// The `status` message for `status`, with `lagged` on lag notices.
+    pub fn from_status(status: &'a crate::hub::Status, lagged: Option<u64>) -> Self {
+        Self {
+            source: status.source.as_str(),
+            calibrating: status.calibrating,
+            recording: status.recording.as_ref(),
+            message: status.message.as_deref(),
+            lagged,
+            calibration: status.calibration.as_ref(),
+            takes: &status.takes,
+        }
+    }
 }
 
 /// The `result` message: a request succeeded.
@@ -480,7 +523,7 @@ pub fn parse_client_message(text: &str) -> Result<ClientMessage, ParseFailure> {
             id,
         });
     };
-    let known = ["subscribe", "calibrate", "record", "ping"];
+    let known = ["subscribe", "calibrate", "record", "ping", "preview"];
     let kind_name = kind.as_str().unwrap_or_default().to_owned();
     match kind.as_str() {
         Some(k) if known.contains(&k) => {}
@@ -529,6 +572,9 @@ fn validate(message: &ClientMessage) -> Result<(), String> {
         } if !(d.is_finite() && *d > 0.0 && *d <= 60.0) => Err(format!(
             "calibrate: duration_s must be in (0, 60] seconds, got {d}"
         )),
+        ClientMessage::Preview(p) if p.enable != Some(false) => {
+            crate::preview::PreviewRequest::new(p.max_rate, p.max_width).map(|_| ())
+        }
         ClientMessage::Record {
             action: RecordAction::Start,
             slate: Some(slate),

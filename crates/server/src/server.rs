@@ -20,10 +20,10 @@ use crate::http::{self, HeadError, Request};
 use crate::hub::Hub;
 use crate::protocol::{FOXGLOVE_SUBPROTOCOL, SUBPROTOCOL, TOKEN_PROTOCOL_PREFIX};
 
-/// The viewer page, bundled in the binary.
-const VIEWER_HTML: &str = include_str!("../assets/viewer.html");
-/// The viewer's script.
-const VIEWER_JS: &str = include_str!("../assets/viewer.js");
+/// The booth console page, bundled in the binary.
+const CONSOLE_HTML: &str = include_str!("../assets/console.html");
+/// The console's script.
+const CONSOLE_JS: &str = include_str!("../assets/console.js");
 
 /// A byte stream a session runs on: plain TCP or TLS.
 pub(crate) trait Io: AsyncRead + AsyncWrite + Unpin + Send {}
@@ -300,14 +300,14 @@ async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io
     }
     match req.path.as_str() {
         "/" | "/index.html" => {
-            http::respond(io, 200, "text/html; charset=utf-8", VIEWER_HTML.as_bytes()).await
+            http::respond(io, 200, "text/html; charset=utf-8", CONSOLE_HTML.as_bytes()).await
         }
-        "/viewer.js" => {
+        "/console.js" => {
             http::respond(
                 io,
                 200,
                 "text/javascript; charset=utf-8",
-                VIEWER_JS.as_bytes(),
+                CONSOLE_JS.as_bytes(),
             )
             .await
         }

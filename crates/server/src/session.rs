@@ -35,6 +35,8 @@ enum Outgoing {
     Text(String),
     /// A new subscription, validated by the writer against the current `hello`.
     Subscribe(Subscribe),
+    /// Start, change or stop the camera preview.
+    Preview(protocol::PreviewSubscribe),
 }
 
 /// Why the reader stopped; a reason means "close the client with it".
@@ -67,6 +69,8 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, access: Access, peer: Sock
         lag_window_start: Instant::now(),
         lagged_in_window: 0,
         buffer: Vec::new(),
+        preview: None,
+        health: None,
     };
     let reason = writer.run(reader, out_rx, started, last_heard).await;
     abort.abort();
@@ -84,6 +88,10 @@ struct Writer {
     lag_window_start: Instant,
     lagged_in_window: u64,
     buffer: Vec<u8>,
+    /// The camera preview, while this client asks for it.
+    preview: Option<crate::preview::ClientPreview>,
+    /// Health figures, while the subscription asks for them.
+    health: Option<tokio::sync::watch::Receiver<crate::console::Health>>,
 }
 
 /// Why the writer stopped (for the log).
@@ -136,8 +144,20 @@ impl Writer {
                 Some(out) = out_rx.recv() => {
                     let sent = match out {
                         Outgoing::Text(text) => self.send(Message::text(text)).await,
+                        Outgoing::Preview(request) => {
+                            let text = self.preview_request(&request);
+                            self.send(Message::text(text)).await
+                        }
                         Outgoing::Subscribe(sub) => {
                             let reply = self.subscribe(&sub, &hub.info());
+                            self.health = sub
+                                .fields
+                                .contains(&protocol::OptionalField::Health)
+                                .then(|| {
+                                    let mut rx = hub.inner.health.subscribe();
+                                    rx.mark_changed();
+                                    rx
+                                });
                             if reply.is_ok() && frames.is_none() {
                                 frames = Some(hub.inner.frames.subscribe());
                             }
@@ -154,13 +174,7 @@ impl Writer {
                 }
                 Ok(()) = status_rx.changed() => {
                     let status = status_rx.borrow_and_update().clone();
-                    let text = protocol::to_json(&ServerMessage::Status(StatusMessage {
-                        source: status.source.as_str(),
-                        calibrating: status.calibrating,
-                        recording: status.recording.as_ref(),
-                        message: status.message.as_deref(),
-                        lagged: None,
-                    }));
+                    let text = protocol::to_json(&ServerMessage::Status(StatusMessage::from_status(&status, None)));
                     if let Err(e) = self.send(Message::text(text)).await {
                         return self.exit(e);
                     }
@@ -184,13 +198,7 @@ impl Writer {
                             return self.close(CloseCode::Policy, &reason).await;
                         }
                         let status = hub.status();
-                        let text = protocol::to_json(&ServerMessage::Status(StatusMessage {
-                            source: status.source.as_str(),
-                            calibrating: status.calibrating,
-                            recording: status.recording.as_ref(),
-                            message: status.message.as_deref(),
-                            lagged: Some(lost),
-                        }));
+                        let text = protocol::to_json(&ServerMessage::Status(StatusMessage::from_status(&status, Some(lost))));
                         if let Err(e) = self.send(Message::text(text)).await {
                             return self.exit(e);
                         }
@@ -199,6 +207,17 @@ impl Writer {
                         return self.close(CloseCode::Away, "stream ended").await;
                     }
                 },
+                image = crate::preview::next_image(&mut self.preview) => {
+                    if let Err(e) = self.send(Message::Binary(image.message.clone())).await {
+                        return self.exit(e);
+                    }
+                    hub.inner.preview.counters.sent.fetch_add(1, Ordering::Relaxed);
+                }
+                Ok(()) = next_health(&mut self.health) => {
+                    if let Err(e) = self.send(Message::text(hub.health_json())).await {
+                        return self.exit(e);
+                    }
+                }
                 _ = ping.tick() => {
                     let heard_ms = last_heard.load(Ordering::Relaxed);
                     let silent = started.elapsed().saturating_sub(Duration::from_millis(heard_ms));
@@ -354,8 +373,48 @@ impl Writer {
         if let Some(at) = frame.published_at {
             metrics.fanout_latency.observe(at.elapsed().as_secs_f64());
         }
+        if let Some(wall) = frame.frame.wall_us {
+            let micros = crate::loadgen::unix_micros() - wall;
+            metrics.capture_latency.observe(micros as f64 * 1e-6);
+        }
         tracing::trace!(seq = frame.seq, "sent frame");
         Ok(())
+    }
+
+    /// Starts, changes or stops this client's preview; returns the `result` (or `error`) text.
+    fn preview_request(&mut self, request: &protocol::PreviewSubscribe) -> String {
+        if request.enable == Some(false) {
+            self.preview = None;
+            return protocol::to_json(&ServerMessage::Result(ResultMessage {
+                id: request.id.clone(),
+                request: "preview",
+                detail: serde_json::json!({"enabled": false}),
+            }));
+        }
+        let wanted = match crate::preview::PreviewRequest::new(request.max_rate, request.max_width)
+        {
+            Ok(r) => r,
+            Err(message) => return error_json(ErrorCode::BadRequest, message, request.id.clone()),
+        };
+        match &mut self.preview {
+            Some(p) => p.change(wanted),
+            None => {
+                self.preview = Some(crate::preview::ClientPreview::start(
+                    &self.shared.hub,
+                    wanted,
+                ))
+            }
+        }
+        debug!(?wanted, "preview");
+        protocol::to_json(&ServerMessage::Result(ResultMessage {
+            id: request.id.clone(),
+            request: "preview",
+            detail: serde_json::json!({
+                "enabled": true,
+                "max_rate": wanted.max_rate,
+                "max_width": wanted.max_width,
+            }),
+        }))
     }
 
     /// Counts lost frames; returns a close reason when the client stays too far behind.
@@ -379,6 +438,19 @@ impl Writer {
                 limits.lag_window.as_secs()
             )
         })
+    }
+}
+
+async fn next_health(
+    health: &mut Option<tokio::sync::watch::Receiver<crate::console::Health>>,
+) -> Result<(), tokio::sync::watch::error::RecvError> {
+    match health {
+        Some(rx) => {
+            let changed = rx.changed().await;
+            rx.mark_unchanged();
+            changed
+        }
+        None => std::future::pending().await,
     }
 }
 
@@ -579,6 +651,7 @@ async fn read_loop(
         };
         let ok = match message {
             ClientMessage::Subscribe(sub) => out.try_send(Outgoing::Subscribe(sub)).is_ok(),
+            ClientMessage::Preview(request) => out.try_send(Outgoing::Preview(request)).is_ok(),
             ClientMessage::Ping { id } => reply(protocol::to_json(&ServerMessage::Pong {
                 id,
                 server_wall_us: unix_micros_now(),
@@ -646,6 +719,13 @@ fn control(
             .is_ok();
     }
     info!(?command, "control request");
+    // A calibration is answered once the neutral pose is taken: wait its duration longer.
+    let longer = match &command {
+        ControlCommand::Calibrate {
+            duration: Some(duration),
+        } => *duration,
+        _ => Duration::ZERO,
+    };
     let pending = match shared.hub.request_control(command, peer.to_string()) {
         Ok(rx) => rx,
         Err(ControlQueueError::Full) => {
@@ -666,7 +746,7 @@ fn control(
         }
     };
     let out = out.clone();
-    let wait = shared.config.limits.control_timeout;
+    let wait = shared.config.limits.control_timeout + longer;
     tokio::spawn(async move {
         let answer = match tokio::time::timeout(wait, pending).await {
             Ok(Ok(Ok(detail))) => protocol::to_json(&ServerMessage::Result(ResultMessage {

@@ -67,7 +67,16 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
         .collect();
     assert_eq!(
         topics,
-        ["/head", "/performer", "/character/human", "/character/wolf"]
+        [
+            "/head",
+            "/performer",
+            "/camera/image",
+            "/camera/annotations",
+            "/scene",
+            "/tf",
+            "/character/human",
+            "/character/wolf"
+        ]
     );
     let mut schemas = serde_json::Map::new();
     for c in channels {
@@ -153,9 +162,9 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
     info.characters.remove(0);
     server.hub.set_info(info);
     let un = next_json_op(&mut ws, "unadvertise").await;
-    assert_eq!(un["channelIds"].as_array().unwrap().len(), 4);
+    assert_eq!(un["channelIds"].as_array().unwrap().len(), 8);
     let adv = next_json_op(&mut ws, "advertise").await;
-    assert_eq!(adv["channels"].as_array().unwrap().len(), 3);
+    assert_eq!(adv["channels"].as_array().unwrap().len(), 7);
     server.stop().await;
 
     // The payloads match the schemas the server advertised.

@@ -17,7 +17,7 @@ async fn serves_viewer_health_and_metrics_on_the_same_port() {
     let (status, body) = http_get(server.addr, "/", "").await;
     assert_eq!(status, 200);
     assert!(body.contains("<canvas"), "the viewer page");
-    let (status, body) = http_get(server.addr, "/viewer.js", "").await;
+    let (status, body) = http_get(server.addr, "/console.js", "").await;
     assert_eq!(status, 200);
     assert!(body.contains("mouthpiece.v1"));
     let (status, body) = http_get(server.addr, "/healthz", "").await;

@@ -179,7 +179,7 @@ async fn status_and_hello_follow_the_daemon() {
         s.recording = Some(Recording {
             slate: "scene4".into(),
             take: 2,
-            file: None,
+            ..Recording::default()
         });
     });
     let s = next_of_type(&mut ws, "status").await;

@@ -106,6 +106,7 @@ async fn server_messages_match_the_published_schemas() {
             slate: "scene 4".into(),
             take: 2,
             file: Some("takes/scene 4_2.mcap".into()),
+            started_wall_us: Some(1_763_781_131_123_456),
         });
     });
     server
@@ -139,6 +140,110 @@ async fn server_messages_match_the_published_schemas() {
     log.push(next_of_type(&mut reader, "result").await);
     server.publish(100);
     log.push(next_of_type(&mut reader, "frame").await);
+
+    // The console's messages: health, the calibration and take list in status, a preview
+    // image (its overlay JSON is checked like a message).
+    let mut console = connect(
+        &server.url(),
+        &["mouthpiece.v1", "mouthpiece.token.read-token-0123456789"],
+    )
+    .await
+    .unwrap();
+    for m in [
+        json!({"type": "subscribe", "id": "c", "fields": ["health"]}),
+        json!({"type": "preview", "id": "p", "max_rate": 5, "max_width": 160}),
+    ] {
+        send_json(&mut console, m.clone()).await;
+        client_msgs.push(m);
+    }
+    client_msgs.push(json!({"type": "preview", "enable": false}));
+    server.hub.set_health(mouthpiece_server::Health {
+        fps: 30.0,
+        dots_found: 0.99,
+        processing_ms: 0.5,
+        capture_to_publish_ms: 0.7,
+        disk_free_mb: Some(5000),
+        image: Some([320, 240]),
+    });
+    let (mut health, mut preview_result) = (false, false);
+    while !(health && preview_result) {
+        let v = next_json(&mut console).await;
+        health |= v["type"] == "health";
+        preview_result |= v["type"] == "result" && v["request"] == "preview";
+        log.push(v);
+    }
+    server
+        .hub
+        .set_calibration(mouthpiece_server::CalibrationReport {
+            wall_us: 1_763_781_131_123_456,
+            frames: 30,
+            mouth_width_mm: 52.5,
+            lip_wobble_mm: 0.21,
+        });
+    server.hub.add_take(mouthpiece_server::TakeSummary {
+        slate: "scene 4".into(),
+        take: 2,
+        file: "takes/scene 4_T002.mcap".into(),
+        frames: 120,
+        seconds: 4.0,
+        error: None,
+    });
+    loop {
+        let v = next_of_type(&mut console, "status").await;
+        let done = v.get("takes").is_some() && v.get("calibration").is_some();
+        log.push(v);
+        if done {
+            break;
+        }
+    }
+    let image = std::sync::Arc::new(mouthpiece_server::preview::OwnedBgr {
+        width: 320,
+        height: 240,
+        data: vec![90; 320 * 240 * 3],
+    });
+    let overlay_json = 'image: loop {
+        server.hub.offer_preview(mouthpiece_server::PreviewInput {
+            seq: 7,
+            t: 1.0,
+            capture_us: 1_000_000,
+            wall_us: None,
+            image: image.clone(),
+            overlay: mouthpiece_server::Overlay {
+                dots: vec![mouthpiece_server::ImageDot {
+                    name: "D1".into(),
+                    x: 10.0,
+                    y: 20.0,
+                    state: mouthpiece_server::DotState::Predicted,
+                }],
+                search: Some(mouthpiece_server::PixelBox {
+                    x: 0.0,
+                    y: 0.0,
+                    width: 50.0,
+                    height: 40.0,
+                }),
+            },
+        });
+        let deadline = std::time::Instant::now() + Duration::from_millis(500);
+        while std::time::Instant::now() < deadline {
+            use futures_util::StreamExt;
+            let Ok(Some(Ok(m))) =
+                tokio::time::timeout(Duration::from_millis(100), console.next()).await
+            else {
+                continue;
+            };
+            if let Message::Binary(b) = m {
+                assert_eq!(&b[..4], b"MPP1");
+                assert_eq!(
+                    u16::from_le_bytes([b[40], b[41]]),
+                    160,
+                    "downscaled to max_width"
+                );
+                let len = u32::from_le_bytes(b[48..52].try_into().unwrap()) as usize;
+                break 'image serde_json::from_slice::<Value>(&b[56..56 + len]).unwrap();
+            }
+        }
+    };
+    log.push(overlay_json);
     server.stop().await;
 
     let dir = tempfile::tempdir().unwrap();

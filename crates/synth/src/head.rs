@@ -407,7 +407,7 @@ pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 /// The material coordinates of the lip dots: corners at the seam ends, the others at equal
 /// arc length (neutral, 3D) along the crest lines of the upper and lower lip. Order D1..Dn:
-/// left corner, upper lip left→right, right corner, lower lip right→left (method §1).
+/// left corner, upper lip left→right, right corner, lower lip right→left (docs/method.md §1).
 pub fn lip_dot_material(count: usize, zc: f64) -> Vec<(f64, f64)> {
     let per_lip = (count - 2) / 2;
     let upper_crest = |x: f64| -0.0047 * lip_taper(x).sqrt();

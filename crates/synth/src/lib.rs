@@ -12,7 +12,7 @@
 //! - `render`: a z-buffer rasteriser over the head's screen box, shading, dots, noise models.
 //!
 //! Conventions: camera frame of OpenCV (x right, y down, z forward, metres); the performer's
-//! left is +x. Dots are named as in method §1 (`D1` left corner, `D2..` upper lip left to right,
+//! left is +x. Dots are named as in docs/method.md §1 (`D1` left corner, `D2..` upper lip left to right,
 //! …, `F1..F3` forehead).
 //!
 //! Default paint colours (HSV in OpenCV's 0–180 hue scale), chosen far from skin (hue ≈ 10,

@@ -208,7 +208,7 @@ fn neutral_mouth_is_about_50_mm_wide_and_still() {
     let width =
         ((d1[0] - d7[0]).powi(2) + (d1[1] - d7[1]).powi(2) + (d1[2] - d7[2]).powi(2)).sqrt();
     assert!((0.045..0.056).contains(&width), "mouth width {width}");
-    // Performer's left corner is +x in the camera frame (method §1, §2).
+    // Performer's left corner is +x in the camera frame (docs/method.md §1, §2).
     assert!(d1[0] > d7[0]);
     for gt in &truths {
         assert_eq!(gt.points, truths[0].points, "the neutral lead-in is still");

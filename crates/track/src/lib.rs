@@ -15,13 +15,14 @@
 //! 5. once named, lip dots take their depth again from a patch stretched along the lip
 //!    ([`depth::depth_by_plane_along`]), and, once calibrated, the head motion is refined on
 //!    the whole forehead surface ([`forehead`]) and the forehead dots placed by it;
-//! 6. neutral calibration (method.md §3) once the mouth has been still for
+//! 6. neutral calibration (docs/method.md §3) once the mouth has been still for
 //!    [`TrackConfig::calibration_s`] (again on [`Tracker::calibrate`]), then head pose and
 //!    stabilised lip dots every frame through the retarget core's [`Stabiliser`] (§4).
 //!
 //! Everything is on the caller's thread; no queues. `process` allocates little once warm.
 
 pub mod camera;
+pub mod clock;
 pub mod depth;
 pub mod forehead;
 pub mod labels;
@@ -400,6 +401,77 @@ pub const LIP_PATCH_NEIGHBOUR_FRACTION: f64 = 0.8;
 /// fit costs).
 const FOREHEAD_SAMPLE_SPACING_M: f64 = 0.002;
 
+/// The most frames the calibration window holds (each with a crop of the forehead's depth,
+/// about 12 kB at 640x480): beyond it every second frame is dropped, so a long calibration
+/// at a high frame rate (or a clock creeping forward by microseconds) stays within a few
+/// megabytes. 512 frames are 8.5 s at 60 frames/s.
+const CALIBRATION_WINDOW_MAX_FRAMES: usize = 512;
+
+/// Drops every second entry (the first and the last stay): the span is kept, the number of
+/// entries halved.
+fn thin_out<T>(window: &mut VecDeque<T>) {
+    let last = window.len().saturating_sub(1);
+    let mut i = 0;
+    window.retain(|_| {
+        let keep = i % 2 == 0 || i == last;
+        i += 1;
+        keep
+    });
+}
+
+/// Largest change of any side of the forehead triangle (all pairwise distances between
+/// forehead dots; rigid, so the head's pose does not change them) for the performer to
+/// count as the calibrated one after a source restart, metres. The sides measured frame to
+/// frame vary by 1–2 mm with Kinect-like depth noise on the synthetic performer; dots painted
+/// again by hand, or another performer, land several millimetres to centimetres apart.
+pub const SAME_PERFORMER_TOLERANCE_M: f64 = 0.005;
+
+/// Whether the forehead dots `now` (camera frame, all seen) are the neutral pose's
+/// (`neutral`, camera frame; a dot unseen at calibration is not compared): every side of
+/// the triangle within [`SAME_PERFORMER_TOLERANCE_M`].
+pub fn same_performer(neutral: &[Option<Vec3>], now: &[Vec3]) -> bool {
+    let n = neutral.len().min(now.len());
+    (0..n).all(|a| {
+        (a + 1..n).all(|b| match (neutral[a], neutral[b]) {
+            (Some(p), Some(q)) => {
+                let then = (p - q).norm();
+                let here = (now[a] - now[b]).norm();
+                (then - here).abs() <= SAME_PERFORMER_TOLERANCE_M
+            }
+            _ => true,
+        })
+    })
+}
+
+/// Candidates from index `real` on (made by a step: split halves, faint corners) that no
+/// name refers to are removed, and the names re-pointed: the frame's unassigned candidates
+/// are then blobs the detector found, never a step's leftovers.
+fn drop_unnamed_extras(
+    names: &mut [Option<usize>],
+    cands: &mut Vec<Candidate>,
+    cand_blob: &mut Vec<usize>,
+    real: usize,
+) {
+    let mut next = real;
+    for c in real..cands.len() {
+        if !names.contains(&Some(c)) {
+            continue;
+        }
+        if c != next {
+            cands.swap(next, c);
+            if c < cand_blob.len() {
+                cand_blob.swap(next, c);
+            }
+            for name in names.iter_mut().filter(|n| **n == Some(c)) {
+                *name = Some(next);
+            }
+        }
+        next += 1;
+    }
+    cands.truncate(next);
+    cand_blob.truncate(next.min(cand_blob.len()));
+}
+
 /// The tracker: owns the detector, the names, and the calibration.
 pub struct Tracker {
     config: TrackConfig,
@@ -408,8 +480,11 @@ pub struct Tracker {
     dot_radius_m: f64,
     depth_range: [f64; 2],
     roles: Vec<DotRole>,
-    /// First frame's device timestamp.
-    t0: Option<u64>,
+    /// Session time from the frames' device timestamps, running on across source restarts.
+    clock: clock::SessionClock,
+    /// The source restarted while calibrated: on the first full naming, check that the
+    /// performer in view is the calibrated one ([`same_performer`]).
+    check_performer: bool,
     /// The previous frame's time (seconds) and the interval the tracks' velocities were
     /// measured over: a live source may skip frames, so predictions scale the velocities by
     /// this frame's interval over that one.
@@ -427,6 +502,9 @@ pub struct Tracker {
     frames_without_names: u32,
     frames_with_missing: u32,
     calibrating: bool,
+    /// How long the running calibration wants the mouth still, seconds
+    /// ([`TrackConfig::calibration_s`] unless [`Tracker::calibrate_for`] said otherwise).
+    calibration_s: f64,
     window: VecDeque<(f64, PerformerDots)>,
     /// The forehead's depth in each frame of `window` (when the surface fit is on).
     window_crops: VecDeque<forehead::DepthCrop>,
@@ -479,7 +557,8 @@ impl Tracker {
             dot_radius_m,
             depth_range,
             roles,
-            t0: None,
+            clock: clock::SessionClock::default(),
+            check_performer: false,
             prev_t: None,
             velocity_dt: 0.0,
             step_ratio: 1.0,
@@ -490,6 +569,7 @@ impl Tracker {
             frames_without_names: 0,
             frames_with_missing: 0,
             calibrating: true,
+            calibration_s: config.calibration_s,
             window: VecDeque::new(),
             window_crops: VecDeque::new(),
             forehead_surface: None,
@@ -530,16 +610,54 @@ impl Tracker {
     /// Asks for a new neutral calibration: the next [`TrackConfig::calibration_s`] of still,
     /// closed mouth become the neutral pose. The old one stays in use until then.
     pub fn calibrate(&mut self) {
-        tracing::info!("neutral calibration requested");
+        self.calibrate_for(None);
+    }
+
+    /// [`Tracker::calibrate`] over `seconds` of still, closed mouth instead of
+    /// [`TrackConfig::calibration_s`] (`None`: that). The frame that takes the pose says
+    /// so in [`Status::neutral_taken`].
+    pub fn calibrate_for(&mut self, seconds: Option<f64>) {
+        let seconds = seconds
+            .filter(|s| s.is_finite() && *s > 0.0)
+            .unwrap_or(self.config.calibration_s);
+        tracing::info!(seconds, "neutral calibration requested");
         self.calibrating = true;
+        self.calibration_s = seconds;
         self.window.clear();
         self.window_crops.clear();
     }
 
+    /// The source was reopened (a replay from its beginning, a camera plugged back in): the
+    /// next frame starts a new segment of the session clock, whatever its timestamp. A clock
+    /// that goes backwards is taken as a restart without being told.
+    pub fn source_restarted(&mut self) {
+        self.clock.restart();
+    }
+
+    /// After a restart: the names are found again from geometry, the calibration window
+    /// starts afresh, and the first full naming checks the performer ([`same_performer`]):
+    /// the neutral pose is kept for the same performer, a new one is taken otherwise.
+    fn restart_tracks(&mut self) {
+        tracing::info!("source restarted; re-acquiring the dots");
+        self.tracks = None;
+        self.window.clear();
+        self.window_crops.clear();
+        self.frames_without_names = 0;
+        self.frames_with_missing = 0;
+        self.velocity_dt = 0.0;
+        if let Some(filters) = &mut self.forehead_depth {
+            filters.iter_mut().for_each(OneEuro::reset);
+        }
+        self.check_performer = self.stabiliser.is_some();
+    }
+
     /// Tracks one frame.
     pub fn process(&mut self, frame: &Frame) -> Result<&TrackedFrame, TrackError> {
-        let t0 = *self.t0.get_or_insert(frame.device_ts_us);
-        let t = frame.device_ts_us.saturating_sub(t0) as f64 * 1e-6;
+        let tick = self.clock.tick(frame.device_ts_us);
+        if tick.restarted {
+            self.restart_tracks();
+        }
+        let t = tick.t;
         let dt = self.prev_t.map_or(0.0, |p| t - p);
         self.step_ratio = if self.velocity_dt > 0.0 && dt > 0.0 {
             // Past a few skipped frames constant velocity says little: cap the extrapolation.
@@ -651,6 +769,24 @@ impl Tracker {
 
         let n = self.layout.lip_dots;
         let mut names = self.name_candidates(cands, &k, &found.blobs);
+        // After a restart, on the first full naming and before the forehead surface fit
+        // (which places the forehead dots on the neutral triangle): the same performer?
+        if self.check_performer && self.tracks.is_none() && names.iter().all(Option::is_some) {
+            self.check_performer = false;
+            let now: Small<Vec3> = names[n..]
+                .iter()
+                .map(|c| cands[c.expect("all named")].point)
+                .collect();
+            let same = self
+                .neutral()
+                .is_none_or(|neutral| same_performer(&neutral.forehead_camera, &now));
+            if !same {
+                tracing::info!(
+                    "the forehead dots are not where the neutral pose had them: another performer; recalibrating"
+                );
+                self.calibrate();
+            }
+        }
         let view = DepthView {
             depth,
             scale,
@@ -909,6 +1045,8 @@ impl Tracker {
         if !self.corners_are_extremes(names, cands) {
             names.copy_from_slice(&before);
         }
+        // Halves no name kept (the split rolled back, or a half out of order) are not blobs.
+        drop_unnamed_extras(names, cands, &mut self.cand_blob, real);
         tracing::debug!(dots = cands.len() - real, "merged lip blobs split");
     }
 
@@ -1391,7 +1529,7 @@ impl Tracker {
 
     /// This frame's head motion (reference → now) from the named forehead dots, or the last one.
     ///
-    /// For naming only (the reported head pose follows method §4): with fewer than 3 forehead
+    /// For naming only (the reported head pose follows docs/method.md §4): with fewer than 3 forehead
     /// dots the motion is fitted to the two forehead dots seen plus the upper lip and corners
     /// at rest. The upper lip moves little with speech; a head turning fast while a forehead dot
     /// is hidden moves far more, and a stale head pose would bend every lip prediction.
@@ -1684,6 +1822,12 @@ impl Tracker {
             self.window_crops.clear();
             return Ok(());
         }
+        // A frame at the window's last moment (a clock standing still) replaces it: the
+        // window spans time, not frames.
+        if self.window.back().is_some_and(|(last, _)| *last >= t) {
+            self.window.pop_back();
+            self.window_crops.pop_back();
+        }
         self.window.push_back((t, dots.clone()));
         if self.config.forehead_surface_margin_m > 0.0 {
             let n = self.layout.lip_dots;
@@ -1701,11 +1845,14 @@ impl Tracker {
         };
         // Keep just over the calibration span.
         while self.window.len() > 2
-            && span(&self.window) - (self.window[1].0 - self.window[0].0)
-                >= self.config.calibration_s
+            && span(&self.window) - (self.window[1].0 - self.window[0].0) >= self.calibration_s
         {
             self.window.pop_front();
             self.window_crops.pop_front();
+        }
+        if self.window.len() > CALIBRATION_WINDOW_MAX_FRAMES {
+            thin_out(&mut self.window);
+            thin_out(&mut self.window_crops);
         }
         // One frame interval short of the span is a full second of frames at any rate.
         let interval = if self.window.len() > 1 {
@@ -1713,7 +1860,7 @@ impl Tracker {
         } else {
             0.0
         };
-        if span(&self.window) + interval < self.config.calibration_s - 1e-9 {
+        if span(&self.window) + interval < self.calibration_s - 1e-9 {
             return Ok(());
         }
         if !self.window_is_still() {
@@ -1753,6 +1900,7 @@ impl Tracker {
         self.stabiliser = Some(Stabiliser::new(neutral, missing).map_err(TrackError::Neutral)?);
         self.forehead_surface = self.build_forehead_surface(depth_scale, &k);
         self.calibrating = false;
+        self.calibration_s = self.config.calibration_s;
         self.window.clear();
         self.window_crops.clear();
         self.out.status.neutral_taken = true;

@@ -1,22 +1,146 @@
-//! The whole per-frame pipeline: detect + track + retarget onto a character, producing the
-//! line `mouthpiece process` writes (and the daemon streams).
+//! The one frame pipeline: detect + track + retarget onto one or several characters. Every
+//! caller runs it: `mouthpiece process` (the line it writes, [`Pipeline::process`]),
+//! `mouthpiece evaluate`, the benchmark and the daemon (which streams every character,
+//! [`Pipeline::step`]). Its settings come from one place, [`PipelineConfig`]: the `[detect]`,
+//! `[track]` and `[retarget]` tables of a configuration file.
 
 use mouthpiece_detect::DetectConfig;
 use mouthpiece_frame::Frame;
 use mouthpiece_retarget::jsonl::OutputLine;
-use mouthpiece_retarget::{Character, CharacterRetarget, CharacterSettings, Named, RetargetOutput};
+use mouthpiece_retarget::{
+    Character, CharacterRetarget, CharacterSettings, MovingAverageKind, Named, OneEuroParams,
+    RetargetOutput, ShapeSmoothing,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::{Status, TrackConfig, TrackError, TrackedFrame, Tracker};
 
-/// The detector's and the tracker's settings: the `[detect]` and `[track]` tables of a
-/// configuration file (other tables belong to other parts of mouthpiece and are ignored here).
+/// The detector's, the tracker's and the retarget's settings: the `[detect]`, `[track]` and
+/// `[retarget]` tables of a configuration file (other tables belong to other parts of
+/// mouthpiece and are ignored here).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct PipelineConfig {
     #[serde(default)]
     pub detect: DetectConfig,
     #[serde(default)]
     pub track: TrackConfig,
+    #[serde(default)]
+    pub retarget: RetargetSettings,
+}
+
+/// Which shape smoothing makes each character's `curve` (`[retarget] smooth`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Smooth {
+    /// No curve.
+    None,
+    /// Plain moving average over `ma_radius` neighbours each side.
+    Ma,
+    /// Triangular-weighted moving average.
+    MaWeighted,
+    /// Exponentially weighted moving average (`ma_alpha` per step).
+    MaExp,
+    /// Savitzky–Golay, 5 points, quadratic.
+    Sg5,
+    /// Closed uniform cubic B-spline, `samples_per_span` samples per point.
+    #[default]
+    Bspline,
+}
+
+/// How the characters' outputs are made (`[retarget]`): the shape smoothing that makes the
+/// curve and the optional temporal filter on the points. The same for every character and
+/// every caller; `mouthpiece process --smooth` overrides `smooth`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RetargetSettings {
+    pub smooth: Smooth,
+    /// Moving averages: neighbours on each side.
+    pub ma_radius: usize,
+    /// Exponential moving average: weight factor per step along the loop, in (0, 1].
+    pub ma_alpha: f64,
+    /// B-spline: curve samples per span (per character point).
+    pub samples_per_span: usize,
+    /// One Euro filter on the output points: `[min_cutoff_hz, beta]`; absent: off.
+    pub one_euro: Option<[f64; 2]>,
+}
+
+impl Default for RetargetSettings {
+    fn default() -> Self {
+        Self {
+            smooth: Smooth::Bspline,
+            ma_radius: 1,
+            ma_alpha: 0.5,
+            samples_per_span: 8,
+            one_euro: None,
+        }
+    }
+}
+
+impl RetargetSettings {
+    /// The shape smoothing these settings name.
+    pub fn smoothing(&self) -> ShapeSmoothing {
+        match self.smooth {
+            Smooth::None => ShapeSmoothing::None,
+            Smooth::Ma => ShapeSmoothing::MovingAverage {
+                kind: MovingAverageKind::Plain,
+                radius: self.ma_radius,
+            },
+            Smooth::MaWeighted => ShapeSmoothing::MovingAverage {
+                kind: MovingAverageKind::Weighted,
+                radius: self.ma_radius,
+            },
+            Smooth::MaExp => ShapeSmoothing::MovingAverage {
+                kind: MovingAverageKind::Exponential {
+                    alpha: self.ma_alpha,
+                },
+                radius: self.ma_radius,
+            },
+            Smooth::Sg5 => ShapeSmoothing::SavitzkyGolay5,
+            Smooth::Bspline => ShapeSmoothing::BSpline {
+                samples_per_span: self.samples_per_span,
+            },
+        }
+    }
+
+    /// The retarget core's per-character settings.
+    pub fn character_settings(&self) -> CharacterSettings {
+        CharacterSettings {
+            smoothing: self.smoothing(),
+            one_euro: self.one_euro.map(|[min_cutoff, beta]| OneEuroParams {
+                min_cutoff,
+                beta,
+                d_cutoff: 1.0,
+            }),
+        }
+    }
+
+    /// Errors name the key (`retarget.ma_alpha`).
+    pub fn validate(&self) -> Result<(), TrackError> {
+        let bad = |key: &str, message: String| {
+            Err(TrackError::Config {
+                key: format!("retarget.{key}"),
+                message,
+            })
+        };
+        if let Some([min_cutoff, beta]) = self.one_euro {
+            if !(min_cutoff.is_finite() && min_cutoff > 0.0 && beta.is_finite() && beta >= 0.0) {
+                return bad(
+                    "one_euro",
+                    format!("[{min_cutoff}, {beta}]: expected [min_cutoff_hz > 0, beta >= 0]"),
+                );
+            }
+        }
+        if let Err(e) = self.smoothing().validate() {
+            let key = match self.smooth {
+                Smooth::MaExp if !(self.ma_alpha > 0.0 && self.ma_alpha <= 1.0) => "ma_alpha",
+                Smooth::Ma | Smooth::MaWeighted | Smooth::MaExp => "ma_radius",
+                Smooth::Bspline => "samples_per_span",
+                _ => "smooth",
+            };
+            return bad(key, e.to_string());
+        }
+        Ok(())
+    }
 }
 
 impl PipelineConfig {
@@ -26,6 +150,7 @@ impl PipelineConfig {
         struct Sections {
             detect: Option<toml::Value>,
             track: Option<toml::Value>,
+            retarget: Option<toml::Value>,
         }
         let bad = |key: &str, e: toml::de::Error| TrackError::Config {
             key: key.into(),
@@ -40,14 +165,40 @@ impl PipelineConfig {
             Some(v) => v.try_into().map_err(|e| bad("track", e))?,
             None => TrackConfig::default(),
         };
-        let config = Self { detect, track };
+        let retarget = match sections.retarget {
+            Some(v) => v.try_into().map_err(|e| bad("retarget", e))?,
+            None => RetargetSettings::default(),
+        };
+        let config = Self {
+            detect,
+            track,
+            retarget,
+        };
         config.validate()?;
         Ok(config)
     }
 
     pub fn validate(&self) -> Result<(), TrackError> {
         self.detect.validate()?;
-        self.track.validate()
+        self.track.validate()?;
+        self.retarget.validate()
+    }
+
+    /// A character fits when it has one point per lip dot; the error names the character.
+    pub fn check_character(&self, character: &Character) -> Result<(), TrackError> {
+        let layout = self.track.layout();
+        if character.len() != layout.lip_dots {
+            return Err(TrackError::Config {
+                key: "track.lip_dots".into(),
+                message: format!(
+                    "the performer wears {} lip dots but character {:?} has {} points",
+                    layout.lip_dots,
+                    character.name,
+                    character.len()
+                ),
+            });
+        }
+        Ok(())
     }
 }
 
@@ -69,51 +220,78 @@ pub struct ProcessLine<'a> {
     pub frame: FrameRef,
 }
 
-/// Detect + track + retarget, frame by frame.
+fn no_character() -> TrackError {
+    TrackError::Config {
+        key: "characters".into(),
+        message: "the pipeline needs at least one character".into(),
+    }
+}
+
+/// Detect + track + retarget, frame by frame, for one or several characters.
 pub struct Pipeline {
     tracker: Tracker,
-    character: Character,
+    characters: Vec<Character>,
     settings: CharacterSettings,
-    retarget: Option<CharacterRetarget>,
+    /// One per character once the neutral pose is taken (`None`: it could not be bound);
+    /// empty before.
+    bound: Vec<Option<CharacterRetarget>>,
+    /// The characters were bound to a new neutral pose since [`Pipeline::take_rebound`].
+    rebound: bool,
+    /// The first character's output line ([`Pipeline::process`]).
     line: OutputLine,
     performer: Named<Option<[f64; 3]>>,
 }
 
 impl std::fmt::Debug for Pipeline {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let names: Vec<&str> = self.characters.iter().map(|c| c.name.as_str()).collect();
         f.debug_struct("Pipeline")
-            .field("character", &self.character.name)
+            .field("characters", &names)
             .finish_non_exhaustive()
     }
 }
 
 impl Pipeline {
+    /// One character with these retarget settings (`config.retarget` is not used).
     pub fn new(
         config: PipelineConfig,
         character: Character,
         settings: CharacterSettings,
     ) -> Result<Self, TrackError> {
+        Self::build(config, vec![character], settings)
+    }
+
+    /// Every character, with `config.retarget`'s settings (the daemon).
+    pub fn for_characters(
+        config: PipelineConfig,
+        characters: Vec<Character>,
+    ) -> Result<Self, TrackError> {
+        config.retarget.validate()?;
+        let settings = config.retarget.character_settings();
+        Self::build(config, characters, settings)
+    }
+
+    fn build(
+        config: PipelineConfig,
+        characters: Vec<Character>,
+        settings: CharacterSettings,
+    ) -> Result<Self, TrackError> {
         let layout = config.track.layout();
-        if character.len() != layout.lip_dots {
-            return Err(TrackError::Config {
-                key: "track.lip_dots".into(),
-                message: format!(
-                    "the performer wears {} lip dots but character {:?} has {} points",
-                    layout.lip_dots,
-                    character.name,
-                    character.len()
-                ),
-            });
+        for character in &characters {
+            config.check_character(character)?;
         }
         settings
             .smoothing
             .validate()
             .map_err(|e| TrackError::Config {
-                key: "smoothing".into(),
+                key: "retarget.smooth".into(),
                 message: e.to_string(),
             })?;
         let tracker = Tracker::new(config.detect, config.track)?;
-        let line = OutputLine::for_character(&character, &settings.smoothing);
+        let Some(first) = characters.first() else {
+            return Err(no_character());
+        };
+        let line = OutputLine::for_character(first, &settings.smoothing);
         let performer = Named(
             TrackedFrame::names(layout)
                 .into_iter()
@@ -122,9 +300,10 @@ impl Pipeline {
         );
         Ok(Self {
             tracker,
-            character,
+            characters,
             settings,
-            retarget: None,
+            bound: Vec::new(),
+            rebound: false,
             line,
             performer,
         })
@@ -138,44 +317,138 @@ impl Pipeline {
         &mut self.tracker
     }
 
-    /// The character's current output (valid after [`Pipeline::process`]).
+    /// The characters, in the order they were given.
+    pub fn characters(&self) -> &[Character] {
+        &self.characters
+    }
+
+    /// Per character, its binding to the neutral pose (`None` before calibration).
+    pub fn bound(&self, index: usize) -> Option<&CharacterRetarget> {
+        self.bound.get(index).and_then(Option::as_ref)
+    }
+
+    /// The retarget settings every character uses.
+    pub fn settings(&self) -> &CharacterSettings {
+        &self.settings
+    }
+
+    /// The last frame the tracker made (after [`Pipeline::step`]).
+    pub fn tracked(&self) -> &TrackedFrame {
+        &self.tracker.out
+    }
+
+    /// Whether the characters were bound to a new neutral pose since the last call.
+    pub fn take_rebound(&mut self) -> bool {
+        std::mem::take(&mut self.rebound)
+    }
+
+    /// New characters (a reload), bound to the current neutral pose if there is one.
+    pub fn set_characters(
+        &mut self,
+        characters: Vec<Character>,
+        settings: CharacterSettings,
+    ) -> Result<(), TrackError> {
+        let layout = self.tracker.layout();
+        for c in &characters {
+            if c.len() != layout.lip_dots {
+                return Err(TrackError::Config {
+                    key: "track.lip_dots".into(),
+                    message: format!(
+                        "the performer wears {} lip dots but character {:?} has {} points",
+                        layout.lip_dots,
+                        c.name,
+                        c.len()
+                    ),
+                });
+            }
+        }
+        let Some(first) = characters.first() else {
+            return Err(no_character());
+        };
+        self.line = OutputLine::for_character(first, &settings.smoothing);
+        self.characters = characters;
+        self.settings = settings;
+        self.bound.clear();
+        // A character that cannot be bound is logged and left out; the others run.
+        let _ = self.bind();
+        Ok(())
+    }
+
+    /// Binds every character to the tracker's neutral pose; a character that cannot be
+    /// bound is left out (logged) and the first such error returned.
+    fn bind(&mut self) -> Result<(), TrackError> {
+        let Some(neutral) = self.tracker.neutral() else {
+            self.bound.clear();
+            return Ok(());
+        };
+        let mut first_error = None;
+        self.bound = self
+            .characters
+            .iter()
+            .map(
+                |c| match CharacterRetarget::new(c.clone(), neutral, self.settings) {
+                    Ok(bound) => Some(bound),
+                    Err(e) => {
+                        tracing::error!(character = %c.name, "cannot bind character: {e}");
+                        first_error.get_or_insert(TrackError::Neutral(e));
+                        None
+                    }
+                },
+            )
+            .collect();
+        self.rebound = true;
+        first_error.map_or(Ok(()), Err)
+    }
+
+    /// Detect, track, and move every character (bound once the neutral pose is taken).
+    /// The results: [`Pipeline::tracked`] and each [`Pipeline::bound`]'s output.
+    pub fn step(&mut self, frame: &Frame) -> Result<(), TrackError> {
+        let tracked = self.tracker.process(frame)?;
+        if tracked.status.neutral_taken
+            || (self.bound.is_empty() && self.tracker.neutral().is_some())
+        {
+            self.bind()?;
+        }
+        if let Some(stabilised) = &self.tracker.out.stabilised {
+            for bound in self.bound.iter_mut().flatten() {
+                bound.apply(stabilised);
+            }
+        }
+        Ok(())
+    }
+
+    /// The first character's output (valid after [`Pipeline::process`]).
     pub fn output(&self) -> &OutputLine {
         &self.line
     }
 
-    /// Processes one frame. Before the first neutral calibration the character rests at its
-    /// neutral pose with confidence 0 (and `status.calibrating`).
+    /// Processes one frame into the line `mouthpiece process` writes, for the first
+    /// character. Before the first neutral calibration the character rests at its neutral
+    /// pose with confidence 0 (and `status.calibrating`).
     pub fn process(
         &mut self,
         frame: &Frame,
     ) -> Result<(ProcessLine<'_>, &TrackedFrame), TrackError> {
-        let tracked = self.tracker.process(frame)?;
-        if tracked.status.neutral_taken
-            || (self.retarget.is_none() && self.tracker.neutral().is_some())
-        {
-            let neutral = self.tracker.neutral().expect("neutral taken");
-            self.retarget = Some(
-                CharacterRetarget::new(self.character.clone(), neutral, self.settings)
-                    .map_err(TrackError::Neutral)?,
-            );
-        }
+        self.step(frame)?;
         let tracked = &self.tracker.out;
-        match (&mut self.retarget, &tracked.stabilised) {
-            (Some(retarget), Some(stabilised)) => {
-                let character = retarget.apply(stabilised);
+        let first = self.bound.first().and_then(Option::as_ref);
+        match (first, &tracked.stabilised) {
+            (Some(bound), Some(stabilised)) => {
                 self.line.update(
                     tracked.seq,
                     &RetargetOutput {
                         performer: stabilised,
-                        character,
+                        character: bound.output(),
                     },
                 );
             }
             _ => {
                 self.line.t = tracked.t;
                 self.line.seq = tracked.seq;
-                for ((_, dst), p) in self.line.points.0.iter_mut().zip(&self.character.neutral) {
-                    *dst = [p.x, p.y, p.z];
+                if let Some(character) = self.characters.first() {
+                    for ((_, dst), p) in self.line.points.0.iter_mut().zip(&character.neutral) {
+                        *dst = [p.x, p.y, p.z];
+                    }
                 }
                 for (_, c) in self.line.confidence.0.iter_mut() {
                     *c = 0.0;
@@ -246,5 +519,43 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("track.forehead_dots"), "{err}");
+    }
+
+    /// `[retarget]` configures every caller's smoothing; bad values name their key.
+    #[test]
+    fn retarget_settings_are_read_and_checked() {
+        let cfg = PipelineConfig::from_toml_str(
+            "[retarget]\nsmooth = \"ma-exp\"\nma_alpha = 0.25\none_euro = [1.0, 0.007]\n",
+        )
+        .unwrap();
+        let settings = cfg.retarget.character_settings();
+        assert_eq!(
+            settings.smoothing,
+            ShapeSmoothing::MovingAverage {
+                kind: MovingAverageKind::Exponential { alpha: 0.25 },
+                radius: 1
+            }
+        );
+        assert_eq!(settings.one_euro.unwrap().min_cutoff, 1.0);
+        assert_eq!(
+            PipelineConfig::default()
+                .retarget
+                .character_settings()
+                .smoothing,
+            ShapeSmoothing::BSpline {
+                samples_per_span: 8
+            }
+        );
+        for (text, key) in [
+            ("smooth = \"ma-exp\"\nma_alpha = 1.5", "retarget.ma_alpha"),
+            ("one_euro = [0.0, 0.1]", "retarget.one_euro"),
+            ("samples_per_span = 0", "retarget.samples_per_span"),
+            ("smooth = \"spline\"", "retarget"),
+        ] {
+            let err = PipelineConfig::from_toml_str(&format!("[retarget]\n{text}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(key), "{text}: {err}");
+        }
     }
 }

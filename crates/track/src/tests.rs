@@ -589,9 +589,135 @@ fn forehead_depth_jitter_is_filtered() {
 
 #[test]
 fn the_example_config_lists_the_defaults() {
-    // config/mouthpiece.toml documents every [detect] and [track] key with its default.
+    // config/mouthpiece.toml documents every [detect], [track] and [retarget] key with its
+    // default.
     let text = include_str!("../../../config/mouthpiece.toml");
     let config = crate::pipeline::PipelineConfig::from_toml_str(text).unwrap();
     assert_eq!(config.detect, DetectConfig::default());
     assert_eq!(config.track, TrackConfig::default());
+    assert_eq!(
+        config.retarget,
+        crate::pipeline::RetargetSettings::default()
+    );
+}
+
+/// A source that restarts (a replay reopened from its start: the device clock goes back) is
+/// tracked on within a second, on a session clock that keeps running forward, and the same
+/// performer keeps the neutral pose.
+#[test]
+fn a_restarted_source_is_tracked_on_with_the_same_neutral_pose() {
+    let mut tr = calibrated_tracker();
+    let width = tr.neutral().unwrap().mouth_width();
+    let last_t = tr.out.t;
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    let mut tracked_at = None;
+    for seq in 0..30 {
+        // Frame numbers, and with them the device clock, start again.
+        let out = tr.process(&render(seq, &still, &[])).unwrap();
+        assert!(out.t > last_t, "session time {} after {last_t}", out.t);
+        assert!(!out.status.calibrating, "frame {seq}: recalibrating");
+        if tracked_at.is_none() && out.stabilised.is_some() && out.status.dots_missing.is_empty() {
+            tracked_at = Some(seq);
+        }
+    }
+    let at = tracked_at.expect("tracked again");
+    assert!(at < 30, "tracked again after {at} frames");
+    assert_eq!(
+        tr.neutral().unwrap().mouth_width(),
+        width,
+        "neutral pose kept"
+    );
+}
+
+/// After a restart with another performer in view (forehead dots elsewhere on the forehead),
+/// a new neutral pose is taken.
+#[test]
+fn a_restarted_source_with_another_performer_recalibrates() {
+    let mut tr = calibrated_tracker();
+    let mut other = posed(0.0, &RigidTransform::IDENTITY);
+    other[14].y -= 0.012; // the top forehead dot painted higher
+    let mut recalibrating = false;
+    let mut retaken = false;
+    for seq in 0..50 {
+        let out = tr.process(&render(seq, &other, &[])).unwrap();
+        recalibrating |= out.status.calibrating;
+        retaken |= out.status.neutral_taken;
+    }
+    assert!(recalibrating && retaken, "{recalibrating} {retaken}");
+    let f = &tr.neutral().unwrap().forehead_camera;
+    assert!((f[2].unwrap() - other[14]).norm() < 0.003, "{f:?}");
+}
+
+/// A clock standing still (the same timestamp again and again) does not grow the
+/// calibration window: the window spans time, not frames.
+#[test]
+fn the_calibration_window_does_not_grow_while_time_stands_still() {
+    let mut tr = tracker();
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    let frame = render(0, &still, &[]);
+    for _ in 0..40 {
+        tr.process(&frame).unwrap();
+    }
+    assert!(tr.window.len() <= 1, "{} frames", tr.window.len());
+    assert!(tr.window_crops.len() <= 1);
+}
+
+#[test]
+fn a_long_window_is_thinned_keeping_its_span() {
+    let mut w: VecDeque<usize> = (0..11).collect();
+    thin_out(&mut w);
+    assert_eq!(w, [0, 2, 4, 6, 8, 10]);
+    let mut w: VecDeque<usize> = (0..10).collect();
+    thin_out(&mut w);
+    assert_eq!(w, [0, 2, 4, 6, 8, 9]);
+}
+
+#[test]
+fn the_performer_is_told_by_the_forehead_triangle() {
+    let neutral = [
+        Some(Vec3::new(-0.035, -0.09, 0.6)),
+        Some(Vec3::new(0.035, -0.09, 0.6)),
+        Some(Vec3::new(0.0, -0.13, 0.61)),
+    ];
+    let seen: Vec<Vec3> = neutral.iter().map(|p| p.unwrap()).collect();
+    // The same triangle turned and moved: the same performer.
+    let h = head(20.0, -10.0, Vec3::new(0.05, 0.0, 0.1));
+    let moved: Vec<Vec3> = seen.iter().map(|p| h.apply(p)).collect();
+    assert!(same_performer(&neutral, &moved));
+    // Noise within the tolerance.
+    let mut noisy = moved.clone();
+    noisy[0].z += 0.002;
+    assert!(same_performer(&neutral, &noisy));
+    // One dot a centimetre elsewhere.
+    let mut other = moved;
+    other[2].y -= 0.01;
+    assert!(!same_performer(&neutral, &other));
+    // A dot unseen at calibration is not compared.
+    let partial = [neutral[0], neutral[1], None];
+    assert!(same_performer(&partial, &other));
+}
+
+/// Candidates a step added (split halves) that no name kept are removed and the names
+/// re-pointed; the detector's candidates stay.
+#[test]
+fn a_steps_leftover_candidates_are_dropped() {
+    let truth = posed(0.0, &RigidTransform::IDENTITY);
+    let mut cands = candidates(&truth[..6]);
+    let real = 4;
+    // Candidates 4 and 5 come from a step; only 5 is named (as D2).
+    let mut blob_of = vec![0, 1, 2, 3, 3, 3];
+    let mut names = [Some(0), Some(5), None, Some(2)];
+    let kept = cands[5].clone();
+    drop_unnamed_extras(&mut names, &mut cands, &mut blob_of, real);
+    assert_eq!(cands.len(), 5);
+    assert_eq!(names, [Some(0), Some(4), None, Some(2)]);
+    assert_eq!(cands[4], kept);
+    assert_eq!(blob_of, [0, 1, 2, 3, 3]);
+    // A rolled-back split: no half named, all halves go.
+    let mut cands = candidates(&truth[..6]);
+    let mut blob_of = vec![0, 1, 2, 3, 3, 3];
+    let mut names = [Some(0), Some(1), None, Some(2)];
+    drop_unnamed_extras(&mut names, &mut cands, &mut blob_of, real);
+    assert_eq!((cands.len(), blob_of.len()), (4, 4));
+    assert_eq!(names, [Some(0), Some(1), None, Some(2)]);
 }

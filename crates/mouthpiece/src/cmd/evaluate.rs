@@ -14,8 +14,8 @@
 //!   the pose at calibration);
 //! - *character RMS*: the character points against those the retarget core gives from the
 //!   true dots with the same neutral frames, as a share of the character's mouth width; over
-//!   the points whose driving lip dot is visible (the issue's targets are on visible dots),
-//!   and over all points (a dot the camera cannot see holds its last value, method.md §6,
+//!   the points whose driving lip dot is visible (the accuracy targets are on visible dots),
+//!   and over all points (a dot the camera cannot see holds its last value, docs/method.md §6,
 //!   while the truth moves on).
 
 use std::path::PathBuf;
@@ -158,6 +158,24 @@ fn gt_dots(gt: &GroundTruth, layout: PerformerLayout) -> PerformerDots {
     d
 }
 
+/// The synthetic performer must wear the dots the configuration's `[track]` expects (a bad
+/// input, exit code 2).
+fn check_layout(
+    layout: &mouthpiece_synth::DotLayout,
+    config: &PipelineConfig,
+) -> anyhow::Result<()> {
+    let (lip, forehead) = (config.track.lip_dots, config.track.forehead_dots);
+    if layout.lip_dots != lip || layout.forehead.len() != forehead {
+        return Err(bad_input(anyhow::anyhow!(
+            "--layout: the synthetic performer wears {} lip dots and {} forehead dots, but the \
+             configuration expects {lip} and {forehead} (track.lip_dots, track.forehead_dots)",
+            layout.lip_dots,
+            layout.forehead.len()
+        )));
+    }
+    Ok(())
+}
+
 /// Runs the pipeline over one synthetic session and measures it against its ground truth.
 pub fn evaluate(
     synth: SynthConfig,
@@ -169,6 +187,7 @@ pub fn evaluate(
         smoothing: ShapeSmoothing::None,
         one_euro: None,
     };
+    check_layout(&synth.layout, config)?;
     let mut pipeline = Pipeline::new(config.clone(), character.clone(), settings)?;
     let layout = config.track.layout();
     let names: Vec<String> = (0..layout.lip_dots)
@@ -398,7 +417,7 @@ mod tests {
 
     /// Renders a short session now, measures it against its ground truth and holds it to the
     /// figures the pipeline reached when this was written (regression guards, a little
-    /// looser than measured; the issue's targets are in docs/detection.md).
+    /// looser than measured; the accuracy targets are in docs/detection.md).
     fn session_holds(synth: SynthConfig, guard: Guard) {
         let character =
             Character::from_toml_str(include_str!("../../../../config/characters/human.toml"))
@@ -636,6 +655,38 @@ mod tests {
                 json.contains("\"calibrating\":true") && json.contains("\"D1\":null"),
                 "{json}"
             );
+        }
+    }
+
+    /// A `--layout` that does not match the configuration's dots is a bad input, not a
+    /// panic.
+    #[test]
+    fn a_layout_that_does_not_match_the_configuration_is_refused() {
+        let character =
+            Character::from_toml_str(include_str!("../../../../config/characters/human.toml"))
+                .unwrap();
+        for layout in [
+            mouthpiece_synth::DotLayout {
+                lip_dots: 8,
+                ..Default::default()
+            },
+            mouthpiece_synth::DotLayout {
+                forehead: mouthpiece_synth::DotLayout::default().forehead[..2].to_vec(),
+                ..Default::default()
+            },
+        ] {
+            let synth = SynthConfig {
+                seed: 1,
+                seconds: 2.5,
+                layout,
+                ..SynthConfig::default()
+            };
+            let err = evaluate(synth, &PipelineConfig::default(), &character, 1.0).unwrap_err();
+            assert!(
+                err.chain().any(|e| e.is::<crate::exit::BadInput>()),
+                "{err:#}"
+            );
+            assert!(format!("{err:#}").contains("track.lip_dots"), "{err:#}");
         }
     }
 }

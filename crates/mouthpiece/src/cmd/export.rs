@@ -315,7 +315,7 @@ fn take_from_recording(args: &Args) -> anyhow::Result<TakeInput> {
         character,
         config: args.config.as_deref(),
         // `mouthpiece process`'s default, so that --curve has a curve to export.
-        smooth: Smooth::Bspline,
+        smooth: Some(Smooth::Bspline),
         opencv_threads: 0,
     };
     let summary = process_recording(&setup, &mut BufWriter::new(&mut file))?;

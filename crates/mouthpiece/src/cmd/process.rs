@@ -13,8 +13,10 @@ use std::time::Instant;
 use anyhow::Context as _;
 use mouthpiece_frame::{Frame, FrameSource};
 use mouthpiece_recording::SessionReader;
-use mouthpiece_retarget::{Character, CharacterSettings, MovingAverageKind, ShapeSmoothing};
-use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
+use mouthpiece_retarget::{Character, ShapeSmoothing};
+use mouthpiece_track::pipeline::{
+    Pipeline, PipelineConfig, RetargetSettings, Smooth as ConfigSmooth,
+};
 
 use crate::cmd::retarget::Smooth;
 use crate::exit::bad_input;
@@ -26,21 +28,22 @@ pub struct Args {
     /// Character file (TOML).
     #[arg(long)]
     pub character: PathBuf,
-    /// Configuration file (TOML): its `[detect]` and `[track]` tables are used.
+    /// Configuration file (TOML): its `[detect]`, `[track]` and `[retarget]` tables are used.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Output JSONL, `-` for stdout.
     #[arg(long)]
     pub out: PathBuf,
-    /// Shape smoothing that makes each line's `curve`.
-    #[arg(long, value_enum, default_value = "bspline")]
-    pub smooth: Smooth,
+    /// Shape smoothing that makes each line's `curve` (default: the configuration's
+    /// `[retarget] smooth`, `bspline` without one).
+    #[arg(long, value_enum)]
+    pub smooth: Option<Smooth>,
     /// Threads OpenCV may use (0: its default). 1 measures one core.
     #[arg(long, default_value_t = 0)]
     pub opencv_threads: i32,
 }
 
-/// Loads the `[detect]`/`[track]` configuration (defaults without a file).
+/// Loads the `[detect]`/`[track]`/`[retarget]` configuration (defaults without a file).
 pub fn load_config(path: Option<&Path>) -> anyhow::Result<PipelineConfig> {
     let Some(path) = path else {
         return Ok(PipelineConfig::default());
@@ -63,25 +66,25 @@ pub fn load_character(path: &Path) -> anyhow::Result<Character> {
         .map_err(bad_input)
 }
 
+/// The shape smoothing `--smooth` names, with the configuration's default parameters
+/// (`[retarget]`: moving averages over 1 neighbour, alpha 0.5, 8 B-spline samples a span).
 pub(crate) fn smoothing(smooth: Smooth) -> ShapeSmoothing {
+    RetargetSettings {
+        smooth: config_smooth(smooth),
+        ..RetargetSettings::default()
+    }
+    .smoothing()
+}
+
+/// The configuration's `smooth` value for the command line's `--smooth`.
+fn config_smooth(smooth: Smooth) -> ConfigSmooth {
     match smooth {
-        Smooth::None => ShapeSmoothing::None,
-        Smooth::Ma => ShapeSmoothing::MovingAverage {
-            kind: MovingAverageKind::Plain,
-            radius: 1,
-        },
-        Smooth::MaWeighted => ShapeSmoothing::MovingAverage {
-            kind: MovingAverageKind::Weighted,
-            radius: 1,
-        },
-        Smooth::MaExp => ShapeSmoothing::MovingAverage {
-            kind: MovingAverageKind::Exponential { alpha: 0.5 },
-            radius: 1,
-        },
-        Smooth::Sg5 => ShapeSmoothing::SavitzkyGolay5,
-        Smooth::Bspline => ShapeSmoothing::BSpline {
-            samples_per_span: 8,
-        },
+        Smooth::None => ConfigSmooth::None,
+        Smooth::Ma => ConfigSmooth::Ma,
+        Smooth::MaWeighted => ConfigSmooth::MaWeighted,
+        Smooth::MaExp => ConfigSmooth::MaExp,
+        Smooth::Sg5 => ConfigSmooth::Sg5,
+        Smooth::Bspline => ConfigSmooth::Bspline,
     }
 }
 
@@ -131,13 +134,14 @@ impl Input {
     }
 }
 
-/// What to process: a recording, the character, the `[detect]`/`[track]` configuration, the
-/// shape smoothing and OpenCV's thread count (0: its default).
+/// What to process: a recording, the character, the `[detect]`/`[track]`/`[retarget]`
+/// configuration, the shape smoothing (`None`: the configuration's) and OpenCV's thread count
+/// (0: its default).
 pub struct ProcessSetup<'a> {
     pub input: &'a Path,
     pub character: &'a Path,
     pub config: Option<&'a Path>,
-    pub smooth: Smooth,
+    pub smooth: Option<Smooth>,
     pub opencv_threads: i32,
 }
 
@@ -186,13 +190,12 @@ pub fn process_recording(
     setup: &ProcessSetup<'_>,
     out: &mut dyn Write,
 ) -> anyhow::Result<ProcessSummary> {
-    let config = load_config(setup.config)?;
+    let mut config = load_config(setup.config)?;
     let character = load_character(setup.character)?;
-    let settings = CharacterSettings {
-        smoothing: smoothing(setup.smooth),
-        one_euro: None,
-    };
-    let mut pipeline = Pipeline::new(config, character, settings).map_err(bad_input)?;
+    if let Some(smooth) = setup.smooth {
+        config.retarget.smooth = config_smooth(smooth);
+    }
+    let mut pipeline = Pipeline::for_characters(config, vec![character]).map_err(bad_input)?;
     if setup.opencv_threads > 0 {
         mouthpiece_detect::set_opencv_threads(setup.opencv_threads)?;
     }

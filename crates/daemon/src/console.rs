@@ -1,0 +1,432 @@
+//! What the booth console page needs from the processing thread: the camera image with the
+//! dots for the preview, health figures once a second, and how good a calibration was.
+//!
+//! Nothing here runs unless asked for: the preview's image and dots are handed over only
+//! when [`mouthpiece_server::Hub::preview_due`] says a client wants one (the JPEG encoding
+//! runs on the server's preview thread); the health figures are sums updated per frame and
+//! sent once a second.
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use mouthpiece_frame::Frame;
+use mouthpiece_retarget::kabsch::kabsch;
+use mouthpiece_retarget::{NeutralPose, Vec3};
+use mouthpiece_server::{BgrImage, DotState, Health, ImageDot, Overlay, PixelBox};
+
+/// A frame's colour image, shared with the preview encoder without a copy.
+pub struct FrameImage(pub Arc<Frame>);
+
+impl BgrImage for FrameImage {
+    fn width(&self) -> u32 {
+        self.0.color.width
+    }
+    fn height(&self) -> u32 {
+        self.0.color.height
+    }
+    fn bgr(&self) -> &[u8] {
+        &self.0.color.data
+    }
+}
+
+/// Where each dot was last seen in the image, and for how many frames some dot has been
+/// missing. Updated every frame without allocating.
+#[derive(Debug, Clone, Default)]
+pub struct DotPlaces {
+    /// Pixel of each dot in this frame (`None`: not found).
+    pub now: Vec<Option<[f64; 2]>>,
+    /// Pixel where each dot was last found.
+    pub last_seen: Vec<Option<[f64; 2]>>,
+    /// Consecutive frames with at least one dot missing.
+    pub frames_with_missing: u32,
+}
+
+impl DotPlaces {
+    /// Takes this frame's pixels (lip dots, then forehead).
+    pub fn update(&mut self, pixels: &[Option<[f64; 2]>]) {
+        self.now.clear();
+        self.now.extend_from_slice(pixels);
+        self.last_seen.resize(pixels.len(), None);
+        for (last, now) in self.last_seen.iter_mut().zip(pixels) {
+            if now.is_some() {
+                *last = *now;
+            }
+        }
+        if pixels.iter().any(Option::is_none) {
+            self.frames_with_missing = self.frames_with_missing.saturating_add(1);
+        } else {
+            self.frames_with_missing = 0;
+        }
+    }
+
+    /// The overlay: each dot at its pixel when found, else where `predicted` places it,
+    /// else where it was last seen; and the search region while dots are missing.
+    pub fn overlay(
+        &self,
+        names: &[String],
+        predicted: impl Fn(usize) -> Option<[f64; 2]>,
+        roi_margin_px: f64,
+        image: [u32; 2],
+    ) -> Overlay {
+        let mut dots = Vec::with_capacity(names.len());
+        for (i, name) in names.iter().enumerate() {
+            let place = match self.now.get(i).copied().flatten() {
+                Some(p) => Some((p, DotState::Tracked)),
+                None => match predicted(i) {
+                    Some(p) => Some((p, DotState::Predicted)),
+                    None => self
+                        .last_seen
+                        .get(i)
+                        .copied()
+                        .flatten()
+                        .map(|p| (p, DotState::Lost)),
+                },
+            };
+            if let Some((p, state)) = place {
+                dots.push(ImageDot {
+                    name: name.clone(),
+                    x: p[0] as f32,
+                    y: p[1] as f32,
+                    state,
+                });
+            }
+        }
+        let search = (self.frames_with_missing > 0).then(|| {
+            search_region(
+                dots.iter().map(|d| [f64::from(d.x), f64::from(d.y)]),
+                self.frames_with_missing,
+                roi_margin_px,
+                image,
+            )
+        });
+        Overlay { dots, search }
+    }
+}
+
+/// Search region estimate: where the tracker looks while dots are missing, as it decides
+/// it (the box around the dots' predicted places, its margin doubling with each frame
+/// something stays missing, up to 16 times; the whole image once the box would cover half
+/// of it, or when no dot has a place). The tracker also searches the whole image every few
+/// frames while dots are missing; that is not drawn.
+pub fn search_region(
+    places: impl Iterator<Item = [f64; 2]>,
+    frames_with_missing: u32,
+    roi_margin_px: f64,
+    image: [u32; 2],
+) -> PixelBox {
+    let (w, h) = (f64::from(image[0]), f64::from(image[1]));
+    let full = PixelBox {
+        x: 0.0,
+        y: 0.0,
+        width: w as f32,
+        height: h as f32,
+    };
+    let mut bounds: Option<[f64; 4]> = None;
+    for [x, y] in places {
+        let b = bounds.get_or_insert([x, y, x, y]);
+        b[0] = b[0].min(x);
+        b[1] = b[1].min(y);
+        b[2] = b[2].max(x);
+        b[3] = b[3].max(y);
+    }
+    let Some([x0, y0, x1, y1]) = bounds else {
+        return full;
+    };
+    let grow = f64::from(1u32 << frames_with_missing.min(4));
+    let margin = roi_margin_px * grow;
+    let (x0, y0) = ((x0 - margin).max(0.0), (y0 - margin).max(0.0));
+    let (x1, y1) = ((x1 + margin).min(w), (y1 + margin).min(h));
+    if (x1 - x0) * (y1 - y0) >= w * h / 2.0 {
+        return full;
+    }
+    PixelBox {
+        x: x0 as f32,
+        y: y0 as f32,
+        width: (x1 - x0) as f32,
+        height: (y1 - y0) as f32,
+    }
+}
+
+/// The last frames' dots in the camera frame (lip, then forehead), kept so that a new
+/// neutral pose can be judged on the frames it was averaged from. Buffers are recycled.
+#[derive(Debug, Default)]
+pub struct DotHistory {
+    entries: VecDeque<(f64, Vec<Option<Vec3>>)>,
+    spare: Vec<Vec<Option<Vec3>>>,
+}
+
+impl DotHistory {
+    /// Adds this frame's dots (time `t`, seconds) and forgets frames older than `keep_s`.
+    pub fn push(&mut self, t: f64, dots: impl Iterator<Item = Option<Vec3>>, keep_s: f64) {
+        while self
+            .entries
+            .front()
+            .is_some_and(|(t0, _)| t - t0 > keep_s || *t0 > t)
+        {
+            if let Some((_, v)) = self.entries.pop_front() {
+                self.spare.push(v);
+            }
+        }
+        let mut v = self.spare.pop().unwrap_or_default();
+        v.clear();
+        v.extend(dots);
+        self.entries.push_back((t, v));
+    }
+
+    /// The newest `n` frames, oldest first.
+    pub fn last(&self, n: usize) -> impl Iterator<Item = &[Option<Vec3>]> {
+        let skip = self.entries.len().saturating_sub(n);
+        self.entries.iter().skip(skip).map(|(_, v)| v.as_slice())
+    }
+}
+
+/// Lip wobble: RMS distance (metres) of the lip dots from their neutral places over the
+/// frames a neutral pose was averaged from, each frame first carried onto the neutral head
+/// (its forehead dots fitted rigidly onto the neutral forehead, so the head's own motion
+/// does not count). Each frame lists the lip dots, then the forehead dots. `None` when no
+/// frame had all dots and a forehead to fit.
+pub fn lip_wobble<'a>(
+    neutral: &NeutralPose,
+    frames: impl Iterator<Item = &'a [Option<Vec3>]>,
+) -> Option<f64> {
+    let n = neutral.lip_camera.len();
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    let mut from = Vec::new();
+    let mut to = Vec::new();
+    for frame in frames {
+        from.clear();
+        to.clear();
+        for (seen, reference) in frame.iter().skip(n).zip(&neutral.forehead_camera) {
+            if let (Some(s), Some(r)) = (seen, reference) {
+                from.push(*s);
+                to.push(*r);
+            }
+        }
+        let Some(head) = kabsch(&from, &to) else {
+            continue;
+        };
+        for (seen, rest) in frame.iter().take(n).zip(&neutral.lip_camera) {
+            if let Some(p) = seen {
+                sum += (head.apply(p) - rest).norm_squared();
+                count += 1;
+            }
+        }
+    }
+    (count > 0).then(|| (sum / count as f64).sqrt())
+}
+
+/// Sums over the current second for the `health` message.
+#[derive(Debug)]
+pub struct HealthMeter {
+    started: Instant,
+    frames: u32,
+    dots_seen: u64,
+    dots_total: u64,
+    processing: Duration,
+    capture_to_publish: Duration,
+    image: Option<[u32; 2]>,
+    takes_folder: PathBuf,
+}
+
+impl HealthMeter {
+    /// Health over each second; free space measured in `takes_folder`.
+    pub fn new(takes_folder: PathBuf) -> Self {
+        Self {
+            started: Instant::now(),
+            frames: 0,
+            dots_seen: 0,
+            dots_total: 0,
+            processing: Duration::ZERO,
+            capture_to_publish: Duration::ZERO,
+            image: None,
+            takes_folder,
+        }
+    }
+
+    /// Counts one processed frame.
+    pub fn frame(
+        &mut self,
+        dots_total: usize,
+        dots_missing: usize,
+        processing: Duration,
+        capture_to_publish: Duration,
+        image: [u32; 2],
+    ) {
+        self.frames += 1;
+        self.dots_total += dots_total as u64;
+        self.dots_seen += dots_total.saturating_sub(dots_missing) as u64;
+        self.processing += processing;
+        self.capture_to_publish += capture_to_publish;
+        self.image = Some(image);
+    }
+
+    /// Once a second: the figures of the second that ended, and a new second begins.
+    pub fn tick(&mut self, now: Instant) -> Option<Health> {
+        let elapsed = now.saturating_duration_since(self.started);
+        if elapsed < Duration::from_secs(1) {
+            return None;
+        }
+        let frames = f64::from(self.frames.max(1));
+        let health = Health {
+            fps: f64::from(self.frames) / elapsed.as_secs_f64(),
+            dots_found: if self.dots_total > 0 {
+                self.dots_seen as f64 / self.dots_total as f64
+            } else {
+                0.0
+            },
+            processing_ms: self.processing.as_secs_f64() * 1e3 / frames,
+            capture_to_publish_ms: self.capture_to_publish.as_secs_f64() * 1e3 / frames,
+            disk_free_mb: std::fs::create_dir_all(&self.takes_folder)
+                .ok()
+                .and_then(|()| crate::takes::free_mb(&self.takes_folder)),
+            image: self.image,
+        };
+        self.started = now;
+        self.frames = 0;
+        self.dots_seen = 0;
+        self.dots_total = 0;
+        self.processing = Duration::ZERO;
+        self.capture_to_publish = Duration::ZERO;
+        Some(health)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mouthpiece_retarget::{PerformerLayout, RigidTransform};
+    use nalgebra::{Rotation3, Vector3};
+
+    #[test]
+    fn overlay_states_and_search_region() {
+        let names: Vec<String> = ["D1", "D2", "F1"].iter().map(|s| s.to_string()).collect();
+        let mut places = DotPlaces::default();
+        places.update(&[
+            Some([100.0, 100.0]),
+            Some([120.0, 100.0]),
+            Some([110.0, 50.0]),
+        ]);
+        let o = places.overlay(&names, |_| None, 20.0, [640, 480]);
+        assert!(o.dots.iter().all(|d| d.state == DotState::Tracked));
+        assert!(o.search.is_none(), "all found: no search region");
+        // D2 missing: predicted by the caller; F1 missing with no prediction: last seen.
+        places.update(&[Some([101.0, 100.0]), None, None]);
+        let o = places.overlay(
+            &names,
+            |i| (i == 1).then_some([125.0, 102.0]),
+            20.0,
+            [640, 480],
+        );
+        let state = |n: &str| o.dots.iter().find(|d| d.name == n).unwrap().state;
+        assert_eq!(state("D1"), DotState::Tracked);
+        assert_eq!(state("D2"), DotState::Predicted);
+        assert_eq!(state("F1"), DotState::Lost);
+        let f1 = o.dots.iter().find(|d| d.name == "F1").unwrap();
+        assert_eq!((f1.x, f1.y), (110.0, 50.0), "where it was last seen");
+        let s = o.search.unwrap();
+        // Margin 20 px doubled after one frame with a dot missing.
+        assert_eq!((s.x, s.y), (101.0 - 40.0, 50.0 - 40.0));
+        assert_eq!((s.width, s.height), (24.0 + 80.0, 52.0 + 80.0));
+    }
+
+    #[test]
+    fn the_search_region_grows_to_the_whole_image() {
+        let dots = [[300.0, 200.0], [340.0, 210.0]];
+        let small = search_region(dots.iter().copied(), 1, 20.0, [640, 480]);
+        let later = search_region(dots.iter().copied(), 3, 20.0, [640, 480]);
+        assert!(later.width > small.width);
+        let huge = search_region(dots.iter().copied(), 10, 20.0, [640, 480]);
+        assert_eq!((huge.width, huge.height), (640.0, 480.0));
+        let none = search_region(std::iter::empty(), 1, 20.0, [640, 480]);
+        assert_eq!((none.width, none.height), (640.0, 480.0));
+    }
+
+    #[test]
+    fn lip_wobble_is_the_lip_jitter_with_head_motion_removed() {
+        let layout = PerformerLayout {
+            lip_dots: 4,
+            forehead_dots: 3,
+        };
+        let lip = [
+            Vector3::new(-0.025, 0.0, 0.6),
+            Vector3::new(0.0, -0.008, 0.59),
+            Vector3::new(0.025, 0.0, 0.6),
+            Vector3::new(0.0, 0.008, 0.59),
+        ];
+        let forehead = [
+            Vector3::new(-0.035, -0.09, 0.62),
+            Vector3::new(0.035, -0.09, 0.62),
+            Vector3::new(0.0, -0.13, 0.63),
+        ];
+        let neutral = NeutralPose::from_positions(
+            layout,
+            lip.iter().map(|p| Some(*p)).collect(),
+            forehead.iter().map(|p| Some(*p)).collect(),
+            20,
+        )
+        .unwrap();
+        // 20 frames: the head turns up to 6 degrees and moves, each lip dot is off its rest
+        // place by exactly 0.5 mm in a varying direction.
+        let mut history = DotHistory::default();
+        for i in 0..20 {
+            let a = 0.1 * (i as f64 / 3.0).sin();
+            let head = RigidTransform {
+                rotation: *Rotation3::from_euler_angles(0.3 * a, a, 0.0).matrix(),
+                translation: Vector3::new(0.01 * a, 0.0, 0.005),
+            };
+            let jitter = |k: usize| {
+                let phi = (i * 7 + k * 3) as f64;
+                Vector3::new(phi.cos(), phi.sin(), 0.0) * 0.0005
+            };
+            let dots: Vec<Option<Vec3>> = lip
+                .iter()
+                .enumerate()
+                .map(|(k, p)| Some(head.apply(&(p + jitter(k)))))
+                .chain(forehead.iter().map(|p| Some(head.apply(p))))
+                .collect();
+            history.push(i as f64 / 30.0, dots.into_iter(), 2.0);
+        }
+        let wobble = lip_wobble(&neutral, history.last(20)).unwrap();
+        assert!((wobble - 0.0005).abs() < 1e-6, "{wobble}");
+        // Without the head's motion removed the figure would be far larger: the fit matters.
+        assert!(lip_wobble(&neutral, history.last(0)).is_none());
+    }
+
+    #[test]
+    fn history_keeps_only_recent_frames_and_recycles() {
+        let mut h = DotHistory::default();
+        for i in 0..100 {
+            h.push(f64::from(i) * 0.1, std::iter::once(None), 1.0);
+        }
+        assert_eq!(h.last(usize::MAX).count(), 11);
+        assert!(h.spare.len() <= 1);
+    }
+
+    #[test]
+    fn health_over_a_second() {
+        let mut m = HealthMeter::new(std::env::temp_dir());
+        let start = m.started;
+        for _ in 0..30 {
+            m.frame(
+                15,
+                1,
+                Duration::from_millis(1),
+                Duration::from_millis(2),
+                [640, 480],
+            );
+        }
+        assert!(m.tick(start + Duration::from_millis(500)).is_none());
+        let h = m.tick(start + Duration::from_secs(1)).unwrap();
+        assert!((h.fps - 30.0).abs() < 1e-9);
+        assert!((h.dots_found - 14.0 / 15.0).abs() < 1e-9);
+        assert!((h.processing_ms - 1.0).abs() < 1e-9);
+        assert!((h.capture_to_publish_ms - 2.0).abs() < 1e-9);
+        assert!(h.disk_free_mb.is_some());
+        assert_eq!(h.image, Some([640, 480]));
+        let idle = m.tick(start + Duration::from_secs(2)).unwrap();
+        assert_eq!(idle.fps, 0.0);
+    }
+}

@@ -1,0 +1,13 @@
+//! Why a configuration that parsed is still unusable. A leaf module: the checks, the live
+//! pipeline's set-up and the daemon all report through it.
+
+use mouthpiece_config::{ConfigError, Location};
+
+/// Why a config that parsed is still unusable.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("{location}: {message}")]
+    Invalid { location: Location, message: String },
+}
