@@ -237,7 +237,7 @@ async fn bad_input_churn_and_half_open_connections_leave_others_streaming_and_me
         let mut s = TcpStream::connect(server.addr).await.unwrap();
         s.write_all(
             format!(
-                "GET /?token={read} HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+                "GET /?token={read} HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
                  Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n"
             )
             .as_bytes(),
