@@ -17,9 +17,10 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use mouthpiece_retarget::jsonl::{InputLine, OutputLine};
 use mouthpiece_retarget::{
-    Character, CharacterSettings, MissingDots, MovingAverageKind, NeutralAccumulator,
-    OneEuroParams, PerformerDots, PerformerLayout, RetargetConfig, Retargeter, ShapeSmoothing,
+    Character, CharacterSettings, MissingDots, NeutralAccumulator, OneEuroParams, PerformerDots,
+    PerformerLayout, RetargetConfig, Retargeter,
 };
+use mouthpiece_track::pipeline::{RetargetSettings, Smooth as ConfigSmooth};
 
 use crate::exit::bad_input;
 use mouthpiece_export::PendingFile;
@@ -38,6 +39,20 @@ pub enum Smooth {
     Sg5,
     /// Closed uniform cubic B-spline, `--samples-per-span` samples per point.
     Bspline,
+}
+
+impl From<Smooth> for ConfigSmooth {
+    /// The command line's `--smooth` as the configuration's `[retarget] smooth`.
+    fn from(smooth: Smooth) -> Self {
+        match smooth {
+            Smooth::None => ConfigSmooth::None,
+            Smooth::Ma => ConfigSmooth::Ma,
+            Smooth::MaWeighted => ConfigSmooth::MaWeighted,
+            Smooth::MaExp => ConfigSmooth::MaExp,
+            Smooth::Sg5 => ConfigSmooth::Sg5,
+            Smooth::Bspline => ConfigSmooth::Bspline,
+        }
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -89,27 +104,15 @@ fn parse_one_euro(s: &str) -> Result<OneEuroParams, String> {
 
 impl Args {
     fn config(&self) -> anyhow::Result<RetargetConfig> {
-        let smoothing = match self.smooth {
-            Smooth::None => ShapeSmoothing::None,
-            Smooth::Ma => ShapeSmoothing::MovingAverage {
-                kind: MovingAverageKind::Plain,
-                radius: self.ma_radius,
-            },
-            Smooth::MaWeighted => ShapeSmoothing::MovingAverage {
-                kind: MovingAverageKind::Weighted,
-                radius: self.ma_radius,
-            },
-            Smooth::MaExp => ShapeSmoothing::MovingAverage {
-                kind: MovingAverageKind::Exponential {
-                    alpha: self.ma_alpha,
-                },
-                radius: self.ma_radius,
-            },
-            Smooth::Sg5 => ShapeSmoothing::SavitzkyGolay5,
-            Smooth::Bspline => ShapeSmoothing::BSpline {
-                samples_per_span: self.samples_per_span,
-            },
-        };
+        // The one mapping from the option to the shape smoothing: the configuration's.
+        let smoothing = RetargetSettings {
+            smooth: self.smooth.into(),
+            ma_radius: self.ma_radius,
+            ma_alpha: self.ma_alpha,
+            samples_per_span: self.samples_per_span,
+            one_euro: None,
+        }
+        .smoothing();
         smoothing.validate().map_err(bad_input)?;
         Ok(RetargetConfig {
             missing: MissingDots {
