@@ -172,8 +172,9 @@ mod tests {
             p[1] += 9.0;
         }
         let mut cands = scene.candidates_at(&truth);
-        for i in 8..11 {
-            scene.push(&mut cands, rest[i], neutral_face()[i].z, DotRole::Lip, 0.3);
+        let face = neutral_face();
+        for (px, p) in rest.iter().zip(&face).take(11).skip(8) {
+            scene.push(&mut cands, *px, p.z, DotRole::Lip, 0.3);
         }
         let mut pass = scene.pass(&rest, &cands);
         let mut names = scene.first_pass(&pass, &cands);
