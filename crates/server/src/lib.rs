@@ -69,6 +69,7 @@ pub mod console;
 mod error;
 mod foxglove;
 pub mod foxglove_scene;
+pub mod head;
 pub mod host;
 pub mod http;
 pub mod hub;
@@ -83,6 +84,7 @@ mod tls;
 
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
 pub use console::{CalibrationReport, FramePose, Health, TakeSummary};
+pub use head::{CharacterHead, LookMode};
 pub use error::ServerError;
 pub use foxglove::{
     check_client_message as check_foxglove_client_message, FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL,
