@@ -695,8 +695,8 @@ mod tests {
                 assert_relative_eq!(n, a, epsilon = 1e-12);
             }
         }
-        // Straight left: the side limit, level.
-        let n = reach.nearest(&Vec3::x());
+        // 70° to the left, level: the side limit, level.
+        let n = reach.nearest(&direction_deg(70.0, 0.0));
         assert_relative_eq!(n, Vec3::new(0.8, 0.0, 0.6), epsilon = 1e-12);
     }
 
@@ -731,7 +731,9 @@ mod tests {
 
     #[test]
     fn eyes_aim_at_once_and_the_head_follows_within_reach() {
-        let frame = crate::MouthFrame::from_corners(Vec3::x(), -Vec3::x(), Vec3::y()).unwrap();
+        // A human-sized mouth (5 cm), viewpoints metres away.
+        let corner = Vec3::new(0.025, 0.0, 0.0);
+        let frame = crate::MouthFrame::from_corners(corner, -corner, Vec3::y()).unwrap();
         let config = HeadConfig::default_for(&frame);
         let mut head = HeadDriver::new(config, frame.axes);
         head.step(0.0, &Quat::identity());

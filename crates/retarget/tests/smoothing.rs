@@ -80,7 +80,7 @@ fn head_slerp_agrees_with_scipy() {
     use mouthpiece_retarget::head::{slerp, Quat};
     use rand::{Rng, SeedableRng};
     let mut rng = rand::rngs::StdRng::seed_from_u64(2);
-    let mut random_quat = |rng: &mut rand::rngs::StdRng| {
+    let random_quat = |rng: &mut rand::rngs::StdRng| {
         let q = nalgebra::Quaternion::new(
             rng.random_range(-1.0..1.0),
             rng.random_range(-1.0..1.0),
