@@ -366,8 +366,7 @@ impl GltfWriter {
             return Err(ExportError::BadLine {
                 source_name: "take".into(),
                 line: frame.line,
-                problem: "no `character_head` on this line, though the first line had one"
-                    .into(),
+                problem: "no `character_head` on this line, though the first line had one".into(),
             });
         };
         let conversion = model_conversion(self.options.model_up);
@@ -770,8 +769,7 @@ fn model_conversion(model_up: ModelUp) -> nalgebra::UnitQuaternion<f64> {
 fn head_transform(rig: &MouthRig, head: &crate::RigHead, model_up: ModelUp) -> NodeTransform {
     let conversion = model_conversion(model_up);
     let s = rig.metres_per_unit().unwrap_or(1.0);
-    let translation =
-        (conversion * nalgebra::Vector3::from(head.pivot) * s).map(|c| c as f32);
+    let translation = (conversion * nalgebra::Vector3::from(head.pivot) * s).map(|c| c as f32);
     let q = conversion.coords.map(|c| c as f32).normalize();
     NodeTransform {
         translation: (translation.norm() > 0.0).then(|| translation.into()),

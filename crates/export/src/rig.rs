@@ -174,11 +174,12 @@ impl MouthRig {
         )?;
         let h = &character.head;
         let arr = |v: &mouthpiece_retarget::Vec3| [v.x, v.y, v.z];
-        let rig = Self::new(Some(character.name.clone()), points, placement)?.with_head(RigHead {
-            pivot: arr(&h.pivot),
-            eye_left: arr(&h.eye_left),
-            eye_right: arr(&h.eye_right),
-        })?;
+        let rig =
+            Self::new(Some(character.name.clone()), points, placement)?.with_head(RigHead {
+                pivot: arr(&h.pivot),
+                eye_left: arr(&h.eye_left),
+                eye_right: arr(&h.eye_right),
+            })?;
         match character.units {
             Some(units) => rig.with_metres_per_unit(units.metres_per_unit()),
             None => Ok(rig),

@@ -290,6 +290,41 @@ async fn a_take_started_by_a_control_message_holds_every_channel() {
     let mut daemon = Daemon::start_looping(60, "", &[], &[]);
     let mut ws = daemon.connect().await;
     wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await;
+    // The wolf's head turns to a viewpoint in front of it, a little to its left (docs/head.md);
+    // an unknown character is refused.
+    send(
+        &mut ws,
+        json!({"type": "look_at", "id": 8, "character": "ghost", "point": [0, 0, 1]}),
+    )
+    .await;
+    let refused = wait_for(&mut ws, Duration::from_secs(5), |v| v["type"] == "error").await;
+    assert_eq!(
+        (refused["id"].as_i64(), refused["code"].as_str()),
+        (Some(8), Some("bad_request"))
+    );
+    send(
+        &mut ws,
+        json!({"type": "look_at", "id": 9, "character": "wolf", "point": [0.8, -2.5, 0.5]}),
+    )
+    .await;
+    let looked = wait_for(&mut ws, Duration::from_secs(5), |v| {
+        v["type"] == "result" || v["type"] == "error"
+    })
+    .await;
+    assert_eq!(looked["type"], "result", "{looked}");
+    assert_eq!(looked["detail"]["in_reach"], true, "{looked}");
+    let wolf_head = |v: &Value| {
+        v["characters"]
+            .as_array()
+            .and_then(|c| c.iter().find(|c| c["name"] == "wolf"))
+            .map(|c| c["head"].clone())
+            .unwrap_or(Value::Null)
+    };
+    let turned = wait_for(&mut ws, Duration::from_secs(15), |v| {
+        v["type"] == "frame" && wolf_head(v)["mode"] == "look_at"
+    })
+    .await;
+    assert_eq!(wolf_head(&turned)["in_reach"], true, "{turned}");
     send(
         &mut ws,
         json!({"type": "record", "id": 1, "action": "start", "slate": "e2e", "take": 4}),
@@ -339,6 +374,16 @@ async fn a_take_started_by_a_control_message_holds_every_channel() {
         );
     }
     assert!(topics.contains_key("/camera/calibration"), "{topics:?}");
+    // The take records the wolf's head looking at the viewpoint.
+    let mut reader = MessageReader::open(&file).unwrap();
+    let mut last_wolf = None;
+    while let Some(m) = reader.next_message().unwrap() {
+        if &*m.topic == "/character/wolf" {
+            last_wolf = Some(serde_json::from_slice::<Value>(&m.data).unwrap());
+        }
+    }
+    let last_wolf = last_wolf.unwrap();
+    assert_eq!(last_wolf["head"]["mode"], "look_at", "{last_wolf}");
     // A second start while recording is refused; stop without a take is an error.
     send(
         &mut ws,

@@ -709,14 +709,14 @@ fn a_turn_exported_faces_the_viewpoint_in_blender() {
         "--model-up",
         "z",
     ]);
-    assert!(stderr.contains("head, eye_L, eye_R: 360 rotation keys"), "{stderr}");
+    assert!(
+        stderr.contains("head, eye_L, eye_R: 360 rotation keys"),
+        "{stderr}"
+    );
     assert_valid(&glb);
     let check = check_gltf_with(&take, &glb, &["--character", c, "--model-up", "z"]);
     assert_eq!(check["head_keys"], 360, "{check}");
-    assert!(
-        check["max_head_error"].as_f64().unwrap() < 1e-6,
-        "{check}"
-    );
+    assert!(check["max_head_error"].as_f64().unwrap() < 1e-6, "{check}");
 
     let t_last = last["t"].as_f64().unwrap();
     let result = blender_samples(&glb, [t_last].into_iter());

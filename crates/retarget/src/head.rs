@@ -150,8 +150,8 @@ fn circle_corners(n1: &Vec3, c1: f64, n2: &Vec3, c2: f64) -> [Option<Vec3>; 2] {
         return [None, None];
     }
     let n12 = n1.dot(n2);
-    let p0 = (n1 * (c1 * n2.norm_squared() - c2 * n12) + n2 * (c2 * n1.norm_squared() - c1 * n12))
-        / d2;
+    let p0 =
+        (n1 * (c1 * n2.norm_squared() - c2 * n12) + n2 * (c2 * n1.norm_squared() - c1 * n12)) / d2;
     // |p0 + s dir|² = 1, p0 ⟂ dir.
     let rest = 1.0 - p0.norm_squared();
     if rest < 0.0 {
@@ -428,8 +428,7 @@ impl HeadDriver {
 
     /// Where the driver looks: the viewpoint (model frame), or `None` when following.
     pub fn viewpoint(&self) -> Option<Vec3> {
-        self.viewpoint
-            .map(|v| self.axes * v.at + self.config.pivot)
+        self.viewpoint.map(|v| self.axes * v.at + self.config.pivot)
     }
 
     /// The head rotation (head frame) that follows the performer's head rotation `r` (given
@@ -620,7 +619,10 @@ mod tests {
         // Anything behind the head, whatever its side and height.
         for yaw in [91.0, 120.0, 180.0, -135.0, -91.0] {
             for pitch in [-30.0, 0.0, 10.0, 30.0] {
-                assert!(!reach.contains(&direction_deg(yaw, pitch)), "({yaw}, {pitch})");
+                assert!(
+                    !reach.contains(&direction_deg(yaw, pitch)),
+                    "({yaw}, {pitch})"
+                );
             }
         }
         assert!(!reach.contains(&Vec3::new(0.0, 0.0, -1.0)));
@@ -690,7 +692,11 @@ mod tests {
             assert_relative_eq!(n.norm(), 1.0, epsilon = 1e-12);
             assert!(reach.contains_within(&n, 1e-9), "{a:?} -> {n:?}");
             let best = inside.iter().map(|p| p.dot(&a)).fold(f64::MIN, f64::max);
-            assert!(n.dot(&a) >= best - 1e-12, "{a:?}: {n:?} {} < {best}", n.dot(&a));
+            assert!(
+                n.dot(&a) >= best - 1e-12,
+                "{a:?}: {n:?} {} < {best}",
+                n.dot(&a)
+            );
             if reach.contains(&a) {
                 assert_relative_eq!(n, a, epsilon = 1e-12);
             }
@@ -719,11 +725,7 @@ mod tests {
             assert_relative_eq!(out.rotation.angle().to_degrees(), want, epsilon = 1e-9);
             // About the up axis, to the left: forward turns towards +x.
             let f = out.rotation * FORWARD;
-            assert_relative_eq!(
-                f,
-                direction_deg(want, 0.0),
-                epsilon = 1e-9
-            );
+            assert_relative_eq!(f, direction_deg(want, 0.0), epsilon = 1e-9);
             assert_relative_eq!(out.progress, (f64::from(k) / 3.0).min(1.0), epsilon = 1e-9);
             assert_eq!(out.mode, HeadMode::LookAt);
         }
@@ -742,19 +744,27 @@ mod tests {
         assert_eq!(head.look_at(Some(target)).unwrap(), Some(true));
         let out = *head.step(0.01, &Quat::identity());
         // The eyes are on the target already while the head has hardly moved.
-        for (eye, centre) in [(out.eye_left, config.eye_left), (out.eye_right, config.eye_right)] {
+        for (eye, centre) in [
+            (out.eye_left, config.eye_left),
+            (out.eye_right, config.eye_right),
+        ] {
             let world = out.rotation * eye * FORWARD;
             let pos = config.pivot + out.rotation * (centre - config.pivot);
             assert_relative_eq!(world, (target - pos).normalize(), epsilon = 1e-9);
         }
         assert!(out.progress < 0.1);
         let out = *head.step(1.0, &Quat::identity());
-        assert_relative_eq!(out.rotation * FORWARD, direction_deg(20.0, 10.0), epsilon = 1e-9);
+        assert_relative_eq!(
+            out.rotation * FORWARD,
+            direction_deg(20.0, 10.0),
+            epsilon = 1e-9
+        );
         assert_eq!(out.progress, 1.0);
         // Out of reach (straight up): the head stops at its limit, the eyes make up the rest
         // within their own 30°.
         assert_eq!(
-            head.look_at(Some(config.pivot + Vec3::new(0.0, 5.0, 0.0))).unwrap(),
+            head.look_at(Some(config.pivot + Vec3::new(0.0, 5.0, 0.0)))
+                .unwrap(),
             Some(false)
         );
         let out = *head.step(3.0, &Quat::identity());
@@ -786,7 +796,11 @@ mod tests {
         assert_relative_eq!(out.rotation.angle().to_degrees(), 20.0, epsilon = 1e-9);
         assert!(!out.limited);
         // Eyes stay on the character's forward: they turn back against the head.
-        assert_relative_eq!(out.rotation * out.eye_left * FORWARD, FORWARD, epsilon = 1e-9);
+        assert_relative_eq!(
+            out.rotation * out.eye_left * FORWARD,
+            FORWARD,
+            epsilon = 1e-9
+        );
         // 40° yaw → 80°, past the side limit: clamped onto it.
         let r = Quat::from_axis_angle(&Vec3::y_axis(), 40f64.to_radians());
         let out = *head.step(0.1, &r);

@@ -125,11 +125,7 @@ fn head_slerp_agrees_with_scipy() {
         .stdout(std::process::Stdio::piped())
         .spawn()
         .unwrap_or_else(|e| panic!("{python} (with scipy, from scripts/test): {e}"));
-    std::io::Write::write_all(
-        child.stdin.as_mut().unwrap(),
-        input.to_string().as_bytes(),
-    )
-    .unwrap();
+    std::io::Write::write_all(child.stdin.as_mut().unwrap(), input.to_string().as_bytes()).unwrap();
     drop(child.stdin.take());
     let out = child.wait_with_output().unwrap();
     assert!(out.status.success(), "slerp_reference.py failed");

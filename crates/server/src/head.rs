@@ -133,8 +133,8 @@ mod tests {
                 ..
             }
         ));
-        let m = parse_client_message(r#"{"type":"look_at","character":"wolf","point":null}"#)
-            .unwrap();
+        let m =
+            parse_client_message(r#"{"type":"look_at","character":"wolf","point":null}"#).unwrap();
         assert!(matches!(m, ClientMessage::LookAt { point: None, .. }));
         for bad in [
             r#"{"type":"look_at","character":"wolf","point":[1e7,0,0]}"#,
@@ -146,8 +146,9 @@ mod tests {
             assert_eq!(e.code, ErrorCode::BadRequest, "{bad}: {}", e.message);
         }
         // JSON has no infinity: a number it cannot hold is not JSON the server reads.
-        let e = parse_client_message(r#"{"type":"look_at","character":"wolf","point":[1e999,0,0]}"#)
-            .unwrap_err();
+        let e =
+            parse_client_message(r#"{"type":"look_at","character":"wolf","point":[1e999,0,0]}"#)
+                .unwrap_err();
         assert!(
             matches!(e.code, ErrorCode::BadJson | ErrorCode::BadRequest),
             "{e:?}"

@@ -84,12 +84,12 @@ mod tls;
 
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
 pub use console::{CalibrationReport, FramePose, Health, TakeSummary};
-pub use head::{CharacterHead, LookMode};
 pub use error::ServerError;
 pub use foxglove::{
     check_client_message as check_foxglove_client_message, FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL,
     MAX_SUBSCRIPTIONS_PER_CLIENT, PERFORMER_CHANNEL,
 };
+pub use head::{CharacterHead, LookMode};
 pub use hub::{
     CharacterFrame, CharacterInfo, ControlCommand, ControlFailure, ControlOutcome, ControlReceiver,
     ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,

@@ -538,7 +538,14 @@ pub fn parse_client_message(text: &str) -> Result<ClientMessage, ParseFailure> {
             id,
         });
     };
-    let known = ["subscribe", "calibrate", "record", "ping", "preview", "look_at"];
+    let known = [
+        "subscribe",
+        "calibrate",
+        "record",
+        "ping",
+        "preview",
+        "look_at",
+    ];
     let kind_name = kind.as_str().unwrap_or_default().to_owned();
     match kind.as_str() {
         Some(k) if known.contains(&k) => {}
@@ -595,10 +602,7 @@ fn validate(message: &ClientMessage) -> Result<(), String> {
             slate: Some(slate),
             ..
         } if !valid_slate(slate) => Err(format!("record: slate {SLATE_RULE}, got {slate:?}")),
-        ClientMessage::LookAt {
-            point: Some(p),
-            ..
-        } => crate::head::check_point(p),
+        ClientMessage::LookAt { point: Some(p), .. } => crate::head::check_point(p),
         _ => Ok(()),
     }
 }

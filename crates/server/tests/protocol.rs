@@ -261,7 +261,10 @@ async fn control_requests_reach_the_daemon_and_answers_come_back() {
     )
     .await;
     let e = next_of_type(&mut ws, "error").await;
-    assert_eq!((e["id"].as_i64(), e["code"].as_str()), (Some(10), Some("bad_request")));
+    assert_eq!(
+        (e["id"].as_i64(), e["code"].as_str()),
+        (Some(10), Some("bad_request"))
+    );
     assert!(e["message"].as_str().unwrap().contains("ghost"), "{e}");
     ws.send(tokio_tungstenite::tungstenite::Message::text(
         r#"{"type":"look_at","id":11,"character":"wolf","point":[1e999,0,0]}"#,
@@ -279,7 +282,10 @@ async fn control_requests_reach_the_daemon_and_answers_come_back() {
     )
     .await;
     let r = next_of_type(&mut ws, "result").await;
-    assert_eq!((r["id"].as_i64(), r["request"].as_str()), (Some(12), Some("look_at")));
+    assert_eq!(
+        (r["id"].as_i64(), r["request"].as_str()),
+        (Some(12), Some("look_at"))
+    );
     assert_eq!(r["detail"]["in_reach"], true);
     let seen = daemon.join().unwrap();
     assert_eq!(
@@ -331,7 +337,10 @@ async fn control_needs_the_control_token_and_unanswered_requests_time_out() {
     )
     .await;
     let e = next_of_type(&mut reader, "error").await;
-    assert_eq!((e["code"].as_str(), e["id"].as_i64()), (Some("forbidden"), Some(15)));
+    assert_eq!(
+        (e["code"].as_str(), e["id"].as_i64()),
+        (Some("forbidden"), Some(15))
+    );
     // A read client may still subscribe.
     send_json(&mut reader, json!({"type": "subscribe"})).await;
     next_of_type(&mut reader, "result").await;

@@ -21,13 +21,13 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
+use mouthpiece_retarget::HeadDriver;
 use mouthpiece_retarget::{
     Character, CharacterSettings, NeutralAccumulator, PerformerDots, PerformerLayout,
     RetargetConfig, Retargeter, ShapeSmoothing,
 };
 use mouthpiece_synth::{GroundTruth, HeadMotion, NoiseModel, Synth, SynthConfig};
 use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
-use mouthpiece_retarget::HeadDriver;
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 
 use crate::cmd::process::{load_character, load_config};
@@ -224,7 +224,14 @@ pub fn evaluate(
     let mut head_at_calibration = Matrix3::identity();
     // The head rule on the true head rotation, in the tracker's neutral mouth frame axes.
     let mut reference_head: Option<(HeadDriver, Matrix3<f64>)> = None;
+    let mut head_reference_due = false;
     while let Some((frame, gt)) = synth.render_next() {
+        if std::mem::take(&mut head_reference_due) {
+            // From the frame after the calibration (the pipeline's line borrows it before).
+            if let Some(neutral) = pipeline.tracker().neutral() {
+                reference_head = Some((character.head_driver(), neutral.frame.axes));
+            }
+        }
         let (line, tracked) = pipeline.process(&frame)?;
         let t = tracked.t;
         history.push((t, gt.clone()));
@@ -249,9 +256,7 @@ pub fn evaluate(
             // Bring the reference's clock to now.
             r.step(t, &gt_dots(&gt, layout))?;
             reference = Some(r);
-            if let Some(neutral) = pipeline.tracker().neutral() {
-                reference_head = Some((character.head_driver(), neutral.frame.axes));
-            }
+            head_reference_due = true;
         }
         if t < skip_s {
             continue;

@@ -200,7 +200,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let result = if is_dash(&args.input) {
         let stdin = io::stdin().lock();
         let mut out = Output::open(&args.out, true)?;
-        let written = retarget_stream(stdin, &input_name, character, config, &mut look_at, &mut out);
+        let written = retarget_stream(
+            stdin,
+            &input_name,
+            character,
+            config,
+            &mut look_at,
+            &mut out,
+        );
         written.and_then(|n| out.finish().map(|()| n))
     } else {
         let file = File::open(&args.input)
@@ -227,7 +234,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             // A pipe or device given by path: it cannot be read twice, so stream it like stdin.
             let mut out = Output::open(&args.out, true)?;
-            let written = retarget_stream(reader, &input_name, character, config, &mut look_at, &mut out);
+            let written = retarget_stream(
+                reader,
+                &input_name,
+                character,
+                config,
+                &mut look_at,
+                &mut out,
+            );
             written.and_then(|n| out.finish().map(|()| n))
         }
     };
@@ -565,8 +579,17 @@ fn retarget_stream<R: BufRead>(
             )));
         }
         let (retargeter, layout, dots) = state.as_mut().expect("set above");
-        emit(retargeter, &l, *layout, dots, &mut line_out, seq, look_at, out)
-            .with_context(|| format!("{input_name} line {line_no}"))?;
+        emit(
+            retargeter,
+            &l,
+            *layout,
+            dots,
+            &mut line_out,
+            seq,
+            look_at,
+            out,
+        )
+        .with_context(|| format!("{input_name} line {line_no}"))?;
         seq += 1;
     }
     Ok(seq)
