@@ -581,9 +581,9 @@ mod tests {
     }
 
     /// Also the character's head following the performer (docs/head.md): the human with a
-    /// gain of 1.6 and a narrower side reach (0.6, 37°), so the strong motion's turns (±30°,
-    /// ±48° scaled) run out of reach: the head never leaves its reach and, where the scaled
-    /// true rotation is within it, tracks it to ≤ 1° RMS.
+    /// gain of 1.6 and a narrow reach (side 0.35, up 0.2, down 0.3: about 20°, 12°, 17°), so
+    /// the strong motion's turns, scaled, run out of reach: the head never leaves its reach
+    /// and, where the scaled true rotation is within it, tracks it to ≤ 1° RMS.
     #[test]
     fn strong_head_motion_is_tracked_against_ground_truth() {
         // Measured: 99.77 % found and named, none wrong of 1327, 1.07 mm, 0.39°, character
@@ -592,7 +592,9 @@ mod tests {
             Character::from_toml_str(include_str!("../../../../config/characters/human.toml"))
                 .unwrap();
         character.head.follow_gain = 1.6;
-        character.head.reach.side = 0.6;
+        character.head.reach.side = 0.35;
+        character.head.reach.up = 0.2;
+        character.head.reach.down = 0.3;
         let m = session_holds_with(
             SynthConfig {
                 seed: 2,
@@ -618,8 +620,8 @@ mod tests {
             m.char_head_outside
         );
         assert_eq!(m.char_head_outside, 0, "{figures}");
-        assert!(m.char_head_limited > 5, "{figures}");
-        assert!(m.char_head_frames > 40, "{figures}");
+        assert!(m.char_head_limited >= 5, "{figures}");
+        assert!(m.char_head_frames >= 20, "{figures}");
         assert!(m.char_head_rms_deg() <= 1.0, "{figures}");
         eprintln!("{figures}");
     }
