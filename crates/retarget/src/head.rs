@@ -582,7 +582,7 @@ mod tests {
         if absz > absy {
             absz <= 0.8
         } else {
-            l <= 0.6 && l >= -0.8
+            (-0.8..=0.6).contains(&l)
         }
     }
 
