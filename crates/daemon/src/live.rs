@@ -145,6 +145,7 @@ impl LiveProcessor {
             slot.confidence.clear();
             slot.confidence.resize(c.len(), 0.0);
             slot.curve = None;
+            slot.head = Some(Default::default());
         }
     }
 }
@@ -248,6 +249,7 @@ impl Processor for LiveProcessor {
                 curve.clear();
                 curve.extend(result.curve.iter().map(to_f32));
             }
+            slot.head = Some(crate::head::wire(&result.head));
         }
     }
 
@@ -328,6 +330,23 @@ impl Processor for LiveProcessor {
             self.config.track.roi_margin_px,
             [frame.color.width, frame.color.height],
         )
+    }
+
+    fn look_at(
+        &mut self,
+        character: &str,
+        point: Option<[f64; 3]>,
+    ) -> Result<serde_json::Value, String> {
+        let in_reach = self
+            .pipeline
+            .look_at(character, point.map(Into::into))
+            .map_err(|e| crate::source::error_chain(&e))?;
+        Ok(serde_json::json!({
+            "character": character,
+            "point": point,
+            "mode": if point.is_some() { "look_at" } else { "follow" },
+            "in_reach": in_reach,
+        }))
     }
 
     fn take_calibration_report(&mut self) -> Option<mouthpiece_server::CalibrationReport> {

@@ -25,6 +25,7 @@
 //!
 //! A new figure is one more [`Measure`]: it sees every frame with its ground truth.
 
+mod character_head;
 mod measures;
 mod steps;
 
@@ -337,6 +338,8 @@ pub fn table_cells(m: &Metrics) -> String {
         m.char_rms_pct()
     )
 }
+
+pub use character_head::CharacterHeadFollow;
 
 #[cfg(test)]
 mod tests;

@@ -15,7 +15,7 @@ fn v3(a: [f64; 3]) -> Vector3<f64> {
     Vector3::new(a[0], a[1], a[2])
 }
 
-fn rotation(gt: &GroundTruth) -> Matrix3<f64> {
+pub(crate) fn rotation(gt: &GroundTruth) -> Matrix3<f64> {
     let m = gt.head.rotation_matrix();
     Matrix3::new(
         m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
@@ -156,7 +156,7 @@ impl Default for HeadError {
 }
 
 /// The ground truth of the calibration window that ends at `t`.
-fn window(
+pub(crate) fn window(
     history: &[(f64, GroundTruth)],
     t: f64,
     seconds: f64,

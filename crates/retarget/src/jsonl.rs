@@ -125,7 +125,8 @@ pub struct Curve {
 }
 
 /// One output line (field order as written):
-/// `{"t", "seq", "character", "points", "confidence", "head", "head_lost", "curve"}`.
+/// `{"t", "seq", "character", "points", "confidence", "head", "head_lost", "curve",
+/// "character_head"}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OutputLine {
     /// The input line's timestamp.
@@ -146,6 +147,9 @@ pub struct OutputLine {
     /// The smoothed curve, `null` without shape smoothing.
     #[serde(default)]
     pub curve: Option<Curve>,
+    /// The character's head and eyes (docs/head.md); absent in takes made before heads.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub character_head: Option<crate::head::HeadLine>,
 }
 
 fn arr(v: &Vec3) -> [f64; 3] {
@@ -176,6 +180,7 @@ impl OutputLine {
                     points: Vec::with_capacity(s.curve_len(names.len())),
                 }),
             },
+            character_head: Some(Default::default()),
         }
     }
 
@@ -201,6 +206,7 @@ impl OutputLine {
             curve.points.clear();
             curve.points.extend(c.curve.iter().map(arr));
         }
+        self.character_head = Some((&c.head).into());
     }
 }
 
@@ -284,6 +290,7 @@ mod tests {
                 closed: true,
                 points: vec![[0.0; 3]],
             }),
+            character_head: Some(Default::default()),
         };
         let text = serde_json::to_string(&line).unwrap();
         assert!(

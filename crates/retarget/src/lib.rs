@@ -12,6 +12,8 @@
 //!   [`Retargeter`] (both).
 //! - [`smooth`]: shape smoothing across the points of a step (§8), and [`one_euro`]: the
 //!   temporal filter.
+//! - [`head`]: the character's head and eyes: reach test, turns by slerp, following the
+//!   performer.
 //! - [`jsonl`]: the line formats of `mouthpiece retarget` (read by `export`, extended by
 //!   `process`).
 //!
@@ -37,6 +39,8 @@ pub mod character;
 pub mod deform;
 mod error;
 pub mod frame;
+pub mod head;
+mod head_file;
 pub mod jsonl;
 pub mod kabsch;
 pub mod layout;
@@ -49,6 +53,7 @@ pub mod smooth;
 pub use character::{Character, MMode, Units};
 pub use error::Error;
 pub use frame::MouthFrame;
+pub use head::{HeadConfig, HeadDriver, HeadFrame, HeadMode, Reach};
 pub use kabsch::RigidTransform;
 pub use layout::{DotId, PerformerDots, PerformerLayout};
 pub use named::Named;

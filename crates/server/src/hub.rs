@@ -53,6 +53,8 @@ pub struct CharacterFrame {
     pub confidence: Vec<f32>,
     /// The smoothed closed curve through the points (docs/method.md §8), if the daemon computes it.
     pub curve: Option<Vec<[f32; 3]>>,
+    /// The character's head and eyes (docs/head.md), if the daemon drives them.
+    pub head: Option<crate::head::CharacterHead>,
 }
 
 /// The performer's lip dots in one frame: head motion removed, performer mouth frame, metres.
@@ -95,6 +97,7 @@ impl Clone for CharacterFrame {
             points: self.points.clone(),
             confidence: self.confidence.clone(),
             curve: self.curve.clone(),
+            head: self.head,
         }
     }
     fn clone_from(&mut self, other: &Self) {
@@ -102,6 +105,7 @@ impl Clone for CharacterFrame {
         self.points.clone_from(&other.points);
         self.confidence.clone_from(&other.confidence);
         clone_option_from(&mut self.curve, &other.curve);
+        self.head = other.head;
     }
 }
 
@@ -269,6 +273,14 @@ pub enum ControlCommand {
     },
     /// Stop the current take.
     RecordStop,
+    /// Turn a character's head to a viewpoint (its model frame), or back to following the
+    /// performer (`None`).
+    LookAt {
+        /// The character's name (checked against the stream's characters).
+        character: String,
+        /// Finite, within ±1e6.
+        point: Option<[f64; 3]>,
+    },
 }
 
 /// Why the daemon refused or failed a control request; the client gets it as an `error`.

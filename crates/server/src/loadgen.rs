@@ -149,18 +149,28 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
         lost: false,
     };
     let confidence = vec![1.0; POINTS];
+    // The heads turn with the performer's yaw; the eyes turn back against it.
+    let (c, s) = ((yaw / 2.0).cos(), (yaw / 2.0).sin());
+    let head = Some(crate::head::CharacterHead {
+        rotation: [c, 0.0, s, 0.0],
+        eye_left: [c, 0.0, -s, 0.0],
+        eye_right: [c, 0.0, -s, 0.0],
+        ..Default::default()
+    });
     frame.characters = vec![
         CharacterFrame {
             name: "human".into(),
             curve: Some(closed_bspline(&human, 4)),
             points: human,
             confidence: confidence.clone(),
+            head,
         },
         CharacterFrame {
             name: "wolf".into(),
             curve: Some(closed_bspline(&wolf, 4)),
             points: wolf,
             confidence: confidence.clone(),
+            head,
         },
     ];
     frame.performer = Some(PerformerFrame {

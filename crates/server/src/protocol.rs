@@ -69,6 +69,18 @@ pub enum ClientMessage {
     },
     /// Start, change or stop the camera preview (binary `MPP1` messages).
     Preview(PreviewSubscribe),
+    /// Turn a character's head to a viewpoint, or back to following the performer.
+    LookAt {
+        /// Echoed in the answer.
+        #[serde(default)]
+        id: Option<RequestId>,
+        /// The character's name, as in `hello`.
+        character: String,
+        /// `[x, y, z]` in the character's model frame, or `null` (or absent) to follow the
+        /// performer again.
+        #[serde(default)]
+        point: Option<[f64; 3]>,
+    },
 }
 
 /// The `preview` request.
@@ -357,6 +369,8 @@ struct CharacterView<'a> {
     confidence: &'a [f32],
     #[serde(skip_serializing_if = "Option::is_none")]
     curve: Option<&'a [[f32; 3]]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    head: Option<&'a crate::head::CharacterHead>,
 }
 
 impl<'a> FrameView<'a> {
@@ -384,6 +398,7 @@ impl<'a> FrameView<'a> {
                     } else {
                         None
                     },
+                    head: c.head.as_ref(),
                 })
                 .collect(),
             performer: if selection.performer {
@@ -523,7 +538,14 @@ pub fn parse_client_message(text: &str) -> Result<ClientMessage, ParseFailure> {
             id,
         });
     };
-    let known = ["subscribe", "calibrate", "record", "ping", "preview"];
+    let known = [
+        "subscribe",
+        "calibrate",
+        "record",
+        "ping",
+        "preview",
+        "look_at",
+    ];
     let kind_name = kind.as_str().unwrap_or_default().to_owned();
     match kind.as_str() {
         Some(k) if known.contains(&k) => {}
@@ -580,6 +602,7 @@ fn validate(message: &ClientMessage) -> Result<(), String> {
             slate: Some(slate),
             ..
         } if !valid_slate(slate) => Err(format!("record: slate {SLATE_RULE}, got {slate:?}")),
+        ClientMessage::LookAt { point: Some(p), .. } => crate::head::check_point(p),
         _ => Ok(()),
     }
 }

@@ -240,6 +240,9 @@ pub struct Pipeline {
     /// The first character's output line ([`Pipeline::process`]).
     line: OutputLine,
     performer: Named<Option<[f64; 3]>>,
+    /// Viewpoints set with [`Pipeline::look_at`], by character name: kept across new
+    /// neutral poses and reloads.
+    viewpoints: Vec<(String, mouthpiece_retarget::Vec3)>,
 }
 
 impl std::fmt::Debug for Pipeline {
@@ -306,6 +309,7 @@ impl Pipeline {
             rebound: false,
             line,
             performer,
+            viewpoints: Vec::new(),
         })
     }
 
@@ -335,6 +339,43 @@ impl Pipeline {
     /// The last frame the tracker made (after [`Pipeline::step`]).
     pub fn tracked(&self) -> &TrackedFrame {
         &self.tracker.out
+    }
+
+    /// Turns `character`'s head to `point` (its model frame), or back to following the
+    /// performer (`None`). Returns whether the point is in reach (`None` when following).
+    /// Kept when the characters are bound to a new neutral pose.
+    pub fn look_at(
+        &mut self,
+        character: &str,
+        point: Option<mouthpiece_retarget::Vec3>,
+    ) -> Result<Option<bool>, TrackError> {
+        let Some(index) = self.characters.iter().position(|c| c.name == character) else {
+            let known: Vec<&str> = self.characters.iter().map(|c| c.name.as_str()).collect();
+            return Err(TrackError::Config {
+                key: "look_at.character".into(),
+                message: format!(
+                    "unknown character {character:?} (available: {})",
+                    known.join(", ")
+                ),
+            });
+        };
+        let bad = |e: mouthpiece_retarget::Error| TrackError::Config {
+            key: "look_at.point".into(),
+            message: e.to_string(),
+        };
+        // Checked on a fresh driver first, so a refused point changes nothing.
+        let in_reach = self.characters[index]
+            .head_driver()
+            .look_at(point)
+            .map_err(bad)?;
+        self.viewpoints.retain(|(name, _)| name != character);
+        if let Some(p) = point {
+            self.viewpoints.push((character.to_owned(), p));
+        }
+        if let Some(Some(bound)) = self.bound.get_mut(index) {
+            bound.look_at(point).map_err(bad)?;
+        }
+        Ok(in_reach)
     }
 
     /// Whether the characters were bound to a new neutral pose since the last call.
@@ -396,6 +437,15 @@ impl Pipeline {
                 },
             )
             .collect();
+        for (name, point) in &self.viewpoints {
+            let at = self.characters.iter().position(|c| &c.name == name);
+            if let Some(Some(bound)) = at.and_then(|i| self.bound.get_mut(i)) {
+                // Checked when it was set; a reloaded character may refuse it.
+                if let Err(e) = bound.look_at(Some(*point)) {
+                    tracing::warn!(character = %name, "viewpoint dropped: {e}");
+                }
+            }
+        }
         self.rebound = true;
         first_error.map_or(Ok(()), Err)
     }
