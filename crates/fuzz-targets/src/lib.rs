@@ -25,6 +25,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("protocol_v1", protocol_v1),
     ("protocol_foxglove", protocol_foxglove),
     ("http_head", http_head),
+    ("lipsync_phones", lipsync_phones),
 ];
 
 /// Runs the target called `name`; `false` when there is none.
@@ -167,5 +168,45 @@ pub fn http_head(data: &[u8]) {
         let _ = request.query_param("token");
         let _ = request.is_upgrade();
         let _ = config.access_for(request.query_param("token").as_deref());
+    }
+}
+
+/// A phone timing file of `mouthpiece lipsync`, read as every format it could be (TIMIT,
+/// TextGrid, HTK/Festival label, JSONL); what reads is classified with the shipped class
+/// table, mapped onto the generated segments and stitched at 60 samples per second, as
+/// the command does.
+pub fn lipsync_phones(data: &[u8]) {
+    use mouthpiece_lipsync::phones::{self, PhoneFormat};
+    use mouthpiece_lipsync::{ClassTable, SegmentTable};
+    use std::sync::OnceLock;
+    static TABLES: OnceLock<(ClassTable, SegmentTable)> = OnceLock::new();
+    let (table, segments) = TABLES.get_or_init(|| {
+        let table = ClassTable::from_toml_str(
+            include_str!("../../../config/lipsync/classes.toml"),
+            "classes.toml",
+        )
+        .expect("the shipped class table reads");
+        let segments = SegmentTable::generate(&table);
+        (table, segments)
+    });
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    for format in [
+        PhoneFormat::Timit,
+        PhoneFormat::TextGrid,
+        PhoneFormat::Label,
+        PhoneFormat::Jsonl,
+    ] {
+        if let Ok(spans) = phones::read(text, format, "fuzz") {
+            let _ = mouthpiece_lipsync::weights_for_phones(
+                &spans,
+                "fuzz",
+                table,
+                segments,
+                mouthpiece_lipsync::DEFAULT_T_CHANGE,
+                60.0,
+            );
+        }
     }
 }

@@ -63,6 +63,9 @@ pub const TIMIT_RATE: f64 = 16_000.0;
 pub const HTK_UNIT: f64 = 1e-7;
 /// Slack for rounding in time checks, seconds.
 pub const TIME_SLACK: f64 = 1e-6;
+/// Latest time a phone may end, seconds (a day): a later end is an error naming its line,
+/// not a timeline sampled for years.
+pub const MAX_TIME: f64 = 86_400.0;
 
 /// Lowercases and drops ARPAbet stress digits (`AH0` → `ah`; TIMIT names have no digits).
 pub fn normalise(phone: &str) -> String {
@@ -416,6 +419,16 @@ pub fn check(raw: Vec<PhoneSpan>, source_name: &str) -> Result<Vec<PhoneSpan>, E
                 ),
             ));
         }
+        if p.end > MAX_TIME {
+            return Err(parse_err(
+                source_name,
+                p.line,
+                format!(
+                    "phone {:?} ends at {} s, past the limit of {MAX_TIME} s",
+                    p.phone, p.end
+                ),
+            ));
+        }
         if p.end < p.start {
             return Err(Error::Backwards {
                 source_name: source_name.to_string(),
@@ -604,6 +617,23 @@ item []:
         assert!(err.to_string().contains("x.phn:1: end \"1oo\""), "{err}");
         let err = read("\n", PhoneFormat::Timit, "x.phn").unwrap_err();
         assert!(matches!(err, Error::Empty { .. }));
+    }
+
+    #[test]
+    fn times_past_a_day_are_refused_naming_the_line() {
+        // 1e300 samples used to reach the sampling as an endless timeline.
+        for (text, format) in [
+            ("0 100 sh\n100 1e300 iy\n", PhoneFormat::Timit),
+            ("0 1000 sh\n1000 1e19 iy\n", PhoneFormat::Label),
+            (
+                "{\"start\": 0, \"end\": 0.1, \"phone\": \"sh\"}\n{\"start\": 0.1, \"end\": 86400.5, \"phone\": \"iy\"}\n",
+                PhoneFormat::Jsonl,
+            ),
+        ] {
+            let err = read(text, format, "long").unwrap_err();
+            assert!(err.to_string().starts_with("long:2: phone \"iy\" ends at"), "{err}");
+        }
+        assert!(read("0 100 sh\n100 1382400000 iy\n", PhoneFormat::Timit, "day").is_ok());
     }
 
     #[test]
