@@ -5,7 +5,8 @@
 //! bytes; errors are the expected outcome for most inputs and are dropped.
 //!
 //! Files are written to a scratch directory first where the parser reads paths (MCAP
-//! sessions, `.oni` files).
+//! sessions, `.oni` files), under the temporary directory (`TMPDIR`; `scripts/fuzz` points
+//! it at the memory file system `/dev/shm` when there is one).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -44,6 +45,9 @@ fn scratch(name: &str, data: &[u8]) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("mouthpiece-fuzz-{}", std::process::id()));
     let _ = std::fs::create_dir_all(&dir);
     let path = dir.join(name);
+    // A new file each time: truncating one that holds data makes ext4 flush it on close,
+    // which costs the fuzzers most of their speed.
+    let _ = std::fs::remove_file(&path);
     let mut file = std::fs::File::create(&path).expect("scratch file");
     file.write_all(data).expect("scratch write");
     path

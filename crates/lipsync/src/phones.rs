@@ -342,7 +342,9 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
         }
         match tier_class.as_str() {
             "IntervalTier" => {
-                let mut spans = Vec::with_capacity(count as usize);
+                // The count comes from the file: it sizes nothing (each interval read is
+                // three tokens that are there, or an error).
+                let mut spans = Vec::new();
                 for _ in 0..count as usize {
                     let (start, line) = num_of(next("interval xmin")?, "interval xmin")?;
                     let (end, _) = num_of(next("interval xmax")?, "interval xmax")?;
@@ -617,6 +619,16 @@ item []:
         assert!(err.to_string().contains("x.phn:1: end \"1oo\""), "{err}");
         let err = read("\n", PhoneFormat::Timit, "x.phn").unwrap_err();
         assert!(matches!(err, Error::Empty { .. }));
+    }
+
+    #[test]
+    fn an_interval_count_the_file_cannot_hold_is_an_error_not_an_allocation() {
+        // 1e30 overflowed the capacity of the interval list; 1e9 asked for 50 GB.
+        for count in ["1e30", "1000000000"] {
+            let text = SHORT.replacen("\n3\n", &format!("\n{count}\n"), 1);
+            let err = read(&text, PhoneFormat::TextGrid, "big.TextGrid").unwrap_err();
+            assert!(err.to_string().starts_with("big.TextGrid:"), "{err}");
+        }
     }
 
     #[test]

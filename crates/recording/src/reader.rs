@@ -156,7 +156,15 @@ impl MessageReader {
             };
             match event {
                 LinearReadEvent::ReadRequest(n) => {
-                    let buf = self.linear.insert(n.max(READ_SIZE));
+                    // Never more than the file still holds: a record header claiming
+                    // hundreds of megabytes in a small file costs no more than the file.
+                    let left = self
+                        .file
+                        .metadata()
+                        .map(|m| m.len().saturating_sub(self.bytes_read))
+                        .unwrap_or(u64::MAX);
+                    let want = n.max(READ_SIZE).min(usize::try_from(left).unwrap_or(usize::MAX));
+                    let buf = self.linear.insert(want.max(1));
                     let got =
                         read_some(&mut self.file, buf).map_err(|source| RecordingError::Io {
                             path: self.path.display().to_string(),
@@ -166,6 +174,16 @@ impl MessageReader {
                     self.linear.notify_read(got);
                 }
                 LinearReadEvent::Record { data, opcode } => {
+                    // Only the records used here are parsed: the others (attachments,
+                    // indexes, statistics) are skipped unread, so a malformed one can do
+                    // nothing (the mcap crate's attachment parser panics on some).
+                    use mcap::records::op;
+                    if !matches!(
+                        opcode,
+                        op::SCHEMA | op::CHANNEL | op::METADATA | op::MESSAGE
+                    ) {
+                        continue;
+                    }
                     let record = mcap::parse_record(opcode, data).map_err(|source| {
                         RecordingError::Mcap {
                             path: self.path.display().to_string(),

@@ -622,3 +622,25 @@ async fn max_clients_is_exact_under_simultaneous_upgrades() {
     drop(open);
     server.stop().await;
 }
+
+#[tokio::test]
+async fn healthz_reports_a_failed_daemon_with_503_and_the_reason() {
+    let server = TestServer::start(ServerConfig::default()).await;
+    let (status, _) = http_get(server.addr, "/healthz", "").await;
+    assert_eq!(status, 200);
+    server
+        .hub
+        .set_failure("the source thread died: panicked: attempt to add with overflow".into());
+    let (status, body) = http_get(server.addr, "/healthz", "").await;
+    assert_eq!(status, 503, "{body}");
+    let health: serde_json::Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(health["status"], "failed");
+    assert!(
+        health["reason"]
+            .as_str()
+            .unwrap()
+            .contains("source thread died"),
+        "{body}"
+    );
+    server.stop().await;
+}
