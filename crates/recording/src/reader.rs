@@ -120,7 +120,25 @@ impl MessageReader {
             return Ok(None);
         }
         loop {
-            let event = match self.linear.next_event() {
+            // The mcap crate's reader does unchecked arithmetic on lengths from the file (an
+            // uncompressed chunk whose record runs past the chunk underflows a counter): a
+            // panic there is a corrupt file, not the end of the program.
+            let linear = &mut self.linear;
+            let next = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || {
+                let linear = linear;
+                linear.next_event()
+            }));
+            let next = match next {
+                Ok(next) => next,
+                Err(_) => {
+                    self.done = true;
+                    return Err(RecordingError::Mcap {
+                        path: self.path_string(),
+                        source: mcap::McapError::UnexpectedEoc,
+                    });
+                }
+            };
+            let event = match next {
                 None => {
                     self.done = true;
                     return Ok(None);
