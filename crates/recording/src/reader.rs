@@ -268,8 +268,9 @@ impl Iterator for MessageReader {
 }
 
 /// Largest MCAP record (and decompressed chunk) read: a crafted length field is an error,
-/// not an allocation of terabytes. The writer's chunks are 8 MiB.
-pub const MAX_RECORD_BYTES: usize = 256 << 20;
+/// not an allocation of terabytes. The writer's chunks are 8 MiB; the largest image allowed
+/// (4096 x 4096 RGB, 48 MiB) fits with room to spare.
+pub const MAX_RECORD_BYTES: usize = 64 << 20;
 
 /// Largest colour or depth image decoded (4096 x 4096).
 pub const MAX_IMAGE_PIXELS: u64 = 4096 * 4096;
