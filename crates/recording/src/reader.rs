@@ -181,7 +181,9 @@ impl MessageReader {
                         .metadata()
                         .map(|m| m.len().saturating_sub(self.bytes_read))
                         .unwrap_or(u64::MAX);
-                    let want = n.max(READ_SIZE).min(usize::try_from(left).unwrap_or(usize::MAX));
+                    let want = n
+                        .max(READ_SIZE)
+                        .min(usize::try_from(left).unwrap_or(usize::MAX));
                     let buf = self.linear.insert(want.max(1));
                     let got =
                         read_some(&mut self.file, buf).map_err(|source| RecordingError::Io {

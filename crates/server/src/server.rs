@@ -195,8 +195,7 @@ impl Pending {
     /// oldest handshake is oldest), so a peer that floods the front door pays for it alone.
     fn evict(&self) -> bool {
         let mut queue = self.queue.lock().unwrap_or_else(|e| e.into_inner());
-        let mut held: std::collections::HashMap<IpAddr, usize> =
-            std::collections::HashMap::new();
+        let mut held: std::collections::HashMap<IpAddr, usize> = std::collections::HashMap::new();
         for (_, peer, _) in queue.iter() {
             *held.entry(*peer).or_default() += 1;
         }

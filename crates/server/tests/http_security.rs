@@ -523,7 +523,11 @@ async fn a_peer_flooding_the_front_door_evicts_only_its_own_handshakes() {
     tokio::time::sleep(Duration::from_millis(200)).await;
     // The flood evicted its own handshakes, oldest first; the slow client is still there
     // and is served when it speaks. So is a new client from a third address.
-    assert_eq!(healthz_on(slow, server.addr).await, 200, "the slow client was evicted");
+    assert_eq!(
+        healthz_on(slow, server.addr).await,
+        200,
+        "the slow client was evicted"
+    );
     let third = connect_from("127.0.0.4", server.addr).await;
     assert_eq!(healthz_on(third, server.addr).await, 200);
     let mut closed = 0;
