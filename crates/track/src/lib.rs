@@ -193,7 +193,11 @@ impl Tracker {
             registered: DepthImage::new(0, 0),
             found: Detections::default(),
             cands: naming::Candidates::default(),
-            scratch: naming::Scratch::default(),
+            scratch: {
+                let mut scratch = naming::Scratch::default();
+                scratch.log.reserve_for(n);
+                scratch
+            },
             out: TrackedFrame {
                 seq: 0,
                 device_ts_us: 0,
@@ -479,6 +483,8 @@ impl Tracker {
         out.status.unassigned_blobs = used.iter().filter(|u| !**u).count();
         out.status.neutral_taken = false;
         out.steps.clear();
+        // As much room as the log has, so that copying it never grows the frame's list.
+        out.steps.reserve(self.scratch.log.events.capacity());
         out.steps.extend_from_slice(&self.scratch.log.events);
         self.tracks.count(&names);
         self.tracks

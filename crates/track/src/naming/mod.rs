@@ -271,7 +271,17 @@ pub(crate) struct StepLog {
     runs: u16,
 }
 
+/// Room the step log takes up front, per dot: every entry of the step list renaming every
+/// dot under four motion hypotheses. A frame that needs more grows the log (one allocation)
+/// and loses nothing; reserving it keeps the per-frame path allocation-free in steady state.
+const STEP_EVENTS_PER_DOT: usize = 4 * recovery::STEPS.len();
+
 impl StepLog {
+    /// Reserves the log for `dots` dots ([`STEP_EVENTS_PER_DOT`]).
+    pub(crate) fn reserve_for(&mut self, dots: usize) {
+        self.events.reserve(dots * STEP_EVENTS_PER_DOT);
+    }
+
     pub(crate) fn clear(&mut self) {
         self.events.clear();
         self.runs = 0;
