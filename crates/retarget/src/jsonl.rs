@@ -146,6 +146,10 @@ pub struct OutputLine {
     /// The smoothed curve, `null` without shape smoothing.
     #[serde(default)]
     pub curve: Option<Curve>,
+    /// The rig of the step (docs/rig.md): jaw, lip motions, named curves. Absent before the
+    /// neutral pose is taken.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig: Option<crate::rig::RigFrame>,
 }
 
 fn arr(v: &Vec3) -> [f64; 3] {
@@ -176,6 +180,7 @@ impl OutputLine {
                     points: Vec::with_capacity(s.curve_len(names.len())),
                 }),
             },
+            rig: None,
         }
     }
 
@@ -284,6 +289,7 @@ mod tests {
                 closed: true,
                 points: vec![[0.0; 3]],
             }),
+            rig: Some(crate::rig::RigFrame::default()),
         };
         let text = serde_json::to_string(&line).unwrap();
         assert!(

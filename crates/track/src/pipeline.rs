@@ -9,7 +9,7 @@ use mouthpiece_frame::Frame;
 use mouthpiece_retarget::jsonl::OutputLine;
 use mouthpiece_retarget::{
     Character, CharacterRetarget, CharacterSettings, MovingAverageKind, Named, OneEuroParams,
-    RetargetOutput, ShapeSmoothing,
+    RetargetOutput, Rig, RigSettings, ShapeSmoothing,
 };
 use serde::{Deserialize, Serialize};
 
@@ -26,6 +26,9 @@ pub struct PipelineConfig {
     pub track: TrackConfig,
     #[serde(default)]
     pub retarget: RetargetSettings,
+    /// The rig (`[rig]`, docs/rig.md): hinge placement, range learning and ranges.
+    #[serde(default)]
+    pub rig: RigSettings,
 }
 
 /// Which shape smoothing makes each character's `curve` (`[retarget] smooth`).
@@ -151,6 +154,7 @@ impl PipelineConfig {
             detect: Option<toml::Value>,
             track: Option<toml::Value>,
             retarget: Option<toml::Value>,
+            rig: Option<toml::Value>,
         }
         let bad = |key: &str, e: toml::de::Error| TrackError::Config {
             key: key.into(),
@@ -169,10 +173,15 @@ impl PipelineConfig {
             Some(v) => v.try_into().map_err(|e| bad("retarget", e))?,
             None => RetargetSettings::default(),
         };
+        let rig = match sections.rig {
+            Some(v) => v.try_into().map_err(|e| bad("rig", e))?,
+            None => RigSettings::default(),
+        };
         let config = Self {
             detect,
             track,
             retarget,
+            rig,
         };
         config.validate()?;
         Ok(config)
@@ -181,7 +190,17 @@ impl PipelineConfig {
     pub fn validate(&self) -> Result<(), TrackError> {
         self.detect.validate()?;
         self.track.validate()?;
-        self.retarget.validate()
+        self.retarget.validate()?;
+        self.rig.validate("rig").map_err(|e| match e {
+            mouthpiece_retarget::Error::InvalidSetting { key, reason } => TrackError::Config {
+                key,
+                message: reason,
+            },
+            e => TrackError::Config {
+                key: "rig".into(),
+                message: e.to_string(),
+            },
+        })
     }
 
     /// A character fits when it has one point per lip dot; the error names the character.
@@ -240,6 +259,9 @@ pub struct Pipeline {
     /// The first character's output line ([`Pipeline::process`]).
     line: OutputLine,
     performer: Named<Option<[f64; 3]>>,
+    /// The performer's rig (docs/rig.md), once the neutral pose is taken.
+    rig_settings: RigSettings,
+    rig: Option<Rig>,
 }
 
 impl std::fmt::Debug for Pipeline {
@@ -287,6 +309,7 @@ impl Pipeline {
                 key: "retarget.smooth".into(),
                 message: e.to_string(),
             })?;
+        let rig_settings = config.rig;
         let tracker = Tracker::new(config.detect, config.track)?;
         let Some(first) = characters.first() else {
             return Err(no_character());
@@ -306,7 +329,14 @@ impl Pipeline {
             rebound: false,
             line,
             performer,
+            rig_settings,
+            rig: None,
         })
+    }
+
+    /// The performer's rig (after calibration).
+    pub fn rig(&self) -> Option<&Rig> {
+        self.rig.as_ref()
     }
 
     pub fn tracker(&self) -> &Tracker {
@@ -379,7 +409,15 @@ impl Pipeline {
     fn bind(&mut self) -> Result<(), TrackError> {
         let Some(neutral) = self.tracker.neutral() else {
             self.bound.clear();
+            self.rig = None;
             return Ok(());
+        };
+        self.rig = match Rig::new(neutral, self.rig_settings.clone()) {
+            Ok(rig) => Some(rig),
+            Err(e) => {
+                tracing::error!("no rig for this neutral pose: {e}");
+                None
+            }
         };
         let mut first_error = None;
         self.bound = self
@@ -413,6 +451,9 @@ impl Pipeline {
             for bound in self.bound.iter_mut().flatten() {
                 bound.apply(stabilised);
             }
+            if let Some(rig) = &mut self.rig {
+                rig.step(stabilised);
+            }
         }
         Ok(())
     }
@@ -441,6 +482,12 @@ impl Pipeline {
                         character: bound.output(),
                     },
                 );
+                if let Some(rig) = &self.rig {
+                    self.line
+                        .rig
+                        .get_or_insert_with(Default::default)
+                        .clone_from(rig.output());
+                }
             }
             _ => {
                 self.line.t = tracked.t;
@@ -457,6 +504,7 @@ impl Pipeline {
                 if let Some(curve) = &mut self.line.curve {
                     curve.points.clear();
                 }
+                self.line.rig = None;
             }
         }
         for ((_, dst), p) in self

@@ -77,6 +77,9 @@ pub struct Args {
     /// After each session, a table per dot: found, wrong, bias and RMS per camera axis.
     #[arg(long)]
     pub per_dot: bool,
+    /// After the rig table, every named curve's RMS per session.
+    #[arg(long)]
+    pub per_curve: bool,
 }
 
 /// One session's figures.
@@ -99,6 +102,8 @@ pub struct Metrics {
     pub calibrated_at: Option<f64>,
     /// Per dot (`D1..`, then `F1..`), for `--per-dot`.
     pub per_dot: Vec<DotStats>,
+    /// The rig's accuracy (`evaluate_rig`).
+    pub rig: crate::cmd::evaluate_rig::RigMetrics,
 }
 
 /// One dot's figures over a session.
@@ -206,7 +211,13 @@ pub fn evaluate(
     let mut history: Vec<(f64, GroundTruth)> = Vec::new();
     let mut reference: Option<Retargeter> = None;
     let mut head_at_calibration = Matrix3::identity();
+    let mut rig = crate::cmd::evaluate_rig::RigAccuracy::new(config.rig.clone());
+    let mut rig_pending = false;
     while let Some((frame, gt)) = synth.render_next() {
+        if let (true, Some(n), Some(r)) = (rig_pending, pipeline.tracker().neutral(), &reference) {
+            rig.calibrated(n, r.stabiliser().neutral())?;
+            rig_pending = false;
+        }
         let (line, tracked) = pipeline.process(&frame)?;
         let t = tracked.t;
         history.push((t, gt.clone()));
@@ -231,6 +242,7 @@ pub fn evaluate(
             // Bring the reference's clock to now.
             r.step(t, &gt_dots(&gt, layout))?;
             reference = Some(r);
+            rig_pending = true;
         }
         if t < skip_s {
             continue;
@@ -304,6 +316,9 @@ pub fn evaluate(
         if let Some(r) = &mut reference {
             let ours: Vec<[f64; 3]> = line.retarget.points.0.iter().map(|(_, p)| *p).collect();
             let out = r.step(t, &gt_dots(&gt, layout))?;
+            if let Some(s) = &tracked.stabilised {
+                rig.frame(s, out.performer, gt.mouth.as_ref(), true);
+            }
             for (k, (a, b)) in ours.iter().zip(&out.character.points).enumerate() {
                 let d2 = (v3(*a) - b).norm_squared();
                 tracing::trace!(
@@ -321,6 +336,7 @@ pub fn evaluate(
             }
         }
     }
+    m.rig = rig.metrics;
     Ok(m)
 }
 
@@ -358,6 +374,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "| seed | noise | head motion | frames | calibrated at (s) | visible dots | found & named | wrong | named hidden | 3D RMS (mm) | head RMS (°) | character RMS, visible dots (% width) | character RMS, all dots (% width) |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut rig_rows = Vec::new();
     for &motion in &args.head_motion {
         for &noise in &args.noise {
             for &seed in &args.seeds {
@@ -394,7 +411,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 if args.per_dot {
                     print_per_dot(&m, config.track.layout());
                 }
+                rig_rows.push((format!("{seed} | {noise:?} | {motion:?}"), m.rig));
             }
+        }
+    }
+    crate::cmd::evaluate_rig::print_header();
+    for (label, r) in &rig_rows {
+        crate::cmd::evaluate_rig::print_row(label, r);
+        if args.per_curve {
+            crate::cmd::evaluate_rig::print_curves(r);
         }
     }
     Ok(())
