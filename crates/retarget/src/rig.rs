@@ -58,22 +58,22 @@ pub const CURVES: usize = CURVE_NAMES.len();
 pub const DEFAULT_RANGES: [f64; CURVES] = [
     25.0, // jawOpen: degrees of jaw rotation
     0.15, // mouthClose: lower-lip rise against the jaw
-    0.12, // mouthFunnel: lips pushed out
-    0.20, // mouthPucker: lips drawn in (horizontal scale 1 - s)
-    0.08, // mouthLeft
-    0.08, // mouthRight
+    0.12, // mouthFunnel: lips pushed out and drawn in
+    0.25, // mouthPucker: lips drawn in (horizontal scale 1 - s)
+    0.10, // mouthLeft
+    0.10, // mouthRight
     0.12, // mouthSmileLeft: corner up
     0.12, // mouthSmileRight
-    0.12, // mouthStretchLeft: corner out
-    0.12, // mouthStretchRight
-    0.10, // mouthRollUpper
+    0.15, // mouthStretchLeft: corner out
+    0.15, // mouthStretchRight
+    0.12, // mouthRollUpper
     0.20, // mouthRollLower
     0.10, // mouthUpperUpLeft
     0.10, // mouthUpperUpRight
     0.12, // mouthLowerDownLeft
     0.12, // mouthLowerDownRight
-    0.10, // mouthPressLeft
-    0.10, // mouthPressRight
+    0.15, // mouthPressLeft
+    0.15, // mouthPressRight
 ];
 
 /// Index of a curve name in [`CURVE_NAMES`].
@@ -390,46 +390,50 @@ impl RigModel {
         v[0] = angle.to_degrees();
         // mouthClose: the lower lip rises against the jaw (lips stay shut while it drops).
         v[1] = (jaw_drop - (du.y - dl.y)) / w;
-        // mouthFunnel: both lips pushed out (upper lip, and lower lip without the jaw).
-        let push_upper = du.z;
-        let push_lower = mean_over(&r.lower, free_z);
-        v[2] = (0.5 * push_upper + 0.5 * push_lower) / w;
-        // mouthPucker: drawn in horizontally: 1 − the least-squares horizontal scale.
-        let sx = lip
-            .iter()
-            .zip(n0)
-            .map(|(p, q)| (p.x - if self.is_lower(q) { slide } else { 0.0 }) * q.x)
-            .sum::<f64>()
-            / self.sxx;
+        // Horizontal scale of the whole mouth (least squares over every dot, the lower lip
+        // without the slide), and of each side.
+        let (mut sxl, mut sxr, mut xxl, mut xxr) = (0.0, 0.0, 0.0, 0.0);
+        for (i, (p, q)) in lip.iter().zip(n0).enumerate() {
+            let x = p.x - if r.lower.contains(&i) { slide } else { 0.0 };
+            if q.x >= 0.0 {
+                sxl += x * q.x;
+                xxl += q.x * q.x;
+            } else {
+                sxr += x * q.x;
+                xxr += q.x * q.x;
+            }
+        }
+        let sx = (sxl + sxr) / self.sxx;
+        // mouthFunnel: lips pushed out and drawn in: half the upper lip's mean forward motion
+        // plus half the corners' inward motion (both in mouth widths).
+        // (The upper lip's push: the lower lip's depends on the jaw's estimate.)
+        v[2] = 0.5 * du.z / w + 0.5 * (1.0 - sx) * 0.5;
+        // mouthPucker: drawn in horizontally: 1 − the horizontal scale.
         v[3] = 1.0 - sx;
-        // mouthLeft / Right: the mouth shifted sideways (upper lip and corners).
-        let shift = (du.x * r.upper.len() as f64 + d(r.left).x + d(r.right).x)
-            / (r.upper.len() + 2) as f64
-            / w;
+        // mouthLeft / Right: the whole mouth shifted sideways (mean over every dot).
+        let shift = lip.iter().zip(n0).map(|(p, q)| p.x - q.x).sum::<f64>() / lip.len() as f64 / w;
         v[4] = shift;
         v[5] = -shift;
         // Corners with their two neighbours (the lower neighbour without the jaw).
         let (ul, ll) = (r.upper[0], *r.lower.last().expect("lower lip"));
         let (ur, lr) = (*r.upper.last().expect("upper lip"), r.lower[0]);
-        let corner = |c: usize, up: usize, low: usize| -> (f64, f64) {
-            let jaw_c = unjaw(c);
+        let corner_up = |c: usize, up: usize, low: usize| -> f64 {
             // A corner moves with half the jaw (it joins both lips).
-            let cy = 0.5 * (d(c).y + jaw_c.y);
-            let cx = 0.5 * (d(c).x + jaw_c.x);
-            let y = (cy + d(up).y + free_y(low)) / 3.0;
-            let x = (cx + d(up).x + unjaw(low).x) / 3.0;
-            (x, y)
+            let cy = 0.5 * (d(c).y + unjaw(c).y);
+            (cy + d(up).y + free_y(low)) / 3.0
         };
-        let (lx, ly) = corner(r.left, ul, ll);
-        let (rx, ry) = corner(r.right, ur, lr);
+        let ly = corner_up(r.left, ul, ll);
+        let ry = corner_up(r.right, ur, lr);
         v[6] = ly / w;
         v[7] = ry / w;
-        v[8] = lx / w;
-        v[9] = -rx / w;
+        // Stretch: each side's horizontal scale, as the corner's outward motion.
+        v[8] = 0.5 * (sxl / xxl.max(f64::MIN_POSITIVE) - 1.0);
+        v[9] = 0.5 * (sxr / xxr.max(f64::MIN_POSITIVE) - 1.0);
         // Rolls: the upper lip's edge down and back; the lower lip's (without the jaw) up and
         // back.
-        v[10] = mean_over(&r.upper, |i| -d(i).y - d(i).z) / w;
-        v[11] = mean_over(&r.lower, |i| free_y(i) - free_z(i)) / w;
+        // (Depth is the noisiest axis: the backward part counts half.)
+        v[10] = mean_over(&r.upper, |i| -d(i).y - 0.5 * d(i).z) / w;
+        v[11] = mean_over(&r.lower, |i| free_y(i) - 0.5 * free_z(i)) / w;
         // Upper lip up / lower lip down, per side.
         let up_l = weighted(&r.upper, &self.upper_left, |i| d(i).y);
         let up_r = weighted_right(&r.upper, &self.upper_left, |i| d(i).y);
@@ -447,11 +451,6 @@ impl RigModel {
             jaw_angle: angle,
             jaw_slide: slide,
         }
-    }
-
-    fn is_lower(&self, q: &Vec3) -> bool {
-        // Lower-lip neutral dots lie below the corner line; only used to undo the slide.
-        q.y < 0.0
     }
 }
 
@@ -726,11 +725,11 @@ mod tests {
         let mut rig = rig();
         let drawn: Vec<Vec3> = n.lip.iter().map(|p| Vec3::new(0.9 * p.x, p.y, p.z)).collect();
         let out = rig.step(&frame(drawn)).clone();
-        assert!((out.curve("mouthPucker") - 0.1 / 0.2).abs() < 1e-9, "{out:?}");
-        assert_eq!(out.curve("mouthFunnel"), 0.0);
+        assert!((out.curve("mouthPucker") - 0.1 / 0.25).abs() < 1e-9, "{out:?}");
+        assert!((out.curve("mouthFunnel") - 0.025 / 0.12).abs() < 1e-9);
         let pushed: Vec<Vec3> = n.lip.iter().map(|p| p + Vec3::new(0.0, 0.0, 0.003)).collect();
         let out = rig.step(&frame(pushed)).clone();
-        assert!((out.curve("mouthFunnel") - 0.003 / w / 0.12).abs() < 1e-9);
+        assert!((out.curve("mouthFunnel") - 0.5 * 0.003 / w / 0.12).abs() < 1e-9);
         assert!(out.jaw.angle_deg.abs() < 1e-9, "a push is not a jaw: {:?}", out.jaw);
     }
 
