@@ -145,6 +145,7 @@ impl LiveProcessor {
             slot.confidence.clear();
             slot.confidence.resize(c.len(), 0.0);
             slot.curve = None;
+            slot.rig = None;
         }
     }
 }
@@ -228,6 +229,7 @@ impl Processor for LiveProcessor {
         // Characters that could not be bound are left out of the frame.
         let bound = (0..self.pipeline.characters().len()).filter_map(|i| self.pipeline.bound(i));
         let count = bound.clone().count();
+        let rig = self.pipeline.rig().map(|r| crate::rig::rig_state(r.output()));
         stream
             .characters
             .resize_with(count, CharacterFrame::default);
@@ -248,6 +250,7 @@ impl Processor for LiveProcessor {
                 curve.clear();
                 curve.extend(result.curve.iter().map(to_f32));
             }
+            slot.rig = rig;
         }
     }
 

@@ -76,6 +76,7 @@ pub mod loadgen;
 pub mod metrics;
 pub mod preview;
 pub mod protocol;
+pub mod rig;
 mod server;
 mod session;
 pub mod timecode;
@@ -93,6 +94,7 @@ pub use hub::{
     ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,
     StreamFrame, StreamInfo,
 };
+pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RIG_CURVE_NAMES};
 pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
 pub use server::run;
 

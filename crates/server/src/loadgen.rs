@@ -155,12 +155,14 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
             curve: Some(closed_bspline(&human, 4)),
             points: human,
             confidence: confidence.clone(),
+            rig: None,
         },
         CharacterFrame {
             name: "wolf".into(),
             curve: Some(closed_bspline(&wolf, 4)),
             points: wolf,
             confidence: confidence.clone(),
+            rig: None,
         },
     ];
     frame.performer = Some(PerformerFrame {

@@ -107,6 +107,8 @@ pub enum OptionalField {
     Curve,
     /// The performer's lip dots (head motion removed, performer mouth frame).
     Performer,
+    /// Each character's `rig`: jaw, lip motions, ARKit-named curves (JSON frames only).
+    Rig,
     /// Not part of `frame`: a `health` message about once a second.
     Health,
 }
@@ -314,6 +316,8 @@ pub struct FrameSelection {
     pub curve: bool,
     /// Include `performer`.
     pub performer: bool,
+    /// Include each character's `rig`.
+    pub rig: bool,
 }
 
 impl FrameSelection {
@@ -323,6 +327,7 @@ impl FrameSelection {
             characters: sub.characters.clone().filter(|c| !c.is_empty()),
             curve: sub.fields.contains(&OptionalField::Curve),
             performer: sub.fields.contains(&OptionalField::Performer),
+            rig: sub.fields.contains(&OptionalField::Rig),
         }
     }
 
@@ -357,6 +362,8 @@ struct CharacterView<'a> {
     confidence: &'a [f32],
     #[serde(skip_serializing_if = "Option::is_none")]
     curve: Option<&'a [[f32; 3]]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rig: Option<&'a crate::rig::RigState>,
 }
 
 impl<'a> FrameView<'a> {
@@ -384,6 +391,7 @@ impl<'a> FrameView<'a> {
                     } else {
                         None
                     },
+                    rig: if selection.rig { c.rig.as_ref() } else { None },
                 })
                 .collect(),
             performer: if selection.performer {
