@@ -643,18 +643,7 @@ pub fn write_skinned_glb(
         name: None,
         uri: None,
     });
-    let text = serde_json::to_vec(&root).map_err(|e| BindError::Write {
-        path: out.to_path_buf(),
-        cause: std::io::Error::other(e),
-    })?;
-    let err = |cause| BindError::Write {
-        path: out.to_path_buf(),
-        cause,
-    };
-    let mut pending = PendingFile::create(out).map_err(err)?;
-    write_glb(&text, &bin, &mut pending).map_err(err)?;
-    pending.commit().map_err(err)?;
-    Ok(())
+    write_document(out, &root, &bin)
 }
 
 /// Writes an unskinned mesh as GLB (the shipped character heads).
@@ -757,15 +746,18 @@ pub fn write_plain_glb(out: &Path, mesh: &Mesh, name: &str) -> Result<(), BindEr
         nodes: vec![node],
     });
     root.scene = Some(scene);
-    let text = serde_json::to_vec(&root).map_err(|e| BindError::Write {
-        path: out.to_path_buf(),
-        cause: std::io::Error::other(e),
-    })?;
+    write_document(out, &root, &bin)
+}
+
+/// Serialises `root` and writes it with its binary chunk as one GLB file, replacing `out`
+/// only once the whole file is written.
+fn write_document(out: &Path, root: &json::Root, bin: &[u8]) -> Result<(), BindError> {
     let err = |cause| BindError::Write {
         path: out.to_path_buf(),
         cause,
     };
+    let text = serde_json::to_vec(root).map_err(|e| err(std::io::Error::other(e)))?;
     let mut pending = PendingFile::create(out).map_err(err)?;
-    write_glb(&text, &bin, &mut pending).map_err(err)?;
+    write_glb(&text, bin, &mut pending).map_err(err)?;
     pending.commit().map_err(err)
 }

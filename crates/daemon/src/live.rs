@@ -285,10 +285,7 @@ impl Processor for LiveProcessor {
                     .map(|b| b.m().iter().map(to_f32).collect())
                     .unwrap_or_default(),
                 m_mode: format!("{:?}", c.m_mode).to_lowercase(),
-                units: c
-                    .units
-                    .map(|u| format!("{u:?}").to_lowercase())
-                    .unwrap_or_default(),
+                units: c.units.map(|u| u.symbol().to_owned()).unwrap_or_default(),
             })
             .collect();
         StreamInfo {

@@ -277,11 +277,30 @@ mod tests {
                 })),
             }
         });
+        let (frames, seen_down) = run_until_frames(opener, "test:panicky", 5);
+        assert!(frames >= 5, "frames flow after the panics ({frames})");
+        assert!(
+            seen_down
+                .iter()
+                .any(|r| r.contains("panicked while opening: open exploded")),
+            "{seen_down:?}"
+        );
+        assert!(
+            seen_down
+                .iter()
+                .any(|r| r.contains("panicked: cannot convert")),
+            "{seen_down:?}"
+        );
+    }
+
+    /// Runs a source thread over `opener` until `want` frames arrived (or 10 s passed) and
+    /// returns the frames seen and every `Down` reason reported on the way.
+    fn run_until_frames(opener: Opener, spec: &str, want: usize) -> (usize, Vec<String>) {
         let shared = SourceShared::new();
         let ms = Duration::from_millis;
         let thread = spawn(
             opener,
-            "test:panicky".into(),
+            spec.into(),
             shared.clone(),
             Backoff::new(ms(10), ms(40)),
             ms(1000),
@@ -291,7 +310,7 @@ mod tests {
         let mut frames = 0;
         let mut generation = 0;
         let deadline = Instant::now() + Duration::from_secs(10);
-        while frames < 5 && Instant::now() < deadline {
+        while frames < want && Instant::now() < deadline {
             if let Taken::Value(_) = shared.frames.take_timeout(ms(5)) {
                 frames += 1;
             }
@@ -306,20 +325,8 @@ mod tests {
         shared.stop();
         thread
             .join()
-            .expect("the source thread survives its source's panics");
-        assert!(frames >= 5, "frames flow after the panics ({frames})");
-        assert!(
-            seen_down
-                .iter()
-                .any(|r| r.contains("panicked while opening: open exploded")),
-            "{seen_down:?}"
-        );
-        assert!(
-            seen_down
-                .iter()
-                .any(|r| r.contains("panicked: cannot convert")),
-            "{seen_down:?}"
-        );
+            .expect("the source thread survives its source's failures and panics");
+        (frames, seen_down)
     }
 
     fn info() -> SourceInfo {
@@ -352,34 +359,7 @@ mod tests {
                 cause: None,
             }),
         });
-        let shared = SourceShared::new();
-        let ms = Duration::from_millis;
-        let thread = spawn(
-            opener,
-            "test:scripted".into(),
-            shared.clone(),
-            Backoff::new(ms(10), ms(40)),
-            ms(1000),
-        )
-        .unwrap();
-        let mut seen_down = Vec::new();
-        let mut frames = 0;
-        let deadline = Instant::now() + Duration::from_secs(10);
-        let mut generation = 0;
-        while frames < 20 && Instant::now() < deadline {
-            if let Taken::Value(_) = shared.frames.take_timeout(ms(5)) {
-                frames += 1;
-            }
-            let (g, state) = shared.state();
-            if g != generation {
-                generation = g;
-                if let SourceState::Down { reason, .. } = state {
-                    seen_down.push(reason);
-                }
-            }
-        }
-        shared.stop();
-        thread.join().unwrap();
+        let (frames, seen_down) = run_until_frames(opener, "test:scripted", 20);
         assert!(
             frames >= 20,
             "frames flowed again after the failures ({frames})"

@@ -253,6 +253,8 @@ async fn a_client_receives_frames_and_sigterm_closes_it_with_1001_and_exits_0_wi
         .map(|c| c["name"].as_str().unwrap())
         .collect();
     assert_eq!(names, ["human", "wolf"], "{hello}");
+    // Units are spelt as the character files and the protocol document spell them.
+    assert_eq!(hello["characters"][0]["units"], "m", "{hello}");
     let mut seqs = Vec::new();
     while seqs.len() < 20 {
         let f = wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await;

@@ -43,6 +43,15 @@ pub enum Units {
 }
 
 impl Units {
+    /// The unit as character files and the protocol spell it: `m`, `cm` or `mm`.
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Units::Metres => "m",
+            Units::Centimetres => "cm",
+            Units::Millimetres => "mm",
+        }
+    }
+
     /// Metres per unit.
     pub fn metres_per_unit(self) -> f64 {
         match self {

@@ -67,8 +67,8 @@ pub fn character_frame(name: &str) -> String {
 /// Metres per unit of a character's points (`units` of `hello`).
 fn metres_per_unit(units: &str) -> f64 {
     match units {
-        "mm" | "millimetres" => 0.001,
-        "cm" | "centimetres" => 0.01,
+        "mm" => 0.001,
+        "cm" => 0.01,
         _ => 1.0,
     }
 }
