@@ -229,7 +229,10 @@ impl Processor for LiveProcessor {
         // Characters that could not be bound are left out of the frame.
         let bound = (0..self.pipeline.characters().len()).filter_map(|i| self.pipeline.bound(i));
         let count = bound.clone().count();
-        let rig = self.pipeline.rig().map(|r| crate::rig::rig_state(r.output()));
+        let rig = self
+            .pipeline
+            .rig()
+            .map(|r| crate::rig::rig_state(r.output()));
         stream
             .characters
             .resize_with(count, CharacterFrame::default);

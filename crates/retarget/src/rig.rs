@@ -472,7 +472,11 @@ fn weighted_right(idx: &[usize], left: &[f64], f: impl Fn(usize) -> f64) -> f64 
 pub fn curves_from(measures: &Measures, ranges: &[f64; CURVES], out: &mut [f64; CURVES]) {
     for i in 0..CURVES {
         let v = measures.values[i] / ranges[i];
-        out[i] = if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 };
+        out[i] = if v.is_finite() {
+            v.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
     }
 }
 
@@ -681,7 +685,7 @@ mod tests {
         let mut rig = rig();
         let out = rig.step(&frame(n.lip.clone())).clone();
         assert!(out.jaw.angle_deg.abs() < 1e-9 && out.jaw.slide_m.abs() < 1e-12);
-        assert!(out.curves.iter().all(|(_, v)| *v == 0.0), "{out:?}");
+        assert!(out.curves.iter().all(|(_, v)| v.abs() < 1e-12), "{out:?}");
         assert!(out.lips.upper.residual < 1e-12 && out.lips.lower.residual < 1e-12);
     }
 
@@ -700,7 +704,12 @@ mod tests {
         assert!((out.curve("jawOpen") - 10.0 / 25.0).abs() < 1e-9);
         // The lips followed the jaw: no lower-down, no roll, no press; the lips parted, so
         // no mouthClose either.
-        for name in ["mouthLowerDownLeft", "mouthRollLower", "mouthPressLeft", "mouthClose"] {
+        for name in [
+            "mouthLowerDownLeft",
+            "mouthRollLower",
+            "mouthPressLeft",
+            "mouthClose",
+        ] {
             assert!(out.curve(name) < 1e-9, "{name}: {}", out.curve(name));
         }
         // The lower lip's rigid motion is the jaw's rotation: 10° about x.
@@ -715,7 +724,10 @@ mod tests {
         }
         let out = rig.step(&frame(lip)).clone();
         assert!((out.jaw.slide_m - 0.002).abs() < 1e-12 && out.jaw.angle_deg.abs() < 1e-9);
-        assert_eq!(out.curve("mouthLeft"), 0.0);
+        // The mouth as a whole moved by the lower lip's share.
+        let w = n.mouth_width();
+        assert!((out.curve("mouthLeft") - 0.002 * 5.0 / 12.0 / w / 0.10).abs() < 1e-9);
+        assert!(out.curve("mouthPucker").abs() < 1e-12, "the slide is not a narrowing");
     }
 
     #[test]
@@ -723,14 +735,29 @@ mod tests {
         let n = neutral();
         let w = n.mouth_width();
         let mut rig = rig();
-        let drawn: Vec<Vec3> = n.lip.iter().map(|p| Vec3::new(0.9 * p.x, p.y, p.z)).collect();
+        let drawn: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(0.9 * p.x, p.y, p.z))
+            .collect();
         let out = rig.step(&frame(drawn)).clone();
-        assert!((out.curve("mouthPucker") - 0.1 / 0.25).abs() < 1e-9, "{out:?}");
+        assert!(
+            (out.curve("mouthPucker") - 0.1 / 0.25).abs() < 1e-9,
+            "{out:?}"
+        );
         assert!((out.curve("mouthFunnel") - 0.025 / 0.12).abs() < 1e-9);
-        let pushed: Vec<Vec3> = n.lip.iter().map(|p| p + Vec3::new(0.0, 0.0, 0.003)).collect();
+        let pushed: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| p + Vec3::new(0.0, 0.0, 0.003))
+            .collect();
         let out = rig.step(&frame(pushed)).clone();
         assert!((out.curve("mouthFunnel") - 0.5 * 0.003 / w / 0.12).abs() < 1e-9);
-        assert!(out.jaw.angle_deg.abs() < 1e-9, "a push is not a jaw: {:?}", out.jaw);
+        assert!(
+            out.jaw.angle_deg.abs() < 1e-9,
+            "a push is not a jaw: {:?}",
+            out.jaw
+        );
     }
 
     #[test]
@@ -741,18 +768,27 @@ mod tests {
         let mut lip = n.lip.clone();
         lip[0] += Vec3::new(0.003, 0.004, 0.0);
         let left = rig.step(&frame(lip)).clone();
-        assert!(left.curve("mouthSmileLeft") > 0.1 && left.curve("mouthSmileRight") == 0.0);
-        assert!(left.curve("mouthStretchLeft") > 0.1 && left.curve("mouthStretchRight") == 0.0);
+        let (sl, sr) = (left.curve("mouthSmileLeft"), left.curve("mouthSmileRight"));
+        assert!(sl > 0.1 && sr < 1e-12, "{sl} {sr}");
+        let (tl, tr) = (left.curve("mouthStretchLeft"), left.curve("mouthStretchRight"));
+        assert!(tl > 0.1 && tr < 1e-12, "{tl} {tr}");
         let mut lip = n.lip.clone();
         lip[6] += Vec3::new(-0.003, 0.004, 0.0);
         let right = rig.step(&frame(lip)).clone();
-        for (a, b) in [("mouthSmileLeft", "mouthSmileRight"), ("mouthStretchLeft", "mouthStretchRight")] {
+        for (a, b) in [
+            ("mouthSmileLeft", "mouthSmileRight"),
+            ("mouthStretchLeft", "mouthStretchRight"),
+        ] {
             assert!((left.curve(a) - right.curve(b)).abs() < 1e-9, "{a}");
         }
         // The whole mouth shifted to the performer's left.
-        let shifted: Vec<Vec3> = n.lip.iter().map(|p| p + Vec3::new(0.002, 0.0, 0.0)).collect();
+        let shifted: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| p + Vec3::new(0.002, 0.0, 0.0))
+            .collect();
         let out = rig.step(&frame(shifted)).clone();
-        assert!(out.curve("mouthLeft") > 0.4 && out.curve("mouthRight") == 0.0);
+        assert!(out.curve("mouthLeft") > 0.3 && out.curve("mouthRight") == 0.0);
         assert!(out.jaw.slide_m.abs() < 1e-12, "the jaw moved with the lips");
     }
 
@@ -766,14 +802,21 @@ mod tests {
         };
         let mut rig = Rig::new(&n, settings).unwrap();
         let jaw = rig.model().jaw_transform(40f64.to_radians(), 0.0);
-        let mut lip: Vec<Vec3> = n.lip.iter().map(|p| Vec3::new(0.5 * p.x, p.y, p.z)).collect();
+        let mut lip: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(0.5 * p.x, p.y, p.z))
+            .collect();
         for p in &mut lip[7..] {
             *p = jaw.apply(p);
         }
         let mut f = frame(lip);
         f.t = 0.5;
         rig.step(&f);
-        assert!((rig.ranges()[0] - 40.0).abs() < 1e-9, "jawOpen widened to 40°");
+        assert!(
+            (rig.ranges()[0] - 40.0).abs() < 1e-9,
+            "jawOpen widened to 40°"
+        );
         assert_eq!(rig.ranges()[3], 0.5, "configured: kept");
         assert!(rig.learning());
         let mut g = frame(n.lip.clone());
@@ -785,13 +828,21 @@ mod tests {
 
     #[test]
     fn settings_errors_name_the_key() {
-        let e = RigSettings::from_toml_str("hinge_back = -1").unwrap_err().to_string();
+        let e = RigSettings::from_toml_str("hinge_back = -1")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("rig.hinge_back"), "{e}");
-        let e = RigSettings::from_toml_str("[ranges]\nmouthSmile = 0.1").unwrap_err().to_string();
+        let e = RigSettings::from_toml_str("[ranges]\nmouthSmile = 0.1")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("rig.ranges.mouthSmile"), "{e}");
-        let e = RigSettings::from_toml_str("[ranges]\njawOpen = 0").unwrap_err().to_string();
+        let e = RigSettings::from_toml_str("[ranges]\njawOpen = 0")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("rig.ranges.jawOpen"), "{e}");
-        let e = RigSettings::from_toml_str("hinge = 1").unwrap_err().to_string();
+        let e = RigSettings::from_toml_str("hinge = 1")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("hinge"), "{e}");
         let s = RigSettings::from_toml_str("learn_s = 0\n[ranges]\njawOpen = 30").unwrap();
         assert_eq!(s.ranges.get("jawOpen"), Some(&30.0));

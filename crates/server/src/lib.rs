@@ -94,8 +94,8 @@ pub use hub::{
     ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,
     StreamFrame, StreamInfo,
 };
-pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RIG_CURVE_NAMES};
 pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
+pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RIG_CURVE_NAMES};
 pub use server::run;
 
 /// Loads the certificate and key as [`run`] will, so that a configuration check refuses

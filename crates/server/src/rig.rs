@@ -102,8 +102,14 @@ mod tests {
         rig.curves.0[2] = 0.5;
         rig.jaw.angle_deg = 12.0;
         let text = serde_json::to_string(&rig).unwrap();
-        assert!(text.contains(r#""curves":{"jawOpen":0.0,"mouthClose":0.0,"mouthFunnel":0.5"#), "{text}");
-        assert!(text.contains(r#""jaw":{"angle_deg":12.0,"slide_m":0.0}"#), "{text}");
+        assert!(
+            text.contains(r#""curves":{"jawOpen":0.0,"mouthClose":0.0,"mouthFunnel":0.5"#),
+            "{text}"
+        );
+        assert!(
+            text.contains(r#""jaw":{"angle_deg":12.0,"slide_m":0.0}"#),
+            "{text}"
+        );
         assert_eq!(rig.curve("mouthFunnel"), Some(0.5));
     }
 }
