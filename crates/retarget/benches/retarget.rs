@@ -9,8 +9,8 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, Criterion};
 use mouthpiece_retarget::{
     Character, CharacterSettings, NeutralAccumulator, OneEuroParams, PerformerDots,
-    PerformerLayout, RetargetConfig, Retargeter, Rig, RigSettings, ShapeSmoothing,
-    StabilisedFrame, Vec3,
+    PerformerLayout, RetargetConfig, Retargeter, Rig, RigSettings, ShapeSmoothing, StabilisedFrame,
+    Vec3,
 };
 use nalgebra::Rotation3;
 

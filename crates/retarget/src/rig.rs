@@ -727,7 +727,10 @@ mod tests {
         // The mouth as a whole moved by the lower lip's share.
         let w = n.mouth_width();
         assert!((out.curve("mouthLeft") - 0.002 * 5.0 / 12.0 / w / 0.10).abs() < 1e-9);
-        assert!(out.curve("mouthPucker").abs() < 1e-12, "the slide is not a narrowing");
+        assert!(
+            out.curve("mouthPucker").abs() < 1e-12,
+            "the slide is not a narrowing"
+        );
     }
 
     #[test]
@@ -770,7 +773,10 @@ mod tests {
         let left = rig.step(&frame(lip)).clone();
         let (sl, sr) = (left.curve("mouthSmileLeft"), left.curve("mouthSmileRight"));
         assert!(sl > 0.1 && sr < 1e-12, "{sl} {sr}");
-        let (tl, tr) = (left.curve("mouthStretchLeft"), left.curve("mouthStretchRight"));
+        let (tl, tr) = (
+            left.curve("mouthStretchLeft"),
+            left.curve("mouthStretchRight"),
+        );
         assert!(tl > 0.1 && tr < 1e-12, "{tl} {tr}");
         let mut lip = n.lip.clone();
         lip[6] += Vec3::new(-0.003, 0.004, 0.0);

@@ -149,20 +149,25 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
         lost: false,
     };
     let confidence = vec![1.0; POINTS];
+    let mut rig = crate::rig::RigState::default();
+    rig.jaw.angle_deg = 20.0 * open;
+    rig.curves.0[0] = 0.8 * open;
+    rig.curves.0[6] = smile.max(0.0);
+    rig.curves.0[7] = smile.max(0.0);
     frame.characters = vec![
         CharacterFrame {
             name: "human".into(),
             curve: Some(closed_bspline(&human, 4)),
             points: human,
             confidence: confidence.clone(),
-            rig: None,
+            rig: Some(rig),
         },
         CharacterFrame {
             name: "wolf".into(),
             curve: Some(closed_bspline(&wolf, 4)),
             points: wolf,
             confidence: confidence.clone(),
-            rig: None,
+            rig: Some(rig),
         },
     ];
     frame.performer = Some(PerformerFrame {
