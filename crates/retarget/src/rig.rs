@@ -470,9 +470,9 @@ fn weighted_right(idx: &[usize], left: &[f64], f: impl Fn(usize) -> f64) -> f64 
 
 /// Turns measures into curves with ranges.
 pub fn curves_from(measures: &Measures, ranges: &[f64; CURVES], out: &mut [f64; CURVES]) {
-    for i in 0..CURVES {
-        let v = measures.values[i] / ranges[i];
-        out[i] = if v.is_finite() {
+    for ((dst, m), r) in out.iter_mut().zip(&measures.values).zip(ranges) {
+        let v = m / r;
+        *dst = if v.is_finite() {
             v.clamp(0.0, 1.0)
         } else {
             0.0
@@ -561,9 +561,9 @@ impl Rig {
         // Learning: the first `learn_s` seconds widen the ranges of curves not configured.
         let start = *self.start.get_or_insert(frame.t);
         if frame.t - start <= self.settings.learn_s {
-            for i in 0..CURVES {
-                if self.settings.configured(i).is_none() && m.values[i].is_finite() {
-                    self.ranges[i] = self.ranges[i].max(m.values[i]);
+            for (i, (range, v)) in self.ranges.iter_mut().zip(m.values).enumerate() {
+                if self.settings.configured(i).is_none() && v.is_finite() {
+                    *range = range.max(v);
                 }
             }
         } else {

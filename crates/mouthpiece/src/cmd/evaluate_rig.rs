@@ -129,8 +129,8 @@ impl RigAccuracy {
         m.frames += 1;
         m.jaw_sq += (ours.jaw_angle - mouth.jaw).to_degrees().powi(2);
         m.slide_sq += ours.jaw_slide.powi(2);
-        for i in 0..CURVES {
-            m.curve_sq[i] += (a[i] - b[i]).powi(2);
+        for ((sq, x), y) in m.curve_sq.iter_mut().zip(a).zip(b) {
+            *sq += (x - y).powi(2);
         }
         m.jaw_open.push(a[0], mouth.jaw);
         m.funnel.push(a[2], mouth.round);
