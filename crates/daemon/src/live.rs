@@ -39,6 +39,7 @@ pub fn setup(config: &Config) -> Result<Setup, CheckError> {
         ),
         ("track", pipeline.track.validate()),
         ("retarget", pipeline.retarget.validate()),
+        ("rig", pipeline.validate()),
     ] {
         result.map_err(|e| invalid(section, crate::source::error_chain(&e)))?;
     }
