@@ -3,7 +3,8 @@
 Run by the export tests:
     blender -b --factory-startup --python-exit-code 1 --python sample_gltf.py -- FILE T1 T2 ...
 Prints one JSON line starting with `SAMPLES ` on stdout:
-    {"fps": …, "objects": {name: {"parent": …}}, "samples": {"T": {name: [x, y, z]}}}
+    {"fps": …, "objects": {name: {"parent": …}}, "samples": {"T": {name: [x, y, z]}},
+     "matrices": {"T": {name: 4x4 world matrix, rows}}}
 positions are world coordinates in Blender's frame (+Z up; glTF's (x, y, z) is Blender's
 (x, -z, y)), so the caller can check Blender's own conversion and animation evaluation.
 """
@@ -33,11 +34,18 @@ objects = {o.name: {"parent": o.parent.name if o.parent else None, "type": o.typ
 actions = [a.name for a in bpy.data.actions]
 
 samples = {}
+matrices = {}
 for t in times:
     frame = t * fps
     whole = int(frame // 1)
     scene.frame_set(whole, subframe=frame - whole)
     bpy.context.view_layer.update()
     samples[repr(t)] = {o.name: list(o.matrix_world.translation) for o in scene.objects}
+    matrices[repr(t)] = {o.name: [list(row) for row in o.matrix_world] for o in scene.objects}
 
-print("SAMPLES " + json.dumps({"fps": fps, "objects": objects, "actions": actions, "samples": samples}))
+print(
+    "SAMPLES "
+    + json.dumps(
+        {"fps": fps, "objects": objects, "actions": actions, "samples": samples, "matrices": matrices}
+    )
+)

@@ -81,6 +81,20 @@ def quat_matrix(q):
     )
 
 
+def quat_mul(a, b):
+    """Hamilton product of quaternions given as [x, y, z, w]."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return np.array(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ]
+    )
+
+
 def node_matrix(node):
     m = np.eye(4)
     s = np.diag(node.get("scale", [1, 1, 1]))
@@ -105,8 +119,13 @@ def main():
     doc, buffers = load(args.gltf)
 
     scene = doc["scenes"][doc.get("scene", 0)]
-    assert len(scene["nodes"]) == 1, "one root node"
+    assert len(scene["nodes"]) in (1, 2), "the mouth, and the head when the take has one"
     mouth_index = scene["nodes"][0]
+    head = doc["nodes"][scene["nodes"][1]] if len(scene["nodes"]) == 2 else None
+    if head is not None:
+        assert head["name"] == "head", head.get("name")
+        eyes = [doc["nodes"][i]["name"] for i in head["children"]]
+        assert eyes == ["eye_L", "eye_R"], eyes
     mouth = doc["nodes"][mouth_index]
     assert mouth["name"] == "mouth", mouth.get("name")
     children = [doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] != "curve"]
@@ -122,13 +141,19 @@ def main():
 
     animation = doc["animations"][0]
     by_node = {}
+    rotations = {}
     for ch in animation["channels"]:
-        assert ch["target"]["path"] == "translation"
+        node_name = doc["nodes"][ch["target"]["node"]]["name"]
         sampler = animation["samplers"][ch["sampler"]]
         assert sampler.get("interpolation", "LINEAR") == "LINEAR"
         t = accessor(doc, buffers, sampler["input"])[:, 0]
         v = accessor(doc, buffers, sampler["output"])
-        by_node[doc["nodes"][ch["target"]["node"]]["name"]] = (t, v)
+        if ch["target"]["path"] == "rotation":
+            assert node_name in ("head", "eye_L", "eye_R"), node_name
+            rotations[node_name] = (t, v)
+            continue
+        assert ch["target"]["path"] == "translation"
+        by_node[node_name] = (t, v)
 
     max_error = 0.0
     max_time_error = 0.0
@@ -160,7 +185,31 @@ def main():
                 got = np.interp(times, t, v[:, k])
                 curve_error = max(curve_error, float(np.abs(got - expected[:, k]).max()))
 
+    # Head and eyes: one key per frame, each the take's quaternion ([w, x, y, z] there,
+    # [x, y, z, w] in glTF; the head's carries the model-axes conversion C), up to sign, and
+    # consecutive keys in one hemisphere (so interpolation takes the short way).
+    head_error = None
+    head_keys = 0
+    if head is not None:
+        head_error = 0.0
+        c = np.array([-np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)]) if args.model_up == "z" else None
+        for name, key in (("head", "rotation"), ("eye_L", "eye_left"), ("eye_R", "eye_right")):
+            t, v = rotations[name]
+            head_keys += len(t)
+            assert len(t) == len(frames), (name, len(t), len(frames))
+            assert np.all(np.diff(t) > 0), f"{name}: key times not increasing"
+            assert np.all(np.einsum("ij,ij->i", v[1:], v[:-1]) >= 0), f"{name}: hemisphere flip"
+            for f, got in zip(frames, v):
+                w, x, y, z = f["character_head"][key]
+                want = np.array([x, y, z, w])
+                if name == "head" and c is not None:
+                    want = quat_mul(c, want)
+                err = min(np.abs(got - want).max(), np.abs(got + want).max())
+                head_error = max(head_error, float(err))
+
     result = {
+        "head_keys": head_keys,
+        "max_head_error": head_error,
         "frames": len(frames),
         "curve_points": len(curve_groups[0]["children"]) if curve_groups else 0,
         "max_curve_error": curve_error,

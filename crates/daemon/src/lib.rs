@@ -28,6 +28,7 @@ pub mod daemon;
 pub mod error;
 pub mod factory;
 pub mod hardening;
+pub mod head;
 pub mod live;
 pub mod logging;
 pub mod notify;

@@ -147,6 +147,7 @@ impl LiveProcessor {
             slot.confidence.resize(c.len(), 0.0);
             slot.curve = None;
             slot.rig = None;
+            slot.head = Some(Default::default());
         }
     }
 }
@@ -255,6 +256,7 @@ impl Processor for LiveProcessor {
                 curve.extend(result.curve.iter().map(to_f32));
             }
             slot.rig = rig;
+            slot.head = Some(crate::head::wire(&result.head));
         }
     }
 
@@ -335,6 +337,23 @@ impl Processor for LiveProcessor {
             self.config.track.roi_margin_px,
             [frame.color.width, frame.color.height],
         )
+    }
+
+    fn look_at(
+        &mut self,
+        character: &str,
+        point: Option<[f64; 3]>,
+    ) -> Result<serde_json::Value, String> {
+        let in_reach = self
+            .pipeline
+            .look_at(character, point.map(Into::into))
+            .map_err(|e| crate::source::error_chain(&e))?;
+        Ok(serde_json::json!({
+            "character": character,
+            "point": point,
+            "mode": if point.is_some() { "look_at" } else { "follow" },
+            "in_reach": in_reach,
+        }))
     }
 
     fn take_calibration_report(&mut self) -> Option<mouthpiece_server::CalibrationReport> {

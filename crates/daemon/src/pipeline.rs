@@ -86,6 +86,16 @@ pub trait Processor: Send {
         mouthpiece_server::Overlay::default()
     }
 
+    /// Turns `character`'s head to `point` (its model frame), or back to following the
+    /// performer (`None`): the `look_at` request. `Ok` carries the answer's `detail`.
+    fn look_at(
+        &mut self,
+        character: &str,
+        _point: Option<[f64; 3]>,
+    ) -> Result<serde_json::Value, String> {
+        Err(format!("character {character:?} has no head to turn here"))
+    }
+
     /// How good the neutral pose taken on the last frame was, once (`wall_us` is set by
     /// the caller).
     fn take_calibration_report(&mut self) -> Option<mouthpiece_server::CalibrationReport> {
@@ -381,6 +391,13 @@ fn handle_control<P: Processor>(
     };
     match command {
         ControlCommand::Calibrate { .. } => {}
+        ControlCommand::LookAt { character, point } => {
+            let outcome = processor.look_at(&character, point);
+            if outcome.is_ok() {
+                tracing::info!(%character, ?point, "look_at");
+            }
+            reply(outcome);
+        }
         ControlCommand::RecordStart { slate, take } => {
             let slate = slate.unwrap_or_else(|| ctx.default_slate.clone());
             start_take(ctx, &slate, take, Box::new(reply));
@@ -569,6 +586,7 @@ fn derive(
                         .collect(),
                     confidence: c.confidence.clone(),
                     curve: c.curve.clone(),
+                    head: c.head,
                 }
             })
             .collect(),

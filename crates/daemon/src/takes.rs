@@ -95,6 +95,8 @@ pub struct CharacterRecord {
     pub points: Vec<(String, [f32; 3])>,
     pub confidence: Vec<f32>,
     pub curve: Option<Vec<[f32; 3]>>,
+    /// The character's head and eyes (docs/head.md).
+    pub head: Option<mouthpiece_server::CharacterHead>,
 }
 
 /// What the processing thread hands the writer.
@@ -672,6 +674,9 @@ fn write_one(
         if let Some(curve) = &character.curve {
             body["curve"] = json!(curve);
         }
+        if let Some(head) = &character.head {
+            body["head"] = json!(head);
+        }
         writer.write_json(
             &format!("/character/{}", character.name),
             log_time,
@@ -893,6 +898,7 @@ mod tests {
                 points: vec![("P1".into(), [0.07, 0.0, 0.0])],
                 confidence: vec![1.0],
                 curve: None,
+                head: Some(Default::default()),
             }],
             status: serde_json::json!({"calibrating": false}),
         })

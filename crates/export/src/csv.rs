@@ -26,13 +26,19 @@ pub struct CsvWriter {
     points: usize,
     rows: u64,
     row: String,
+    /// The header, written with the first row (which says whether the take has a head).
+    header: Option<String>,
+    /// Whether the rows carry the head columns.
+    head: bool,
 }
+
+/// The head columns' prefixes, in order (docs/head.md).
+pub const HEAD_COLUMNS: [&str; 3] = ["head", "eye_L", "eye_R"];
 
 impl CsvWriter {
     /// Starts `path` (written under a temporary name until [`finish`](Self::finish)).
     pub fn create(rig: &MouthRig, path: &Path) -> Result<Self, ExportError> {
         let err = |cause| ExportError::write(path, cause);
-        let mut out = PendingFile::create(path).map_err(err)?;
         let mut header = String::from("t");
         for p in rig.points() {
             for axis in ["x", "y", "z"] {
@@ -40,14 +46,15 @@ impl CsvWriter {
                 header.push_str(&quote(&format!("{}_{axis}", p.name)));
             }
         }
-        header.push('\n');
-        out.write_all(header.as_bytes()).map_err(err)?;
+        let out = PendingFile::create(path).map_err(err)?;
         Ok(Self {
             out,
             path: path.to_path_buf(),
             points: rig.points().len(),
             rows: 0,
             row: String::new(),
+            header: Some(header),
+            head: false,
         })
     }
 
@@ -63,6 +70,26 @@ impl CsvWriter {
             )));
         }
         self.row.clear();
+        if let Some(mut header) = self.header.take() {
+            // The first row says whether the take has the character's head.
+            self.head = frame.head.is_some();
+            if self.head {
+                for node in HEAD_COLUMNS {
+                    for c in ["qw", "qx", "qy", "qz"] {
+                        let _ = write!(header, ",{node}_{c}");
+                    }
+                }
+            }
+            header.push('\n');
+            self.row.push_str(&header);
+        }
+        if frame.head.is_some() != self.head {
+            return Err(ExportError::BadLine {
+                source_name: "take".into(),
+                line: frame.line,
+                problem: "`character_head` on some lines and not on others".into(),
+            });
+        }
         let _ = write!(self.row, "{}", frame.t);
         for p in &frame.points {
             match p {
@@ -71,6 +98,10 @@ impl CsvWriter {
                 }
                 None => self.row.push_str(",,,"),
             }
+        }
+        for q in frame.head.iter().flat_map(|h| h.rotations()) {
+            let [w, x, y, z] = q;
+            let _ = write!(self.row, ",{w},{x},{y},{z}");
         }
         self.row.push('\n');
         self.out
@@ -138,6 +169,7 @@ mod tests {
             t: 0.0,
             points: vec![Some([0.1, -2.5, 3.0]), None],
             curve: None,
+            head: None,
         })
         .unwrap();
         w.push(&TakeFrame {
@@ -145,6 +177,7 @@ mod tests {
             t: 1.0 / 3.0,
             points: vec![Some([1e-9, 0.0, 1.0]), Some([1.0, 2.0, 3.0])],
             curve: None,
+            head: None,
         })
         .unwrap();
         let summary = w.finish().unwrap();
@@ -155,6 +188,44 @@ mod tests {
             "t,P1_x,P1_y,P1_z,\"odd,name_x\",\"odd,name_y\",\"odd,name_z\"\n\
              0,0.1,-2.5,3,,,\n\
              0.3333333333333333,0.000000001,0,1,1,2,3\n"
+        );
+    }
+
+    #[test]
+    fn head_columns_follow_the_points() {
+        let dir = tempfile::tempdir().unwrap();
+        let rig = MouthRig::new(
+            None,
+            vec![RigPoint {
+                name: "P1".into(),
+                rest: [0.0; 3],
+            }],
+            nalgebra::Isometry3::identity(),
+        )
+        .unwrap();
+        let path = dir.path().join("take.csv");
+        let mut w = CsvWriter::create(&rig, &path).unwrap();
+        let head = crate::HeadKeys {
+            head: [0.5, 0.5, 0.5, 0.5],
+            eye_left: [1.0, 0.0, 0.0, 0.0],
+            eye_right: [0.0, 1.0, 0.0, 0.0],
+        };
+        let frame = |line, head| TakeFrame {
+            line,
+            t: line as f64,
+            points: vec![Some([1.0, 2.0, 3.0])],
+            curve: None,
+            head,
+        };
+        w.push(&frame(1, Some(head))).unwrap();
+        let e = w.push(&frame(2, None)).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("character_head"), "{e}");
+        w.finish().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(
+            text,
+            "t,P1_x,P1_y,P1_z,head_qw,head_qx,head_qy,head_qz,eye_L_qw,eye_L_qx,eye_L_qy,eye_L_qz,eye_R_qw,eye_R_qx,eye_R_qy,eye_R_qz\n\
+             1,1,2,3,0.5,0.5,0.5,0.5,1,0,0,0,0,1,0,0\n"
         );
     }
 }

@@ -60,6 +60,9 @@ pub struct GltfOptions {
     /// Give each point node a small octahedron (2 % of the mouth width) so viewers show the
     /// points; without it the nodes are empties.
     pub markers: bool,
+    /// Write the character's head and eyes (`head`, `eye_L`, `eye_R` nodes with rotation
+    /// channels) when the rig has a head and the take carries `character_head`.
+    pub head: bool,
 }
 
 impl Default for GltfOptions {
@@ -70,6 +73,7 @@ impl Default for GltfOptions {
             reduce: None,
             curve: false,
             markers: true,
+            head: true,
         }
     }
 }
@@ -85,6 +89,8 @@ pub struct GltfSummary {
     pub keys: u64,
     /// Samples dropped by `--reduce` (`samples - keys`).
     pub dropped: u64,
+    /// Rotation keys of the head and eyes (not in `samples`, `keys`, `dropped`).
+    pub rotation_keys: u64,
     /// Files written: the document, and the `.bin` for [`GltfLayout::SeparateBin`].
     pub files: Vec<PathBuf>,
 }
@@ -101,20 +107,28 @@ pub struct GltfWriter {
     frames: u64,
     /// Every channel has a key at every frame: one time accessor serves them all.
     shared_times: bool,
+    /// Index of the head's first rotation channel (then the eyes'), once the first frame
+    /// showed that the take has a head.
+    head_start: Option<usize>,
 }
 
-/// One point's translation channel while the take streams in.
+/// One node's channel while the take streams in: a point's translation (3 values a key) or
+/// a head or eye rotation (4: x, y, z, w).
 struct Channel {
     spool: BufWriter<File>,
     reducer: Option<Reducer>,
     samples: u64,
     keys: u64,
     t_bounds: Bounds<1>,
-    v_bounds: Bounds<3>,
+    v_bounds: Bounds<4>,
+    /// Values per key: 3 (translation) or 4 (rotation).
+    width: usize,
+    /// The last rotation key, to keep consecutive quaternions in one hemisphere.
+    last_rotation: Option<[f32; 4]>,
 }
 
-/// Spool record: t, x, y, z as little-endian f32 (what glTF stores).
-const RECORD: usize = 16;
+/// Longest spool record: t, then x, y, z (, w) as little-endian f32 (what glTF stores).
+const RECORD: usize = 20;
 
 impl Channel {
     fn new(spool_dir: &Path, reduce: Option<f64>) -> Result<Self, ExportError> {
@@ -127,7 +141,38 @@ impl Channel {
             keys: 0,
             t_bounds: Bounds::new(),
             v_bounds: Bounds::new(),
+            width: 3,
+            last_rotation: None,
         })
+    }
+
+    /// A rotation channel: never reduced (glTF interpolates rotations spherically, which
+    /// the reducer's linear test does not model).
+    fn rotation(spool_dir: &Path) -> Result<Self, ExportError> {
+        let mut channel = Self::new(spool_dir, None)?;
+        channel.width = 4;
+        Ok(channel)
+    }
+
+    /// Bytes per spool record.
+    fn record_len(&self) -> usize {
+        4 + 4 * self.width
+    }
+
+    /// Takes one rotation (`[x, y, z, w]`, unit) as a key, in the previous key's hemisphere.
+    fn sample_rotation(&mut self, t: f64, q: [f64; 4]) -> io::Result<()> {
+        self.samples += 1;
+        let mut q32 = q.map(|c| c as f32);
+        let norm = q32.iter().map(|c| c * c).sum::<f32>().sqrt();
+        q32 = q32.map(|c| c / norm);
+        if let Some(last) = self.last_rotation {
+            let dot: f32 = last.iter().zip(&q32).map(|(a, b)| a * b).sum();
+            if dot < 0.0 {
+                q32 = q32.map(|c| -c);
+            }
+        }
+        self.last_rotation = Some(q32);
+        self.write_record(t as f32, &q32)
     }
 
     /// Takes one sample (through the reducer, if any) and spools the key it settles.
@@ -144,17 +189,21 @@ impl Channel {
     }
 
     fn write_key(&mut self, (t, v): Key) -> io::Result<()> {
-        let t32 = t as f32;
-        let v32 = v.map(|c| c as f32);
+        self.write_record(t as f32, &v.map(|c| c as f32))
+    }
+
+    fn write_record(&mut self, t32: f32, v32: &[f32]) -> io::Result<()> {
         let mut record = [0u8; RECORD];
         record[0..4].copy_from_slice(&t32.to_le_bytes());
+        let mut bounds = [0.0f32; 4];
         for (k, c) in v32.iter().enumerate() {
             record[4 + 4 * k..8 + 4 * k].copy_from_slice(&c.to_le_bytes());
+            bounds[k] = *c;
         }
-        self.spool.write_all(&record)?;
+        self.spool.write_all(&record[..4 + 4 * v32.len()])?;
         self.keys += 1;
         self.t_bounds.add(&[t32]);
-        self.v_bounds.add(&v32);
+        self.v_bounds.add(&bounds);
         Ok(())
     }
 }
@@ -181,7 +230,13 @@ impl<const N: usize> Bounds<N> {
     }
     /// JSON arrays holding the f32 values exactly (as f64), so validators compare equal.
     fn json(&self) -> (Value, Value) {
-        let arr = |a: &[f32; N]| Value::from(a.iter().map(|&c| f64::from(c)).collect::<Vec<_>>());
+        self.json_first(N)
+    }
+
+    /// [`Bounds::json`] of the first `n` components.
+    fn json_first(&self, n: usize) -> (Value, Value) {
+        let arr =
+            |a: &[f32; N]| Value::from(a[..n].iter().map(|&c| f64::from(c)).collect::<Vec<_>>());
         (arr(&self.min), arr(&self.max))
     }
 }
@@ -213,6 +268,7 @@ impl GltfWriter {
             spool_dir: spool_dir.to_path_buf(),
             channels,
             frames: 0,
+            head_start: None,
         })
     }
 
@@ -284,7 +340,47 @@ impl GltfWriter {
                     .map_err(|cause| ExportError::write(&self.spool_dir, cause))?;
             }
         }
+        self.push_head(frame)?;
         self.frames += 1;
+        Ok(())
+    }
+
+    /// The head's and eyes' rotation keys: the head node's rotation is the model-axes
+    /// conversion times the head's rotation in the model frame; the eyes' are their
+    /// rotations relative to the head.
+    fn push_head(&mut self, frame: &TakeFrame) -> Result<(), ExportError> {
+        if self.frames == 0
+            && self.options.head
+            && self.rig.head().is_some()
+            && frame.head.is_some()
+        {
+            self.head_start = Some(self.channels.len());
+            for _ in 0..3 {
+                self.channels.push(Channel::rotation(&self.spool_dir)?);
+            }
+        }
+        let Some(start) = self.head_start else {
+            return Ok(());
+        };
+        let Some(head) = &frame.head else {
+            return Err(ExportError::BadLine {
+                source_name: "take".into(),
+                line: frame.line,
+                problem: "no `character_head` on this line, though the first line had one".into(),
+            });
+        };
+        let conversion = model_conversion(self.options.model_up);
+        for (k, q) in head.rotations().iter().enumerate() {
+            let q = nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]);
+            let q = if k == 0 {
+                conversion.into_inner() * q
+            } else {
+                q
+            };
+            self.channels[start + k]
+                .sample_rotation(frame.t, [q.i, q.j, q.k, q.w])
+                .map_err(|cause| ExportError::write(&self.spool_dir, cause))?;
+        }
         Ok(())
     }
 
@@ -320,13 +416,20 @@ impl GltfWriter {
         }
         let bin_path = out.with_extension("bin");
         let (root, pieces, bin_len) = self.document(&bin_path)?;
-        let samples: u64 = self.channels.iter().map(|c| c.samples).sum();
-        let keys: u64 = self.channels.iter().map(|c| c.keys).sum();
+        let points = self.channels.iter().filter(|c| c.width == 3);
+        let samples: u64 = points.clone().map(|c| c.samples).sum();
+        let keys: u64 = points.map(|c| c.keys).sum();
         let summary = GltfSummary {
             frames: self.frames,
             samples,
             keys,
             dropped: samples - keys,
+            rotation_keys: self
+                .channels
+                .iter()
+                .filter(|c| c.width == 4)
+                .map(|c| c.keys)
+                .sum(),
             files: match self.options.layout {
                 GltfLayout::SeparateBin => vec![out.to_path_buf(), bin_path.clone()],
                 _ => vec![out.to_path_buf()],
@@ -487,11 +590,40 @@ impl GltfWriter {
             children: Some(mouth_children),
             ..Default::default()
         });
+        let mut scene_nodes = vec![mouth];
+        if let (Some(head), Some(_)) = (self.rig.head(), self.head_start) {
+            let offset = |p: &[f64; 3]| {
+                let d = [0, 1, 2].map(|k| (p[k] - head.pivot[k]) as f32);
+                Some(d)
+            };
+            let eye = |root: &mut json::Root, name: &str, at: &[f64; 3]| {
+                root.push(json::Node {
+                    name: Some(name.into()),
+                    translation: offset(at),
+                    mesh: marker_mesh,
+                    ..Default::default()
+                })
+            };
+            let eye_left = eye(&mut root, "eye_L", &head.eye_left);
+            let eye_right = eye(&mut root, "eye_R", &head.eye_right);
+            let place = head_transform(&self.rig, head, self.options.model_up);
+            let head_node = root.push(json::Node {
+                name: Some("head".into()),
+                translation: place.translation,
+                rotation: place.rotation,
+                scale: place.scale,
+                children: Some(vec![eye_left, eye_right]),
+                ..Default::default()
+            });
+            scene_nodes.push(head_node);
+            channel_names.extend(["head", "eye_L", "eye_R"].map(String::from));
+            channel_nodes.extend([head_node, eye_left, eye_right]);
+        }
         let scene = root.push(json::Scene {
             extensions: None,
             extras: Default::default(),
             name: Some(self.rig.character().unwrap_or("take").to_owned()),
-            nodes: vec![mouth],
+            nodes: scene_nodes,
         });
         root.scene = Some(scene);
 
@@ -542,14 +674,25 @@ impl GltfWriter {
                 &mut root,
                 &mut pieces,
                 Piece::Values { channel: i },
-                12 * channel.keys,
+                4 * channel.width as u64 * channel.keys,
                 None,
             );
-            let (min, max) = channel.v_bounds.json();
+            let (min, max) = channel.v_bounds.json_first(channel.width);
+            let (kind, path) = if channel.width == 4 {
+                (
+                    json::accessor::Type::Vec4,
+                    json::animation::Property::Rotation,
+                )
+            } else {
+                (
+                    json::accessor::Type::Vec3,
+                    json::animation::Property::Translation,
+                )
+            };
             let output = root.push(accessor(
                 v,
                 channel.keys,
-                json::accessor::Type::Vec3,
+                kind,
                 json::accessor::ComponentType::F32,
                 Some((min, max)),
             ));
@@ -567,7 +710,7 @@ impl GltfWriter {
                     extensions: None,
                     extras: Default::default(),
                     node: *node,
-                    path: Valid(json::animation::Property::Translation),
+                    path: Valid(path),
                 },
                 extensions: None,
                 extras: Default::default(),
@@ -609,16 +752,36 @@ struct NodeTransform {
     scale: Option<[f32; 3]>,
 }
 
-/// glTF world = C · s · placement · mouth, with C the model-axes conversion and s the units'
-/// metres: translation s·C·o, rotation C·R, scale s.
-fn mouth_transform(rig: &MouthRig, model_up: ModelUp) -> NodeTransform {
+/// C, the rotation from the character's model axes to glTF's.
+fn model_conversion(model_up: ModelUp) -> nalgebra::UnitQuaternion<f64> {
     use nalgebra::{UnitQuaternion, Vector3};
-    let conversion = match model_up {
+    match model_up {
         ModelUp::Y => UnitQuaternion::identity(),
         ModelUp::Z => {
             UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -std::f64::consts::FRAC_PI_2)
         }
-    };
+    }
+}
+
+/// The `head` node's rest TRS: translation s·C·pivot, rotation C (its keys are C·R_head),
+/// scale s; its children (the eyes) are then in the model's axes and units, relative to the
+/// pivot.
+fn head_transform(rig: &MouthRig, head: &crate::RigHead, model_up: ModelUp) -> NodeTransform {
+    let conversion = model_conversion(model_up);
+    let s = rig.metres_per_unit().unwrap_or(1.0);
+    let translation = (conversion * nalgebra::Vector3::from(head.pivot) * s).map(|c| c as f32);
+    let q = conversion.coords.map(|c| c as f32).normalize();
+    NodeTransform {
+        translation: (translation.norm() > 0.0).then(|| translation.into()),
+        rotation: (q.w.abs() < 1.0).then(|| json::scene::UnitQuaternion([q.x, q.y, q.z, q.w])),
+        scale: (s != 1.0).then_some([s as f32; 3]),
+    }
+}
+
+/// glTF world = C · s · placement · mouth, with C the model-axes conversion and s the units'
+/// metres: translation s·C·o, rotation C·R, scale s.
+fn mouth_transform(rig: &MouthRig, model_up: ModelUp) -> NodeTransform {
+    let conversion = model_conversion(model_up);
     let s = rig.metres_per_unit().unwrap_or(1.0);
     let placement = rig.placement();
     let translation = (conversion * placement.translation.vector * s).map(|c| c as f32);
@@ -740,7 +903,10 @@ impl Assembler<'_> {
             match *piece {
                 Piece::Bytes(ref bytes) => out.write_all(bytes).map_err(WriteError::Out)?,
                 Piece::Times { channel } => self.copy_column(channel, 0..4, out)?,
-                Piece::Values { channel } => self.copy_column(channel, 4..16, out)?,
+                Piece::Values { channel } => {
+                    let end = self.channels[channel].record_len();
+                    self.copy_column(channel, 4..end, out)?
+                }
             }
         }
         Ok(())
@@ -755,9 +921,10 @@ impl Assembler<'_> {
         let spool = &mut self.spools[channel];
         spool.seek(SeekFrom::Start(0)).map_err(WriteError::Spool)?;
         let mut reader = BufReader::with_capacity(64 * 1024, spool);
-        let mut record = [0u8; RECORD];
+        let mut buffer = [0u8; RECORD];
+        let record = &mut buffer[..self.channels[channel].record_len()];
         for _ in 0..self.channels[channel].keys {
-            reader.read_exact(&mut record).map_err(WriteError::Spool)?;
+            reader.read_exact(record).map_err(WriteError::Spool)?;
             out.write_all(&record[columns.clone()])
                 .map_err(WriteError::Out)?;
         }

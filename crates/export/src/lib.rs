@@ -33,5 +33,5 @@ pub use gltf::{GltfLayout, GltfOptions, GltfSummary, GltfWriter, ModelUp};
 pub use onto_rig::{animate_rig, RigSummary};
 pub use output::PendingFile;
 pub use reduce::Reducer;
-pub use rig::{MouthRig, RigPoint};
-pub use take::{TakeFrame, TakeReader};
+pub use rig::{MouthRig, RigHead, RigPoint};
+pub use take::{HeadKeys, TakeFrame, TakeReader};

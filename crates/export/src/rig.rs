@@ -34,6 +34,16 @@ pub struct MouthRig {
     points: Vec<RigPoint>,
     placement: Isometry3<f64>,
     metres_per_unit: Option<f64>,
+    head: Option<RigHead>,
+}
+
+/// Where the character's head pivots and its eyes sit, model frame (character units): the
+/// `head`, `eye_L` and `eye_R` nodes (docs/head.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RigHead {
+    pub pivot: [f64; 3],
+    pub eye_left: [f64; 3],
+    pub eye_right: [f64; 3],
 }
 
 impl MouthRig {
@@ -75,7 +85,26 @@ impl MouthRig {
             points,
             placement,
             metres_per_unit: None,
+            head: None,
         })
+    }
+
+    /// Gives the rig a head (from the character's `[head]`).
+    pub fn with_head(mut self, head: RigHead) -> Result<Self, ExportError> {
+        let finite = [head.pivot, head.eye_left, head.eye_right]
+            .iter()
+            .flatten()
+            .all(|c| c.is_finite());
+        if !finite {
+            return Err(ExportError::BadRig("head placement is not finite".into()));
+        }
+        self.head = Some(head);
+        Ok(self)
+    }
+
+    /// The head's placement, when the character file gave the rig.
+    pub fn head(&self) -> Option<&RigHead> {
+        self.head.as_ref()
     }
 
     /// Declares the character's units (metres per unit, from the character file's `units`).
@@ -143,7 +172,14 @@ impl MouthRig {
             axis(1),
             axis(2),
         )?;
-        let rig = Self::new(Some(character.name.clone()), points, placement)?;
+        let h = &character.head;
+        let arr = |v: &mouthpiece_retarget::Vec3| [v.x, v.y, v.z];
+        let rig =
+            Self::new(Some(character.name.clone()), points, placement)?.with_head(RigHead {
+                pivot: arr(&h.pivot),
+                eye_left: arr(&h.eye_left),
+                eye_right: arr(&h.eye_right),
+            })?;
         match character.units {
             Some(units) => rig.with_metres_per_unit(units.metres_per_unit()),
             None => Ok(rig),

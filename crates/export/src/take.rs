@@ -24,6 +24,24 @@ pub struct TakeFrame {
     pub points: Vec<Option<[f64; 3]>>,
     /// The smoothed mouth outline (`curve`), when the take has one.
     pub curve: Option<Vec<[f64; 3]>>,
+    /// The character's head and eyes (`character_head`), when the take has them.
+    pub head: Option<HeadKeys>,
+}
+
+/// One frame's head and eye rotations, unit quaternions `[w, x, y, z]` (docs/head.md): the
+/// head in the character's model frame, the eyes relative to the head.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeadKeys {
+    pub head: [f64; 4],
+    pub eye_left: [f64; 4],
+    pub eye_right: [f64; 4],
+}
+
+impl HeadKeys {
+    /// The three rotations in node order: head, left eye, right eye.
+    pub fn rotations(&self) -> [[f64; 4]; 3] {
+        [self.head, self.eye_left, self.eye_right]
+    }
 }
 
 /// Reads frames from JSONL, checking each line as it goes.
@@ -177,11 +195,27 @@ impl<R: BufRead> TakeReader<R> {
         {
             return Err(self.bad(format!("curve point {bad:?} is not finite")));
         }
+        let head = parsed.character_head.map(|h| HeadKeys {
+            head: h.rotation,
+            eye_left: h.eye_left,
+            eye_right: h.eye_right,
+        });
+        if let Some(h) = &head {
+            for (what, q) in ["head", "eye_left", "eye_right"].iter().zip(h.rotations()) {
+                let norm = q.iter().map(|c| c * c).sum::<f64>().sqrt();
+                if !(norm.is_finite() && (norm - 1.0).abs() <= 1e-3) {
+                    return Err(self.bad(format!(
+                        "character_head.{what} = {q:?} is not a unit quaternion"
+                    )));
+                }
+            }
+        }
         Ok(Some(TakeFrame {
             line: self.line_no,
             t: parsed.t,
             points,
             curve,
+            head,
         }))
     }
 

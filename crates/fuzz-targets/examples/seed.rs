@@ -216,4 +216,26 @@ fn main() {
         "health",
         b"GET /healthz HTTP/1.1\r\nHost: [::1]:9870\r\nAuthorization: Bearer x\r\n\r\n",
     );
+    for (name, text) in [
+        ("timit.phn", "0 3050 h#\n3050 4559 sh\n4559 5723 ix\n7000 8000 m\n"),
+        ("htk.lab", "0 2000000 sil\n2000000 3500000 SH -12.5\n3500000 5000000 aa1\n"),
+        (
+            "festival.segs",
+            "separator ;\nnfields 1\n#\n    0.2100 100 pau\n    0.3499 100 sh\n 0.41 100 iy\n",
+        ),
+        (
+            "phones.jsonl",
+            "{\"start\": 0.1, \"end\": 0.2, \"phone\": \"AH0\"}\n\n{\"start\": 0.2, \"end\": 0.3, \"phone\": \"M\"}\n",
+        ),
+        (
+            "short.TextGrid",
+            "\"ooTextFile\"\n\"TextGrid\"\n0\n0.5\n<exists>\n1\n\"IntervalTier\"\n\"phn\"\n0\n0.5\n3\n0\n0.1\n\"\"\n0.1\n0.3\n\"sh\"\n0.3\n0.5\n\"iy\"\n",
+        ),
+        (
+            "long.TextGrid",
+            "File type = \"ooTextFile\"\nObject class = \"TextGrid\"\n\nxmin = 0\nxmax = 0.5\ntiers? <exists>\nsize = 2\nitem []:\n    item [1]:\n        class = \"IntervalTier\"\n        name = \"words\"\n        xmin = 0\n        xmax = 0.5\n        intervals: size = 1\n        intervals [1]:\n            xmin = 0\n            xmax = 0.5\n            text = \"she\"\n    item [2]:\n        class = \"IntervalTier\"\n        name = \"phones\"\n        xmin = 0\n        xmax = 0.5\n        intervals: size = 2\n        intervals [1]:\n            xmin = 0.1\n            xmax = 0.3\n            text = \"SH\"\n        intervals [2]:\n            xmin = 0.3\n            xmax = 0.5\n            text = \"IY1\"\n    item [3]:\n        class = \"TextTier\"\n        name = \"marks\"\n        xmin = 0\n        xmax = 0.5\n        points: size = 1\n        points [1]:\n            number = 0.2\n            mark = \"x\"\n",
+        ),
+    ] {
+        put("lipsync_phones", name, text.as_bytes());
+    }
 }

@@ -5,7 +5,8 @@
 //! bytes; errors are the expected outcome for most inputs and are dropped.
 //!
 //! Files are written to a scratch directory first where the parser reads paths (MCAP
-//! sessions, `.oni` files).
+//! sessions, `.oni` files), under the temporary directory (`TMPDIR`; `scripts/fuzz` points
+//! it at the memory file system `/dev/shm` when there is one).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -25,6 +26,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("protocol_v1", protocol_v1),
     ("protocol_foxglove", protocol_foxglove),
     ("http_head", http_head),
+    ("lipsync_phones", lipsync_phones),
 ];
 
 /// Runs the target called `name`; `false` when there is none.
@@ -43,6 +45,9 @@ fn scratch(name: &str, data: &[u8]) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("mouthpiece-fuzz-{}", std::process::id()));
     let _ = std::fs::create_dir_all(&dir);
     let path = dir.join(name);
+    // A new file each time: truncating one that holds data makes ext4 flush it on close,
+    // which costs the fuzzers most of their speed.
+    let _ = std::fs::remove_file(&path);
     let mut file = std::fs::File::create(&path).expect("scratch file");
     file.write_all(data).expect("scratch write");
     path
@@ -167,5 +172,46 @@ pub fn http_head(data: &[u8]) {
         let _ = request.query_param("token");
         let _ = request.is_upgrade();
         let _ = config.access_for(request.query_param("token").as_deref());
+    }
+}
+
+/// A phone timing file of `mouthpiece lipsync`, read as every format it could be (TIMIT,
+/// TextGrid, HTK/Festival label, JSONL); what reads is classified with the shipped class
+/// table, mapped onto the generated segments and stitched as the command does, at 10
+/// samples per second (a day of phones is then 864 000 samples: every input stays quick;
+/// the sample cap itself is unit-tested).
+pub fn lipsync_phones(data: &[u8]) {
+    use mouthpiece_lipsync::phones::{self, PhoneFormat};
+    use mouthpiece_lipsync::{ClassTable, SegmentTable};
+    use std::sync::OnceLock;
+    static TABLES: OnceLock<(ClassTable, SegmentTable)> = OnceLock::new();
+    let (table, segments) = TABLES.get_or_init(|| {
+        let table = ClassTable::from_toml_str(
+            include_str!("../../../config/lipsync/classes.toml"),
+            "classes.toml",
+        )
+        .expect("the shipped class table reads");
+        let segments = SegmentTable::generate(&table);
+        (table, segments)
+    });
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    for format in [
+        PhoneFormat::Timit,
+        PhoneFormat::TextGrid,
+        PhoneFormat::Label,
+        PhoneFormat::Jsonl,
+    ] {
+        if let Ok(spans) = phones::read(text, format, "fuzz") {
+            let _ = mouthpiece_lipsync::weights_for_phones(
+                &spans,
+                "fuzz",
+                table,
+                segments,
+                mouthpiece_lipsync::DEFAULT_T_CHANGE,
+                10.0,
+            );
+        }
     }
 }

@@ -43,6 +43,8 @@ pub const T_CHANGE_RANGE: (f64, f64) = (0.030, 0.050);
 
 /// Highest sample rate accepted, samples per second.
 pub const MAX_FPS: f64 = 10_000.0;
+/// Most samples one call makes (about 18 hours at 60 per second; 200 MB of weights).
+pub const MAX_SAMPLES: f64 = 4_000_000.0;
 
 /// Phones → weight curves sampled at `fps`: classes, mapping and stitching in one call.
 /// `source_name` names the phones' source in errors.
@@ -57,6 +59,15 @@ pub fn weights_for_phones(
     if !(fps > 0.0 && fps <= MAX_FPS) {
         return Err(Error::Setting {
             what: format!("sample rate must be within (0, {MAX_FPS}] per second, got {fps}"),
+        });
+    }
+    let end = phones.iter().map(|p| p.end).fold(0.0, f64::max);
+    if end * fps > MAX_SAMPLES {
+        return Err(Error::Setting {
+            what: format!(
+                "{source_name}: the phones last {end} s; at {fps} samples per second that is \
+                 more than {MAX_SAMPLES} samples"
+            ),
         });
     }
     let classes = table.classify(phones, source_name)?;

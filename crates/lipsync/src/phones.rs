@@ -63,6 +63,9 @@ pub const TIMIT_RATE: f64 = 16_000.0;
 pub const HTK_UNIT: f64 = 1e-7;
 /// Slack for rounding in time checks, seconds.
 pub const TIME_SLACK: f64 = 1e-6;
+/// Latest time a phone may end, seconds (a day): a later end is an error naming its line,
+/// not a timeline sampled for years.
+pub const MAX_TIME: f64 = 86_400.0;
 
 /// Lowercases and drops ARPAbet stress digits (`AH0` → `ah`; TIMIT names have no digits).
 pub fn normalise(phone: &str) -> String {
@@ -339,7 +342,9 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
         }
         match tier_class.as_str() {
             "IntervalTier" => {
-                let mut spans = Vec::with_capacity(count as usize);
+                // The count comes from the file: it sizes nothing (each interval read is
+                // three tokens that are there, or an error).
+                let mut spans = Vec::new();
                 for _ in 0..count as usize {
                     let (start, line) = num_of(next("interval xmin")?, "interval xmin")?;
                     let (end, _) = num_of(next("interval xmax")?, "interval xmax")?;
@@ -413,6 +418,16 @@ pub fn check(raw: Vec<PhoneSpan>, source_name: &str) -> Result<Vec<PhoneSpan>, E
                 format!(
                     "phone {:?} starts at a negative time {} s",
                     p.phone, p.start
+                ),
+            ));
+        }
+        if p.end > MAX_TIME {
+            return Err(parse_err(
+                source_name,
+                p.line,
+                format!(
+                    "phone {:?} ends at {} s, past the limit of {MAX_TIME} s",
+                    p.phone, p.end
                 ),
             ));
         }
@@ -604,6 +619,33 @@ item []:
         assert!(err.to_string().contains("x.phn:1: end \"1oo\""), "{err}");
         let err = read("\n", PhoneFormat::Timit, "x.phn").unwrap_err();
         assert!(matches!(err, Error::Empty { .. }));
+    }
+
+    #[test]
+    fn an_interval_count_the_file_cannot_hold_is_an_error_not_an_allocation() {
+        // 1e30 overflowed the capacity of the interval list; 1e9 asked for 50 GB.
+        for count in ["1e30", "1000000000"] {
+            let text = SHORT.replacen("\n3\n", &format!("\n{count}\n"), 1);
+            let err = read(&text, PhoneFormat::TextGrid, "big.TextGrid").unwrap_err();
+            assert!(err.to_string().starts_with("big.TextGrid:"), "{err}");
+        }
+    }
+
+    #[test]
+    fn times_past_a_day_are_refused_naming_the_line() {
+        // 1e300 samples used to reach the sampling as an endless timeline.
+        for (text, format) in [
+            ("0 100 sh\n100 1e300 iy\n", PhoneFormat::Timit),
+            ("0 1000 sh\n1000 1e19 iy\n", PhoneFormat::Label),
+            (
+                "{\"start\": 0, \"end\": 0.1, \"phone\": \"sh\"}\n{\"start\": 0.1, \"end\": 86400.5, \"phone\": \"iy\"}\n",
+                PhoneFormat::Jsonl,
+            ),
+        ] {
+            let err = read(text, format, "long").unwrap_err();
+            assert!(err.to_string().starts_with("long:2: phone \"iy\" ends at"), "{err}");
+        }
+        assert!(read("0 100 sh\n100 1382400000 iy\n", PhoneFormat::Timit, "day").is_ok());
     }
 
     #[test]

@@ -100,3 +100,26 @@ fn identical_phone_files_give_identical_weights() {
     assert_eq!(wa, wb);
     assert!(wa.values.iter().any(|&v| v > 0.5));
 }
+
+#[test]
+fn a_timeline_of_too_many_samples_is_refused_before_sampling() {
+    let t = table();
+    let segments = SegmentTable::generate(&t);
+    // A day of phones is readable, but at 10 000 samples per second it would be 8.6e8
+    // samples (tens of GB of weights): an error naming the sample count, no allocation.
+    let spans = phones::read(
+        "0 1000 sh\n1000 1382400000 iy\n",
+        PhoneFormat::Timit,
+        "day.phn",
+    )
+    .unwrap();
+    let err = weights_for_phones(&spans, "day.phn", &t, &segments, 0.04, 10_000.0).unwrap_err();
+    assert!(
+        err.to_string().contains("day.phn: the phones last 86400 s")
+            && err.to_string().contains("4000000 samples"),
+        "{err}"
+    );
+    // The same phones at 40 per second are 3.5 million samples: fine.
+    let w = weights_for_phones(&spans, "day.phn", &t, &segments, 0.04, 40.0).unwrap();
+    assert_eq!(w.len(), 86_400 * 40 + 1);
+}

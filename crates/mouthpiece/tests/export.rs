@@ -649,3 +649,111 @@ fn assert_no_temporary_files(dir: &Path) {
         "temporary files left behind: {leftovers:?}"
     );
 }
+
+/// A take with a turn: the wolf retargeted with `--look-at` (a viewpoint 25° to its left,
+/// 10° down, 3 m from its head pivot, set at 1.5 s), exported with its head and eyes. The
+/// validator's report is empty, the rotation keys read back equal to the take's, and after
+/// Blender imports the GLB the head's forward axis points at the viewpoint at the last frame
+/// (within 0.1°), as do both eyes.
+#[test]
+fn a_turn_exported_faces_the_viewpoint_in_blender() {
+    use mouthpiece_retarget::head::direction_deg;
+    use mouthpiece_retarget::Character;
+    use nalgebra::{Matrix3, Vector3};
+    let dir = tempfile::tempdir().unwrap();
+    let root = repo();
+    let wolf_toml = root.join("config/characters/wolf.toml");
+    let character =
+        Character::from_toml_str(&std::fs::read_to_string(&wolf_toml).unwrap()).unwrap();
+    let axes = character.frame.axes;
+    let viewpoint = character.head.pivot + axes * direction_deg(25.0, -10.0) * 3.0;
+    let take = dir.path().join("turn.jsonl");
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(["retarget", "--character"])
+        .arg(&wolf_toml)
+        .arg("--input")
+        .arg(root.join("tests/data/example-performer.jsonl"))
+        .arg("--out")
+        .arg(&take)
+        .arg("--look-at")
+        .arg(format!(
+            "{},{},{}@1.5",
+            viewpoint.x, viewpoint.y, viewpoint.z
+        ))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "retarget: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let frames: Vec<Value> = std::fs::read_to_string(&take)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let last = frames.last().unwrap();
+    assert_eq!(last["character_head"]["mode"], "look_at", "{last}");
+    assert_eq!(last["character_head"]["in_reach"], true, "{last}");
+    assert_eq!(last["character_head"]["progress"], 1.0, "{last}");
+    assert_eq!(frames[0]["character_head"]["mode"], "follow");
+
+    let glb = dir.path().join("turn.glb");
+    let c = wolf_toml.to_str().unwrap();
+    let stderr = export_ok(&[
+        take.to_str().unwrap(),
+        "--out",
+        glb.to_str().unwrap(),
+        "--character",
+        c,
+        "--model-up",
+        "z",
+    ]);
+    assert!(
+        stderr.contains("head, eye_L, eye_R: 360 rotation keys"),
+        "{stderr}"
+    );
+    assert_valid(&glb);
+    let check = check_gltf_with(&take, &glb, &["--character", c, "--model-up", "z"]);
+    assert_eq!(check["head_keys"], 360, "{check}");
+    assert!(check["max_head_error"].as_f64().unwrap() < 1e-6, "{check}");
+
+    let t_last = last["t"].as_f64().unwrap();
+    let result = blender_samples(&glb, [t_last].into_iter());
+    assert_eq!(result["objects"]["eye_L"]["parent"], "head", "{result}");
+    let matrices = &result["matrices"][format!("{t_last:?}")];
+    let world = |name: &str| -> (Matrix3<f64>, Vector3<f64>) {
+        let rows: Vec<Vec<f64>> = serde_json::from_value(matrices[name].clone()).unwrap();
+        let m = Matrix3::from_fn(|r, c| rows[r][c]);
+        (m, Vector3::new(rows[0][3], rows[1][3], rows[2][3]))
+    };
+    // Blender's local axes are glTF's turned Z-up, (x, y, z) -> (x, -z, y); the head node's
+    // glTF axes are the wolf's model axes; the wolf is modelled Z-up, so Blender's world is
+    // the model frame again.
+    let forward_model = axes.column(2).into_owned();
+    let forward_local = Vector3::new(forward_model.x, -forward_model.z, forward_model.y);
+    let angle_deg = |a: &Vector3<f64>, b: &Vector3<f64>| {
+        let c = a.normalize().dot(&b.normalize()).clamp(-1.0, 1.0);
+        c.acos().to_degrees()
+    };
+    let (m, at) = world("head");
+    assert!(
+        (at - character.head.pivot).norm() < 1e-5,
+        "head at {at:?}, pivot {:?}",
+        character.head.pivot
+    );
+    let facing = angle_deg(&(m * forward_local), &(viewpoint - at));
+    assert!(facing <= 0.1, "the head is {facing}° off the viewpoint");
+    for eye in ["eye_L", "eye_R"] {
+        let (m, at) = world(eye);
+        let gaze = angle_deg(&(m * forward_local), &(viewpoint - at));
+        assert!(gaze <= 0.1, "{eye} looks {gaze}° off the viewpoint");
+    }
+    // The head did turn: at the start of the turn it faced elsewhere.
+    let before = &frames[44]["character_head"]["rotation"];
+    let after = &last["character_head"]["rotation"];
+    let dot: f64 = (0..4)
+        .map(|k| before[k].as_f64().unwrap() * after[k].as_f64().unwrap())
+        .sum();
+    assert!(dot.abs() < 0.99, "{before} vs {after}");
+}

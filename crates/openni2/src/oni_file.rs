@@ -354,7 +354,9 @@ pub fn add_missing_cropping(
             .take_while(|(at, _)| *at <= pos)
             .last()
             .map_or(0, |&(_, acc)| acc);
-        pos + shift
+        // Positions come from the file: a corrupt one near u64::MAX stays nonsense rather
+        // than overflowing.
+        pos.saturating_add(shift)
     };
 
     let tmp_path = path.with_extension("oni.fixing");

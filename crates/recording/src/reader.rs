@@ -120,7 +120,25 @@ impl MessageReader {
             return Ok(None);
         }
         loop {
-            let event = match self.linear.next_event() {
+            // The mcap crate's reader does unchecked arithmetic on lengths from the file (an
+            // uncompressed chunk whose record runs past the chunk underflows a counter): a
+            // panic there is a corrupt file, not the end of the program.
+            let linear = &mut self.linear;
+            let next = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || {
+                let linear = linear;
+                linear.next_event()
+            }));
+            let next = match next {
+                Ok(next) => next,
+                Err(_) => {
+                    self.done = true;
+                    return Err(RecordingError::Mcap {
+                        path: self.path_string(),
+                        source: mcap::McapError::UnexpectedEoc,
+                    });
+                }
+            };
+            let event = match next {
                 None => {
                     self.done = true;
                     return Ok(None);
@@ -156,7 +174,17 @@ impl MessageReader {
             };
             match event {
                 LinearReadEvent::ReadRequest(n) => {
-                    let buf = self.linear.insert(n.max(READ_SIZE));
+                    // Never more than the file still holds: a record header claiming
+                    // hundreds of megabytes in a small file costs no more than the file.
+                    let left = self
+                        .file
+                        .metadata()
+                        .map(|m| m.len().saturating_sub(self.bytes_read))
+                        .unwrap_or(u64::MAX);
+                    let want = n
+                        .max(READ_SIZE)
+                        .min(usize::try_from(left).unwrap_or(usize::MAX));
+                    let buf = self.linear.insert(want.max(1));
                     let got =
                         read_some(&mut self.file, buf).map_err(|source| RecordingError::Io {
                             path: self.path.display().to_string(),
@@ -166,6 +194,16 @@ impl MessageReader {
                     self.linear.notify_read(got);
                 }
                 LinearReadEvent::Record { data, opcode } => {
+                    // Only the records used here are parsed: the others (attachments,
+                    // indexes, statistics) are skipped unread, so a malformed one can do
+                    // nothing (the mcap crate's attachment parser panics on some).
+                    use mcap::records::op;
+                    if !matches!(
+                        opcode,
+                        op::SCHEMA | op::CHANNEL | op::METADATA | op::MESSAGE
+                    ) {
+                        continue;
+                    }
                     let record = mcap::parse_record(opcode, data).map_err(|source| {
                         RecordingError::Mcap {
                             path: self.path.display().to_string(),
@@ -232,8 +270,9 @@ impl Iterator for MessageReader {
 }
 
 /// Largest MCAP record (and decompressed chunk) read: a crafted length field is an error,
-/// not an allocation of terabytes. The writer's chunks are 8 MiB.
-pub const MAX_RECORD_BYTES: usize = 256 << 20;
+/// not an allocation of terabytes. The writer's chunks are 8 MiB; the largest image allowed
+/// (4096 x 4096 RGB, 48 MiB) fits with room to spare.
+pub const MAX_RECORD_BYTES: usize = 64 << 20;
 
 /// Largest colour or depth image decoded (4096 x 4096).
 pub const MAX_IMAGE_PIXELS: u64 = 4096 * 4096;

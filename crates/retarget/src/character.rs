@@ -84,6 +84,8 @@ pub struct Character {
     pub m_mode: MMode,
     /// With `MMode::Manual`: `M` per point, in point order.
     pub manual_m: Option<Vec<Vec3>>,
+    /// The head and eyes (`[head]`; defaults placed from the mouth when absent).
+    pub head: crate::head::HeadConfig,
 }
 
 /// Mouth-frame coordinates within this fraction of the mouth width of zero are exactly zero.
@@ -178,6 +180,7 @@ impl Character {
             driver,
             m_mode,
             manual_m,
+            head: crate::head::HeadConfig::default_for(&frame),
         })
     }
 
@@ -205,6 +208,11 @@ impl Character {
         self.frame.width
     }
 
+    /// A driver for this character's head and eyes (`[head]`), in its mouth frame's axes.
+    pub fn head_driver(&self) -> crate::head::HeadDriver {
+        crate::head::HeadDriver::new(self.head, self.frame.axes)
+    }
+
     /// The performer layout this character expects (its lip dot count; 3 forehead dots).
     pub fn performer_layout(&self) -> PerformerLayout {
         PerformerLayout {
@@ -225,6 +233,7 @@ struct RawCharacter {
     m_mode: Option<MMode>,
     m: Option<Spanned<Named<Spanned<[f64; 3]>>>>,
     contour: Option<Spanned<RawContour>>,
+    head: Option<Spanned<crate::head_file::RawHead>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -235,12 +244,12 @@ struct RawContour {
     points_per_lip: Spanned<usize>,
 }
 
-struct Checker<'a> {
-    src: &'a str,
+pub(crate) struct Checker<'a> {
+    pub(crate) src: &'a str,
 }
 
 impl Checker<'_> {
-    fn err(
+    pub(crate) fn err(
         &self,
         key: impl Into<String>,
         span: Option<Range<usize>>,
@@ -253,7 +262,7 @@ impl Checker<'_> {
         }
     }
 
-    fn finite(&self, key: &str, v: &Spanned<[f64; 3]>) -> Result<Vec3, Error> {
+    pub(crate) fn finite(&self, key: &str, v: &Spanned<[f64; 3]>) -> Result<Vec3, Error> {
         let a = v.get_ref();
         if !a.iter().all(|c| c.is_finite()) {
             Err(self.err(key, Some(v.span()), format!("non-finite number in {a:?}")))
@@ -474,6 +483,9 @@ impl RawCharacter {
                 other => other,
             })?;
         character.units = self.units;
+        if let Some(head) = &self.head {
+            character.head = head.get_ref().validate(src, &character)?;
+        }
         Ok(character)
     }
 }
@@ -845,6 +857,45 @@ lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
 
         let (key, _, _) = invalid(&format!("{SQUARE}[contour]\npoints_per_lip = 3\nupper = [[1, 0, 0], [-1, 0, 0]]\nlower = [[1, 0, 0], [-1, 0, 0]]\n"));
         assert_eq!(key, "contour");
+    }
+
+    #[test]
+    fn head_table_is_read_and_checked() {
+        let c = Character::from_toml_str(SQUARE).unwrap();
+        // Without [head]: placed from the mouth (width 2): pivot 1.6 widths behind.
+        assert_relative_eq!(c.head.pivot, Vec3::new(0.0, 1.0, -3.2), epsilon = 1e-12);
+        assert_eq!(c.head.reach, crate::head::Reach::default());
+        let src = format!(
+            "{SQUARE}[head]\npivot = [0, 1, -2]\nreach_up = 0.5\nturn_time_s = 0\nfollow_max_deg = 45\n"
+        );
+        let c = Character::from_toml_str(&src).unwrap();
+        assert_eq!(c.head.pivot, Vec3::new(0.0, 1.0, -2.0));
+        assert_eq!(c.head.reach.up, 0.5);
+        assert_eq!(c.head.turn_time, 0.0);
+        assert_relative_eq!(c.head.follow_max, std::f64::consts::FRAC_PI_4);
+        for (table, key, line, words) in [
+            ("reach_up = 1.5", "head.reach_up", 9, "(0, 1]"),
+            ("reach_side = 0", "head.reach_side", 9, "(0, 1]"),
+            ("turn_time_s = -1", "head.turn_time_s", 9, "[0, 60]"),
+            ("follow_gain = nan", "head.follow_gain", 9, "[0, 10]"),
+            ("eye_max_deg = 91", "head.eye_max_deg", 9, "[0, 90]"),
+            ("pivot = [0, inf, 0]", "head.pivot", 9, "non-finite"),
+            (
+                "eye_left = [-1, 1, 0]\neye_right = [1, 1, 0]",
+                "head.eye_left",
+                9,
+                "character's left",
+            ),
+            ("pivot = [1.3, 2.8, -0.4]", "head.eye_left", 9, "pivot"),
+        ] {
+            let src = format!("{SQUARE}[head]\n{table}\n");
+            let (k, l, reason) = invalid(&src);
+            assert_eq!((k.as_str(), l), (key, Some(line)), "{table}: {reason}");
+            assert!(reason.contains(words), "{table}: {reason}");
+        }
+        let (k, l, reason) = invalid(&format!("{SQUARE}[head]\nneck = 1\n"));
+        assert_eq!((k.as_str(), l), ("<toml>", Some(9)), "{reason}");
+        assert!(reason.contains("unknown field `neck`"), "{reason}");
     }
 
     #[test]

@@ -125,7 +125,8 @@ pub struct Curve {
 }
 
 /// One output line (field order as written):
-/// `{"t", "seq", "character", "points", "confidence", "head", "head_lost", "curve"}`.
+/// `{"t", "seq", "character", "points", "confidence", "head", "head_lost", "curve",
+/// "character_head"}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OutputLine {
     /// The input line's timestamp.
@@ -150,6 +151,9 @@ pub struct OutputLine {
     /// neutral pose is taken.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rig: Option<crate::rig::RigFrame>,
+    /// The character's head and eyes (docs/head.md); absent in takes made before heads.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub character_head: Option<crate::head::HeadLine>,
 }
 
 fn arr(v: &Vec3) -> [f64; 3] {
@@ -181,6 +185,7 @@ impl OutputLine {
                 }),
             },
             rig: None,
+            character_head: Some(Default::default()),
         }
     }
 
@@ -206,6 +211,7 @@ impl OutputLine {
             curve.points.clear();
             curve.points.extend(c.curve.iter().map(arr));
         }
+        self.character_head = Some((&c.head).into());
     }
 }
 
@@ -290,6 +296,7 @@ mod tests {
                 points: vec![[0.0; 3]],
             }),
             rig: Some(crate::rig::RigFrame::default()),
+            character_head: Some(Default::default()),
         };
         let text = serde_json::to_string(&line).unwrap();
         assert!(

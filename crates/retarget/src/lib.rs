@@ -13,6 +13,8 @@
 //! - [`smooth`]: shape smoothing across the points of a step (§8), and [`one_euro`]: the
 //!   temporal filter.
 //! - [`rig`]: jaw, lip motions and ARKit-named mouth curves (docs/rig.md).
+//! - [`head`]: the character's head and eyes: reach test, turns by slerp, following the
+//!   performer.
 //! - [`jsonl`]: the line formats of `mouthpiece retarget` (read by `export`, extended by
 //!   `process`).
 //!
@@ -38,6 +40,8 @@ pub mod character;
 pub mod deform;
 mod error;
 pub mod frame;
+pub mod head;
+mod head_file;
 pub mod jsonl;
 pub mod kabsch;
 pub mod layout;
@@ -51,6 +55,7 @@ pub mod smooth;
 pub use character::{Character, MMode, Units};
 pub use error::Error;
 pub use frame::MouthFrame;
+pub use head::{HeadConfig, HeadDriver, HeadFrame, HeadMode, Reach};
 pub use kabsch::RigidTransform;
 pub use layout::{DotId, PerformerDots, PerformerLayout};
 pub use named::Named;

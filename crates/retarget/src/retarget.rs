@@ -225,6 +225,8 @@ pub struct CharacterFrame {
     pub confidence: Vec<f64>,
     /// The smoothed closed curve (empty with `ShapeSmoothing::None`).
     pub curve: Vec<Vec3>,
+    /// The character's head and eyes (docs/head.md).
+    pub head: crate::head::HeadFrame,
 }
 
 /// Moves one character's points from stabilised performer dots (docs/method.md §6).
@@ -236,6 +238,11 @@ pub struct CharacterRetarget {
     /// `D⁰` of the dot driving each point.
     d0: Vec<Vec3>,
     filters: Vec<OneEuro>,
+    /// The head and eyes, driven by the performer's head or a viewpoint.
+    head: crate::head::HeadDriver,
+    /// The performer's neutral mouth frame axes (camera frame): the head rotation is carried
+    /// into them, where it means the same to the character.
+    performer_axes: nalgebra::Matrix3<f64>,
     out: CharacterFrame,
 }
 
@@ -275,7 +282,10 @@ impl CharacterRetarget {
                 points: character.neutral.clone(),
                 confidence: vec![0.0; n],
                 curve: Vec::with_capacity(settings.smoothing.curve_len(n)),
+                head: Default::default(),
             },
+            head: character.head_driver(),
+            performer_axes: neutral.frame.axes,
             character,
             settings,
             m,
@@ -292,6 +302,17 @@ impl CharacterRetarget {
     /// The deformation parameters `M`, per point (reported in `hello`).
     pub fn m(&self) -> &[Vec3] {
         &self.m
+    }
+
+    /// The head and eyes.
+    pub fn head(&self) -> &crate::head::HeadDriver {
+        &self.head
+    }
+
+    /// Turns the head to `point` (character model frame), or back to following the
+    /// performer (`None`); see [`crate::head::HeadDriver::look_at`].
+    pub fn look_at(&mut self, point: Option<Vec3>) -> Result<Option<bool>, Error> {
+        self.head.look_at(point)
     }
 
     /// The settings.
@@ -322,6 +343,12 @@ impl CharacterRetarget {
             out.confidence[n] = performer.confidence[d];
         }
         smooth_closed(&out.points, &self.settings.smoothing, &mut out.curve);
+        let p = &self.performer_axes;
+        let relative = p.transpose() * performer.head.rotation * p;
+        let relative = nalgebra::UnitQuaternion::from_rotation_matrix(
+            &nalgebra::Rotation3::from_matrix_unchecked(relative),
+        );
+        out.head = *self.head.step(performer.t, &relative);
         &self.out
     }
 }
@@ -383,5 +410,10 @@ impl Retargeter {
     /// The character side.
     pub fn character(&self) -> &CharacterRetarget {
         &self.character
+    }
+
+    /// The character side, to change (e.g. [`CharacterRetarget::look_at`]).
+    pub fn character_mut(&mut self) -> &mut CharacterRetarget {
+        &mut self.character
     }
 }

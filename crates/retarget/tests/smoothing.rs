@@ -71,3 +71,79 @@ fn closed_bspline_matches_scipy_bspline() {
         );
     }
 }
+
+/// The head's turn (`head::slerp`) against scipy's `Slerp` (tests/reference/slerp_reference.py)
+/// on random quaternion pairs, including nearly equal and nearly opposite ones: the same
+/// rotations to 1e-12.
+#[test]
+fn head_slerp_agrees_with_scipy() {
+    use mouthpiece_retarget::head::{slerp, Quat};
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(2);
+    let random_quat = |rng: &mut rand::rngs::StdRng| {
+        let q = nalgebra::Quaternion::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
+        Quat::new_normalize(q)
+    };
+    let mut pairs = Vec::new();
+    for i in 0..200 {
+        let a = random_quat(&mut rng);
+        let b = match i % 4 {
+            // Nearly the same rotation.
+            0 => a * Quat::from_scaled_axis(nalgebra::Vector3::new(1e-4, -2e-4, 3e-5)),
+            // Nearly half a turn apart.
+            1 => a * Quat::from_scaled_axis(nalgebra::Vector3::new(0.0, 3.1, 0.0)),
+            _ => random_quat(&mut rng),
+        };
+        pairs.push((a, b));
+    }
+    let s: Vec<f64> = vec![0.0, 0.1, 1.0 / 3.0, 0.5, 2.0 / 3.0, 0.9, 1.0];
+    let wxyz = |q: &Quat| [q.w, q.i, q.j, q.k];
+    let input = serde_json::json!({
+        "pairs": pairs.iter().map(|(a, b)| [wxyz(a), wxyz(b)]).collect::<Vec<_>>(),
+        "s": s,
+    });
+    let python = std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| {
+        let venv = concat!(env!("CARGO_MANIFEST_DIR"), "/../../target/py/bin/python");
+        if std::path::Path::new(venv).exists() {
+            venv.into()
+        } else {
+            "python3".into()
+        }
+    });
+    let script = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../tests/reference/slerp_reference.py"
+    );
+    let mut child = std::process::Command::new(&python)
+        .arg(script)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{python} (with scipy, from scripts/test): {e}"));
+    std::io::Write::write_all(child.stdin.as_mut().unwrap(), input.to_string().as_bytes()).unwrap();
+    drop(child.stdin.take());
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "slerp_reference.py failed");
+    let reference: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mut worst = 0.0f64;
+    for ((a, b), expected) in pairs.iter().zip(reference["results"].as_array().unwrap()) {
+        for (&si, e) in s.iter().zip(expected.as_array().unwrap()) {
+            let e: Vec<f64> = e
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
+            let got = wxyz(&slerp(a, b, si));
+            let same: f64 = (0..4).map(|k| (got[k] - e[k]).abs()).fold(0.0, f64::max);
+            let opposite: f64 = (0..4).map(|k| (got[k] + e[k]).abs()).fold(0.0, f64::max);
+            worst = worst.max(same.min(opposite));
+        }
+    }
+    assert!(worst <= 1e-12, "largest difference from scipy: {worst:e}");
+}

@@ -152,7 +152,8 @@ fn schema(kind: &ChannelKind) -> (String, Value) {
             json!({
                 "name": {"type": "string"},
                 "points": {"type": "array", "items": point_schema(true)},
-                "curve": {"type": "array", "items": point_schema(false)}
+                "curve": {"type": "array", "items": point_schema(false)},
+                "head": crate::head::foxglove_schema()
             }),
             vec!["name", "points"],
         ),
@@ -228,6 +229,9 @@ fn payload(
             });
             if let Some(curve) = &c.curve {
                 v["curve"] = curve.iter().map(xyz).collect();
+            }
+            if let Some(head) = &c.head {
+                v["head"] = crate::head::foxglove_payload(head);
             }
             v
         }

@@ -56,6 +56,8 @@ pub struct CharacterFrame {
     /// The rig (docs/rig.md) once the performer is calibrated; JSON only.
     #[serde(skip)]
     pub rig: Option<crate::rig::RigState>,
+    /// The character's head and eyes (docs/head.md), if the daemon drives them.
+    pub head: Option<crate::head::CharacterHead>,
 }
 
 /// The performer's lip dots in one frame: head motion removed, performer mouth frame, metres.
@@ -99,6 +101,7 @@ impl Clone for CharacterFrame {
             confidence: self.confidence.clone(),
             curve: self.curve.clone(),
             rig: self.rig,
+            head: self.head,
         }
     }
     fn clone_from(&mut self, other: &Self) {
@@ -107,6 +110,7 @@ impl Clone for CharacterFrame {
         self.confidence.clone_from(&other.confidence);
         clone_option_from(&mut self.curve, &other.curve);
         self.rig = other.rig;
+        self.head = other.head;
     }
 }
 
@@ -274,6 +278,14 @@ pub enum ControlCommand {
     },
     /// Stop the current take.
     RecordStop,
+    /// Turn a character's head to a viewpoint (its model frame), or back to following the
+    /// performer (`None`).
+    LookAt {
+        /// The character's name (checked against the stream's characters).
+        character: String,
+        /// Finite, within ±1e6.
+        point: Option<[f64; 3]>,
+    },
 }
 
 /// Why the daemon refused or failed a control request; the client gets it as an `error`.

@@ -69,6 +69,7 @@ pub mod console;
 mod error;
 mod foxglove;
 pub mod foxglove_scene;
+pub mod head;
 pub mod host;
 pub mod http;
 pub mod hub;
@@ -89,6 +90,7 @@ pub use foxglove::{
     check_client_message as check_foxglove_client_message, FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL,
     MAX_SUBSCRIPTIONS_PER_CLIENT, PERFORMER_CHANNEL,
 };
+pub use head::{CharacterHead, LookMode};
 pub use hub::{
     CharacterFrame, CharacterInfo, ControlCommand, ControlFailure, ControlOutcome, ControlReceiver,
     ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,

@@ -154,6 +154,14 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
     rig.curves.0[0] = 0.8 * open;
     rig.curves.0[6] = smile.max(0.0);
     rig.curves.0[7] = smile.max(0.0);
+    // The heads turn with the performer's yaw; the eyes turn back against it.
+    let (c, s) = ((yaw / 2.0).cos(), (yaw / 2.0).sin());
+    let head = Some(crate::head::CharacterHead {
+        rotation: [c, 0.0, s, 0.0],
+        eye_left: [c, 0.0, -s, 0.0],
+        eye_right: [c, 0.0, -s, 0.0],
+        ..Default::default()
+    });
     frame.characters = vec![
         CharacterFrame {
             name: "human".into(),
@@ -161,6 +169,7 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
             points: human,
             confidence: confidence.clone(),
             rig: Some(rig),
+            head,
         },
         CharacterFrame {
             name: "wolf".into(),
@@ -168,6 +177,7 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
             points: wolf,
             confidence: confidence.clone(),
             rig: Some(rig),
+            head,
         },
     ];
     frame.performer = Some(PerformerFrame {

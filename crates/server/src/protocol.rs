@@ -69,6 +69,18 @@ pub enum ClientMessage {
     },
     /// Start, change or stop the camera preview (binary `MPP1` messages).
     Preview(PreviewSubscribe),
+    /// Turn a character's head to a viewpoint, or back to following the performer.
+    LookAt {
+        /// Echoed in the answer.
+        #[serde(default)]
+        id: Option<RequestId>,
+        /// The character's name, as in `hello`.
+        character: String,
+        /// `[x, y, z]` in the character's model frame, or `null` (or absent) to follow the
+        /// performer again.
+        #[serde(default)]
+        point: Option<[f64; 3]>,
+    },
 }
 
 /// The `preview` request.
@@ -364,6 +376,7 @@ struct CharacterView<'a> {
     curve: Option<&'a [[f32; 3]]>,
     #[serde(skip_serializing_if = "Option::is_none")]
     rig: Option<&'a crate::rig::RigState>,
+    head: Option<&'a crate::head::CharacterHead>,
 }
 
 impl<'a> FrameView<'a> {
@@ -392,6 +405,7 @@ impl<'a> FrameView<'a> {
                         None
                     },
                     rig: if selection.rig { c.rig.as_ref() } else { None },
+                    head: c.head.as_ref(),
                 })
                 .collect(),
             performer: if selection.performer {
@@ -531,7 +545,14 @@ pub fn parse_client_message(text: &str) -> Result<ClientMessage, ParseFailure> {
             id,
         });
     };
-    let known = ["subscribe", "calibrate", "record", "ping", "preview"];
+    let known = [
+        "subscribe",
+        "calibrate",
+        "record",
+        "ping",
+        "preview",
+        "look_at",
+    ];
     let kind_name = kind.as_str().unwrap_or_default().to_owned();
     match kind.as_str() {
         Some(k) if known.contains(&k) => {}
@@ -588,6 +609,7 @@ fn validate(message: &ClientMessage) -> Result<(), String> {
             slate: Some(slate),
             ..
         } if !valid_slate(slate) => Err(format!("record: slate {SLATE_RULE}, got {slate:?}")),
+        ClientMessage::LookAt { point: Some(p), .. } => crate::head::check_point(p),
         _ => Ok(()),
     }
 }

@@ -1,7 +1,7 @@
 //! The accept loop and the per-connection front door (TLS, HTTP routing, WebSocket upgrade).
 
 use std::future::Future;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
@@ -96,9 +96,10 @@ pub async fn run(
             accepted = listener.accept() => match accepted {
                 Ok((stream, peer)) => {
                     let open = shared.connections.fetch_add(1, Ordering::Relaxed);
-                    // Full: the oldest connection still in its handshake makes room, so
-                    // connections opened and left silent cannot lock everyone else out.
-                    if open >= shared.config.limits.max_connections && !shared.pending.evict_oldest() {
+                    // Full: a connection still in its handshake makes room (the oldest of the
+                    // peer holding the most), so connections opened and left silent cannot
+                    // lock everyone else out.
+                    if open >= shared.config.limits.max_connections && !shared.pending.evict() {
                         shared.connections.fetch_sub(1, Ordering::Relaxed);
                         shared.hub.inner.metrics.connections_rejected.fetch_add(1, Ordering::Relaxed);
                         debug!(%peer, "too many connections: closed");
@@ -108,7 +109,7 @@ pub async fn run(
                     let span = tracing::info_span!("conn", %peer);
                     // Created before spawning, so an aborted task still gives its slot back.
                     let open = OpenConnection(shared.clone());
-                    let handshake = shared.pending.register();
+                    let handshake = shared.pending.register(peer);
                     tasks.spawn(async move {
                         let _open = open;
                         handle_connection(&shared, stream, peer, handshake).await;
@@ -144,12 +145,31 @@ impl Drop for OpenConnection {
 }
 
 /// Connections that have not yet sent a full request head, oldest first. When
-/// `max_connections` is reached, a new connection evicts the oldest of them (it has had
-/// the longest to speak); connections past the front door are never evicted.
+/// `max_connections` is reached, a new connection evicts one of them: the oldest of those
+/// held by the peer holding the most (one peer opening connections and leaving them silent
+/// only ever evicts its own, never another peer's handshake), see [`Pending::evict`].
+/// Connections past the front door are never evicted.
 #[derive(Default)]
 struct Pending {
-    queue: std::sync::Mutex<std::collections::VecDeque<(u64, Arc<tokio::sync::Notify>)>>,
+    queue: std::sync::Mutex<std::collections::VecDeque<PendingEntry>>,
     next: std::sync::atomic::AtomicU64,
+}
+
+/// One pending handshake: its id, its peer (see [`peer_key`]), the signal that closes it.
+type PendingEntry = (u64, IpAddr, Arc<tokio::sync::Notify>);
+
+/// Who a connection counts against in [`Pending`]: its IPv4 address, or the /64 network of
+/// its IPv6 address (one host usually holds a whole /64). Local processes all share the
+/// loopback address, so among them eviction is simply oldest-first.
+fn peer_key(peer: SocketAddr) -> IpAddr {
+    match peer.ip().to_canonical() {
+        IpAddr::V6(v6) => {
+            let mut octets = v6.octets();
+            octets[8..].fill(0);
+            IpAddr::V6(octets.into())
+        }
+        v4 => v4,
+    }
 }
 
 /// A connection's place in [`Pending`]; leaves it when dropped.
@@ -160,25 +180,33 @@ struct Handshake<'a> {
 }
 
 impl Pending {
-    fn register(&self) -> (u64, Arc<tokio::sync::Notify>) {
+    fn register(&self, peer: SocketAddr) -> (u64, Arc<tokio::sync::Notify>) {
         let id = self.next.fetch_add(1, Ordering::Relaxed);
         let evicted = Arc::new(tokio::sync::Notify::new());
         self.queue
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .push_back((id, evicted.clone()));
+            .push_back((id, peer_key(peer), evicted.clone()));
         (id, evicted)
     }
 
-    /// Tells the oldest pending connection to close; false when there is none.
-    fn evict_oldest(&self) -> bool {
-        let oldest = self
-            .queue
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .pop_front();
-        match oldest {
-            Some((_, evicted)) => {
+    /// Tells one pending connection to close; false when there is none. The one chosen is
+    /// the oldest of the peer holding the most pending handshakes (ties: the peer whose
+    /// oldest handshake is oldest), so a peer that floods the front door pays for it alone.
+    fn evict(&self) -> bool {
+        let mut queue = self.queue.lock().unwrap_or_else(|e| e.into_inner());
+        let mut held: std::collections::HashMap<IpAddr, usize> = std::collections::HashMap::new();
+        for (_, peer, _) in queue.iter() {
+            *held.entry(*peer).or_default() += 1;
+        }
+        let Some(most) = held.values().copied().max() else {
+            return false;
+        };
+        let Some(index) = queue.iter().position(|(_, peer, _)| held[peer] == most) else {
+            return false;
+        };
+        match queue.remove(index) {
+            Some((_, _, evicted)) => {
                 evicted.notify_one();
                 true
             }
@@ -190,7 +218,7 @@ impl Pending {
         self.queue
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .retain(|(i, _)| *i != id);
+            .retain(|(i, _, _)| *i != id);
     }
 }
 

@@ -667,6 +667,25 @@ async fn read_loop(
                     duration: duration_s.map(Duration::from_secs_f64),
                 },
             ),
+            ClientMessage::LookAt {
+                id,
+                character,
+                point,
+            } => match crate::head::unknown_character(&shared.hub.info(), &character) {
+                Some(message) if access >= Access::Control => {
+                    metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+                    reply(error_json(ErrorCode::BadRequest, message, id))
+                }
+                _ => control(
+                    &shared,
+                    &out,
+                    access,
+                    peer,
+                    id,
+                    "look_at",
+                    ControlCommand::LookAt { character, point },
+                ),
+            },
             ClientMessage::Record {
                 id,
                 action,

@@ -466,3 +466,185 @@ async fn a_client_that_does_not_read_its_replies_gets_1008_with_a_reason() {
     sender.abort();
     server.stop().await;
 }
+
+/// A TCP connection to `addr` from the loopback address `from` (any of 127.0.0.0/8).
+async fn connect_from(from: &str, addr: std::net::SocketAddr) -> TcpStream {
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.bind(format!("{from}:0").parse().unwrap()).unwrap();
+    socket.connect(addr).await.unwrap()
+}
+
+/// Sends `GET /healthz` on `s` and returns the status (0 when the server closed instead).
+async fn healthz_on(mut s: TcpStream, addr: std::net::SocketAddr) -> u16 {
+    if s.write_all(format!("GET /healthz HTTP/1.1\r\nHost: {addr}\r\n\r\n").as_bytes())
+        .await
+        .is_err()
+    {
+        return 0;
+    }
+    let mut buf = Vec::new();
+    let _ = tokio::time::timeout(Duration::from_secs(5), s.read_to_end(&mut buf)).await;
+    parse_response(&buf).0
+}
+
+/// Whether the server has closed `s` (it reads end of stream or an error within 50 ms).
+async fn closed_by_server(s: &mut TcpStream) -> bool {
+    let mut byte = [0u8; 1];
+    matches!(
+        tokio::time::timeout(Duration::from_millis(50), s.read(&mut byte)).await,
+        Ok(Ok(0) | Err(_))
+    )
+}
+
+fn small_front_door() -> ServerConfig {
+    ServerConfig {
+        limits: Limits {
+            max_connections: 8,
+            max_clients: 4,
+            ..Limits::default()
+        },
+        ..ServerConfig::default()
+    }
+}
+
+#[tokio::test]
+async fn a_peer_flooding_the_front_door_evicts_only_its_own_handshakes() {
+    let server = TestServer::start(small_front_door()).await;
+    // A slow client (another machine, a TLS handshake on a busy booth PC) has connected but
+    // not yet sent its request.
+    let slow = connect_from("127.0.0.3", server.addr).await;
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    // Meanwhile one peer opens 40 connections and says nothing on any of them.
+    let mut flood = Vec::new();
+    for _ in 0..40 {
+        flood.push(connect_from("127.0.0.2", server.addr).await);
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    // The flood evicted its own handshakes, oldest first; the slow client is still there
+    // and is served when it speaks. So is a new client from a third address.
+    assert_eq!(
+        healthz_on(slow, server.addr).await,
+        200,
+        "the slow client was evicted"
+    );
+    let third = connect_from("127.0.0.4", server.addr).await;
+    assert_eq!(healthz_on(third, server.addr).await, 200);
+    let mut closed = 0;
+    for s in &mut flood {
+        closed += usize::from(closed_by_server(s).await);
+    }
+    assert!(closed >= 40 - 8, "only {closed} of the flood's 40 closed");
+    drop(flood);
+    server.stop().await;
+}
+
+#[tokio::test]
+async fn a_local_process_holding_silent_connections_does_not_lock_others_out() {
+    // Local processes all connect from 127.0.0.1: one of them keeps opening connections
+    // and never speaks, holding far more than max_connections over time.
+    let server = TestServer::start(small_front_door()).await;
+    let addr = server.addr;
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flooder = tokio::spawn({
+        let stop = stop.clone();
+        async move {
+            let mut held = Vec::new();
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                if let Ok(s) = TcpStream::connect(addr).await {
+                    held.push(s);
+                }
+                tokio::time::sleep(Duration::from_millis(1)).await;
+            }
+            held.len()
+        }
+    });
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    // Another local client, connecting and speaking as a browser does, is served every time.
+    for _ in 0..20 {
+        let s = TcpStream::connect(addr).await.unwrap();
+        assert_eq!(healthz_on(s, addr).await, 200, "locked out by the flood");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    let mut ws = connect_v1(&server.url()).await;
+    next_of_type(&mut ws, "hello").await;
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let held = flooder.await.unwrap();
+    assert!(held > 8 * 4, "the flood opened {held} connections");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn max_clients_is_exact_under_simultaneous_upgrades() {
+    let config = ServerConfig {
+        limits: Limits {
+            max_clients: 3,
+            ..Limits::default()
+        },
+        ..ServerConfig::default()
+    };
+    let server = TestServer::start(config).await;
+    let addr = server.addr;
+    let n = 48;
+    let mut sockets = Vec::new();
+    for _ in 0..n {
+        sockets.push(TcpStream::connect(addr).await.unwrap());
+    }
+    // Every request head goes out at the same moment.
+    let barrier = Arc::new(tokio::sync::Barrier::new(n));
+    let mut tasks = Vec::new();
+    for mut s in sockets {
+        let barrier = barrier.clone();
+        tasks.push(tokio::spawn(async move {
+            let head = format!(
+                "GET / HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+                 Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\
+                 Sec-WebSocket-Protocol: mouthpiece.v1\r\n\r\n"
+            );
+            barrier.wait().await;
+            s.write_all(head.as_bytes()).await.unwrap();
+            let mut buf = vec![0u8; 4096];
+            let got = tokio::time::timeout(Duration::from_secs(5), s.read(&mut buf))
+                .await
+                .expect("an answer within 5 s")
+                .unwrap_or(0);
+            let (status, _) = parse_response(&buf[..got]);
+            (status, s)
+        }));
+    }
+    let mut statuses = Vec::new();
+    let mut open = Vec::new();
+    for t in tasks {
+        let (status, s) = t.await.unwrap();
+        statuses.push(status);
+        open.push(s);
+    }
+    let upgraded = statuses.iter().filter(|&&s| s == 101).count();
+    let full = statuses.iter().filter(|&&s| s == 503).count();
+    assert_eq!((upgraded, full), (3, n - 3), "statuses {statuses:?}");
+    assert_eq!(server.hub.clients(), 3);
+    drop(open);
+    server.stop().await;
+}
+
+#[tokio::test]
+async fn healthz_reports_a_failed_daemon_with_503_and_the_reason() {
+    let server = TestServer::start(ServerConfig::default()).await;
+    let (status, _) = http_get(server.addr, "/healthz", "").await;
+    assert_eq!(status, 200);
+    server
+        .hub
+        .set_failure("the source thread died: panicked: attempt to add with overflow".into());
+    let (status, body) = http_get(server.addr, "/healthz", "").await;
+    assert_eq!(status, 503, "{body}");
+    let health: serde_json::Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(health["status"], "failed");
+    assert!(
+        health["reason"]
+            .as_str()
+            .unwrap()
+            .contains("source thread died"),
+        "{body}"
+    );
+    server.stop().await;
+}

@@ -216,8 +216,11 @@ async fn control_requests_reach_the_daemon_and_answers_come_back() {
                     request.reply(Err(ControlFailure::new("not recording")))
                 }
                 ControlCommand::Calibrate { .. } => request.reply(Ok(json!({"frames": 30}))),
+                ControlCommand::LookAt { character, point } => request.reply(Ok(
+                    json!({"character": character, "point": point, "in_reach": true}),
+                )),
             }
-            if seen.len() == 3 {
+            if seen.len() == 4 {
                 return seen;
             }
         }
@@ -251,7 +254,47 @@ async fn control_requests_reach_the_daemon_and_answers_come_back() {
     .await;
     let r = next_of_type(&mut ws, "result").await;
     assert_eq!(r["detail"]["frames"], 30);
+    // look_at: an unknown character and a point JSON cannot hold never reach the daemon.
+    send_json(
+        &mut ws,
+        json!({"type": "look_at", "id": 10, "character": "ghost", "point": [0, 0, 1]}),
+    )
+    .await;
+    let e = next_of_type(&mut ws, "error").await;
+    assert_eq!(
+        (e["id"].as_i64(), e["code"].as_str()),
+        (Some(10), Some("bad_request"))
+    );
+    assert!(e["message"].as_str().unwrap().contains("ghost"), "{e}");
+    ws.send(tokio_tungstenite::tungstenite::Message::text(
+        r#"{"type":"look_at","id":11,"character":"wolf","point":[1e999,0,0]}"#,
+    ))
+    .await
+    .unwrap();
+    let e = next_of_type(&mut ws, "error").await;
+    assert!(
+        matches!(e["code"].as_str(), Some("bad_json" | "bad_request")),
+        "{e}"
+    );
+    send_json(
+        &mut ws,
+        json!({"type": "look_at", "id": 12, "character": "wolf", "point": [0.1, 0.2, 3.0]}),
+    )
+    .await;
+    let r = next_of_type(&mut ws, "result").await;
+    assert_eq!(
+        (r["id"].as_i64(), r["request"].as_str()),
+        (Some(12), Some("look_at"))
+    );
+    assert_eq!(r["detail"]["in_reach"], true);
     let seen = daemon.join().unwrap();
+    assert_eq!(
+        seen[3],
+        ControlCommand::LookAt {
+            character: "wolf".into(),
+            point: Some([0.1, 0.2, 3.0])
+        }
+    );
     assert_eq!(
         seen[2],
         ControlCommand::Calibrate {
@@ -288,6 +331,16 @@ async fn control_needs_the_control_token_and_unanswered_requests_time_out() {
     let e = next_of_type(&mut reader, "error").await;
     assert_eq!(e["code"], "forbidden");
     assert_eq!(e["id"], 5);
+    send_json(
+        &mut reader,
+        json!({"type": "look_at", "id": 15, "character": "ghost", "point": null}),
+    )
+    .await;
+    let e = next_of_type(&mut reader, "error").await;
+    assert_eq!(
+        (e["code"].as_str(), e["id"].as_i64()),
+        (Some("forbidden"), Some(15))
+    );
     // A read client may still subscribe.
     send_json(&mut reader, json!({"type": "subscribe"})).await;
     next_of_type(&mut reader, "result").await;

@@ -50,6 +50,12 @@ async fn server_messages_match_the_published_schemas() {
                     "file": format!("{}_{}.mcap", slate.unwrap_or_default(), take.unwrap_or(1))
                 }))),
                 ControlCommand::RecordStop => r.reply(Err(ControlFailure::new("not recording"))),
+                ControlCommand::LookAt { character, point } => r.reply(Ok(json!({
+                    "character": character,
+                    "point": point,
+                    "mode": if point.is_some() { "look_at" } else { "follow" },
+                    "in_reach": point.map(|_| true),
+                }))),
             }
         }
     });
@@ -68,6 +74,9 @@ async fn server_messages_match_the_published_schemas() {
         json!({"type": "record", "id": 3, "action": "start", "slate": "scene 4", "take": 2}),
         json!({"type": "record", "id": 4, "action": "stop"}),
         json!({"type": "subscribe", "id": 5, "characters": ["ghost"]}),
+        json!({"type": "look_at", "id": 6, "character": "wolf", "point": [0.1, -0.2, 3.0]}),
+        json!({"type": "look_at", "id": 7, "character": "wolf", "point": null}),
+        json!({"type": "look_at", "id": 8, "character": "ghost", "point": [0, 0, 1]}),
     ];
     for m in &client_msgs {
         send_json(&mut ws, m.clone()).await;
@@ -76,9 +85,10 @@ async fn server_messages_match_the_published_schemas() {
     ws.send(Message::text("{oops")).await.unwrap();
     ws.send(Message::text(r#"{"type":"dance"}"#)).await.unwrap();
     // Expect: hello, status, result(sub), pong, result(calibrate), result(record), error(stop),
-    // error(ghost), error(bad_json), error(unknown_type).
-    let mut want_errors = 4;
-    let mut want_results = 3;
+    // error(ghost), result(look_at) twice, error(look_at ghost), error(bad_json),
+    // error(unknown_type).
+    let mut want_errors = 5;
+    let mut want_results = 5;
     let mut pong = false;
     while want_errors + want_results > 0 || !pong {
         let v = next_json(&mut ws).await;

@@ -237,6 +237,10 @@ pub struct ProcessLine<'a> {
     pub performer: &'a Named<Option<[f64; 3]>>,
     pub status: &'a Status,
     pub frame: FrameRef,
+    /// The performer's rig (docs/rig.md), once the neutral pose is taken; its figures are in
+    /// `retarget.rig`.
+    #[serde(skip)]
+    pub rig: Option<&'a Rig>,
 }
 
 fn no_character() -> TrackError {
@@ -262,6 +266,9 @@ pub struct Pipeline {
     /// The performer's rig (docs/rig.md), once the neutral pose is taken.
     rig_settings: RigSettings,
     rig: Option<Rig>,
+    /// Viewpoints set with [`Pipeline::look_at`], by character name: kept across new
+    /// neutral poses and reloads.
+    viewpoints: Vec<(String, mouthpiece_retarget::Vec3)>,
 }
 
 impl std::fmt::Debug for Pipeline {
@@ -331,6 +338,7 @@ impl Pipeline {
             performer,
             rig_settings,
             rig: None,
+            viewpoints: Vec::new(),
         })
     }
 
@@ -365,6 +373,43 @@ impl Pipeline {
     /// The last frame the tracker made (after [`Pipeline::step`]).
     pub fn tracked(&self) -> &TrackedFrame {
         &self.tracker.out
+    }
+
+    /// Turns `character`'s head to `point` (its model frame), or back to following the
+    /// performer (`None`). Returns whether the point is in reach (`None` when following).
+    /// Kept when the characters are bound to a new neutral pose.
+    pub fn look_at(
+        &mut self,
+        character: &str,
+        point: Option<mouthpiece_retarget::Vec3>,
+    ) -> Result<Option<bool>, TrackError> {
+        let Some(index) = self.characters.iter().position(|c| c.name == character) else {
+            let known: Vec<&str> = self.characters.iter().map(|c| c.name.as_str()).collect();
+            return Err(TrackError::Config {
+                key: "look_at.character".into(),
+                message: format!(
+                    "unknown character {character:?} (available: {})",
+                    known.join(", ")
+                ),
+            });
+        };
+        let bad = |e: mouthpiece_retarget::Error| TrackError::Config {
+            key: "look_at.point".into(),
+            message: e.to_string(),
+        };
+        // Checked on a fresh driver first, so a refused point changes nothing.
+        let in_reach = self.characters[index]
+            .head_driver()
+            .look_at(point)
+            .map_err(bad)?;
+        self.viewpoints.retain(|(name, _)| name != character);
+        if let Some(p) = point {
+            self.viewpoints.push((character.to_owned(), p));
+        }
+        if let Some(Some(bound)) = self.bound.get_mut(index) {
+            bound.look_at(point).map_err(bad)?;
+        }
+        Ok(in_reach)
     }
 
     /// Whether the characters were bound to a new neutral pose since the last call.
@@ -434,6 +479,15 @@ impl Pipeline {
                 },
             )
             .collect();
+        for (name, point) in &self.viewpoints {
+            let at = self.characters.iter().position(|c| &c.name == name);
+            if let Some(Some(bound)) = at.and_then(|i| self.bound.get_mut(i)) {
+                // Checked when it was set; a reloaded character may refuse it.
+                if let Err(e) = bound.look_at(Some(*point)) {
+                    tracing::warn!(character = %name, "viewpoint dropped: {e}");
+                }
+            }
+        }
         self.rebound = true;
         first_error.map_or(Ok(()), Err)
     }
@@ -523,6 +577,7 @@ impl Pipeline {
                 seq: tracked.seq,
                 device_ts_us: tracked.device_ts_us,
             },
+            rig: self.rig.as_ref(),
         };
         Ok((line, tracked))
     }

@@ -12,7 +12,10 @@ use opencv::core::{Mat, Point, Scalar, CV_16UC1, CV_8UC3};
 use opencv::imgproc;
 use opencv::prelude::*;
 
+use std::collections::VecDeque;
+
 use super::*;
+use crate::calibration::thin_out;
 
 const SKIN: Scalar = Scalar::new(120.0, 150.0, 205.0, 0.0);
 const GREEN: Scalar = Scalar::new(50.0, 175.0, 40.0, 0.0);
@@ -391,66 +394,6 @@ fn bad_configuration_names_the_key() {
 }
 
 #[test]
-fn names_slipped_around_the_mouth_are_caught_by_the_corners() {
-    let tr = calibrated_tracker();
-    // Later, the head turned and the jaw open: candidates in truth order (D1..D12, F1..F3).
-    let truth = posed(0.006, &head(10.0, 4.0, Vec3::new(0.005, 0.0, 0.0)));
-    let cands = candidates(&truth);
-    let right: Vec<Option<usize>> = (0..15).map(Some).collect();
-    assert!(tr.corners_are_extremes(&right, &cands));
-    // Every lip name one place on around the mouth: still in order, but D7 (the right corner)
-    // now sits on D8's blob and D1 on D2's: the order check cannot see it, the corners can.
-    for shift in [1, 11] {
-        let slipped: Vec<Option<usize>> = (0..12)
-            .map(|i| Some((i + shift) % 12))
-            .chain((12..15).map(Some))
-            .collect();
-        assert!(
-            !tr.corners_are_extremes(&slipped, &cands),
-            "slip by {shift}"
-        );
-    }
-    // A corner missing is no evidence of a slip.
-    let mut missing = right.clone();
-    missing[6] = None;
-    assert!(tr.corners_are_extremes(&missing, &cands));
-}
-
-#[test]
-fn a_name_slipped_onto_an_unseen_neighbours_place_is_dropped() {
-    let tr = calibrated_tracker();
-    let cands = candidates(&posed(0.0, &RigidTransform::IDENTITY));
-    let right: Vec<Option<usize>> = (0..15).map(Some).collect();
-    let check = |names: &[Option<usize>]| {
-        let mut names = names.to_vec();
-        tr.keep_corner_neighbours_in_place(&mut names, &cands);
-        names
-    };
-    assert_eq!(check(&right), right, "right names stay");
-    // `dot` named on the blob of `unseen`, which is not seen: is the name dropped?
-    let dropped = |unseen: usize, dot: usize| {
-        let mut slipped = right.clone();
-        slipped[unseen] = None;
-        slipped[dot] = Some(unseen);
-        check(&slipped)[dot].is_none()
-    };
-    // D1 (left corner) unseen, D2 on its blob: in order around the mouth, but out where the
-    // corner is.
-    assert!(dropped(0, 1));
-    // D2 unseen, D1 on D2's blob: not out beyond where D2 is.
-    assert!(dropped(1, 0));
-    // D4 unseen, D10 on its blob: a lower-lip dot over the upper lip.
-    assert!(dropped(3, 9));
-    // Along a lip: D10 unseen, D9 on its blob; D4 unseen, D3 on its blob.
-    assert!(dropped(9, 8));
-    assert!(dropped(3, 2));
-    // A corner unseen and its neighbours in place: nothing to drop.
-    let mut missing = right.clone();
-    missing[6] = None;
-    assert_eq!(check(&missing), missing);
-}
-
-#[test]
 fn a_jaw_dropping_between_two_frames_keeps_the_lower_lip_named() {
     let mut tr = calibrated_tracker();
     let still = posed(0.0, &RigidTransform::IDENTITY);
@@ -658,8 +601,12 @@ fn the_calibration_window_does_not_grow_while_time_stands_still() {
     for _ in 0..40 {
         tr.process(&frame).unwrap();
     }
-    assert!(tr.window.len() <= 1, "{} frames", tr.window.len());
-    assert!(tr.window_crops.len() <= 1);
+    assert!(
+        tr.window.frames.len() <= 1,
+        "{} frames",
+        tr.window.frames.len()
+    );
+    assert!(tr.window.crops.len() <= 1);
 }
 
 #[test]
@@ -702,22 +649,30 @@ fn the_performer_is_told_by_the_forehead_triangle() {
 #[test]
 fn a_steps_leftover_candidates_are_dropped() {
     let truth = posed(0.0, &RigidTransform::IDENTITY);
-    let mut cands = candidates(&truth[..6]);
-    let real = 4;
+    let fill = |cands: &mut naming::Candidates| {
+        for (i, c) in candidates(&truth[..6]).into_iter().enumerate() {
+            if i < 4 {
+                cands.push_detected(c, i);
+            } else {
+                cands.push_made(c, 3);
+            }
+        }
+    };
+    let mut cands = naming::Candidates::default();
+    fill(&mut cands);
     // Candidates 4 and 5 come from a step; only 5 is named (as D2).
-    let mut blob_of = vec![0, 1, 2, 3, 3, 3];
+    let kept = cands.list[5].clone();
     let mut names = [Some(0), Some(5), None, Some(2)];
-    let kept = cands[5].clone();
-    drop_unnamed_extras(&mut names, &mut cands, &mut blob_of, real);
+    cands.drop_unnamed_extras(&mut names);
     assert_eq!(cands.len(), 5);
     assert_eq!(names, [Some(0), Some(4), None, Some(2)]);
-    assert_eq!(cands[4], kept);
-    assert_eq!(blob_of, [0, 1, 2, 3, 3]);
+    assert_eq!(cands.list[4], kept);
+    assert_eq!(cands.blob, [0, 1, 2, 3, 3]);
     // A rolled-back split: no half named, all halves go.
-    let mut cands = candidates(&truth[..6]);
-    let mut blob_of = vec![0, 1, 2, 3, 3, 3];
+    let mut cands = naming::Candidates::default();
+    fill(&mut cands);
     let mut names = [Some(0), Some(1), None, Some(2)];
-    drop_unnamed_extras(&mut names, &mut cands, &mut blob_of, real);
-    assert_eq!((cands.len(), blob_of.len()), (4, 4));
+    cands.drop_unnamed_extras(&mut names);
+    assert_eq!((cands.len(), cands.blob.len()), (4, 4));
     assert_eq!(names, [Some(0), Some(1), None, Some(2)]);
 }

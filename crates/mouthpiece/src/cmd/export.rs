@@ -180,6 +180,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 reduce: args.reduce,
                 curve: args.curve,
                 markers: !args.no_markers && args.rig.is_none(),
+                // A bound mesh has no head joints to carry the head's keys.
+                head: args.rig.is_none(),
             };
             let dir = spool_dir(&args.out);
             // With --rig the take goes to a temporary GLB first, then onto the rig.
@@ -230,6 +232,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     None => String::new(),
                 }
             );
+            if summary.rotation_keys > 0 {
+                eprintln!(
+                    "head, eye_L, eye_R: {} rotation keys",
+                    summary.rotation_keys
+                );
+            }
         }
     }
     Ok(())

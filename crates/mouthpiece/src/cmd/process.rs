@@ -14,9 +14,7 @@ use anyhow::Context as _;
 use mouthpiece_frame::{Frame, FrameSource};
 use mouthpiece_recording::SessionReader;
 use mouthpiece_retarget::{Character, ShapeSmoothing};
-use mouthpiece_track::pipeline::{
-    Pipeline, PipelineConfig, RetargetSettings, Smooth as ConfigSmooth,
-};
+use mouthpiece_track::pipeline::{Pipeline, PipelineConfig, RetargetSettings};
 
 use crate::cmd::retarget::Smooth;
 use crate::exit::bad_input;
@@ -70,22 +68,10 @@ pub fn load_character(path: &Path) -> anyhow::Result<Character> {
 /// (`[retarget]`: moving averages over 1 neighbour, alpha 0.5, 8 B-spline samples a span).
 pub(crate) fn smoothing(smooth: Smooth) -> ShapeSmoothing {
     RetargetSettings {
-        smooth: config_smooth(smooth),
+        smooth: smooth.into(),
         ..RetargetSettings::default()
     }
     .smoothing()
-}
-
-/// The configuration's `smooth` value for the command line's `--smooth`.
-fn config_smooth(smooth: Smooth) -> ConfigSmooth {
-    match smooth {
-        Smooth::None => ConfigSmooth::None,
-        Smooth::Ma => ConfigSmooth::Ma,
-        Smooth::MaWeighted => ConfigSmooth::MaWeighted,
-        Smooth::MaExp => ConfigSmooth::MaExp,
-        Smooth::Sg5 => ConfigSmooth::Sg5,
-        Smooth::Bspline => ConfigSmooth::Bspline,
-    }
 }
 
 /// A finite stream of frames from a recorded session.
@@ -193,7 +179,7 @@ pub fn process_recording(
     let mut config = load_config(setup.config)?;
     let character = load_character(setup.character)?;
     if let Some(smooth) = setup.smooth {
-        config.retarget.smooth = config_smooth(smooth);
+        config.retarget.smooth = smooth.into();
     }
     let mut pipeline = Pipeline::for_characters(config, vec![character]).map_err(bad_input)?;
     if setup.opencv_threads > 0 {

@@ -17,10 +17,10 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use mouthpiece_retarget::jsonl::{InputLine, OutputLine};
 use mouthpiece_retarget::{
-    Character, CharacterSettings, MissingDots, MovingAverageKind, NeutralAccumulator,
-    OneEuroParams, PerformerDots, PerformerLayout, RetargetConfig, Retargeter, Rig, RigSettings,
-    ShapeSmoothing,
+    Character, CharacterSettings, MissingDots, NeutralAccumulator, OneEuroParams, PerformerDots,
+    PerformerLayout, RetargetConfig, Retargeter, Rig, RigSettings,
 };
+use mouthpiece_track::pipeline::{RetargetSettings, Smooth as ConfigSmooth};
 
 use crate::exit::bad_input;
 use mouthpiece_export::PendingFile;
@@ -39,6 +39,20 @@ pub enum Smooth {
     Sg5,
     /// Closed uniform cubic B-spline, `--samples-per-span` samples per point.
     Bspline,
+}
+
+impl From<Smooth> for ConfigSmooth {
+    /// The command line's `--smooth` as the configuration's `[retarget] smooth`.
+    fn from(smooth: Smooth) -> Self {
+        match smooth {
+            Smooth::None => ConfigSmooth::None,
+            Smooth::Ma => ConfigSmooth::Ma,
+            Smooth::MaWeighted => ConfigSmooth::MaWeighted,
+            Smooth::MaExp => ConfigSmooth::MaExp,
+            Smooth::Sg5 => ConfigSmooth::Sg5,
+            Smooth::Bspline => ConfigSmooth::Bspline,
+        }
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -74,6 +88,50 @@ pub struct Args {
     /// Seconds over which a missing dot then returns to neutral.
     #[arg(long, default_value_t = 0.5)]
     pub decay: f64,
+    /// Turn the character's head to a viewpoint `X,Y,Z` (character model frame) from the
+    /// first line at time `T` on (`X,Y,Z@T`; from the start without `@T`). Without it the
+    /// head follows the performer's (docs/head.md).
+    #[arg(long, value_name = "X,Y,Z[@T]", value_parser = parse_look_at)]
+    pub look_at: Option<LookAt>,
+}
+
+/// `--look-at`: a viewpoint and when it is set.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LookAt {
+    /// Character model frame.
+    pub point: [f64; 3],
+    /// Set before the first line whose `t` is at least this.
+    pub from_t: f64,
+}
+
+/// Parses `X,Y,Z` or `X,Y,Z@T`.
+pub fn parse_look_at(s: &str) -> Result<LookAt, String> {
+    let (xyz, from_t) = match s.split_once('@') {
+        Some((xyz, t)) => {
+            let t: f64 = t.trim().parse().map_err(|e| format!("time `{t}`: {e}"))?;
+            if !t.is_finite() {
+                return Err(format!("time `{t}` is not finite"));
+            }
+            (xyz, t)
+        }
+        None => (s, f64::NEG_INFINITY),
+    };
+    let parts: Vec<&str> = xyz.split(',').collect();
+    if parts.len() != 3 {
+        return Err("expected X,Y,Z or X,Y,Z@T, e.g. 0,0.1,2@1.5".into());
+    }
+    let mut point = [0.0; 3];
+    for (dst, part) in point.iter_mut().zip(&parts) {
+        let v: f64 = part
+            .trim()
+            .parse()
+            .map_err(|e| format!("coordinate `{part}`: {e}"))?;
+        if !v.is_finite() {
+            return Err(format!("coordinate `{part}` is not finite"));
+        }
+        *dst = v;
+    }
+    Ok(LookAt { point, from_t })
 }
 
 fn parse_one_euro(s: &str) -> Result<OneEuroParams, String> {
@@ -90,27 +148,15 @@ fn parse_one_euro(s: &str) -> Result<OneEuroParams, String> {
 
 impl Args {
     fn config(&self) -> anyhow::Result<RetargetConfig> {
-        let smoothing = match self.smooth {
-            Smooth::None => ShapeSmoothing::None,
-            Smooth::Ma => ShapeSmoothing::MovingAverage {
-                kind: MovingAverageKind::Plain,
-                radius: self.ma_radius,
-            },
-            Smooth::MaWeighted => ShapeSmoothing::MovingAverage {
-                kind: MovingAverageKind::Weighted,
-                radius: self.ma_radius,
-            },
-            Smooth::MaExp => ShapeSmoothing::MovingAverage {
-                kind: MovingAverageKind::Exponential {
-                    alpha: self.ma_alpha,
-                },
-                radius: self.ma_radius,
-            },
-            Smooth::Sg5 => ShapeSmoothing::SavitzkyGolay5,
-            Smooth::Bspline => ShapeSmoothing::BSpline {
-                samples_per_span: self.samples_per_span,
-            },
-        };
+        // The one mapping from the option to the shape smoothing: the configuration's.
+        let smoothing = RetargetSettings {
+            smooth: self.smooth.into(),
+            ma_radius: self.ma_radius,
+            ma_alpha: self.ma_alpha,
+            samples_per_span: self.samples_per_span,
+            one_euro: None,
+        }
+        .smoothing();
         smoothing.validate().map_err(bad_input)?;
         Ok(RetargetConfig {
             missing: MissingDots {
@@ -139,6 +185,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("character file {}", args.character.display()))
         .map_err(bad_input)?;
     tracing::info!(character = %character.name, points = character.len(), "character loaded");
+    if let Some(look) = &args.look_at {
+        let in_reach = character
+            .head_driver()
+            .look_at(Some(look.point.into()))
+            .with_context(|| format!("--look-at for character {}", character.name))
+            .map_err(bad_input)?;
+        tracing::info!(point = ?look.point, in_reach, "viewpoint");
+    }
+    let mut look_at = args.look_at;
 
     let input_name = if is_dash(&args.input) {
         "stdin".to_string()
@@ -148,7 +203,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let result = if is_dash(&args.input) {
         let stdin = io::stdin().lock();
         let mut out = Output::open(&args.out, true)?;
-        let written = retarget_stream(stdin, &input_name, character, config, &mut out);
+        let written = retarget_stream(
+            stdin,
+            &input_name,
+            character,
+            config,
+            &mut look_at,
+            &mut out,
+        );
         written.and_then(|n| out.finish().map(|()| n))
     } else {
         let file = File::open(&args.input)
@@ -162,12 +224,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .rewind()
                 .with_context(|| format!("cannot rewind {input_name}"))?;
             let mut out = Output::open(&args.out, false)?;
-            let written = retarget_file(reader, &input_name, character, config, neutral, &mut out);
+            let written = retarget_file(
+                reader,
+                &input_name,
+                character,
+                config,
+                neutral,
+                &mut look_at,
+                &mut out,
+            );
             written.and_then(|n| out.finish().map(|()| n))
         } else {
             // A pipe or device given by path: it cannot be read twice, so stream it like stdin.
             let mut out = Output::open(&args.out, true)?;
-            let written = retarget_stream(reader, &input_name, character, config, &mut out);
+            let written = retarget_stream(
+                reader,
+                &input_name,
+                character,
+                config,
+                &mut look_at,
+                &mut out,
+            );
             written.and_then(|n| out.finish().map(|()| n))
         }
     };
@@ -391,6 +468,7 @@ fn retarget_file<R: BufRead>(
     character: Character,
     config: RetargetConfig,
     neutral: NeutralLines,
+    look_at: &mut Option<LookAt>,
     out: &mut Output,
 ) -> anyhow::Result<u64> {
     let mut line_out = OutputLine::for_character(&character, &config.character.smoothing);
@@ -413,6 +491,7 @@ fn retarget_file<R: BufRead>(
             &mut dots,
             &mut line_out,
             seq,
+            look_at,
             out,
         )
         .with_context(|| format!("{input_name} line {line_no}"))?;
@@ -427,6 +506,7 @@ fn retarget_stream<R: BufRead>(
     input_name: &str,
     character: Character,
     config: RetargetConfig,
+    look_at: &mut Option<LookAt>,
     out: &mut Output,
 ) -> anyhow::Result<u64> {
     let mut line_out = OutputLine::for_character(&character, &config.character.smoothing);
@@ -490,6 +570,7 @@ fn retarget_stream<R: BufRead>(
                         &mut s.2,
                         &mut line_out,
                         seq,
+                        look_at,
                         out,
                     )
                     .with_context(|| format!("{input_name} line {line_no}"))?;
@@ -522,6 +603,7 @@ fn retarget_stream<R: BufRead>(
             dots,
             &mut line_out,
             seq,
+            look_at,
             out,
         )
         .with_context(|| format!("{input_name} line {line_no}"))?;
@@ -539,12 +621,19 @@ fn emit(
     dots: &mut PerformerDots,
     line_out: &mut OutputLine,
     seq: u64,
+    look_at: &mut Option<LookAt>,
     out: &mut Output,
 ) -> anyhow::Result<()> {
     line.dots_into(layout, dots).map_err(bad_input)?;
     if rig.is_none() {
         // The rig of this neutral pose (docs/rig.md); a layout it cannot rig has no `rig`.
         *rig = Rig::new(retargeter.stabiliser().neutral(), RigSettings::default()).ok();
+    }
+    if let Some(look) = look_at.take_if(|l| line.t >= l.from_t) {
+        retargeter
+            .character_mut()
+            .look_at(Some(look.point.into()))
+            .map_err(bad_input)?;
     }
     let result = retargeter.step(line.t, dots).map_err(bad_input)?;
     line_out.update(seq, &result);

@@ -1,0 +1,253 @@
+//! The head: the head motion the naming uses (from the named forehead dots, or with one of
+//! them hidden from the two seen and the upper lip at rest), each forehead dot's depth (a
+//! plane over a wide patch of skin, then a temporal filter), and once calibrated the head
+//! motion refined on the whole forehead surface ([`crate::forehead`]).
+
+use mouthpiece_frame::Intrinsics;
+use mouthpiece_retarget::kabsch::kabsch;
+use mouthpiece_retarget::{OneEuro, PerformerLayout, RigidTransform};
+
+use crate::depth::{self, DepthScratch};
+use crate::forehead::{self, DepthCrop, ForeheadSurface};
+use crate::labels::{Candidate, Small};
+use crate::{camera, Sensor, Vec3};
+
+/// Largest RMS misfit (metres) of the upper lip and forehead dots to their rest shape for
+/// the head motion fitted to them to be used while a forehead dot is hidden: the upper lip
+/// moves a millimetre or two with speech, wrong or deformed lip names misfit by more.
+pub const HEAD_FALLBACK_RMS_M: f64 = 0.003;
+
+/// Largest change the forehead surface fit may make to the dots' head motion: rotation
+/// (radians, 5°) and the forehead dots' places (metres). The dots' own fit is off by a
+/// degree or two at worst on the synthetic performer; beyond these the fit took something
+/// else for the forehead (a hand over most of it).
+pub const SURFACE_FIT_MAX_TURN_RAD: f64 = 0.087;
+pub const SURFACE_FIT_MAX_SHIFT_M: f64 = 0.01;
+
+/// The forehead surface is sampled this far apart, metres (2 px at 0.6 m in VGA; the
+/// sensor's noise is correlated over about four pixels, and the samples' count is what the
+/// fit costs).
+pub const FOREHEAD_SAMPLE_SPACING_M: f64 = 0.002;
+
+/// The smallest forehead depth patch: this many paint radii, and this many pixels (a patch
+/// of fewer readings fits a plane poorly).
+const FOREHEAD_PATCH_MIN_RADII: f64 = 2.0;
+const FOREHEAD_PATCH_MIN_PX: f64 = 3.0;
+
+/// Depths below this (metres) are taken as this when converting sizes in metres to pixels
+/// (a forehead nearer than 10 cm is not a performer in front of a depth camera).
+const NEAREST_FOREHEAD_M: f64 = 0.1;
+
+/// What a frame's head motion is measured against.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct HeadReference<'a> {
+    pub(crate) layout: PerformerLayout,
+    /// The forehead dots in the reference head pose (camera frame).
+    pub(crate) forehead: &'a [Vec3],
+    /// The lip dots at rest in the reference head pose.
+    pub(crate) rest: &'a [Vec3],
+    /// The last frame's head motion (reference → then).
+    pub(crate) last: RigidTransform,
+}
+
+impl HeadReference<'_> {
+    /// This frame's head motion (reference → now) from the named forehead dots, or the last
+    /// one.
+    ///
+    /// For naming only (the reported head pose follows docs/method.md): with fewer than 3
+    /// forehead dots the motion is fitted to the two forehead dots seen plus the upper lip
+    /// and corners at rest. The upper lip moves little with speech; a head turning fast
+    /// while a forehead dot is hidden moves far more, and a stale head pose would bend every
+    /// lip prediction.
+    pub(crate) fn now(&self, names: &[Option<usize>], cands: &[Candidate]) -> RigidTransform {
+        let n = self.layout.lip_dots;
+        let (mut from, mut to): (Small<Vec3>, Small<Vec3>) = names[n..]
+            .iter()
+            .enumerate()
+            .filter_map(|(j, c)| c.map(|c| (self.forehead[j], cands[c].point)))
+            .unzip();
+        if let Some(head) = kabsch(&from, &to) {
+            return head;
+        }
+        if self.rest.len() == n && from.len() == 2 {
+            let upper = 0..=self.layout.right_corner();
+            for (rest, c) in self.rest[upper.clone()].iter().zip(&names[upper]) {
+                if let Some(c) = c {
+                    from.push(*rest);
+                    to.push(cands[*c].point);
+                }
+            }
+        }
+        // Only a fit the upper lip follows rigidly (wrong or deformed lip names fit badly).
+        match kabsch(&from, &to) {
+            Some(head)
+                if from
+                    .iter()
+                    .zip(&to)
+                    .map(|(f, t)| (head.apply(f) - t).norm_squared())
+                    .sum::<f64>()
+                    <= from.len() as f64 * HEAD_FALLBACK_RMS_M.powi(2) =>
+            {
+                head
+            }
+            _ => self.last,
+        }
+    }
+}
+
+/// Sizes in metres at depth `z` in pixels, rounded to 1/64 px: calibrations that differ only
+/// in their last digits (an .oni's field of view is a 32-bit float) must pick the same
+/// pixels.
+pub(crate) fn patch_px(size_m: f64, fx: f64, z: f64) -> f64 {
+    quantise_px(size_m * fx / z)
+}
+
+/// A pixel length rounded to 1/64 px (see [`patch_px`]).
+pub(crate) fn quantise_px(px: f64) -> f64 {
+    (px * 64.0).round() / 64.0
+}
+
+/// A forehead dot's depth: the forehead is smooth, so a plane over a wide patch of skin
+/// (`patch_m` radius) around the dot averages the sensor's (spatially correlated) noise
+/// down; the head pose needs it.
+pub(crate) fn forehead_dot_depth(
+    sensor: &Sensor,
+    patch_m: f64,
+    center: [f64; 2],
+    z_hint: f64,
+    scratch: &mut DepthScratch,
+) -> Option<(f64, depth::DepthMethod)> {
+    let radius_px = sensor.dot_radius_px(z_hint);
+    let patch = patch_px(patch_m, sensor.k.fx, z_hint);
+    depth::depth_by_plane(
+        sensor.depth,
+        sensor.scale,
+        center,
+        patch
+            .max(FOREHEAD_PATCH_MIN_RADII * radius_px)
+            .max(FOREHEAD_PATCH_MIN_PX),
+        sensor.depth_range,
+        scratch,
+    )
+}
+
+/// The forehead's depth in one calibration frame: the box round the forehead dots' pixels
+/// grown by `margin_m` (see [`DepthCrop::around_forehead`]).
+pub(crate) fn forehead_crop(
+    sensor: &Sensor,
+    margin_m: f64,
+    pixels: &[[f64; 2]],
+    dots: &[Option<Vec3>],
+) -> DepthCrop {
+    let z = dots.iter().flatten().map(|p| p.z).sum::<f64>() / dots.len() as f64;
+    let margin_px = margin_m * sensor.k.fx / z.max(NEAREST_FOREHEAD_M);
+    DepthCrop::around_forehead(sensor.depth, pixels, margin_px)
+}
+
+/// The neutral forehead surface from the calibration window's crops (see [`forehead`]).
+pub(crate) fn build_forehead_surface(
+    crops: Option<Vec<&DepthCrop>>,
+    scale: f64,
+    depth_range: [f64; 2],
+    k: &Intrinsics,
+    reference_forehead: &[Vec3],
+) -> Option<ForeheadSurface> {
+    let crops = crops?;
+    let z = reference_forehead.iter().map(|p| p.z).sum::<f64>()
+        / reference_forehead.len().max(1) as f64;
+    let step_px = (FOREHEAD_SAMPLE_SPACING_M * k.fx / z.max(NEAREST_FOREHEAD_M))
+        .round()
+        .max(1.0) as usize;
+    let surface = ForeheadSurface::build(
+        &crops,
+        scale,
+        depth_range,
+        k,
+        reference_forehead.to_vec(),
+        step_px,
+    );
+    match &surface {
+        Some(s) => tracing::info!(samples = s.samples(), "forehead surface taken"),
+        None => tracing::warn!(
+            "too little forehead surface with depth: the head motion comes from the forehead dots alone"
+        ),
+    }
+    surface
+}
+
+/// With every forehead dot named and a neutral surface, the forehead dots become the
+/// neutral ones (`reference`) carried by the head motion fitted to the surface and their
+/// pixels.
+pub(crate) fn fit_forehead_surface(
+    surface: &ForeheadSurface,
+    reference: &[Vec3],
+    forehead: &[Option<usize>],
+    cands: &mut [Candidate],
+    sensor: &Sensor,
+) {
+    let rays: Small<Option<Vec3>> = forehead.iter().map(|c| c.map(|c| cands[c].point)).collect();
+    let (from, to): (Small<Vec3>, Small<Vec3>) = reference
+        .iter()
+        .zip(&rays)
+        .filter_map(|(f, r)| r.map(|r| (*f, r)))
+        .unzip();
+    if from.len() < forehead.len() {
+        return;
+    }
+    let Some(start) = kabsch(&from, &to) else {
+        return;
+    };
+    let Some(head) = surface.refine(
+        &start,
+        &rays,
+        sensor.depth,
+        sensor.scale,
+        sensor.k,
+        forehead::SurfaceFit::default(),
+    ) else {
+        return;
+    };
+    // The dots' own fit is off by a degree or two at worst: a refinement that turned or
+    // moved the forehead far from it fitted something else (a hand over most of the
+    // forehead).
+    let turned = ((head.rotation.transpose() * start.rotation).trace() - 1.0) / 2.0;
+    let moved = reference
+        .iter()
+        .map(|p| (head.apply(p) - start.apply(p)).norm())
+        .fold(0.0, f64::max);
+    if turned.clamp(-1.0, 1.0).acos() > SURFACE_FIT_MAX_TURN_RAD || moved > SURFACE_FIT_MAX_SHIFT_M
+    {
+        tracing::debug!(
+            moved_m = moved,
+            "forehead surface fit far from the dots' fit; not used"
+        );
+        return;
+    }
+    for (c, reference) in forehead.iter().zip(reference) {
+        if let Some(c) = c {
+            cands[*c].point = head.apply(reference);
+        }
+    }
+}
+
+/// Each forehead dot's depth through its temporal filter (the pixel stays; the dot is
+/// deprojected again at the filtered depth). A dot unseen starts afresh when it returns,
+/// rather than from a stale depth.
+pub(crate) fn filter_forehead_depths(
+    filters: &mut [OneEuro],
+    forehead: &[Option<usize>],
+    cands: &mut [Candidate],
+    t: f64,
+    k: &Intrinsics,
+) {
+    for (filter, name) in filters.iter_mut().zip(forehead) {
+        match name {
+            Some(c) => {
+                let c = &mut cands[*c];
+                let z = filter.filter(t, c.point.z);
+                c.point = camera::deproject(k, c.pixel, z);
+            }
+            None => filter.reset(),
+        }
+    }
+}

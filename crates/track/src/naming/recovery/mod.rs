@@ -1,0 +1,177 @@
+//! The recovery steps: second chances for dots the first naming pass left missing or named
+//! wrongly, each in a file of its own behind [`Step`], run in the order of [`STEPS`].
+//!
+//! Every step reads the frame ([`Context`]) and the naming hypothesis it runs in ([`Pass`]),
+//! and changes the names ([`NameSet`]); the frame's [`crate::TrackedFrame::steps`] records
+//! what each changed (`mouthpiece evaluate --steps` sums it over a session).
+
+mod faint_corners;
+mod follow_neighbours;
+mod geometry_fill;
+mod jaw_jump;
+mod leave_ghosts;
+mod rest_offsets;
+mod shift_across_lip;
+mod split_merged_blobs;
+mod stopped_lips;
+
+#[cfg(test)]
+pub(crate) mod test_support;
+
+pub(crate) use faint_corners::FaintCorners;
+pub(crate) use follow_neighbours::FollowNeighbours;
+pub(crate) use geometry_fill::GeometryFill;
+pub(crate) use jaw_jump::JawJump;
+pub(crate) use leave_ghosts::LeaveGhosts;
+pub(crate) use rest_offsets::RestOffsets;
+pub(crate) use shift_across_lip::ShiftAcrossLip;
+pub(crate) use split_merged_blobs::SplitMergedBlobs;
+pub(crate) use stopped_lips::StoppedLips;
+
+use super::{pixels, Candidates, Context, NameSet, Pass, Scratch};
+use crate::labels::{self, Slot, Small};
+use crate::prediction;
+
+/// One recovery step.
+pub(crate) trait Step: Sync {
+    /// Its name, as `mouthpiece evaluate --steps` prints it.
+    fn name(&self) -> &'static str;
+
+    /// Runs the step on the names; true when it changed them (a step listed
+    /// [`When::AfterPrevious`] runs only then).
+    fn run(
+        &self,
+        ctx: &Context,
+        pass: &Pass,
+        names: &mut NameSet,
+        cands: &mut Candidates,
+        scratch: &mut Scratch,
+    ) -> bool;
+}
+
+/// When in the naming of a frame a step runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Stage {
+    /// Inside every naming hypothesis, after the assignment to predictions and before the
+    /// order and neighbour checks; the lips only, on the detector's candidates.
+    InPass,
+    /// After the steady hypothesis: other lip motions, taken when they name more.
+    Hypotheses,
+    /// On the names chosen (after the corner check); may make candidates.
+    Named,
+}
+
+/// Whether a step runs always or only after the step before it changed names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum When {
+    Always,
+    AfterPrevious,
+}
+
+pub(crate) struct Entry {
+    pub(crate) stage: Stage,
+    pub(crate) when: When,
+    pub(crate) step: &'static dyn Step,
+}
+
+const fn entry(stage: Stage, when: When, step: &'static dyn Step) -> Entry {
+    Entry { stage, when, step }
+}
+
+/// Every recovery step, in the order they run (within a stage; the stages run in the order
+/// of [`Stage`], see [`super::name_frame`]).
+pub(crate) static STEPS: [Entry; 11] = [
+    // Speech moves neighbouring dots together: a missing dot is looked for where its
+    // prediction lands moved as its found neighbours moved.
+    entry(Stage::InPass, When::Always, &FollowNeighbours),
+    // The jaw moves the lower lip across the lip line all at once: one common shift.
+    entry(Stage::InPass, When::Always, &ShiftAcrossLip),
+    entry(Stage::InPass, When::AfterPrevious, &FollowNeighbours),
+    // A dot that stayed at its prediction while its neighbour jumped took its blur ghost.
+    entry(Stage::InPass, When::Always, &LeaveGhosts),
+    // Last in the pass: found neighbours' places plus the rest offsets.
+    entry(Stage::InPass, When::Always, &RestOffsets),
+    // Dots found from their neighbours show a jump the dots beside them stayed behind for.
+    entry(Stage::InPass, When::AfterPrevious, &LeaveGhosts),
+    // Lips that stopped dead: named from where they were.
+    entry(Stage::Hypotheses, When::Always, &StoppedLips),
+    // A jaw that jumped within a frame: the lower lip named from its shifted places.
+    entry(Stage::Hypotheses, When::Always, &JawJump),
+    // As many candidates as dots: geometry fills in the missing, if it agrees.
+    entry(Stage::Named, When::Always, &GeometryFill),
+    // Two lip dots merged into one blob: split along its long axis.
+    entry(Stage::Named, When::Always, &SplitMergedBlobs),
+    // A mouth corner folded over its paint: named on a faint speck.
+    entry(Stage::Named, When::Always, &FaintCorners),
+];
+
+/// The steps' names, each once, in the order they first run.
+pub fn step_names() -> Vec<&'static str> {
+    let mut names: Vec<&'static str> = Vec::new();
+    for stage in [Stage::InPass, Stage::Hypotheses, Stage::Named] {
+        for e in STEPS.iter().filter(|e| e.stage == stage) {
+            if !names.contains(&e.step.name()) {
+                names.push(e.step.name());
+            }
+        }
+    }
+    names
+}
+
+/// Runs the steps of `stage` in order, recording what each changed.
+pub(crate) fn run_stage(
+    stage: Stage,
+    ctx: &Context,
+    pass: &Pass,
+    names: &mut NameSet,
+    cands: &mut Candidates,
+    scratch: &mut Scratch,
+) {
+    let mut previous = false;
+    for e in STEPS.iter().filter(|e| e.stage == stage) {
+        if e.when == When::AfterPrevious && !previous {
+            continue;
+        }
+        let before = pixels(names, cands);
+        // A step's own record is its net change: what it ran inside (another hypothesis's
+        // steps) is not recorded apart.
+        let mark = scratch.log.events.len();
+        previous = e.step.run(ctx, pass, names, cands, scratch);
+        scratch.log.events.truncate(mark);
+        scratch.log.record(e.step.name(), &before, names, cands);
+    }
+}
+
+/// Names missing lip dots at moved predictions (`moved`: dot, pixel), with the pass's
+/// gates recomputed for this frame's positions (found or predicted). True when any dot was
+/// found. Same gates (pixel and depth) as the first pass, candidates nobody took.
+pub(crate) fn name_moved(
+    ctx: &Context,
+    pass: &Pass,
+    names: &mut NameSet,
+    cands: &Candidates,
+    solver: &mut labels::Assignment,
+    moved: &[(usize, [f64; 2])],
+) -> bool {
+    if moved.is_empty() {
+        return false;
+    }
+    let n = ctx.layout.lip_dots;
+    let mut all: Small<[f64; 2]> = (0..n)
+        .map(|i| names.get(i).map_or(pass.preds[i], |c| cands.list[c].pixel))
+        .collect();
+    for &(i, p) in moved {
+        all[i] = p;
+    }
+    let gates = prediction::gated(ctx.config, &all, &ctx.tracks[..n], Slot::Lip, &pass.head);
+    let these: Small<labels::Prediction> = moved.iter().map(|&(i, _)| gates[i]).collect();
+    let mut found = false;
+    let assigned = labels::assign(&these, &cands.list, names.taken(), solver);
+    for (&(i, _), c) in moved.iter().zip(assigned) {
+        if let Some(c) = c {
+            names.set(i, Some(c));
+            found = true;
+        }
+    }
+    found
+}

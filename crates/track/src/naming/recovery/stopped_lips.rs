@@ -1,0 +1,88 @@
+//! Stopped lips: lips that stop dead (closing against each other, a corner at the end of a
+//! smile) overshoot a constant-velocity prediction, by up to 6 px when they close onto each
+//! other. With lip dots missing and candidates left, the frame is named again with each lip
+//! dot predicted where it was last (zero velocity, the same head motion); those names are
+//! taken when they name more lip dots and the corners are still the extremes.
+
+use super::{Candidates, Context, NameSet, Pass, Scratch, Step};
+use crate::naming::{checked_pass, checks};
+use crate::prediction::LipMotion;
+
+pub(crate) struct StoppedLips;
+
+impl Step for StoppedLips {
+    fn name(&self) -> &'static str {
+        "stopped-lips"
+    }
+
+    fn run(
+        &self,
+        ctx: &Context,
+        pass: &Pass,
+        names: &mut NameSet,
+        cands: &mut Candidates,
+        scratch: &mut Scratch,
+    ) -> bool {
+        let n = ctx.layout.lip_dots;
+        if names.lips_named(n) == n || pass.steady_named >= cands.len() {
+            return false;
+        }
+        let (_, stopped) = checked_pass(
+            ctx,
+            &pass.forehead,
+            pass.head,
+            LipMotion::Stopped,
+            cands,
+            scratch,
+        );
+        if stopped.lips_named(n) > names.lips_named(n)
+            && checks::corners_are_extremes(ctx, stopped.as_slice(), &cands.list)
+        {
+            tracing::debug!(
+                steady = names.lips_named(n),
+                stopped = stopped.lips_named(n),
+                "lips stopped: named from their last places"
+            );
+            *names = stopped;
+            return true;
+        }
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_support::*;
+    use super::*;
+
+    /// The lower lip was closing fast and stopped dead: its constant-velocity predictions lie
+    /// 6 px on, beyond the gates, and the steady names leave it missing. Named from where it
+    /// was, every dot is found.
+    #[test]
+    fn lips_that_stopped_dead_are_named_from_their_last_places() {
+        let mut scene = Scene::calibrated();
+        let rest = scene.rest_pixels();
+        let mut overshot = rest.clone();
+        for p in &mut overshot[7..12] {
+            p[1] += 6.0;
+        }
+        let mut cands = scene.candidates_at(&rest);
+        let mut pass = scene.pass(&overshot, &cands);
+        let mut names = scene.first_pass(&pass, &cands);
+        pass.steady_named = names.count();
+        assert!(
+            (8..11).all(|i| names.get(i).is_none()),
+            "{:?}",
+            named(&names)
+        );
+        let fired = StoppedLips.run(
+            &scene.ctx(),
+            &pass,
+            &mut names,
+            &mut cands,
+            &mut Scratch::default(),
+        );
+        assert!(fired);
+        assert_eq!(named(&names), identity());
+    }
+}

@@ -1,0 +1,315 @@
+//! Where the dots are expected in this frame: each dot's track (last pixel and pixel
+//! velocity, last place and velocity in the reference head pose, last depth), the
+//! predictions and gates the naming assigns against, the detector's search region, and the
+//! tracks' update once a frame is named.
+
+use mouthpiece_detect::PixelRect;
+use mouthpiece_frame::Intrinsics;
+use mouthpiece_retarget::{PerformerLayout, RigidTransform};
+
+use crate::camera;
+use crate::config::TrackConfig;
+use crate::head;
+use crate::labels::{self, Candidate, Slot, Small};
+use crate::naming::checks::depth_window;
+use crate::naming::Context;
+use crate::Vec3;
+
+/// Past this many skipped frames constant velocity says little: a prediction extrapolates
+/// at most this many frame intervals (the interval the velocity was measured over).
+pub const MAX_STEP_RATIO: f64 = 4.0;
+
+/// A dot missing for longer than this many frames widens its gates no further.
+const GATE_WIDENING_MAX_FRAMES: u32 = 10;
+/// Per frame a dot has been missing, its pixel gate widens by this share of itself ...
+const PIXEL_GATE_WIDENING_PER_FRAME: f64 = 0.05;
+/// ... and its depth gate by this share (lips move in depth faster than the gate's
+/// 8 mm would follow over several frames).
+const DEPTH_GATE_WIDENING_PER_FRAME: f64 = 0.2;
+
+/// The search region's margin doubles per frame with dots missing, up to 2^this times.
+const SEARCH_GROWTH_MAX_DOUBLINGS: u32 = 4;
+
+/// One dot's track.
+#[derive(Debug, Clone)]
+pub(crate) struct DotTrack {
+    pub(crate) pixel: [f64; 2],
+    pub(crate) pixel_vel: [f64; 2],
+    /// Last position carried back into the reference head pose (`H⁻¹ p`).
+    pub(crate) stab: Vec3,
+    pub(crate) stab_vel: Vec3,
+    /// Depth when last seen (camera frame, metres): one end of the depth gate's window (the
+    /// other, the stabilised position carried by the head motion, carries the head pose's
+    /// noise about the lever from the forehead).
+    pub(crate) depth: f64,
+    /// Frames since last seen (0 = seen in the last frame).
+    pub(crate) missing: u32,
+}
+
+impl DotTrack {
+    /// A dot seen for the first time at `c`.
+    pub(crate) fn new(c: &Candidate) -> Self {
+        DotTrack {
+            pixel: c.pixel,
+            pixel_vel: [0.0; 2],
+            stab: c.point,
+            stab_vel: Vec3::zeros(),
+            depth: c.point.z,
+            missing: 0,
+        }
+    }
+
+    /// Where constant pixel velocity puts the dot `ratio` frame intervals on.
+    pub(crate) fn predicted_pixel(&self, ratio: f64) -> [f64; 2] {
+        [
+            self.pixel[0] + self.pixel_vel[0] * ratio,
+            self.pixel[1] + self.pixel_vel[1] * ratio,
+        ]
+    }
+}
+
+/// How the lip dots are predicted to have moved since the last frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum LipMotion {
+    /// On at the velocity they had (in the head's frame).
+    Steady,
+    /// Not at all: where they were last (in the head's frame).
+    Stopped,
+    /// As `Steady`, the lower lip between the corners shifted by these pixels besides (the
+    /// jaw dropping or snapping shut within one frame).
+    JawJumped([f64; 2]),
+}
+
+/// Where each lip dot is predicted in the image: its stabilised position (moved on by its
+/// velocity when it was seen last frame and `lip_motion` is steady) carried by this
+/// frame's head motion and projected.
+pub(crate) fn lip_predictions(
+    ctx: &Context,
+    head: &RigidTransform,
+    lip_motion: LipMotion,
+) -> Small<[f64; 2]> {
+    let k = ctx.sensor.k;
+    ctx.tracks[..ctx.layout.lip_dots]
+        .iter()
+        .map(|t| {
+            let q = if t.missing == 0 && lip_motion != LipMotion::Stopped {
+                t.stab + t.stab_vel * ctx.step_ratio
+            } else {
+                t.stab
+            };
+            camera::project(k, &head.apply(&q)).unwrap_or(t.pixel)
+        })
+        .enumerate()
+        .map(|(i, p)| match lip_motion {
+            LipMotion::JawJumped(shift) if i > ctx.layout.right_corner() => {
+                [p[0] + shift[0], p[1] + shift[1]]
+            }
+            _ => p,
+        })
+        .collect()
+}
+
+/// Where each forehead dot is predicted: on at constant pixel velocity when seen last frame,
+/// else its last place carried by the last head motion.
+pub(crate) fn forehead_predictions(ctx: &Context, k: &Intrinsics) -> Small<[f64; 2]> {
+    ctx.tracks[ctx.layout.lip_dots..]
+        .iter()
+        .map(|t| {
+            if t.missing == 0 {
+                t.predicted_pixel(ctx.step_ratio)
+            } else {
+                camera::project(k, &ctx.head.last.apply(&t.stab)).unwrap_or(t.pixel)
+            }
+        })
+        .collect()
+}
+
+/// Gate per prediction: a fraction of the distance to the nearest other prediction of the
+/// group, at least `min_gate_px`, widened a little for dots missing for a while. Lip dots
+/// are gated in depth too: a candidate further than [`TrackConfig::lip_depth_gate_m`]
+/// from the dot's expected depth is not this dot (widened for dots missing for a while).
+/// The window spans the dot's last depth and its last place carried by this frame's head
+/// motion (`head`, reference → now): a head moving fast in depth moved the lips 8 mm
+/// between two frames, out of a gate around their last depth, while the head pose's own
+/// noise makes the carried depth alone the worse guess in some sessions.
+pub(crate) fn gated(
+    config: &TrackConfig,
+    preds: &[[f64; 2]],
+    tracks: &[DotTrack],
+    slot: Slot,
+    head: &RigidTransform,
+) -> Small<labels::Prediction> {
+    preds
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let nearest = preds
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt())
+                .fold(f64::INFINITY, f64::min);
+            let base = (config.gate_fraction * nearest).max(config.min_gate_px);
+            let missing = tracks[i].missing.min(GATE_WIDENING_MAX_FRAMES) as f64;
+            let mut gate = labels::Prediction::in_image(
+                *p,
+                base * (1.0 + PIXEL_GATE_WIDENING_PER_FRAME * missing),
+                slot,
+            );
+            if slot == Slot::Lip {
+                let gate_m =
+                    config.lip_depth_gate_m * (1.0 + DEPTH_GATE_WIDENING_PER_FRAME * missing);
+                let [low, high] = depth_window(&tracks[i], head, gate_m);
+                gate.z = 0.5 * (low + high);
+                gate.z_gate = 0.5 * (high - low);
+            }
+            gate
+        })
+        .collect()
+}
+
+/// What the tracker knows of the dots between frames: each dot's track once all were named,
+/// the reference forehead the head motion is measured against, the last head motion, and
+/// the lips' rest shape.
+#[derive(Debug, Default)]
+pub(crate) struct Tracks {
+    /// Per dot (lip dots, then forehead); `None` until a full naming from geometry.
+    pub(crate) dots: Option<Vec<DotTrack>>,
+    /// Forehead positions the head motion is measured against (camera frame).
+    pub(crate) reference_forehead: Vec<Vec3>,
+    /// The last head motion (reference → then).
+    pub(crate) head: RigidTransform,
+    /// Lip dots at rest in the reference head pose (first naming, then the neutral pose):
+    /// the shape the neighbour-based prediction keeps offsets from.
+    pub(crate) rest: Vec<Vec3>,
+    pub(crate) frames_without_names: u32,
+    pub(crate) frames_with_missing: u32,
+}
+
+impl Tracks {
+    /// Forgets the names (they are found again from geometry).
+    pub(crate) fn forget(&mut self) {
+        self.dots = None;
+        self.frames_without_names = 0;
+        self.frames_with_missing = 0;
+    }
+
+    /// Where to look: around the predicted dots, growing while some are missing; the full
+    /// frame (`None`) when nothing is named or every few frames while dots are missing.
+    pub(crate) fn search_region(
+        &self,
+        config: &TrackConfig,
+        step_ratio: f64,
+        image: [usize; 2],
+    ) -> Option<PixelRect> {
+        let tracks = self.dots.as_ref()?;
+        if self.frames_with_missing > 0
+            && self
+                .frames_with_missing
+                .is_multiple_of(config.full_search_every)
+        {
+            return None;
+        }
+        let grow = (1u32 << self.frames_with_missing.min(SEARCH_GROWTH_MAX_DOUBLINGS)) as f64;
+        let margin = config.roi_margin_px * grow;
+        let rect = PixelRect::around(tracks.iter().map(|t| t.predicted_pixel(step_ratio)), margin)?;
+        // A region covering most of the image costs as much as the full frame.
+        let full = image[0] as i64 * image[1] as i64;
+        (rect.area() < full / 2).then_some(rect)
+    }
+
+    /// Counts the frame's names (for the search region and for losing the names).
+    pub(crate) fn count(&mut self, names: &[Option<usize>]) {
+        let seen = names.iter().filter(|c| c.is_some()).count();
+        if seen == 0 {
+            self.frames_without_names += 1;
+        } else {
+            self.frames_without_names = 0;
+        }
+        if seen < names.len() {
+            self.frames_with_missing += 1;
+        } else {
+            self.frames_with_missing = 0;
+        }
+    }
+
+    /// The frame's names into the tracks: the first full naming starts them (its forehead the
+    /// reference, its lips the rest shape); afterwards each seen dot's pixel, place in the
+    /// reference head pose, depth and velocities, and each unseen dot's count of frames
+    /// missing. After `lost_after_frames` without any name the names are forgotten.
+    pub(crate) fn update(
+        &mut self,
+        config: &TrackConfig,
+        layout: PerformerLayout,
+        names: &[Option<usize>],
+        cands: &[Candidate],
+    ) {
+        let n = layout.lip_dots;
+        let all_seen = names.iter().all(|c| c.is_some());
+        if self.dots.is_none() {
+            if !all_seen {
+                return;
+            }
+            // First full naming: this forehead is the reference until calibrated.
+            self.reference_forehead = names[n..]
+                .iter()
+                .map(|c| cands[c.expect("all seen")].point)
+                .collect();
+            self.head = RigidTransform::IDENTITY;
+            self.rest = names[..n]
+                .iter()
+                .map(|c| cands[c.expect("all seen")].point)
+                .collect();
+            self.dots = Some(
+                names
+                    .iter()
+                    .map(|c| DotTrack::new(&cands[c.expect("all seen")]))
+                    .collect(),
+            );
+            tracing::info!("all dots named from geometry; tracking");
+            return;
+        }
+        if self.frames_without_names > config.lost_after_frames {
+            tracing::info!(
+                frames = self.frames_without_names,
+                "dots lost; re-acquiring from geometry"
+            );
+            self.dots = None;
+            return;
+        }
+        self.head = self.reference(layout).now(names, cands);
+        let inverse = self.head.inverse();
+        let tracks = self.dots.as_mut().expect("checked");
+        for (track, name) in tracks.iter_mut().zip(names) {
+            match name {
+                Some(c) => {
+                    let c = &cands[*c];
+                    let stab = inverse.apply(&c.point);
+                    if track.missing == 0 {
+                        track.pixel_vel =
+                            [c.pixel[0] - track.pixel[0], c.pixel[1] - track.pixel[1]];
+                        track.stab_vel = stab - track.stab;
+                    } else {
+                        track.pixel_vel = [0.0; 2];
+                        track.stab_vel = Vec3::zeros();
+                    }
+                    track.pixel = c.pixel;
+                    track.depth = c.point.z;
+                    track.stab = stab;
+                    track.missing = 0;
+                }
+                None => track.missing = track.missing.saturating_add(1),
+            }
+        }
+    }
+
+    /// What the head motion of a frame is measured against.
+    pub(crate) fn reference(&self, layout: PerformerLayout) -> head::HeadReference<'_> {
+        head::HeadReference {
+            layout,
+            forehead: &self.reference_forehead,
+            rest: &self.rest,
+            last: self.head,
+        }
+    }
+}
