@@ -165,6 +165,8 @@ pub struct Config {
     /// How the characters' outputs are made (shape smoothing, temporal filter), parsed by
     /// [`Config::extract`] like `[detect]` and `[track]`.
     pub retarget: toml::Table,
+    /// The rig (jaw hinge, curve ranges; docs/rig.md), parsed by [`Config::extract`].
+    pub rig: toml::Table,
     /// Where this configuration came from, with its text (for [`Config::extract`]).
     #[serde(skip)]
     pub origin: Origin,
@@ -182,6 +184,7 @@ impl Default for Config {
             detect: toml::Table::new(),
             track: toml::Table::new(),
             retarget: toml::Table::new(),
+            rig: toml::Table::new(),
             origin: Origin::Embedded,
         }
     }

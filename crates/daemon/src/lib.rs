@@ -33,6 +33,7 @@ pub mod live;
 pub mod logging;
 pub mod notify;
 pub mod pipeline;
+pub mod rig;
 pub mod settings;
 pub mod slot;
 pub mod source;

@@ -39,6 +39,7 @@ pub fn setup(config: &Config) -> Result<Setup, CheckError> {
         ),
         ("track", pipeline.track.validate()),
         ("retarget", pipeline.retarget.validate()),
+        ("rig", pipeline.validate()),
     ] {
         result.map_err(|e| invalid(section, crate::source::error_chain(&e)))?;
     }
@@ -145,6 +146,7 @@ impl LiveProcessor {
             slot.confidence.clear();
             slot.confidence.resize(c.len(), 0.0);
             slot.curve = None;
+            slot.rig = None;
             slot.head = Some(Default::default());
         }
     }
@@ -229,6 +231,10 @@ impl Processor for LiveProcessor {
         // Characters that could not be bound are left out of the frame.
         let bound = (0..self.pipeline.characters().len()).filter_map(|i| self.pipeline.bound(i));
         let count = bound.clone().count();
+        let rig = self
+            .pipeline
+            .rig()
+            .map(|r| crate::rig::rig_state(r.output()));
         stream
             .characters
             .resize_with(count, CharacterFrame::default);
@@ -249,6 +255,7 @@ impl Processor for LiveProcessor {
                 curve.clear();
                 curve.extend(result.curve.iter().map(to_f32));
             }
+            slot.rig = rig;
             slot.head = Some(crate::head::wire(&result.head));
         }
     }

@@ -27,6 +27,7 @@
 
 mod character_head;
 mod measures;
+pub mod rig;
 mod steps;
 
 use mouthpiece_retarget::{Character, CharacterSettings, PerformerLayout, ShapeSmoothing};

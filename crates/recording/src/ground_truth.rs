@@ -68,6 +68,26 @@ pub struct GroundTruth {
     /// Whether the dot's centre is seen by the colour camera (not occluded, facing it).
     pub visible: BTreeMap<String, bool>,
     pub head: HeadPose,
+    /// The synthetic performer's mouth state (absent in sessions written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mouth: Option<MouthTruth>,
+}
+
+/// The mouth state a synthetic frame was rendered with (the synthetic performer's own
+/// articulation parameters; all zero is the neutral pose).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct MouthTruth {
+    /// Jaw rotation about the hinge axis, radians (opening > 0). The synthetic jaw does not
+    /// slide: its slide is 0.
+    pub jaw: f64,
+    /// Lip spreading (corners outward), 0..1.
+    pub spread: f64,
+    /// Rounding and pucker (corners inward, lips forward), 0..1.
+    pub round: f64,
+    /// Upper-lip raise, 0..1.
+    pub raise: f64,
+    /// Lower lip rolled in under the upper lip, 0..1.
+    pub roll_in: f64,
 }
 
 impl GroundTruth {
@@ -98,6 +118,15 @@ impl GroundTruth {
         "rotation": {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4, "description": "unit quaternion [w, x, y, z], neutral head to current"},
         "translation": {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3, "description": "metres, camera frame"}
       }
+    },
+    "mouth": {
+      "type": "object",
+      "description": "the synthetic mouth state: jaw (radians, about the hinge; the synthetic jaw does not slide), spread, round, raise, roll_in (0..1)",
+      "required": ["jaw", "spread", "round", "raise", "roll_in"],
+      "properties": {
+        "jaw": {"type": "number"}, "spread": {"type": "number"}, "round": {"type": "number"},
+        "raise": {"type": "number"}, "roll_in": {"type": "number"}
+      }
     }
   }
 }"#
@@ -127,11 +156,18 @@ mod tests {
             points: [("D1".to_string(), [0.1, 0.2, 0.6])].into(),
             visible: [("D1".to_string(), true)].into(),
             head: HeadPose::IDENTITY,
+            mouth: Some(MouthTruth {
+                jaw: 0.1,
+                ..MouthTruth::default()
+            }),
         };
         let v: serde_json::Value = serde_json::to_value(&gt).unwrap();
         assert_eq!(v["points"]["D1"][2], 0.6);
         assert_eq!(v["visible"]["D1"], true);
         assert_eq!(v["head"]["rotation"][0], 1.0);
+        assert_eq!(v["mouth"]["jaw"], 0.1);
+        let back: GroundTruth = serde_json::from_value(v).unwrap();
+        assert_eq!(back, gt);
         let _: serde_json::Value = serde_json::from_str(GroundTruth::json_schema()).unwrap();
     }
 }

@@ -30,7 +30,7 @@ mod ground_truth;
 mod reader;
 mod writer;
 
-pub use ground_truth::{GroundTruth, HeadPose};
+pub use ground_truth::{GroundTruth, HeadPose, MouthTruth};
 pub use reader::{MessageReader, RawMessage, SessionFrame, SessionReader};
 pub use writer::{ColorEncoding, SessionSummary, SessionWriter, WriterOptions};
 

@@ -69,6 +69,7 @@ fn ground_truth(i: u64) -> GroundTruth {
         ]
         .into(),
         head: HeadPose::IDENTITY,
+        mouth: None,
     }
 }
 

@@ -1,5 +1,6 @@
 //! Per-step cost of the retarget core: one performer step (Kabsch + stabilisation) and one
-//! character (closed form + curve), as the daemon runs it for every camera frame.
+//! character (closed form + curve), as the daemon runs it for every camera frame; and the
+//! rig's step (jaw, lip fits, named curves).
 //!
 //!     cargo bench -p mouthpiece-retarget --bench retarget
 
@@ -8,7 +9,8 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, Criterion};
 use mouthpiece_retarget::{
     Character, CharacterSettings, NeutralAccumulator, OneEuroParams, PerformerDots,
-    PerformerLayout, RetargetConfig, Retargeter, ShapeSmoothing, Vec3,
+    PerformerLayout, RetargetConfig, Retargeter, Rig, RigSettings, ShapeSmoothing, StabilisedFrame,
+    Vec3,
 };
 use nalgebra::Rotation3;
 
@@ -86,6 +88,22 @@ fn bench(c: &mut Criterion) {
             })
         });
     }
+    // The rig (docs/rig.md) on stabilised frames: jaw, both lip fits, every curve.
+    let mut rt = retargeter(CharacterSettings::default());
+    let stabilised: Vec<StabilisedFrame> = frames
+        .iter()
+        .enumerate()
+        .map(|(i, f)| rt.step(i as f64 / 60.0, f).unwrap().performer.clone())
+        .collect();
+    let mut rig = Rig::new(rt.stabiliser().neutral(), RigSettings::default()).unwrap();
+    let mut i = 0usize;
+    c.bench_function("rig/step", |b| {
+        b.iter(|| {
+            let out = rig.step(black_box(&stabilised[i % stabilised.len()]));
+            i += 1;
+            black_box(out.jaw.angle_deg);
+        })
+    });
 }
 
 criterion_group!(benches, bench);

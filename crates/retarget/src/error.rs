@@ -133,6 +133,9 @@ pub enum Error {
         /// What was expected.
         reason: String,
     },
+    /// A setting of a table (`rig.ranges.jawOpen`) is wrong; the key names it in full.
+    #[error("invalid setting `{key}`: {reason}")]
+    InvalidSetting { key: String, reason: String },
 }
 
 fn line_prefix(line: Option<usize>) -> String {

@@ -147,6 +147,10 @@ pub struct OutputLine {
     /// The smoothed curve, `null` without shape smoothing.
     #[serde(default)]
     pub curve: Option<Curve>,
+    /// The rig of the step (docs/rig.md): jaw, lip motions, named curves. Absent before the
+    /// neutral pose is taken.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig: Option<crate::rig::RigFrame>,
     /// The character's head and eyes (docs/head.md); absent in takes made before heads.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub character_head: Option<crate::head::HeadLine>,
@@ -180,6 +184,7 @@ impl OutputLine {
                     points: Vec::with_capacity(s.curve_len(names.len())),
                 }),
             },
+            rig: None,
             character_head: Some(Default::default()),
         }
     }
@@ -290,6 +295,7 @@ mod tests {
                 closed: true,
                 points: vec![[0.0; 3]],
             }),
+            rig: Some(crate::rig::RigFrame::default()),
             character_head: Some(Default::default()),
         };
         let text = serde_json::to_string(&line).unwrap();

@@ -12,6 +12,7 @@
 //!   [`Retargeter`] (both).
 //! - [`smooth`]: shape smoothing across the points of a step (§8), and [`one_euro`]: the
 //!   temporal filter.
+//! - [`rig`]: jaw, lip motions and ARKit-named mouth curves (docs/rig.md).
 //! - [`head`]: the character's head and eyes: reach test, turns by slerp, following the
 //!   performer.
 //! - [`jsonl`]: the line formats of `mouthpiece retarget` (read by `export`, extended by
@@ -48,6 +49,7 @@ mod named;
 pub mod neutral;
 pub mod one_euro;
 pub mod retarget;
+pub mod rig;
 pub mod smooth;
 
 pub use character::{Character, MMode, Units};
@@ -63,6 +65,7 @@ pub use retarget::{
     CharacterFrame, CharacterRetarget, CharacterSettings, MissingDots, RetargetConfig,
     RetargetOutput, Retargeter, StabilisedFrame, Stabiliser,
 };
+pub use rig::{Rig, RigFrame, RigModel, RigSettings};
 pub use smooth::{MovingAverageKind, ShapeSmoothing};
 
 /// A 3D vector or point, `f64`.

@@ -53,6 +53,9 @@ pub struct CharacterFrame {
     pub confidence: Vec<f32>,
     /// The smoothed closed curve through the points (docs/method.md §8), if the daemon computes it.
     pub curve: Option<Vec<[f32; 3]>>,
+    /// The rig (docs/rig.md) once the performer is calibrated; JSON only.
+    #[serde(skip)]
+    pub rig: Option<crate::rig::RigState>,
     /// The character's head and eyes (docs/head.md), if the daemon drives them.
     pub head: Option<crate::head::CharacterHead>,
 }
@@ -97,6 +100,7 @@ impl Clone for CharacterFrame {
             points: self.points.clone(),
             confidence: self.confidence.clone(),
             curve: self.curve.clone(),
+            rig: self.rig,
             head: self.head,
         }
     }
@@ -105,6 +109,7 @@ impl Clone for CharacterFrame {
         self.points.clone_from(&other.points);
         self.confidence.clone_from(&other.confidence);
         clone_option_from(&mut self.curve, &other.curve);
+        self.rig = other.rig;
         self.head = other.head;
     }
 }

@@ -77,6 +77,7 @@ pub mod loadgen;
 pub mod metrics;
 pub mod preview;
 pub mod protocol;
+pub mod rig;
 mod server;
 mod session;
 pub mod timecode;
@@ -96,6 +97,7 @@ pub use hub::{
     StreamFrame, StreamInfo,
 };
 pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
+pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RIG_CURVE_NAMES};
 pub use server::run;
 
 /// Loads the certificate and key as [`run`] will, so that a configuration check refuses

@@ -149,6 +149,11 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
         lost: false,
     };
     let confidence = vec![1.0; POINTS];
+    let mut rig = crate::rig::RigState::default();
+    rig.jaw.angle_deg = 20.0 * open;
+    rig.curves.0[0] = 0.8 * open;
+    rig.curves.0[6] = smile.max(0.0);
+    rig.curves.0[7] = smile.max(0.0);
     // The heads turn with the performer's yaw; the eyes turn back against it.
     let (c, s) = ((yaw / 2.0).cos(), (yaw / 2.0).sin());
     let head = Some(crate::head::CharacterHead {
@@ -163,6 +168,7 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
             curve: Some(closed_bspline(&human, 4)),
             points: human,
             confidence: confidence.clone(),
+            rig: Some(rig),
             head,
         },
         CharacterFrame {
@@ -170,6 +176,7 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
             curve: Some(closed_bspline(&wolf, 4)),
             points: wolf,
             confidence: confidence.clone(),
+            rig: Some(rig),
             head,
         },
     ];

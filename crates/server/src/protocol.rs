@@ -119,6 +119,8 @@ pub enum OptionalField {
     Curve,
     /// The performer's lip dots (head motion removed, performer mouth frame).
     Performer,
+    /// Each character's `rig`: jaw, lip motions, ARKit-named curves (JSON frames only).
+    Rig,
     /// Not part of `frame`: a `health` message about once a second.
     Health,
 }
@@ -326,6 +328,8 @@ pub struct FrameSelection {
     pub curve: bool,
     /// Include `performer`.
     pub performer: bool,
+    /// Include each character's `rig`.
+    pub rig: bool,
 }
 
 impl FrameSelection {
@@ -335,6 +339,7 @@ impl FrameSelection {
             characters: sub.characters.clone().filter(|c| !c.is_empty()),
             curve: sub.fields.contains(&OptionalField::Curve),
             performer: sub.fields.contains(&OptionalField::Performer),
+            rig: sub.fields.contains(&OptionalField::Rig),
         }
     }
 
@@ -370,6 +375,7 @@ struct CharacterView<'a> {
     #[serde(skip_serializing_if = "Option::is_none")]
     curve: Option<&'a [[f32; 3]]>,
     #[serde(skip_serializing_if = "Option::is_none")]
+    rig: Option<&'a crate::rig::RigState>,
     head: Option<&'a crate::head::CharacterHead>,
 }
 
@@ -398,6 +404,7 @@ impl<'a> FrameView<'a> {
                     } else {
                         None
                     },
+                    rig: if selection.rig { c.rig.as_ref() } else { None },
                     head: c.head.as_ref(),
                 })
                 .collect(),

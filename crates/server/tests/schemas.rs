@@ -68,7 +68,7 @@ async fn server_messages_match_the_published_schemas() {
     .await
     .unwrap();
     let mut client_msgs = vec![
-        json!({"type": "subscribe", "id": 1, "fields": ["curve", "performer"], "max_rate": 120, "format": "json"}),
+        json!({"type": "subscribe", "id": 1, "fields": ["curve", "performer", "rig"], "max_rate": 120, "format": "json"}),
         json!({"type": "ping", "id": "p"}),
         json!({"type": "calibrate", "id": 2, "duration_s": 1.0}),
         json!({"type": "record", "id": 3, "action": "start", "slate": "scene 4", "take": 2}),

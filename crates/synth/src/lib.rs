@@ -32,7 +32,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use mouthpiece_frame::{Calibration, Extrinsics, Frame, Intrinsics};
-pub use mouthpiece_recording::{GroundTruth, HeadPose};
+pub use mouthpiece_recording::{GroundTruth, HeadPose, MouthTruth};
 
 pub use dots::dot_positions;
 pub use layout::{DotLayout, ForeheadDot};

@@ -527,6 +527,13 @@ impl Renderer {
                 rotation: quaternion(&rot),
                 translation,
             },
+            mouth: Some(mouthpiece_recording::MouthTruth {
+                jaw: mouth.jaw,
+                spread: mouth.spread,
+                round: mouth.round,
+                raise: mouth.raise,
+                roll_in: mouth.roll_in,
+            }),
         };
         RenderOutput {
             color,

@@ -9,7 +9,7 @@ use mouthpiece_frame::Frame;
 use mouthpiece_retarget::jsonl::OutputLine;
 use mouthpiece_retarget::{
     Character, CharacterRetarget, CharacterSettings, MovingAverageKind, Named, OneEuroParams,
-    RetargetOutput, ShapeSmoothing,
+    RetargetOutput, Rig, RigSettings, ShapeSmoothing,
 };
 use serde::{Deserialize, Serialize};
 
@@ -26,6 +26,9 @@ pub struct PipelineConfig {
     pub track: TrackConfig,
     #[serde(default)]
     pub retarget: RetargetSettings,
+    /// The rig (`[rig]`, docs/rig.md): hinge placement, range learning and ranges.
+    #[serde(default)]
+    pub rig: RigSettings,
 }
 
 /// Which shape smoothing makes each character's `curve` (`[retarget] smooth`).
@@ -151,6 +154,7 @@ impl PipelineConfig {
             detect: Option<toml::Value>,
             track: Option<toml::Value>,
             retarget: Option<toml::Value>,
+            rig: Option<toml::Value>,
         }
         let bad = |key: &str, e: toml::de::Error| TrackError::Config {
             key: key.into(),
@@ -169,10 +173,15 @@ impl PipelineConfig {
             Some(v) => v.try_into().map_err(|e| bad("retarget", e))?,
             None => RetargetSettings::default(),
         };
+        let rig = match sections.rig {
+            Some(v) => v.try_into().map_err(|e| bad("rig", e))?,
+            None => RigSettings::default(),
+        };
         let config = Self {
             detect,
             track,
             retarget,
+            rig,
         };
         config.validate()?;
         Ok(config)
@@ -181,7 +190,17 @@ impl PipelineConfig {
     pub fn validate(&self) -> Result<(), TrackError> {
         self.detect.validate()?;
         self.track.validate()?;
-        self.retarget.validate()
+        self.retarget.validate()?;
+        self.rig.validate("rig").map_err(|e| match e {
+            mouthpiece_retarget::Error::InvalidSetting { key, reason } => TrackError::Config {
+                key,
+                message: reason,
+            },
+            e => TrackError::Config {
+                key: "rig".into(),
+                message: e.to_string(),
+            },
+        })
     }
 
     /// A character fits when it has one point per lip dot; the error names the character.
@@ -218,6 +237,10 @@ pub struct ProcessLine<'a> {
     pub performer: &'a Named<Option<[f64; 3]>>,
     pub status: &'a Status,
     pub frame: FrameRef,
+    /// The performer's rig (docs/rig.md), once the neutral pose is taken; its figures are in
+    /// `retarget.rig`.
+    #[serde(skip)]
+    pub rig: Option<&'a Rig>,
 }
 
 fn no_character() -> TrackError {
@@ -240,6 +263,9 @@ pub struct Pipeline {
     /// The first character's output line ([`Pipeline::process`]).
     line: OutputLine,
     performer: Named<Option<[f64; 3]>>,
+    /// The performer's rig (docs/rig.md), once the neutral pose is taken.
+    rig_settings: RigSettings,
+    rig: Option<Rig>,
     /// Viewpoints set with [`Pipeline::look_at`], by character name: kept across new
     /// neutral poses and reloads.
     viewpoints: Vec<(String, mouthpiece_retarget::Vec3)>,
@@ -290,6 +316,7 @@ impl Pipeline {
                 key: "retarget.smooth".into(),
                 message: e.to_string(),
             })?;
+        let rig_settings = config.rig;
         let tracker = Tracker::new(config.detect, config.track)?;
         let Some(first) = characters.first() else {
             return Err(no_character());
@@ -309,8 +336,15 @@ impl Pipeline {
             rebound: false,
             line,
             performer,
+            rig_settings,
+            rig: None,
             viewpoints: Vec::new(),
         })
+    }
+
+    /// The performer's rig (after calibration).
+    pub fn rig(&self) -> Option<&Rig> {
+        self.rig.as_ref()
     }
 
     pub fn tracker(&self) -> &Tracker {
@@ -420,7 +454,15 @@ impl Pipeline {
     fn bind(&mut self) -> Result<(), TrackError> {
         let Some(neutral) = self.tracker.neutral() else {
             self.bound.clear();
+            self.rig = None;
             return Ok(());
+        };
+        self.rig = match Rig::new(neutral, self.rig_settings.clone()) {
+            Ok(rig) => Some(rig),
+            Err(e) => {
+                tracing::error!("no rig for this neutral pose: {e}");
+                None
+            }
         };
         let mut first_error = None;
         self.bound = self
@@ -463,6 +505,9 @@ impl Pipeline {
             for bound in self.bound.iter_mut().flatten() {
                 bound.apply(stabilised);
             }
+            if let Some(rig) = &mut self.rig {
+                rig.step(stabilised);
+            }
         }
         Ok(())
     }
@@ -491,6 +536,12 @@ impl Pipeline {
                         character: bound.output(),
                     },
                 );
+                if let Some(rig) = &self.rig {
+                    self.line
+                        .rig
+                        .get_or_insert_with(Default::default)
+                        .clone_from(rig.output());
+                }
             }
             _ => {
                 self.line.t = tracked.t;
@@ -507,6 +558,7 @@ impl Pipeline {
                 if let Some(curve) = &mut self.line.curve {
                     curve.points.clear();
                 }
+                self.line.rig = None;
             }
         }
         for ((_, dst), p) in self
@@ -525,6 +577,7 @@ impl Pipeline {
                 seq: tracked.seq,
                 device_ts_us: tracked.device_ts_us,
             },
+            rig: self.rig.as_ref(),
         };
         Ok((line, tracked))
     }

@@ -4,7 +4,8 @@
 
 use std::path::PathBuf;
 
-use mouthpiece_evaluate::{EvaluateError, Metrics, StepStats, TABLE_HEADER};
+use mouthpiece_evaluate::rig::RigAccuracy;
+use mouthpiece_evaluate::{EvaluateError, Measure, Metrics, StepStats, TABLE_HEADER};
 use mouthpiece_retarget::PerformerLayout;
 use mouthpiece_synth::{HeadMotion, NoiseModel, SynthConfig};
 
@@ -60,6 +61,9 @@ pub struct Args {
     /// on, and the found and wrong names it added and took away; at the end, the sums.
     #[arg(long)]
     pub steps: bool,
+    /// After the rig table, every named curve's RMS per session.
+    #[arg(long)]
+    pub per_curve: bool,
 }
 
 /// A bad `--layout` is the caller's input (exit code 2); anything else is not.
@@ -103,6 +107,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     println!("{TABLE_HEADER}");
     let mut steps = StepStats::default();
+    let mut rig_rows = Vec::new();
     for &motion in &args.head_motion {
         for &noise in &args.noise {
             for &seed in &args.seeds {
@@ -122,8 +127,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     layout: layout.clone(),
                     ..SynthConfig::default()
                 };
-                let m = mouthpiece_evaluate::evaluate(synth, &config, &character, 1.0)
-                    .map_err(to_anyhow)?;
+                let mut rig = RigAccuracy::new(
+                    config.rig.clone(),
+                    character.clone(),
+                    config.track.layout(),
+                    config.track.calibration_s,
+                );
+                let m = mouthpiece_evaluate::evaluate_with(
+                    synth,
+                    &config,
+                    &character,
+                    1.0,
+                    &mut [&mut rig as &mut dyn Measure],
+                )
+                .map_err(to_anyhow)?;
                 println!(
                     "| {seed} | {noise:?} | {motion:?} | {}",
                     mouthpiece_evaluate::table_cells(&m)
@@ -135,11 +152,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     println!("\n{}", m.steps.table());
                     steps.add(&m.steps);
                 }
+                rig_rows.push((format!("{seed} | {noise:?} | {motion:?}"), rig.metrics));
             }
         }
     }
     if args.steps {
         println!("All sessions:\n\n{}", steps.table());
+    }
+    crate::cmd::evaluate_rig::print_header();
+    for (label, r) in &rig_rows {
+        crate::cmd::evaluate_rig::print_row(label, r);
+        if args.per_curve {
+            crate::cmd::evaluate_rig::print_curves(r);
+        }
     }
     Ok(())
 }

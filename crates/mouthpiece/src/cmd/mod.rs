@@ -4,6 +4,7 @@ pub mod bind;
 pub mod check_config;
 pub mod devices;
 pub mod evaluate;
+pub mod evaluate_rig;
 pub mod export;
 pub mod lipsync;
 pub mod lipsync_poses;

@@ -18,7 +18,7 @@ use anyhow::Context as _;
 use mouthpiece_retarget::jsonl::{InputLine, OutputLine};
 use mouthpiece_retarget::{
     Character, CharacterSettings, MissingDots, NeutralAccumulator, OneEuroParams, PerformerDots,
-    PerformerLayout, RetargetConfig, Retargeter,
+    PerformerLayout, RetargetConfig, Retargeter, Rig, RigSettings,
 };
 use mouthpiece_track::pipeline::{RetargetSettings, Smooth as ConfigSmooth};
 
@@ -478,12 +478,14 @@ fn retarget_file<R: BufRead>(
     let mut dots = PerformerDots::new(layout);
     let mut lines = Lines::new(reader);
     let mut seq = 0;
+    let mut rig = None;
     while let Some((line_no, text)) = lines.next_line(input_name)? {
         let Some(line) = checker.check(line_no, text)? else {
             continue;
         };
         emit(
             &mut retargeter,
+            &mut rig,
             &line,
             layout,
             &mut dots,
@@ -520,6 +522,7 @@ fn retarget_stream<R: BufRead>(
     let mut character = Some(character);
     let mut state: Option<(Retargeter, PerformerLayout, PerformerDots)> = None;
     let mut seq = 0;
+    let mut rig = None;
     loop {
         let next = lines.next_line(input_name)?;
         let line = match next {
@@ -559,8 +562,18 @@ fn retarget_stream<R: BufRead>(
             let mut s = (retargeter, layout, PerformerDots::new(layout));
             if pending.flagged {
                 for (l, &line_no) in pending.lines.iter().zip(&pending_numbers) {
-                    emit(&mut s.0, l, s.1, &mut s.2, &mut line_out, seq, look_at, out)
-                        .with_context(|| format!("{input_name} line {line_no}"))?;
+                    emit(
+                        &mut s.0,
+                        &mut rig,
+                        l,
+                        s.1,
+                        &mut s.2,
+                        &mut line_out,
+                        seq,
+                        look_at,
+                        out,
+                    )
+                    .with_context(|| format!("{input_name} line {line_no}"))?;
                     seq += 1;
                 }
             }
@@ -584,6 +597,7 @@ fn retarget_stream<R: BufRead>(
         let (retargeter, layout, dots) = state.as_mut().expect("set above");
         emit(
             retargeter,
+            &mut rig,
             &l,
             *layout,
             dots,
@@ -601,6 +615,7 @@ fn retarget_stream<R: BufRead>(
 #[allow(clippy::too_many_arguments)]
 fn emit(
     retargeter: &mut Retargeter,
+    rig: &mut Option<Rig>,
     line: &InputLine,
     layout: PerformerLayout,
     dots: &mut PerformerDots,
@@ -610,6 +625,10 @@ fn emit(
     out: &mut Output,
 ) -> anyhow::Result<()> {
     line.dots_into(layout, dots).map_err(bad_input)?;
+    if rig.is_none() {
+        // The rig of this neutral pose (docs/rig.md); a layout it cannot rig has no `rig`.
+        *rig = Rig::new(retargeter.stabiliser().neutral(), RigSettings::default()).ok();
+    }
     if let Some(look) = look_at.take_if(|l| line.t >= l.from_t) {
         retargeter
             .character_mut()
@@ -618,6 +637,12 @@ fn emit(
     }
     let result = retargeter.step(line.t, dots).map_err(bad_input)?;
     line_out.update(seq, &result);
+    if let Some(r) = rig {
+        line_out
+            .rig
+            .get_or_insert_with(Default::default)
+            .clone_from(r.step(result.performer));
+    }
     out.write_line(line_out)
 }
 

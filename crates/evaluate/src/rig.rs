@@ -1,0 +1,160 @@
+//! The rig's accuracy (docs/rig.md), measured inside `mouthpiece evaluate`: the jaw against the
+//! synthetic performer's own mouth state, and every named curve against its definition
+//! applied to the ground-truth dots.
+//!
+//! Per session, over the frames after calibration from the evaluation's `--skip` on:
+//! - *jaw RMS*: the rig's jaw angle against the synthetic jaw's rotation (degrees);
+//! - *slide RMS*: the rig's jaw slide against the synthetic jaw's, which does not slide (mm);
+//! - *curve RMS*: each curve against the same curve computed from the ground-truth dots
+//!   (stabilised by the retarget core from the true dots, the same neutral frames), with the
+//!   tracked rig's ranges; the worst curve is reported with its name;
+//! - *correlations*: `jawOpen` with the synthetic jaw angle, `mouthFunnel` with its rounding.
+
+use mouthpiece_retarget::rig::{curves_from, RigModel, RigSettings, CURVES, CURVE_NAMES};
+use mouthpiece_retarget::{
+    Character, NeutralAccumulator, PerformerLayout, RetargetConfig, Retargeter,
+};
+use mouthpiece_synth::GroundTruth;
+
+use crate::measures::{true_dots, window};
+use crate::{measured_settings, EvaluateError, FrameView, Measure};
+
+/// Pearson correlation accumulator.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Correlation {
+    n: f64,
+    sx: f64,
+    sy: f64,
+    sxx: f64,
+    syy: f64,
+    sxy: f64,
+}
+
+impl Correlation {
+    pub fn push(&mut self, x: f64, y: f64) {
+        self.n += 1.0;
+        self.sx += x;
+        self.sy += y;
+        self.sxx += x * x;
+        self.syy += y * y;
+        self.sxy += x * y;
+    }
+
+    pub fn value(&self) -> f64 {
+        let n = self.n.max(1.0);
+        let cov = self.sxy / n - self.sx * self.sy / (n * n);
+        let vx = self.sxx / n - self.sx * self.sx / (n * n);
+        let vy = self.syy / n - self.sy * self.sy / (n * n);
+        if vx <= 0.0 || vy <= 0.0 {
+            return f64::NAN;
+        }
+        cov / (vx * vy).sqrt()
+    }
+}
+
+/// One session's rig figures.
+#[derive(Debug, Clone, Default)]
+pub struct RigMetrics {
+    pub frames: usize,
+    pub jaw_sq: f64,
+    pub slide_sq: f64,
+    pub curve_sq: [f64; CURVES],
+    pub jaw_open: Correlation,
+    pub funnel: Correlation,
+}
+
+impl RigMetrics {
+    pub fn jaw_rms_deg(&self) -> f64 {
+        (self.jaw_sq / self.frames.max(1) as f64).sqrt()
+    }
+    pub fn slide_rms_mm(&self) -> f64 {
+        1e3 * (self.slide_sq / self.frames.max(1) as f64).sqrt()
+    }
+    pub fn curve_rms(&self, i: usize) -> f64 {
+        (self.curve_sq[i] / self.frames.max(1) as f64).sqrt()
+    }
+    /// The worst curve: (name, RMS).
+    pub fn worst_curve(&self) -> (&'static str, f64) {
+        (0..CURVES)
+            .map(|i| (CURVE_NAMES[i], self.curve_rms(i)))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .expect("curves")
+    }
+}
+
+/// The measurement in progress: the pipeline's rig against the one the ground truth gives.
+#[derive(Debug)]
+pub struct RigAccuracy {
+    settings: RigSettings,
+    character: Character,
+    layout: PerformerLayout,
+    calibration_s: f64,
+    /// The retarget core fed with the true dots (their stabilised frames) and the rig model
+    /// of its neutral pose.
+    reference: Option<(Retargeter, RigModel)>,
+    pub metrics: RigMetrics,
+}
+
+impl RigAccuracy {
+    pub fn new(
+        settings: RigSettings,
+        character: Character,
+        layout: PerformerLayout,
+        calibration_s: f64,
+    ) -> Self {
+        Self {
+            settings,
+            character,
+            layout,
+            calibration_s,
+            reference: None,
+            metrics: RigMetrics::default(),
+        }
+    }
+}
+
+impl Measure for RigAccuracy {
+    fn neutral_taken(
+        &mut self,
+        f: &FrameView,
+        history: &[(f64, GroundTruth)],
+    ) -> Result<(), EvaluateError> {
+        let mut acc = NeutralAccumulator::new(self.layout);
+        for g in window(history, f.t, self.calibration_s) {
+            acc.push(&true_dots(g, self.layout))?;
+        }
+        let cfg = RetargetConfig {
+            missing: Default::default(),
+            character: measured_settings(),
+        };
+        let r = Retargeter::new(self.character.clone(), acc.finish()?, cfg)?;
+        let model = RigModel::new(r.stabiliser().neutral(), &self.settings)?;
+        self.reference = Some((r, model));
+        Ok(())
+    }
+
+    fn frame(&mut self, f: &FrameView) -> Result<(), EvaluateError> {
+        let Some((r, model)) = &mut self.reference else {
+            return Ok(());
+        };
+        let out = r.step(f.t, &true_dots(f.truth, self.layout))?;
+        let (true, Some(rig), Some(mouth)) = (f.counted, f.line.rig, f.truth.mouth.as_ref()) else {
+            return Ok(());
+        };
+        let ours = *rig.measures();
+        let theirs = model.measure(&out.performer.lip);
+        let (mut a, mut b) = ([0.0; CURVES], [0.0; CURVES]);
+        curves_from(&ours, rig.ranges(), &mut a);
+        curves_from(&theirs, rig.ranges(), &mut b);
+        let m = &mut self.metrics;
+        m.frames += 1;
+        m.jaw_sq += (ours.jaw_angle - mouth.jaw).to_degrees().powi(2);
+        m.slide_sq += ours.jaw_slide.powi(2);
+        for ((sq, x), y) in m.curve_sq.iter_mut().zip(a).zip(b) {
+            *sq += (x - y).powi(2);
+        }
+        m.jaw_open.push(a[0], mouth.jaw);
+        m.funnel.push(a[2], mouth.round);
+        Ok(())
+    }
+}

@@ -1,0 +1,856 @@
+//! What engine rigs take (docs/rig.md): a jaw bone, the rigid motion of each lip, and mouth
+//! curves named and ranged as Apple's ARKit blend shapes, from the stabilised performer dots.
+//!
+//! Everything is in the performer's neutral mouth frame (docs/method.md §2: x towards the
+//! performer's left, y up, z out of the mouth; metres) and relative to the neutral pose.
+//!
+//! - **Jaw**: a rigid body turning about the hinge axis (the line through the condyles) and
+//!   sliding along it. The axis is the mouth frame's x axis (parallel to the corner line: the
+//!   face is symmetric); its pivot is placed from the neutral mouth width with anatomical
+//!   ratios ([`RigSettings::hinge_up`], [`RigSettings::hinge_back`]). Per step, the opening
+//!   angle is the angle the lower-lip centroid turned about the pivot, after the forward
+//!   motion the upper lip shares (lips pushed out) is taken off; the slide is the lower lip's
+//!   sideways shift against the upper lip's.
+//! - **Lips**: for each lip (its dots and both corners) the rigid motion that best carries the
+//!   neutral dots onto the current ones (Kabsch), and the residual RMS it leaves.
+//! - **Curves**: [`CURVE_NAMES`], each `clamp(measure / range, 0, 1)`; the measures are means
+//!   and least-squares fits over several dots (never one distance), the ranges come from the
+//!   defaults scaled by the performer's mouth width, widened by what the performer does in
+//!   the first seconds after the neutral pose ([`RigSettings::learn_s`]), and overridable per
+//!   curve ([`RigSettings::ranges`]).
+//!
+//! A step allocates nothing.
+
+use nalgebra::Rotation3;
+use serde::{Deserialize, Serialize};
+
+use crate::kabsch::kabsch;
+use crate::retarget::StabilisedFrame;
+use crate::{Error, Named, NeutralPose, Vec3};
+
+/// The curve names, in wire order (ARKit's blend-shape names; left and right are the
+/// performer's).
+pub const CURVE_NAMES: [&str; 18] = [
+    "jawOpen",
+    "mouthClose",
+    "mouthFunnel",
+    "mouthPucker",
+    "mouthLeft",
+    "mouthRight",
+    "mouthSmileLeft",
+    "mouthSmileRight",
+    "mouthStretchLeft",
+    "mouthStretchRight",
+    "mouthRollUpper",
+    "mouthRollLower",
+    "mouthUpperUpLeft",
+    "mouthUpperUpRight",
+    "mouthLowerDownLeft",
+    "mouthLowerDownRight",
+    "mouthPressLeft",
+    "mouthPressRight",
+];
+
+/// Number of curves.
+pub const CURVES: usize = CURVE_NAMES.len();
+
+/// Default range of each curve's measure: degrees for `jawOpen`, mouth widths for the rest.
+pub const DEFAULT_RANGES: [f64; CURVES] = [
+    25.0, // jawOpen: degrees of jaw rotation
+    0.15, // mouthClose: lower-lip rise against the jaw
+    0.12, // mouthFunnel: lips pushed out and drawn in
+    0.25, // mouthPucker: lips drawn in (horizontal scale 1 - s)
+    0.10, // mouthLeft
+    0.10, // mouthRight
+    0.12, // mouthSmileLeft: corner up
+    0.12, // mouthSmileRight
+    0.15, // mouthStretchLeft: corner out
+    0.15, // mouthStretchRight
+    0.12, // mouthRollUpper
+    0.20, // mouthRollLower
+    0.10, // mouthUpperUpLeft
+    0.10, // mouthUpperUpRight
+    0.12, // mouthLowerDownLeft
+    0.12, // mouthLowerDownRight
+    0.15, // mouthPressLeft
+    0.15, // mouthPressRight
+];
+
+/// Index of a curve name in [`CURVE_NAMES`].
+pub fn curve_index(name: &str) -> Option<usize> {
+    CURVE_NAMES.iter().position(|n| *n == name)
+}
+
+/// Rig settings: the `[rig]` table of a character file or of the daemon configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RigSettings {
+    /// Hinge pivot height above the mouth centre, in neutral mouth widths.
+    pub hinge_up: f64,
+    /// Hinge pivot depth behind the mouth centre, in neutral mouth widths.
+    pub hinge_back: f64,
+    /// Seconds after the neutral pose during which ranges widen to what the performer does
+    /// (0: the defaults as they are).
+    pub learn_s: f64,
+    /// Curve name → range of its measure (degrees for `jawOpen`, mouth widths for the
+    /// others). A range given here is used as it is (not widened by learning).
+    pub ranges: Named<f64>,
+}
+
+impl Default for RigSettings {
+    fn default() -> Self {
+        Self {
+            hinge_up: 0.5,
+            hinge_back: 1.6,
+            learn_s: 4.0,
+            ranges: Named::default(),
+        }
+    }
+}
+
+impl RigSettings {
+    /// Checks the values; `prefix` names the table (`rig`, `characters.wolf.rig`).
+    pub fn validate(&self, prefix: &str) -> Result<(), Error> {
+        let bad = |key: &str, reason: String| Error::InvalidSetting {
+            key: format!("{prefix}.{key}"),
+            reason,
+        };
+        for (key, v, lo, hi) in [
+            ("hinge_up", self.hinge_up, -5.0, 5.0),
+            ("hinge_back", self.hinge_back, 0.2, 10.0),
+            ("learn_s", self.learn_s, 0.0, 600.0),
+        ] {
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                return Err(bad(key, format!("must be within {lo}..={hi}, got {v}")));
+            }
+        }
+        for (name, v) in self.ranges.iter() {
+            if curve_index(name).is_none() {
+                return Err(bad(
+                    &format!("ranges.{name}"),
+                    format!("is not a curve name (one of {})", CURVE_NAMES.join(", ")),
+                ));
+            }
+            if !(v.is_finite() && *v > 0.0 && *v <= 1000.0) {
+                return Err(bad(
+                    &format!("ranges.{name}"),
+                    format!("must be a positive number (at most 1000), got {v}"),
+                ));
+            }
+        }
+        let mut seen = [false; CURVES];
+        for (name, _) in self.ranges.iter() {
+            let i = curve_index(name).expect("checked");
+            if seen[i] {
+                return Err(bad(&format!("ranges.{name}"), "is given twice".into()));
+            }
+            seen[i] = true;
+        }
+        Ok(())
+    }
+
+    /// Parses a `[rig]` table given as TOML text (for tests and tools).
+    pub fn from_toml_str(text: &str) -> Result<Self, Error> {
+        let s: Self = toml::from_str(text).map_err(|e| Error::InvalidSetting {
+            key: "rig".into(),
+            reason: e.to_string(),
+        })?;
+        s.validate("rig")?;
+        Ok(s)
+    }
+
+    /// The configured range of curve `i`, if any.
+    fn configured(&self, i: usize) -> Option<f64> {
+        self.ranges.get(CURVE_NAMES[i]).copied()
+    }
+}
+
+/// One lip's rigid motion from neutral (mouth frame).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LipMotion {
+    /// Unit quaternion `[w, x, y, z]`, `w >= 0`.
+    pub rotation: [f64; 4],
+    /// Metres.
+    pub translation: [f64; 3],
+    /// RMS distance (metres) between the current dots and the rigidly moved neutral ones:
+    /// what the rigid motion cannot explain (stretch, rounding).
+    pub residual: f64,
+}
+
+impl Default for LipMotion {
+    fn default() -> Self {
+        Self {
+            rotation: [1.0, 0.0, 0.0, 0.0],
+            translation: [0.0; 3],
+            residual: 0.0,
+        }
+    }
+}
+
+/// The jaw of one step.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct JawState {
+    /// Opening angle about the hinge axis, degrees (> 0 open).
+    pub angle_deg: f64,
+    /// Slide along the hinge axis, metres (> 0 towards the performer's left).
+    pub slide_m: f64,
+}
+
+/// Both lips of one step.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct LipsState {
+    pub upper: LipMotion,
+    pub lower: LipMotion,
+}
+
+/// The rig of one step, as it goes on the wire and into files.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RigFrame {
+    pub jaw: JawState,
+    pub lips: LipsState,
+    /// Curve name → value in 0..1, in [`CURVE_NAMES`] order.
+    pub curves: Named<f64>,
+}
+
+impl Default for RigFrame {
+    fn default() -> Self {
+        Self {
+            jaw: JawState::default(),
+            lips: LipsState::default(),
+            curves: Named(CURVE_NAMES.iter().map(|n| (n.to_string(), 0.0)).collect()),
+        }
+    }
+}
+
+impl RigFrame {
+    /// The value of curve `name` (0 when absent).
+    pub fn curve(&self, name: &str) -> f64 {
+        self.curves.get(name).copied().unwrap_or(0.0)
+    }
+}
+
+/// The raw measures of one step, before ranges (degrees for the jaw, mouth widths for the
+/// rest), and the jaw in natural units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measures {
+    pub values: [f64; CURVES],
+    /// Jaw angle, radians.
+    pub jaw_angle: f64,
+    /// Jaw slide, metres.
+    pub jaw_slide: f64,
+}
+
+/// Dot roles in the layout (indices into the lip dots).
+#[derive(Debug, Clone)]
+struct Roles {
+    left: usize,
+    right: usize,
+    upper: Vec<usize>,
+    lower: Vec<usize>,
+}
+
+impl Roles {
+    fn new(n: usize) -> Self {
+        let right = n / 2;
+        Self {
+            left: 0,
+            right,
+            upper: (1..right).collect(),
+            lower: (right + 1..n).collect(),
+        }
+    }
+}
+
+/// The rig geometry fixed at calibration, and the measures of any stabilised step.
+///
+/// Use [`Rig`] for the streaming estimator; [`RigModel::measure`] alone gives the measures of
+/// any set of mouth-frame dots (the evaluation applies it to ground truth).
+#[derive(Debug, Clone)]
+pub struct RigModel {
+    roles: Roles,
+    /// Neutral lip dots, mouth frame.
+    neutral: Vec<Vec3>,
+    width: f64,
+    /// Hinge pivot (y, z) in the mouth frame; the axis is x.
+    pivot: [f64; 2],
+    /// Per upper / lower non-corner dot: weight of the performer's left side (right = 1 − it).
+    upper_left: Vec<f64>,
+    lower_left: Vec<f64>,
+    /// Σ x0² over all dots (the horizontal scale fit's denominator).
+    sxx: f64,
+}
+
+fn mean_over(idx: &[usize], f: impl Fn(usize) -> f64) -> f64 {
+    idx.iter().map(|&i| f(i)).sum::<f64>() / idx.len().max(1) as f64
+}
+
+fn weighted(idx: &[usize], w: &[f64], f: impl Fn(usize) -> f64) -> f64 {
+    let (mut s, mut ws) = (0.0, 0.0);
+    for (k, &i) in idx.iter().enumerate() {
+        s += w[k] * f(i);
+        ws += w[k];
+    }
+    if ws > 0.0 {
+        s / ws
+    } else {
+        0.0
+    }
+}
+
+impl RigModel {
+    /// The model for a neutral pose (at least 6 lip dots: two corners and two per lip).
+    pub fn new(neutral: &NeutralPose, settings: &RigSettings) -> Result<Self, Error> {
+        settings.validate("rig")?;
+        let n = neutral.lip.len();
+        if n < 6 {
+            return Err(Error::InvalidSetting {
+                key: "track.lip_dots".into(),
+                reason: format!("the rig needs at least 6 lip dots, the layout has {n}"),
+            });
+        }
+        let roles = Roles::new(n);
+        let width = neutral.mouth_width();
+        let side = |i: usize| (0.5 + neutral.lip[i].x / (0.5 * width)).clamp(0.0, 1.0);
+        let upper_left = roles.upper.iter().map(|&i| side(i)).collect();
+        let lower_left = roles.lower.iter().map(|&i| side(i)).collect();
+        let sxx = neutral.lip.iter().map(|p| p.x * p.x).sum::<f64>();
+        Ok(Self {
+            pivot: [settings.hinge_up * width, -settings.hinge_back * width],
+            neutral: neutral.lip.clone(),
+            roles,
+            width,
+            upper_left,
+            lower_left,
+            sxx,
+        })
+    }
+
+    /// Neutral mouth width, metres.
+    pub fn width(&self) -> f64 {
+        self.width
+    }
+
+    /// The hinge pivot in the mouth frame (the hinge axis is the frame's x axis).
+    pub fn pivot(&self) -> Vec3 {
+        Vec3::new(0.0, self.pivot[0], self.pivot[1])
+    }
+
+    /// The jaw's rigid motion (mouth frame) for an angle (radians) and slide (metres).
+    pub fn jaw_transform(&self, angle: f64, slide: f64) -> crate::RigidTransform {
+        let r = Rotation3::from_axis_angle(&Vec3::x_axis(), angle).into_inner();
+        let h = self.pivot();
+        crate::RigidTransform {
+            rotation: r,
+            translation: h - r * h + Vec3::new(slide, 0.0, 0.0),
+        }
+    }
+
+    /// The measures of one step's lip dots (mouth frame, in layout order).
+    pub fn measure(&self, lip: &[Vec3]) -> Measures {
+        let r = &self.roles;
+        let n0 = &self.neutral;
+        let w = self.width;
+        let d = |i: usize| lip[i] - n0[i];
+        // Lip centroids and their motion.
+        let du = Vec3::new(
+            mean_over(&r.upper, |i| d(i).x),
+            mean_over(&r.upper, |i| d(i).y),
+            mean_over(&r.upper, |i| d(i).z),
+        );
+        let c0 = Vec3::new(
+            mean_over(&r.lower, |i| n0[i].x),
+            mean_over(&r.lower, |i| n0[i].y),
+            mean_over(&r.lower, |i| n0[i].z),
+        );
+        let dl = Vec3::new(
+            mean_over(&r.lower, |i| d(i).x),
+            mean_over(&r.lower, |i| d(i).y),
+            mean_over(&r.lower, |i| d(i).z),
+        );
+        // Jaw: the angle the lower-lip centroid turned about the pivot, with the forward motion
+        // both lips share taken off.
+        let (hy, hz) = (self.pivot[0], self.pivot[1]);
+        let (r0y, r0z) = (c0.y - hy, c0.z - hz);
+        let (py, pz) = (r0y + dl.y, r0z + dl.z - du.z);
+        let angle = (r0y * pz - r0z * py).atan2(r0y * py + r0z * pz);
+        let slide = dl.x - du.x;
+        // The lower lip with the jaw's motion taken off.
+        let (s, c) = angle.sin_cos();
+        let unjaw = |i: usize| -> Vec3 {
+            let p = lip[i];
+            let (y, z) = (p.y - hy, p.z - hz);
+            // Rotate back by −angle about x through the pivot, and undo the slide.
+            Vec3::new(p.x - slide, hy + y * c + z * s, hz - y * s + z * c) - n0[i]
+        };
+        let free_y = |i: usize| unjaw(i).y;
+        let free_z = |i: usize| unjaw(i).z;
+        // The drop the jaw gives the lower-lip centroid.
+        let jaw_drop = -((r0y * c - r0z * s + hy) - c0.y);
+        let mut v = [0.0; CURVES];
+        v[0] = angle.to_degrees();
+        // mouthClose: the lower lip rises against the jaw (lips stay shut while it drops).
+        v[1] = (jaw_drop - (du.y - dl.y)) / w;
+        // Horizontal scale of the whole mouth (least squares over every dot, the lower lip
+        // without the slide), and of each side.
+        let (mut sxl, mut sxr, mut xxl, mut xxr) = (0.0, 0.0, 0.0, 0.0);
+        for (i, (p, q)) in lip.iter().zip(n0).enumerate() {
+            let x = p.x - if r.lower.contains(&i) { slide } else { 0.0 };
+            if q.x >= 0.0 {
+                sxl += x * q.x;
+                xxl += q.x * q.x;
+            } else {
+                sxr += x * q.x;
+                xxr += q.x * q.x;
+            }
+        }
+        let sx = (sxl + sxr) / self.sxx;
+        // mouthFunnel: lips pushed out and drawn in: half the upper lip's mean forward motion
+        // plus half the corners' inward motion (both in mouth widths).
+        // (The upper lip's push: the lower lip's depends on the jaw's estimate.)
+        v[2] = 0.5 * du.z / w + 0.5 * (1.0 - sx) * 0.5;
+        // mouthPucker: drawn in horizontally: 1 − the horizontal scale.
+        v[3] = 1.0 - sx;
+        // mouthLeft / Right: the whole mouth shifted sideways (mean over every dot).
+        let shift = lip.iter().zip(n0).map(|(p, q)| p.x - q.x).sum::<f64>() / lip.len() as f64 / w;
+        v[4] = shift;
+        v[5] = -shift;
+        // Corners with their two neighbours (the lower neighbour without the jaw).
+        let (ul, ll) = (r.upper[0], *r.lower.last().expect("lower lip"));
+        let (ur, lr) = (*r.upper.last().expect("upper lip"), r.lower[0]);
+        let corner_up = |c: usize, up: usize, low: usize| -> f64 {
+            // A corner moves with half the jaw (it joins both lips).
+            let cy = 0.5 * (d(c).y + unjaw(c).y);
+            (cy + d(up).y + free_y(low)) / 3.0
+        };
+        let ly = corner_up(r.left, ul, ll);
+        let ry = corner_up(r.right, ur, lr);
+        v[6] = ly / w;
+        v[7] = ry / w;
+        // Stretch: each side's horizontal scale, as the corner's outward motion.
+        v[8] = 0.5 * (sxl / xxl.max(f64::MIN_POSITIVE) - 1.0);
+        v[9] = 0.5 * (sxr / xxr.max(f64::MIN_POSITIVE) - 1.0);
+        // Rolls: the upper lip's edge down and back; the lower lip's (without the jaw) up and
+        // back.
+        // (Depth is the noisiest axis: the backward part counts half.)
+        v[10] = mean_over(&r.upper, |i| -d(i).y - 0.5 * d(i).z) / w;
+        v[11] = mean_over(&r.lower, |i| free_y(i) - 0.5 * free_z(i)) / w;
+        // Upper lip up / lower lip down, per side.
+        let up_l = weighted(&r.upper, &self.upper_left, |i| d(i).y);
+        let up_r = weighted_right(&r.upper, &self.upper_left, |i| d(i).y);
+        let lo_l = weighted(&r.lower, &self.lower_left, free_y);
+        let lo_r = weighted_right(&r.lower, &self.lower_left, free_y);
+        v[12] = up_l / w;
+        v[13] = up_r / w;
+        v[14] = -lo_l / w;
+        v[15] = -lo_r / w;
+        // Press: the lips squeezed together on a side (upper down, lower up, without the jaw).
+        v[16] = (lo_l - up_l) / w;
+        v[17] = (lo_r - up_r) / w;
+        Measures {
+            values: v,
+            jaw_angle: angle,
+            jaw_slide: slide,
+        }
+    }
+}
+
+fn weighted_right(idx: &[usize], left: &[f64], f: impl Fn(usize) -> f64) -> f64 {
+    let (mut s, mut ws) = (0.0, 0.0);
+    for (k, &i) in idx.iter().enumerate() {
+        let w = 1.0 - left[k];
+        s += w * f(i);
+        ws += w;
+    }
+    if ws > 0.0 {
+        s / ws
+    } else {
+        0.0
+    }
+}
+
+/// Turns measures into curves with ranges.
+pub fn curves_from(measures: &Measures, ranges: &[f64; CURVES], out: &mut [f64; CURVES]) {
+    for ((dst, m), r) in out.iter_mut().zip(&measures.values).zip(ranges) {
+        let v = m / r;
+        *dst = if v.is_finite() {
+            v.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+    }
+}
+
+/// The streaming rig estimator of one performer: [`RigModel`], the range learning and the
+/// lip fits. One per performer neutral pose; [`Rig::step`] per stabilised frame.
+#[derive(Debug, Clone)]
+pub struct Rig {
+    model: RigModel,
+    settings: RigSettings,
+    ranges: [f64; CURVES],
+    learn_until: Option<f64>,
+    start: Option<f64>,
+    /// Scratch for the lip fits.
+    from: Vec<Vec3>,
+    to: Vec<Vec3>,
+    measures: Measures,
+    values: [f64; CURVES],
+    out: RigFrame,
+}
+
+impl Rig {
+    /// A rig for a performer's neutral pose.
+    pub fn new(neutral: &NeutralPose, settings: RigSettings) -> Result<Self, Error> {
+        let model = RigModel::new(neutral, &settings)?;
+        let mut ranges = DEFAULT_RANGES;
+        for (i, r) in ranges.iter_mut().enumerate() {
+            if let Some(v) = settings.configured(i) {
+                *r = v;
+            }
+        }
+        let n = neutral.lip.len();
+        Ok(Self {
+            model,
+            ranges,
+            learn_until: None,
+            start: None,
+            from: Vec::with_capacity(n),
+            to: Vec::with_capacity(n),
+            measures: Measures {
+                values: [0.0; CURVES],
+                jaw_angle: 0.0,
+                jaw_slide: 0.0,
+            },
+            values: [0.0; CURVES],
+            out: RigFrame::default(),
+            settings,
+        })
+    }
+
+    pub fn model(&self) -> &RigModel {
+        &self.model
+    }
+
+    pub fn settings(&self) -> &RigSettings {
+        &self.settings
+    }
+
+    /// The ranges in use (degrees for `jawOpen`, mouth widths for the rest).
+    pub fn ranges(&self) -> &[f64; CURVES] {
+        &self.ranges
+    }
+
+    /// The last step's measures.
+    pub fn measures(&self) -> &Measures {
+        &self.measures
+    }
+
+    /// The last step's output.
+    pub fn output(&self) -> &RigFrame {
+        &self.out
+    }
+
+    /// Whether the ranges are still being learned (the learning window has not ended).
+    pub fn learning(&self) -> bool {
+        self.learn_until.is_none()
+    }
+
+    /// One step.
+    pub fn step(&mut self, frame: &StabilisedFrame) -> &RigFrame {
+        let m = self.model.measure(&frame.lip);
+        self.measures = m;
+        // Learning: the first `learn_s` seconds widen the ranges of curves not configured.
+        let start = *self.start.get_or_insert(frame.t);
+        if frame.t - start <= self.settings.learn_s {
+            for (i, (range, v)) in self.ranges.iter_mut().zip(m.values).enumerate() {
+                if self.settings.configured(i).is_none() && v.is_finite() {
+                    *range = range.max(v);
+                }
+            }
+        } else {
+            self.learn_until.get_or_insert(frame.t);
+        }
+        curves_from(&m, &self.ranges, &mut self.values);
+        for ((_, dst), v) in self.out.curves.0.iter_mut().zip(&self.values) {
+            *dst = *v;
+        }
+        self.out.jaw = JawState {
+            angle_deg: m.jaw_angle.to_degrees(),
+            slide_m: m.jaw_slide,
+        };
+        let m = &self.model;
+        let r = &m.roles;
+        self.out.lips.upper = lip_motion(
+            &m.neutral,
+            &frame.lip,
+            r.upper.iter().chain([r.left, r.right].iter()),
+            &mut self.from,
+            &mut self.to,
+        );
+        self.out.lips.lower = lip_motion(
+            &m.neutral,
+            &frame.lip,
+            r.lower.iter().chain([r.left, r.right].iter()),
+            &mut self.from,
+            &mut self.to,
+        );
+        &self.out
+    }
+}
+
+/// The rigid motion carrying the neutral dots `idx` onto the current ones, and its residual.
+fn lip_motion<'a>(
+    neutral: &[Vec3],
+    lip: &[Vec3],
+    idx: impl Iterator<Item = &'a usize>,
+    from: &mut Vec<Vec3>,
+    to: &mut Vec<Vec3>,
+) -> LipMotion {
+    from.clear();
+    to.clear();
+    for &i in idx {
+        from.push(neutral[i]);
+        to.push(lip[i]);
+    }
+    let Some(t) = kabsch(from, to) else {
+        return LipMotion::default();
+    };
+    let sq: f64 = from
+        .iter()
+        .zip(to.iter())
+        .map(|(a, b)| (t.apply(a) - b).norm_squared())
+        .sum();
+    LipMotion {
+        rotation: t.quaternion_wxyz(),
+        translation: [t.translation.x, t.translation.y, t.translation.z],
+        residual: (sq / from.len().max(1) as f64).sqrt(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{PerformerLayout, RigidTransform};
+
+    /// A 12-dot mouth given directly in its mouth frame (x left, y up, z out): the forehead
+    /// straight above, so the camera frame is the mouth frame.
+    fn neutral() -> NeutralPose {
+        let mut lip = vec![Vec3::new(0.025, 0.0, -0.004)];
+        for k in 0..5 {
+            let x = 0.016 - 0.008 * k as f64;
+            lip.push(Vec3::new(x, 0.006 - 40.0 * x * x, -2.0 * x * x));
+        }
+        lip.push(Vec3::new(-0.025, 0.0, -0.004));
+        for k in 0..5 {
+            let x = -0.016 + 0.008 * k as f64;
+            lip.push(Vec3::new(x, -0.008 + 40.0 * x * x, -2.0 * x * x));
+        }
+        let forehead = vec![
+            Some(Vec3::new(-0.03, 0.1, -0.01)),
+            Some(Vec3::new(0.03, 0.1, -0.01)),
+            Some(Vec3::new(0.0, 0.12, -0.02)),
+        ];
+        NeutralPose::from_positions(
+            PerformerLayout::default(),
+            lip.into_iter().map(Some).collect(),
+            forehead,
+            30,
+        )
+        .unwrap()
+    }
+
+    fn frame(lip: Vec<Vec3>) -> StabilisedFrame {
+        StabilisedFrame {
+            t: 0.0,
+            confidence: vec![1.0; lip.len()],
+            lip,
+            head: RigidTransform::IDENTITY,
+            head_lost: false,
+        }
+    }
+
+    fn rig() -> Rig {
+        Rig::new(
+            &neutral(),
+            RigSettings {
+                learn_s: 0.0,
+                ..RigSettings::default()
+            },
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn neutral_is_all_zero() {
+        let n = neutral();
+        let mut rig = rig();
+        let out = rig.step(&frame(n.lip.clone())).clone();
+        assert!(out.jaw.angle_deg.abs() < 1e-9 && out.jaw.slide_m.abs() < 1e-12);
+        assert!(out.curves.iter().all(|(_, v)| v.abs() < 1e-12), "{out:?}");
+        assert!(out.lips.upper.residual < 1e-12 && out.lips.lower.residual < 1e-12);
+    }
+
+    #[test]
+    fn a_turned_jaw_gives_its_angle_and_nothing_else_moves() {
+        let n = neutral();
+        let mut rig = rig();
+        let jaw = rig.model().jaw_transform(10f64.to_radians(), 0.0);
+        let mut lip = n.lip.clone();
+        for p in &mut lip[7..] {
+            *p = jaw.apply(p);
+        }
+        let out = rig.step(&frame(lip.clone())).clone();
+        assert!((out.jaw.angle_deg - 10.0).abs() < 1e-9, "{:?}", out.jaw);
+        assert!(out.jaw.slide_m.abs() < 1e-12);
+        assert!((out.curve("jawOpen") - 10.0 / 25.0).abs() < 1e-9);
+        // The lips followed the jaw: no lower-down, no roll, no press; the lips parted, so
+        // no mouthClose either.
+        for name in [
+            "mouthLowerDownLeft",
+            "mouthRollLower",
+            "mouthPressLeft",
+            "mouthClose",
+        ] {
+            assert!(out.curve(name) < 1e-9, "{name}: {}", out.curve(name));
+        }
+        // The lower lip's rigid motion is the jaw's rotation: 10° about x.
+        let q = out.lips.lower.rotation;
+        let angle = 2.0 * q[1].atan2(q[0]);
+        assert!(angle.to_degrees() > 5.0, "{q:?}");
+        // A slide along the hinge.
+        let jaw = rig.model().jaw_transform(0.0, 0.002);
+        let mut lip = n.lip.clone();
+        for p in &mut lip[7..] {
+            *p = jaw.apply(p);
+        }
+        let out = rig.step(&frame(lip)).clone();
+        assert!((out.jaw.slide_m - 0.002).abs() < 1e-12 && out.jaw.angle_deg.abs() < 1e-9);
+        // The mouth as a whole moved by the lower lip's share.
+        let w = n.mouth_width();
+        assert!((out.curve("mouthLeft") - 0.002 * 5.0 / 12.0 / w / 0.10).abs() < 1e-9);
+        assert!(
+            out.curve("mouthPucker").abs() < 1e-12,
+            "the slide is not a narrowing"
+        );
+    }
+
+    #[test]
+    fn lips_drawn_in_pucker_and_pushed_out_funnel() {
+        let n = neutral();
+        let w = n.mouth_width();
+        let mut rig = rig();
+        let drawn: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(0.9 * p.x, p.y, p.z))
+            .collect();
+        let out = rig.step(&frame(drawn)).clone();
+        assert!(
+            (out.curve("mouthPucker") - 0.1 / 0.25).abs() < 1e-9,
+            "{out:?}"
+        );
+        assert!((out.curve("mouthFunnel") - 0.025 / 0.12).abs() < 1e-9);
+        let pushed: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| p + Vec3::new(0.0, 0.0, 0.003))
+            .collect();
+        let out = rig.step(&frame(pushed)).clone();
+        assert!((out.curve("mouthFunnel") - 0.5 * 0.003 / w / 0.12).abs() < 1e-9);
+        assert!(
+            out.jaw.angle_deg.abs() < 1e-9,
+            "a push is not a jaw: {:?}",
+            out.jaw
+        );
+    }
+
+    #[test]
+    fn left_and_right_are_the_performers_and_mirror() {
+        let n = neutral();
+        let mut rig = rig();
+        // The left corner (D1, +x) up and out.
+        let mut lip = n.lip.clone();
+        lip[0] += Vec3::new(0.003, 0.004, 0.0);
+        let left = rig.step(&frame(lip)).clone();
+        let (sl, sr) = (left.curve("mouthSmileLeft"), left.curve("mouthSmileRight"));
+        assert!(sl > 0.1 && sr < 1e-12, "{sl} {sr}");
+        let (tl, tr) = (
+            left.curve("mouthStretchLeft"),
+            left.curve("mouthStretchRight"),
+        );
+        assert!(tl > 0.1 && tr < 1e-12, "{tl} {tr}");
+        let mut lip = n.lip.clone();
+        lip[6] += Vec3::new(-0.003, 0.004, 0.0);
+        let right = rig.step(&frame(lip)).clone();
+        for (a, b) in [
+            ("mouthSmileLeft", "mouthSmileRight"),
+            ("mouthStretchLeft", "mouthStretchRight"),
+        ] {
+            assert!((left.curve(a) - right.curve(b)).abs() < 1e-9, "{a}");
+        }
+        // The whole mouth shifted to the performer's left.
+        let shifted: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| p + Vec3::new(0.002, 0.0, 0.0))
+            .collect();
+        let out = rig.step(&frame(shifted)).clone();
+        assert!(out.curve("mouthLeft") > 0.3 && out.curve("mouthRight") == 0.0);
+        assert!(out.jaw.slide_m.abs() < 1e-12, "the jaw moved with the lips");
+    }
+
+    #[test]
+    fn ranges_are_learned_then_kept_and_configured_ones_are_not_learned() {
+        let n = neutral();
+        let settings = RigSettings {
+            learn_s: 1.0,
+            ranges: Named(vec![("mouthPucker".into(), 0.5)]),
+            ..RigSettings::default()
+        };
+        let mut rig = Rig::new(&n, settings).unwrap();
+        let jaw = rig.model().jaw_transform(40f64.to_radians(), 0.0);
+        let mut lip: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(0.5 * p.x, p.y, p.z))
+            .collect();
+        for p in &mut lip[7..] {
+            *p = jaw.apply(p);
+        }
+        let mut f = frame(lip);
+        f.t = 0.5;
+        rig.step(&f);
+        assert!(
+            (rig.ranges()[0] - 40.0).abs() < 1e-9,
+            "jawOpen widened to 40°"
+        );
+        assert_eq!(rig.ranges()[3], 0.5, "configured: kept");
+        assert!(rig.learning());
+        let mut g = frame(n.lip.clone());
+        g.t = 2.0;
+        rig.step(&g);
+        assert!(!rig.learning());
+        assert!((rig.ranges()[0] - 40.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn settings_errors_name_the_key() {
+        let e = RigSettings::from_toml_str("hinge_back = -1")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("rig.hinge_back"), "{e}");
+        let e = RigSettings::from_toml_str("[ranges]\nmouthSmile = 0.1")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("rig.ranges.mouthSmile"), "{e}");
+        let e = RigSettings::from_toml_str("[ranges]\njawOpen = 0")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("rig.ranges.jawOpen"), "{e}");
+        let e = RigSettings::from_toml_str("hinge = 1")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("hinge"), "{e}");
+        let s = RigSettings::from_toml_str("learn_s = 0\n[ranges]\njawOpen = 30").unwrap();
+        assert_eq!(s.ranges.get("jawOpen"), Some(&30.0));
+    }
+}
