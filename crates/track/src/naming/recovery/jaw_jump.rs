@@ -167,10 +167,7 @@ mod tests {
     fn a_lower_lip_on_its_ghosts_is_named_from_the_jaws_jump() {
         let mut scene = Scene::calibrated();
         let rest = scene.rest_pixels();
-        let mut truth = rest.clone();
-        for p in &mut truth[7..12] {
-            p[1] += 9.0;
-        }
+        let truth = lower_lip_moved(&rest, [0.0, 9.0]);
         let mut cands = scene.candidates_at(&truth);
         let face = neutral_face();
         for (px, p) in rest.iter().zip(&face).take(11).skip(8) {

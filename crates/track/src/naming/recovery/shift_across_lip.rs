@@ -123,10 +123,7 @@ mod tests {
     fn a_lower_lip_that_moved_together_is_found_with_one_shift() {
         let mut scene = Scene::calibrated();
         let rest = scene.rest_pixels();
-        let mut truth = rest.clone();
-        for p in &mut truth[7..12] {
-            p[1] += 7.0;
-        }
+        let truth = lower_lip_moved(&rest, [0.0, 7.0]);
         let mut cands = scene.candidates_at(&truth);
         let pass = scene.pass(&rest, &cands);
         let (first, names) = scene.run_after_first_pass(&ShiftAcrossLip, &pass, &mut cands);
@@ -143,10 +140,7 @@ mod tests {
     fn a_shift_along_the_lip_is_not_tried() {
         let mut scene = Scene::calibrated();
         let rest = scene.rest_pixels();
-        let mut truth = rest.clone();
-        for p in &mut truth[7..12] {
-            p[0] += 9.0;
-        }
+        let truth = lower_lip_moved(&rest, [9.0, 0.0]);
         let mut cands = scene.candidates_at(&truth);
         let pass = scene.pass(&rest, &cands);
         let (first, names) = scene.run_after_first_pass(&ShiftAcrossLip, &pass, &mut cands);

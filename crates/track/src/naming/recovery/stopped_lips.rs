@@ -62,10 +62,7 @@ mod tests {
     fn lips_that_stopped_dead_are_named_from_their_last_places() {
         let mut scene = Scene::calibrated();
         let rest = scene.rest_pixels();
-        let mut overshot = rest.clone();
-        for p in &mut overshot[7..12] {
-            p[1] += 6.0;
-        }
+        let overshot = lower_lip_moved(&rest, [0.0, 6.0]);
         let mut cands = scene.candidates_at(&rest);
         let mut pass = scene.pass(&overshot, &cands);
         let mut names = scene.first_pass(&pass, &cands);

@@ -50,6 +50,16 @@ pub struct Scene {
     pub k: Intrinsics,
 }
 
+/// `rest` with the lower lip between the corners (D8..D12) moved by `by` pixels.
+pub(crate) fn lower_lip_moved(rest: &[[f64; 2]], by: [f64; 2]) -> Vec<[f64; 2]> {
+    let mut moved = rest.to_vec();
+    for p in &mut moved[7..12] {
+        p[0] += by[0];
+        p[1] += by[1];
+    }
+    moved
+}
+
 impl Scene {
     pub fn calibrated() -> Self {
         let layout = PerformerLayout::default();
