@@ -2,11 +2,11 @@
 //! rule applied to the performer's true head rotation.
 
 use mouthpiece_retarget::head::{HeadDriver, FORWARD};
-use mouthpiece_retarget::{Character, NeutralAccumulator, PerformerLayout};
+use mouthpiece_retarget::{Character, PerformerLayout};
 use mouthpiece_synth::GroundTruth;
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion};
 
-use crate::measures::{rotation, true_dots, window};
+use crate::measures::{mean_rotation, rotation, true_neutral};
 use crate::{EvaluateError, FrameView, Measure};
 
 /// Angles between the character head the pipeline gave and the one the head rule gives for
@@ -59,16 +59,9 @@ impl Measure for CharacterHeadFollow {
         f: &FrameView,
         history: &[(f64, GroundTruth)],
     ) -> Result<(), EvaluateError> {
-        let mut acc = NeutralAccumulator::new(self.layout);
-        let mut rotations = Matrix3::zeros();
-        let mut n = 0.0;
-        for g in window(history, f.t, self.calibration_s) {
-            acc.push(&true_dots(g, self.layout))?;
-            rotations += rotation(g);
-            n += 1.0;
-        }
-        let at_calibration = Rotation3::from_matrix(&(rotations / f64::max(n, 1.0))).into_inner();
-        self.neutral = Some((at_calibration, acc.finish()?.frame.axes));
+        let at_calibration = mean_rotation(history, f.t, self.calibration_s);
+        let neutral = true_neutral(history, f.t, self.calibration_s, self.layout)?;
+        self.neutral = Some((at_calibration, neutral.frame.axes));
         self.reference = None;
         Ok(())
     }

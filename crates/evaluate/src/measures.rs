@@ -1,7 +1,8 @@
 //! The built-in measures: naming and 3D error, head rotation error, character error.
 
 use mouthpiece_retarget::{
-    Character, NeutralAccumulator, PerformerDots, PerformerLayout, RetargetConfig, Retargeter,
+    Character, NeutralAccumulator, NeutralPose, PerformerDots, PerformerLayout, RetargetConfig,
+    Retargeter,
 };
 use mouthpiece_synth::GroundTruth;
 use nalgebra::{Matrix3, Vector3};
@@ -155,6 +156,41 @@ impl Default for HeadError {
     }
 }
 
+/// The true head rotation averaged over the calibration window that ends at `t`.
+pub(crate) fn mean_rotation(history: &[(f64, GroundTruth)], t: f64, seconds: f64) -> Matrix3<f64> {
+    let rotations: Vec<Matrix3<f64>> = window(history, t, seconds).map(rotation).collect();
+    let mean = rotations.iter().sum::<Matrix3<f64>>() / rotations.len().max(1) as f64;
+    nalgebra::Rotation3::from_matrix(&mean).into_inner()
+}
+
+/// The neutral pose taken from the true dots of the calibration window that ends at `t`:
+/// what the tracker would have taken with perfect dots.
+pub(crate) fn true_neutral(
+    history: &[(f64, GroundTruth)],
+    t: f64,
+    seconds: f64,
+    layout: PerformerLayout,
+) -> Result<NeutralPose, EvaluateError> {
+    let mut acc = NeutralAccumulator::new(layout);
+    for g in window(history, t, seconds) {
+        acc.push(&true_dots(g, layout))?;
+    }
+    Ok(acc.finish()?)
+}
+
+/// The retarget core bound to `neutral` with the measured settings: the reference a measure
+/// feeds the true dots.
+pub(crate) fn reference_retargeter(
+    character: &Character,
+    neutral: NeutralPose,
+) -> Result<Retargeter, EvaluateError> {
+    let cfg = RetargetConfig {
+        missing: Default::default(),
+        character: measured_settings(),
+    };
+    Ok(Retargeter::new(character.clone(), neutral, cfg)?)
+}
+
 /// The ground truth of the calibration window that ends at `t`.
 pub(crate) fn window(
     history: &[(f64, GroundTruth)],
@@ -174,11 +210,7 @@ impl Measure for HeadError {
         f: &FrameView,
         history: &[(f64, GroundTruth)],
     ) -> Result<(), EvaluateError> {
-        let rotations: Vec<Matrix3<f64>> = window(history, f.t, self.calibration_s)
-            .map(rotation)
-            .collect();
-        let mean = rotations.iter().sum::<Matrix3<f64>>() / rotations.len().max(1) as f64;
-        self.at_calibration = nalgebra::Rotation3::from_matrix(&mean).into_inner();
+        self.at_calibration = mean_rotation(history, f.t, self.calibration_s);
         Ok(())
     }
 
@@ -253,15 +285,8 @@ impl Measure for CharacterMeasure {
         f: &FrameView,
         history: &[(f64, GroundTruth)],
     ) -> Result<(), EvaluateError> {
-        let mut acc = NeutralAccumulator::new(self.layout);
-        for g in window(history, f.t, self.calibration_s) {
-            acc.push(&true_dots(g, self.layout))?;
-        }
-        let cfg = RetargetConfig {
-            missing: Default::default(),
-            character: measured_settings(),
-        };
-        let mut r = Retargeter::new(self.character.clone(), acc.finish()?, cfg)?;
+        let neutral = true_neutral(history, f.t, self.calibration_s, self.layout)?;
+        let mut r = reference_retargeter(&self.character, neutral)?;
         // Bring the reference's clock to now.
         r.step(f.t, &true_dots(f.truth, self.layout))?;
         self.reference = Some(r);

@@ -11,13 +11,11 @@
 //! - *correlations*: `jawOpen` with the synthetic jaw angle, `mouthFunnel` with its rounding.
 
 use mouthpiece_retarget::rig::{curves_from, RigModel, RigSettings, CURVES, CURVE_NAMES};
-use mouthpiece_retarget::{
-    Character, NeutralAccumulator, PerformerLayout, RetargetConfig, Retargeter,
-};
+use mouthpiece_retarget::{Character, PerformerLayout, Retargeter};
 use mouthpiece_synth::GroundTruth;
 
-use crate::measures::{true_dots, window};
-use crate::{measured_settings, EvaluateError, FrameView, Measure};
+use crate::measures::{reference_retargeter, true_dots, true_neutral};
+use crate::{EvaluateError, FrameView, Measure};
 
 /// Pearson correlation accumulator.
 #[derive(Debug, Clone, Copy, Default)]
@@ -119,15 +117,8 @@ impl Measure for RigAccuracy {
         f: &FrameView,
         history: &[(f64, GroundTruth)],
     ) -> Result<(), EvaluateError> {
-        let mut acc = NeutralAccumulator::new(self.layout);
-        for g in window(history, f.t, self.calibration_s) {
-            acc.push(&true_dots(g, self.layout))?;
-        }
-        let cfg = RetargetConfig {
-            missing: Default::default(),
-            character: measured_settings(),
-        };
-        let r = Retargeter::new(self.character.clone(), acc.finish()?, cfg)?;
+        let neutral = true_neutral(history, f.t, self.calibration_s, self.layout)?;
+        let r = reference_retargeter(&self.character, neutral)?;
         let model = RigModel::new(r.stabiliser().neutral(), &self.settings)?;
         self.reference = Some((r, model));
         Ok(())
