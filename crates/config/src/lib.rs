@@ -167,6 +167,8 @@ pub struct Config {
     pub retarget: toml::Table,
     /// The rig (jaw hinge, curve ranges; docs/rig.md), parsed by [`Config::extract`].
     pub rig: toml::Table,
+    /// OSC / VMC protocol output to avatar apps and engines (docs/osc.md).
+    pub osc: OscConfig,
     /// Where this configuration came from, with its text (for [`Config::extract`]).
     #[serde(skip)]
     pub origin: Origin,
@@ -185,6 +187,7 @@ impl Default for Config {
             track: toml::Table::new(),
             retarget: toml::Table::new(),
             rig: toml::Table::new(),
+            osc: OscConfig::default(),
             origin: Origin::Embedded,
         }
     }
@@ -545,6 +548,111 @@ impl Default for LoggingConfig {
     }
 }
 
+/// `[osc]`: the rig and the head sent as VMC protocol messages over OSC/UDP (docs/osc.md).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OscConfig {
+    /// Where to send, `host:port` each (UDP; [`OscTarget`], checked when the file is
+    /// loaded so that an error names the element's own line). Empty: no OSC output.
+    pub targets: Vec<String>,
+    /// The character whose rig and head go out; `None`: the first configured character.
+    pub character: Option<String>,
+    /// Send the head as `/VMC/Ext/Bone/Pos` `Head`.
+    pub head: bool,
+    /// Send the eyes as `/VMC/Ext/Bone/Pos` `LeftEye` and `RightEye`.
+    pub eyes: bool,
+}
+
+impl Default for OscConfig {
+    fn default() -> Self {
+        OscConfig {
+            targets: Vec::new(),
+            character: None,
+            head: true,
+            eyes: true,
+        }
+    }
+}
+
+/// Most OSC targets in `[osc] targets` (each costs one datagram per frame).
+pub const MAX_OSC_TARGETS: usize = 16;
+
+impl OscConfig {
+    /// The targets, parsed (a loaded config's targets all parse).
+    pub fn parsed_targets(&self) -> Result<Vec<OscTarget>, String> {
+        self.targets.iter().map(|t| t.parse()).collect()
+    }
+}
+
+/// A UDP destination `host:port`: a name, an IPv4 address, or an IPv6 address in brackets,
+/// then a port 1 to 65535. The host is resolved by the daemon (at start and on reload).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct OscTarget {
+    /// The host as written, without brackets.
+    pub host: String,
+    pub port: u16,
+}
+
+impl fmt::Display for OscTarget {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.host.contains(':') {
+            write!(f, "[{}]:{}", self.host, self.port)
+        } else {
+            write!(f, "{}:{}", self.host, self.port)
+        }
+    }
+}
+
+impl TryFrom<String> for OscTarget {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        let shape =
+            || format!("expected host:port (e.g. \"127.0.0.1:39539\", \"[::1]:39539\"), got {s:?}");
+        let Some((host, port)) = s.rsplit_once(':') else {
+            return Err(shape());
+        };
+        let host = match host.strip_prefix('[') {
+            Some(inner) => {
+                let inner = inner.strip_suffix(']').ok_or_else(shape)?;
+                inner
+                    .parse::<std::net::Ipv6Addr>()
+                    .map_err(|_| format!("expected an IPv6 address between [ and ], got {s:?}"))?;
+                inner
+            }
+            None if host.contains(':') => return Err(format!(
+                "expected host:port, got {s:?} (an IPv6 address goes in brackets: \"[::1]:39539\")"
+            )),
+            None => host,
+        };
+        let name_ok = !host.is_empty()
+            && host.len() <= 253
+            && host
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_' | ':'));
+        if !name_ok {
+            return Err(shape());
+        }
+        if port.is_empty() || !port.chars().all(|c| c.is_ascii_digit()) {
+            return Err(shape());
+        }
+        let port = match port.parse::<u32>() {
+            Ok(p) if (1..=65535).contains(&p) => p as u16,
+            _ => return Err(format!("port out of range in {s:?}: expected 1 to 65535")),
+        };
+        Ok(OscTarget {
+            host: host.to_owned(),
+            port,
+        })
+    }
+}
+
+impl std::str::FromStr for OscTarget {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        OscTarget::try_from(s.to_owned())
+    }
+}
+
 impl Config {
     /// Reads, parses and validates a config file, resolves its relative paths and reads its
     /// tokens.
@@ -682,6 +790,30 @@ impl Config {
                 ));
             }
         }
+        if self.osc.targets.len() > MAX_OSC_TARGETS {
+            return Err(fail(
+                "osc.targets",
+                format!(
+                    "expected at most {MAX_OSC_TARGETS} targets, got {}",
+                    self.osc.targets.len()
+                ),
+            ));
+        }
+        let mut targets: Vec<OscTarget> = Vec::new();
+        for (i, text) in self.osc.targets.iter().enumerate() {
+            let key = format!("osc.targets[{i}]");
+            let target = text.parse::<OscTarget>().map_err(|e| fail(&key, e))?;
+            if targets.contains(&target) {
+                return Err(fail(&key, format!("{target} is listed twice")));
+            }
+            targets.push(target);
+        }
+        if self.osc.character.as_deref() == Some("") {
+            return Err(fail(
+                "osc.character",
+                "expected a character's name, got \"\"".into(),
+            ));
+        }
         Ok(())
     }
 
@@ -805,14 +937,20 @@ impl Config {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
+        let osc = if self.osc.targets.is_empty() {
+            "off".to_owned()
+        } else {
+            self.osc.targets.join(", ")
+        };
         format!(
-            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, tokens: read {}, control {}",
+            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, tokens: read {}, control {}",
             self.origin.describe(),
             self.source.spec.0,
             self.server.listen.0,
             characters,
             self.takes.folder.display(),
             self.timecode.rate.0,
+            osc,
             if self.server.tokens.read.is_some() { "set" } else { "none" },
             if self.server.tokens.control.is_some() { "set" } else { "none" },
         )
@@ -939,10 +1077,30 @@ fn key_path_at(text: &str, span: Range<usize>) -> Option<String> {
     best.map(|(path, _)| path)
 }
 
-/// The span of the key at a dotted path (array indices as `[i]`).
+/// The span of the key at a dotted path; with an array index (`osc.targets[1]`), of that
+/// element when the array is there, else of the key.
 fn span_of_key(text: &str, key: &str) -> Option<Range<usize>> {
     let doc = toml_edit::ImDocument::parse(text).ok()?;
     let wanted = key.split('[').next().unwrap_or(key);
+    if let Some(index) = key
+        .strip_prefix(wanted)
+        .and_then(|rest| rest.strip_prefix('['))
+        .and_then(|rest| rest.strip_suffix(']'))
+        .and_then(|i| i.parse::<usize>().ok())
+    {
+        let mut segments = wanted.split('.');
+        let mut item = doc.as_table().get(segments.next()?);
+        for segment in segments {
+            item = item.and_then(|i| i.get(segment));
+        }
+        if let Some(span) = item
+            .and_then(|i| i.as_array())
+            .and_then(|a| a.get(index))
+            .and_then(|v| v.span())
+        {
+            return Some(span);
+        }
+    }
     let mut found = None;
     visit_table(doc.as_table(), "", &mut |path, key_span, item_span| {
         if path == wanted && found.is_none() {

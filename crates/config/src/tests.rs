@@ -254,3 +254,67 @@ fn limits_above_the_hard_caps_are_refused() {
     }
     assert!(parse("[takes]\nqueue_frames = 3600\n[server]\nmax_clients = 512\n").is_ok());
 }
+
+#[test]
+fn osc_targets_are_host_and_port() {
+    let config = parse(
+        "[osc]\ntargets = [\"127.0.0.1:39539\", \"localhost:9000\", \"[::1]:39540\"]\ncharacter = \"wolf\"\neyes = false\n",
+    )
+    .unwrap();
+    let targets = config.osc.parsed_targets().unwrap();
+    let shown: Vec<String> = targets.iter().map(|t| t.to_string()).collect();
+    assert_eq!(shown, ["127.0.0.1:39539", "localhost:9000", "[::1]:39540"]);
+    assert_eq!((targets[2].host.as_str(), targets[2].port), ("::1", 39540));
+    assert_eq!(config.osc.character.as_deref(), Some("wolf"));
+    assert!(config.osc.head && !config.osc.eyes);
+    assert!(config
+        .summary()
+        .contains("osc 127.0.0.1:39539, localhost:9000"));
+    // Off unless configured.
+    assert!(parse("").unwrap().osc.targets.is_empty());
+    assert!(parse("").unwrap().summary().contains("osc off"));
+}
+
+#[test]
+fn a_bad_osc_target_names_its_line_and_key() {
+    for (target, expected) in [
+        ("127.0.0.1", "expected host:port"),
+        ("127.0.0.1:", "expected host:port"),
+        (":39539", "expected host:port"),
+        ("127.0.0.1:65536", "port out of range"),
+        ("127.0.0.1:0", "port out of range"),
+        ("127.0.0.1:99999999999", "port out of range"),
+        ("127.0.0.1:-1", "expected host:port"),
+        ("::1:39539", "goes in brackets"),
+        ("[::1:39539", "expected host:port"),
+        ("[nope]:39539", "IPv6 address"),
+        ("a host:1", "expected host:port"),
+    ] {
+        let text = format!("[osc]\ntargets = [\n  \"127.0.0.1:9000\",\n  \"{target}\",\n]\n");
+        let err = parse(&text).unwrap_err();
+        let shown = err.to_string();
+        assert!(shown.contains("test.toml:4:3: "), "{target}: {shown}");
+        assert_eq!(err.key(), Some("osc.targets[1]"), "{target}: {shown}");
+        assert!(shown.contains(expected), "{target}: {shown}");
+    }
+    let err = parse("[osc]\ntargets = \"127.0.0.1:1\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("osc.targets"), "{err}");
+    let err = parse("[osc]\ntargets = [\"127.0.0.1:1\",\n \"127.0.0.1:1\"]\n").unwrap_err();
+    assert_eq!(err.key(), Some("osc.targets[1]"), "{err}");
+    assert!(err.to_string().contains("test.toml:3:"), "{err}");
+    assert!(err.to_string().contains("listed twice"), "{err}");
+    let err = parse("[osc]\ncharacter = \"\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("osc.character"), "{err}");
+    let err = parse("[osc]\nport = 1\n").unwrap_err();
+    assert_eq!(err.key(), Some("osc.port"), "{err}");
+}
+
+#[test]
+fn an_array_element_is_located_on_its_own_line() {
+    let config = parse("[osc]\ntargets = [\n  \"127.0.0.1:1\",\n  \"127.0.0.1:2\",\n]\n").unwrap();
+    let location = config.locate("osc.targets[1]");
+    assert_eq!((location.line, location.column), (4, 3), "{location}");
+    assert_eq!(location.key.as_deref(), Some("osc.targets[1]"));
+    // Past the end: the key itself.
+    assert_eq!(config.locate("osc.targets[7]").line, 2);
+}
