@@ -619,9 +619,11 @@ impl TryFrom<String> for OscTarget {
                     .map_err(|_| format!("expected an IPv6 address between [ and ], got {s:?}"))?;
                 inner
             }
-            None if host.contains(':') => return Err(format!(
+            None if host.contains(':') => {
+                return Err(format!(
                 "expected host:port, got {s:?} (an IPv6 address goes in brackets: \"[::1]:39539\")"
-            )),
+            ))
+            }
             None => host,
         };
         let name_ok = !host.is_empty()

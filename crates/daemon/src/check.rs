@@ -19,6 +19,8 @@ pub fn check(config: &Config) -> Result<(), CheckError> {
     crate::capture::check_spec(config)?;
     crate::hardening::check_server(config)?;
     crate::settings::timecode_rate(config)?;
+    // `[osc]`: the character exists, every target resolves.
+    crate::osc::settings(config)?;
     let listen = config.server.listen.0;
     if !listen.ip().is_loopback()
         && (config.server.tokens.read.is_none() || config.server.tokens.control.is_none())

@@ -6,7 +6,7 @@
 //! server, the signals and the watchdog. Start-up: validate the config, bind the port, start
 //! the threads, then `READY=1`. Signals: SIGTERM/SIGINT stop (a take written out to its
 //! last queued frame and synced, clients closed with 1001, exit 0 within 2 s when no take
-//! drains); SIGHUP reloads characters, tokens and colour ranges;
+//! drains); SIGHUP reloads characters, tokens, colour ranges, `[rig]` and `[osc]`;
 //! SIGUSR1 starts a take with the default slate, SIGUSR2 stops it.
 
 use std::path::PathBuf;
@@ -80,6 +80,7 @@ pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Resul
     let server_config = server_config(&config)?;
     let rate = timecode_rate(&config)?;
     let processor = factory.processor(&config)?;
+    let osc = crate::osc::settings(&config)?;
     let _ = crate::logging::set_level(&config.logging.level);
     tracing::info!("{}", config.summary());
 
@@ -94,7 +95,7 @@ pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Resul
         factory,
         options,
         processor,
-        server_config,
+        (server_config, osc),
         rate,
     ));
     // Threads still blocked in a source's read must not hold up the exit.
@@ -107,7 +108,7 @@ async fn serve<F: Factory>(
     factory: F,
     options: RunOptions,
     processor: F::Processor,
-    server_config: ServerConfig,
+    (server_config, osc_settings): (ServerConfig, crate::osc::OscSettings),
     rate: TimecodeRate,
 ) -> Result<(), DaemonError> {
     let notifier = Notifier::from_env().unwrap_or_else(|e| {
@@ -135,6 +136,8 @@ async fn serve<F: Factory>(
         config.source.retry_max_s.duration(),
     );
     let throttle = config.logging.throttle_s.duration();
+    let osc = crate::osc::OscOutput::new(hub.osc(), throttle);
+    osc.configure(osc_settings).map_err(DaemonError::Runtime)?;
     let source_thread = source::spawn(
         factory.opener(&spec, config.source.stall_timeout_s.duration()),
         spec.clone(),
@@ -170,6 +173,7 @@ async fn serve<F: Factory>(
             heartbeat: heartbeat.clone(),
             epoch,
             stop: stop.clone(),
+            osc: osc.clone(),
         },
     )
     .map_err(DaemonError::Runtime)?;
@@ -216,9 +220,12 @@ async fn serve<F: Factory>(
             _ = sighup.recv() => {
                 let _ = notifier.reloading();
                 match reload(&factory, &options, &current, local) {
-                    Ok((config, payload, new_server)) => {
+                    Ok((config, payload, new_server, new_osc)) => {
                         if commands_tx.try_send(Command::Reload(payload)).is_ok() {
                             hub.set_tokens(new_server.read_token, new_server.control_token);
+                            if let Err(e) = osc.configure(new_osc) {
+                                tracing::error!("SIGHUP: OSC output not reconfigured: {e}");
+                            }
                             tracing::info!("SIGHUP: {}", config.summary());
                             current = config;
                         } else {
@@ -227,7 +234,7 @@ async fn serve<F: Factory>(
                     }
                     Err(e) => tracing::error!("SIGHUP: new configuration rejected, old one kept: {}", source::error_chain(&e)),
                 }
-                let _ = notifier.reloaded(&status_line(&shared, &hub));
+                let _ = notifier.reloaded(&status_line(&shared, &hub, &osc));
             }
             _ = sigusr1.recv() => {
                 let _ = commands_tx.try_send(Command::RecordStart { slate: current.takes.slate.0.clone(), take: None });
@@ -250,7 +257,7 @@ async fn serve<F: Factory>(
                 } else {
                     tracing::warn!(stalled_ms = age, "processing thread not turning; withholding watchdog ping");
                 }
-                let status = status_line(&shared, &hub);
+                let status = status_line(&shared, &hub, &osc);
                 if status != last_status {
                     let _ = notifier.status(&status);
                     last_status = status;
@@ -325,18 +332,27 @@ async fn serve<F: Factory>(
     }
 }
 
-fn status_line(shared: &SourceShared, hub: &Hub) -> String {
+fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) -> String {
     let source = match shared.state().1 {
         SourceState::Starting => "source starting".to_owned(),
         SourceState::Up(info) => format!("source up ({})", info.description),
         SourceState::Down { reason, .. } => format!("source down: {reason}"),
     };
-    format!(
+    let mut line = format!(
         "{source}; {} clients; {} frames",
         hub.clients(),
         hub.frames_published()
-    )
+    );
+    if let Some(osc) = osc.status() {
+        line.push_str("; ");
+        line.push_str(&osc);
+    }
+    line
 }
+
+/// What a validated reload carries: the config, the processor's payload, the server's
+/// settings (tokens) and the OSC output's.
+type Reloaded<R> = (Config, R, ServerConfig, crate::osc::OscSettings);
 
 /// Loads the config again (same file, same CLI overrides) and validates everything a reload
 /// changes.
@@ -349,7 +365,7 @@ fn reload<F: Factory>(
     options: &RunOptions,
     current: &Config,
     bound: std::net::SocketAddr,
-) -> Result<(Config, <F::Processor as Processor>::Reload, ServerConfig), CheckError> {
+) -> Result<Reloaded<<F::Processor as Processor>::Reload>, CheckError> {
     let mut config = match &options.config_path {
         Some(path) => Config::load(path)?,
         None => Config::embedded(),
@@ -359,6 +375,7 @@ fn reload<F: Factory>(
     let server = server_config(&config)?;
     crate::hardening::check_against(&config, &server, bound)?;
     let payload = factory.reload(&config)?;
+    let osc = crate::osc::settings(&config)?;
     for (what, changed) in [
         ("source", config.source != current.source),
         (
@@ -373,7 +390,7 @@ fn reload<F: Factory>(
         }
     }
     let _ = crate::logging::set_level(&config.logging.level);
-    Ok((config, payload, server))
+    Ok((config, payload, server, osc))
 }
 
 /// CLI flags win over the file.

@@ -13,11 +13,13 @@
 //!   modules the checks and the daemon share (no module imports one that imports it back);
 //! - [`slot`]: the latest-frame slot between the source thread and processing (newest wins);
 //! - [`notify`]: systemd's notify protocol (READY, STATUS, WATCHDOG, STOPPING);
+//! - [`osc`]: the rig, head and eyes as VMC protocol messages over UDP, from its own sender
+//!   thread behind a bounded queue;
 //! - [`throttle`]: repeated warnings at most once per interval;
 //! - [`logging`]: journald-friendly `tracing` set-up.
 //!
 //! Threads: the source thread, the processing thread, one take-writer thread while a take
-//! records, and the async server's runtime. Only bounded queues connect them.
+//! records, the OSC sender thread once `[osc]` has a target, and the async server's runtime. Only bounded queues connect them.
 
 pub mod backoff;
 pub mod capture;
@@ -32,6 +34,7 @@ pub mod head;
 pub mod live;
 pub mod logging;
 pub mod notify;
+pub mod osc;
 pub mod pipeline;
 pub mod rig;
 pub mod settings;

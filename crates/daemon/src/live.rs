@@ -367,6 +367,12 @@ impl Processor for LiveProcessor {
                 .map_err(|e| crate::source::error_chain(&e))?;
             self.dot_names = TrackedFrame::names(self.pipeline.tracker().layout());
         } else {
+            if setup.config.rig != self.config.rig {
+                // New hinge or ranges: the rig is rebuilt on the neutral pose already taken.
+                self.pipeline
+                    .set_rig_settings(setup.config.rig.clone())
+                    .map_err(|e| crate::source::error_chain(&e))?;
+            }
             self.pipeline
                 .set_characters(setup.characters, setup.config.retarget.character_settings())
                 .map_err(|e| crate::source::error_chain(&e))?;

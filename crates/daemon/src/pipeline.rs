@@ -1,9 +1,9 @@
 //! The processing thread: takes the newest frame from the slot, runs the [`Processor`]
 //! (detect → track → retarget, one or several characters), publishes the result to the
-//! server's hub, feeds the take recorder, and answers control requests.
+//! server's hub and the OSC output, feeds the take recorder, and answers control requests.
 //!
 //! It never blocks on I/O: the hub's publish is a non-blocking ring write, the take writer
-//! sits behind a bounded queue, control replies are one-shot sends. In steady state, with no
+//! and the OSC sender sit behind bounded queues, control replies are one-shot sends. In steady state, with no
 //! take recording, the path from a new frame to the clients' queues reuses its buffers
 //! ([`Output`] is refilled in place and the hub copies it with `clone_from` into recycled
 //! slots).
@@ -130,6 +130,8 @@ pub struct Context<R> {
     pub heartbeat: Arc<AtomicU64>,
     pub epoch: Instant,
     pub stop: Arc<AtomicBool>,
+    /// The OSC output (`[osc]`): offered every published frame, never blocks.
+    pub osc: crate::osc::OscOutput,
 }
 
 /// Starts the processing thread.
@@ -231,6 +233,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                 out.stream.wall_us = Some(wall_us);
                 out.stream.processing = Some(started.elapsed());
                 let seq = ctx.hub.publish(&out.stream);
+                ctx.osc.offer(&out.stream);
                 tracing::trace!(seq, device_ts_us = frame.device_ts_us, "frame processed");
                 health.frame(
                     processor.performer_names().len(),

@@ -395,6 +395,8 @@ pub(crate) struct HubInner {
     pub(crate) preview: Arc<crate::preview::PreviewShared>,
     /// Health figures, latest only.
     pub(crate) health: watch::Sender<crate::console::Health>,
+    /// The daemon's OSC output counters (`/metrics`, `/healthz`).
+    pub(crate) osc: Arc<crate::osc::OscCounters>,
 }
 
 impl Hub {
@@ -419,6 +421,7 @@ impl Hub {
                 failure: Mutex::new(None),
                 preview: Arc::new(crate::preview::PreviewShared::new()),
                 health: watch::Sender::new(crate::console::Health::default()),
+                osc: Arc::default(),
             }),
         };
         (hub, ControlReceiver { rx })
@@ -572,7 +575,13 @@ impl Hub {
     pub fn metrics_text(&self) -> String {
         let mut text = self.inner.metrics.render();
         crate::preview::render_metrics(&self.inner.preview, &mut text);
+        self.inner.osc.render_metrics(&mut text);
         text
+    }
+
+    /// The OSC output's counters, for the daemon's OSC sender to update.
+    pub fn osc(&self) -> Arc<crate::osc::OscCounters> {
+        self.inner.osc.clone()
     }
 
     /// Queues a control request for the daemon; the answer comes back on the returned slot.

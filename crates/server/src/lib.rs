@@ -75,6 +75,7 @@ pub mod http;
 pub mod hub;
 pub mod loadgen;
 pub mod metrics;
+pub mod osc;
 pub mod preview;
 pub mod protocol;
 pub mod rig;
@@ -96,6 +97,7 @@ pub use hub::{
     ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,
     StreamFrame, StreamInfo,
 };
+pub use osc::{OscCounters, OscTargetCounters, OscTargetFigures};
 pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
 pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RIG_CURVE_NAMES};
 pub use server::run;

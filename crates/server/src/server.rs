@@ -346,12 +346,15 @@ async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io
                     .await;
             }
             let status = shared.hub.status();
-            let body = serde_json::json!({
+            let mut body = serde_json::json!({
                 "status": "ok",
                 "source": status.source.as_str(),
                 "clients": shared.hub.clients(),
                 "frames": shared.hub.frames_published(),
             });
+            if let Some(osc) = shared.hub.inner.osc.health_json() {
+                body["osc"] = osc;
+            }
             http::respond(io, 200, "application/json", body.to_string().as_bytes()).await
         }
         "/metrics" => {

@@ -347,6 +347,33 @@ impl Pipeline {
         self.rig.as_ref()
     }
 
+    /// New rig settings (a reload of `[rig]`): the rig is rebuilt on the current neutral pose
+    /// at once, so a new hinge or a set range applies from the next frame; ranges not set are
+    /// learned again over `learn_s` from then on.
+    pub fn set_rig_settings(&mut self, settings: RigSettings) -> Result<(), TrackError> {
+        settings.validate("rig").map_err(|e| match e {
+            mouthpiece_retarget::Error::InvalidSetting { key, reason } => TrackError::Config {
+                key,
+                message: reason,
+            },
+            e => TrackError::Config {
+                key: "rig".into(),
+                message: e.to_string(),
+            },
+        })?;
+        if let Some(neutral) = self.tracker.neutral() {
+            self.rig = match Rig::new(neutral, settings.clone()) {
+                Ok(rig) => Some(rig),
+                Err(e) => {
+                    tracing::error!("no rig for this neutral pose: {e}");
+                    None
+                }
+            };
+        }
+        self.rig_settings = settings;
+        Ok(())
+    }
+
     pub fn tracker(&self) -> &Tracker {
         &self.tracker
     }
