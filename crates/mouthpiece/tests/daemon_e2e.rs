@@ -956,3 +956,267 @@ async fn calibrate_answers_once_calibrated_and_a_reopened_replay_is_tracked_agai
         daemon.log()
     );
 }
+
+fn python() -> String {
+    std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
+/// `GET path` on the daemon's port: the body.
+fn http_body(port: u16, path: &str) -> String {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).unwrap();
+    text.split_once("\r\n\r\n")
+        .map(|(_, body)| body.to_owned())
+        .unwrap_or_default()
+}
+
+/// A per-target OSC counter from `/metrics` (`None` when the target is not listed).
+fn osc_counter(metrics: &str, name: &str, target: &str) -> Option<u64> {
+    let prefix = format!("{name}{{target=\"{target}\"}} ");
+    metrics
+        .lines()
+        .find_map(|l| l.strip_prefix(&prefix))
+        .map(|v| v.trim().parse().unwrap())
+}
+
+/// The wolf's `t`, `rig` and `head` of every frame for `seconds` (JSON lines for the OSC
+/// receiver) and the largest `jawOpen` among frames received after `settle`.
+async fn collect_wolf(
+    ws: &mut Client,
+    seconds: f64,
+    settle: f64,
+    lines: &mut Vec<String>,
+) -> f64 {
+    let started = Instant::now();
+    let mut jaw: f64 = 0.0;
+    while started.elapsed().as_secs_f64() < seconds {
+        let f = wait_for(ws, Duration::from_secs(5), |v| v["type"] == "frame").await;
+        let Some(wolf) = f["characters"]
+            .as_array()
+            .and_then(|c| c.iter().find(|c| c["name"] == "wolf"))
+        else {
+            continue;
+        };
+        lines.push(json!({"t": f["t"], "rig": wolf["rig"], "head": wolf["head"]}).to_string());
+        if started.elapsed().as_secs_f64() >= settle {
+            if let Some(v) = wolf["rig"]["curves"]["jawOpen"].as_f64() {
+                jaw = jaw.max(v);
+            }
+        }
+    }
+    jaw
+}
+
+/// `[osc]`: the daemon replays the demo session and sends the wolf's rig curves, head and
+/// eyes as VMC protocol messages to a receiver written with python-osc
+/// (`tests/python/vmc_receiver.py`), which checks the messages and compares them with the
+/// WebSocket frames of the same times. A second target where nothing listens is counted and
+/// changes nothing. SIGHUP applies a new `[rig]` range at once and new `[osc]` targets; a bad
+/// target is refused and the old ones kept.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn osc_sends_the_streamed_rig_to_a_python_osc_receiver_and_rig_and_osc_reload_on_sighup() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let work = tempfile::tempdir().unwrap();
+    let (port_file, stop_file, stream_file) = (
+        work.path().join("port"),
+        work.path().join("stop"),
+        work.path().join("stream.jsonl"),
+    );
+    let wolf = mouthpiece_retarget::Character::from_toml_str(
+        &std::fs::read_to_string(repo.join("config/characters/wolf.toml")).unwrap(),
+    )
+    .unwrap();
+    let axes: Vec<Vec<f64>> = (0..3)
+        .map(|r| (0..3).map(|c| wolf.frame.axes[(r, c)]).collect())
+        .collect();
+    let receiver = Command::new(python())
+        .arg(repo.join("tests/python/vmc_receiver.py"))
+        .arg("--port-file")
+        .arg(&port_file)
+        .arg("--stop-file")
+        .arg(&stop_file)
+        .arg("--stream")
+        .arg(&stream_file)
+        .args(["--axes", &json!(axes).to_string(), "--eyes"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("running Python (set MOUTHPIECE_PYTHON)");
+    let mut receiver = Guarded(receiver);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let osc_port: u16 = loop {
+        if let Ok(text) = std::fs::read_to_string(&port_file) {
+            break text.trim().parse().unwrap();
+        }
+        if let Some(status) = receiver.0.try_wait().unwrap() {
+            let out = receiver.0.wait_with_output_now();
+            panic!("the python-osc receiver ended ({status}): {out}");
+        }
+        assert!(Instant::now() < deadline, "the python-osc receiver did not start");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    // A port nothing listens on: the kernel refuses datagrams sent there.
+    let closed = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let live = format!("127.0.0.1:{osc_port}");
+    let refused = format!("127.0.0.1:{closed}");
+    let config = |targets: &str, jaw_range: f64| {
+        format!(
+            "[osc]\ntargets = [{targets}]\ncharacter = \"wolf\"\n[rig.ranges]\njawOpen = {jaw_range}\n"
+        )
+    };
+    let both = format!("\"{refused}\", \"{live}\"");
+    let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
+    let mut daemon = Daemon::start(
+        &format!("replay:{}?loop=1", demo.display()),
+        &config(&both, 1000.0),
+        &[],
+        &[],
+    );
+    let config_path = daemon.dir.path().join("mouthpiece.toml");
+    let original = std::fs::read_to_string(&config_path).unwrap();
+    let base = original.split("[osc]").next().unwrap().to_owned();
+    let mut ws = daemon.connect().await;
+    send(
+        &mut ws,
+        json!({"type": "subscribe", "fields": ["rig"], "characters": ["wolf"]}),
+    )
+    .await;
+    // After the neutral second the rig is there.
+    wait_for(&mut ws, Duration::from_secs(20), |v| {
+        v["type"] == "frame" && v["characters"][0]["rig"].is_object()
+    })
+    .await;
+    let mut lines = Vec::new();
+    // A jaw range of 1000° keeps jawOpen near 0 ...
+    let before = collect_wolf(&mut ws, 2.0, 0.0, &mut lines).await;
+    assert!(before < 0.05, "jawOpen {before} with a 1000° range");
+    // ... and after a reload to 2° every opening saturates it: no restart, clients stay.
+    std::fs::write(&config_path, format!("{base}{}", config(&both, 2.0))).unwrap();
+    daemon.signal(libc::SIGHUP);
+    let after = collect_wolf(&mut ws, 3.0, 0.5, &mut lines).await;
+    assert!(
+        after > 0.9,
+        "jawOpen at most {after} after the reload to a 2° range\n{}",
+        daemon.log()
+    );
+    std::fs::write(&stream_file, lines.join("\n") + "\n").unwrap();
+
+    // Both targets counted: the receiver's datagrams sent, the closed port's refusals.
+    let metrics = http_body(daemon.port, "/metrics");
+    let sent = osc_counter(&metrics, "mouthpiece_osc_sent_total", &live).unwrap();
+    assert!(sent >= 60, "{metrics}");
+    assert_eq!(
+        osc_counter(&metrics, "mouthpiece_osc_errors_total", &live),
+        Some(0),
+        "{metrics}"
+    );
+    let errors = osc_counter(&metrics, "mouthpiece_osc_errors_total", &refused).unwrap();
+    assert!(errors > 0, "{metrics}");
+    let health: Value = serde_json::from_str(&http_body(daemon.port, "/healthz")).unwrap();
+    assert_eq!(health["osc"]["targets"][1]["target"], live, "{health}");
+
+    // A target that is not host:port is refused on reload; the old targets go on.
+    std::fs::write(
+        &config_path,
+        format!("{base}{}", config("\"127.0.0.1:70000\"", 2.0)),
+    )
+    .unwrap();
+    daemon.signal(libc::SIGHUP);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !daemon.log().contains("new configuration rejected") {
+        assert!(Instant::now() < deadline, "{}", daemon.log());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(daemon.log().contains("osc.targets[0]"), "{}", daemon.log());
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let later = osc_counter(
+        &http_body(daemon.port, "/metrics"),
+        "mouthpiece_osc_sent_total",
+        &live,
+    )
+    .unwrap();
+    assert!(later > sent, "{later} after {sent}");
+
+    // The receiver's target removed: it is no longer listed (or sent to).
+    std::fs::write(
+        &config_path,
+        format!("{base}{}", config(&format!("\"{refused}\""), 2.0)),
+    )
+    .unwrap();
+    daemon.signal(libc::SIGHUP);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let metrics = http_body(daemon.port, "/metrics");
+        if osc_counter(&metrics, "mouthpiece_osc_sent_total", &live).is_none() {
+            assert!(
+                osc_counter(&metrics, "mouthpiece_osc_errors_total", &refused).unwrap() >= errors,
+                "{metrics}"
+            );
+            break;
+        }
+        assert!(Instant::now() < deadline, "{metrics}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    // Still streaming, still running.
+    wait_for(&mut ws, Duration::from_secs(5), |v| v["type"] == "frame").await;
+    assert!(daemon.child.try_wait().unwrap().is_none());
+
+    std::fs::write(&stop_file, "").unwrap();
+    let out = receiver.0.wait_with_output_now();
+    let code = receiver.0.try_wait().unwrap();
+    assert!(
+        code.is_some_and(|c| c.success()),
+        "the python-osc receiver's checks failed ({code:?}):\n{out}"
+    );
+    let summary: Value = serde_json::from_str(out.lines().next().unwrap_or("")).unwrap();
+    assert!(summary["matched"].as_u64() >= Some(60), "{summary}");
+    assert!(summary["matched_with_rig"].as_u64() >= Some(60), "{summary}");
+    assert!(summary["max_jaw_open"].as_f64() > Some(0.9), "{summary}");
+    daemon.signal(libc::SIGTERM);
+    assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
+}
+
+/// A child process killed when the test ends early.
+struct Guarded(Child);
+
+impl Drop for Guarded {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+trait WaitOutput {
+    /// Waits (at most 60 s) for the child's exit and returns its stdout then stderr.
+    fn wait_with_output_now(&mut self) -> String;
+}
+
+impl WaitOutput for Child {
+    fn wait_with_output_now(&mut self) -> String {
+        use std::io::Read;
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while self.try_wait().unwrap().is_none() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let mut out = String::new();
+        if let Some(s) = self.stdout.as_mut() {
+            let _ = s.read_to_string(&mut out);
+        }
+        if let Some(s) = self.stderr.as_mut() {
+            let _ = s.read_to_string(&mut out);
+        }
+        out
+    }
+}
