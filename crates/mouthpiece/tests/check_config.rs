@@ -94,3 +94,52 @@ fn an_inverted_colour_range_exits_2_naming_the_key() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("track.lip_dots"), "{stderr}");
 }
+
+#[test]
+fn a_bad_osc_target_or_character_exits_2_naming_the_element() {
+    // Port out of range, on the element's own line.
+    let (code, _, stderr) =
+        check("[osc]\ntargets = [\n  \"127.0.0.1:39539\",\n  \"127.0.0.1:70000\",\n]\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("mouthpiece.toml:4:3: key `osc.targets[1]`")
+            && stderr.contains("port out of range"),
+        "{stderr}"
+    );
+    // Not host:port.
+    let (code, _, stderr) = check("[osc]\ntargets = [\"39539\"]\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("osc.targets[0]") && stderr.contains("expected host:port"),
+        "{stderr}"
+    );
+    // A name that does not resolve (`.invalid` never does).
+    let (code, _, stderr) = check("[osc]\ntargets = [\"no-such-host.invalid:39539\"]\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains(":2:") && stderr.contains("osc.targets[0]"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("cannot resolve no-such-host.invalid"),
+        "{stderr}"
+    );
+    // A character that is not configured.
+    let (code, _, stderr) =
+        check("[osc]\ntargets = [\"127.0.0.1:39539\"]\ncharacter = \"ghost\"\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains(":3:")
+            && stderr.contains("osc.character")
+            && stderr.contains("human, wolf"),
+        "{stderr}"
+    );
+    // And a good one.
+    let (code, stdout, stderr) =
+        check("[osc]\ntargets = [\"localhost:39539\", \"[::1]:39540\"]\ncharacter = \"wolf\"\n");
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stdout.contains("osc localhost:39539, [::1]:39540"),
+        "{stdout}"
+    );
+}

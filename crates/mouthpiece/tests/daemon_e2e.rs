@@ -989,12 +989,7 @@ fn osc_counter(metrics: &str, name: &str, target: &str) -> Option<u64> {
 
 /// The wolf's `t`, `rig` and `head` of every frame for `seconds` (JSON lines for the OSC
 /// receiver) and the largest `jawOpen` among frames received after `settle`.
-async fn collect_wolf(
-    ws: &mut Client,
-    seconds: f64,
-    settle: f64,
-    lines: &mut Vec<String>,
-) -> f64 {
+async fn collect_wolf(ws: &mut Client, seconds: f64, settle: f64, lines: &mut Vec<String>) -> f64 {
     let started = Instant::now();
     let mut jaw: f64 = 0.0;
     while started.elapsed().as_secs_f64() < seconds {
@@ -1060,7 +1055,10 @@ async fn osc_sends_the_streamed_rig_to_a_python_osc_receiver_and_rig_and_osc_rel
             let out = receiver.0.wait_with_output_now();
             panic!("the python-osc receiver ended ({status}): {out}");
         }
-        assert!(Instant::now() < deadline, "the python-osc receiver did not start");
+        assert!(
+            Instant::now() < deadline,
+            "the python-osc receiver did not start"
+        );
         std::thread::sleep(Duration::from_millis(50));
     };
     // A port nothing listens on: the kernel refuses datagrams sent there.
@@ -1182,7 +1180,10 @@ async fn osc_sends_the_streamed_rig_to_a_python_osc_receiver_and_rig_and_osc_rel
     );
     let summary: Value = serde_json::from_str(out.lines().next().unwrap_or("")).unwrap();
     assert!(summary["matched"].as_u64() >= Some(60), "{summary}");
-    assert!(summary["matched_with_rig"].as_u64() >= Some(60), "{summary}");
+    assert!(
+        summary["matched_with_rig"].as_u64() >= Some(60),
+        "{summary}"
+    );
     assert!(summary["max_jaw_open"].as_f64() > Some(0.9), "{summary}");
     daemon.signal(libc::SIGTERM);
     assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
