@@ -2,7 +2,8 @@
 //! async server together, and handles signals, sd_notify and the watchdog.
 //!
 //! Threads: `mouthpiece-source` (owns the source), `mouthpiece-process` (processing, takes
-//! control), `mouthpiece-take` (while a take records), and a 2-thread tokio runtime for the
+//! control), `mouthpiece-take` (while a take records), `mouthpiece-osc` (once `[osc]` has a
+//! target: the VMC sender behind a bounded queue), and a 2-thread tokio runtime for the
 //! server, the signals and the watchdog. Start-up: validate the config, bind the port, start
 //! the threads, then `READY=1`. Signals: SIGTERM/SIGINT stop (a take written out to its
 //! last queued frame and synced, clients closed with 1001, exit 0 within 2 s when no take
