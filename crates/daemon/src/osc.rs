@@ -146,14 +146,20 @@ impl VmcFrame {
     }
 }
 
+/// The rotation whose matrix is `axes` (the head frame's axes as columns, a right-handed
+/// orthonormal frame).
+pub fn axes_rotation(axes: &Matrix3<f64>) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(axes))
+}
+
 /// A rotation of the character's model frame (`[w, x, y, z]`) as a VMC bone rotation
-/// `[x, y, z, w]`: written in the character's head-frame axes (`Aᵀ R A`: left, up, forward),
-/// then mirrored into Unity's left-handed axes (x right, y up, z forward), which keeps the
-/// rotation's angle and maps the quaternion `(w, x, y, z)` to `(w, x, −y, −z)`. `w ≥ 0`.
-pub fn unity_rotation(q_wxyz: [f32; 4], axes: &Matrix3<f64>) -> [f32; 4] {
+/// `[x, y, z, w]`: written in the character's head-frame axes (`Aᵀ R A`: left, up, forward;
+/// `a` is `A` as a quaternion, [`axes_rotation`]), then mirrored into Unity's left-handed
+/// axes (x right, y up, z forward), which keeps the rotation's angle and maps the quaternion
+/// `(w, x, y, z)` to `(w, x, −y, −z)`. `w ≥ 0`.
+pub fn unity_rotation(q_wxyz: [f32; 4], a: &UnitQuaternion<f64>) -> [f32; 4] {
     let [w, x, y, z] = q_wxyz.map(f64::from);
     let q = UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z));
-    let a = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(axes));
     let h = a.inverse() * q * a;
     let s = if h.w < 0.0 { -1.0 } else { 1.0 };
     [s * h.i, -s * h.j, -s * h.k, s * h.w].map(|v| v as f32)
@@ -231,8 +237,9 @@ impl VmcPacket {
         }
     }
 
-    /// Puts `frame`'s values into the bundle (no allocation).
-    pub fn fill(&mut self, frame: &VmcFrame, axes: &Matrix3<f64>) {
+    /// Puts `frame`'s values into the bundle (no allocation); `axes`: [`axes_rotation`] of
+    /// the character's head frame.
+    pub fn fill(&mut self, frame: &VmcFrame, axes: &UnitQuaternion<f64>) {
         let OscPacket::Bundle(bundle) = &mut self.packet else {
             unreachable!("built as a bundle")
         };
@@ -523,7 +530,7 @@ impl Link {
 struct SenderState {
     links: Vec<Link>,
     packet: VmcPacket,
-    axes: Matrix3<f64>,
+    axes: UnitQuaternion<f64>,
     throttle: Duration,
 }
 
@@ -543,7 +550,7 @@ impl SenderState {
         }
         counters.set_targets(self.links.iter().map(|l| l.counters.clone()).collect());
         self.packet = VmcPacket::new(settings.head, settings.eyes);
-        self.axes = settings.axes;
+        self.axes = axes_rotation(&settings.axes);
         let shown: Vec<&str> = self.links.iter().map(|l| l.target.label.as_str()).collect();
         tracing::info!(
             character = %settings.character,
@@ -566,7 +573,7 @@ fn run(
     let mut state = SenderState {
         links: Vec::new(),
         packet: VmcPacket::new(true, true),
-        axes: Matrix3::identity(),
+        axes: UnitQuaternion::identity(),
         throttle,
     };
     let mut bytes = Vec::with_capacity(2048);
@@ -651,7 +658,7 @@ mod tests {
         )
         .unwrap();
         let mut packet = VmcPacket::new(true, true);
-        packet.fill(&frame, &Matrix3::identity());
+        packet.fill(&frame, &UnitQuaternion::identity());
         let mut bytes = Vec::new();
         packet.encode(&mut bytes);
         // One datagram under the 1472 bytes of an unfragmented Ethernet UDP payload.
@@ -719,7 +726,7 @@ mod tests {
             VmcFrame::from_stream(&frame_with(1.0, None, [1.0, 0.0, 0.0, 0.0]), "ghost").is_none()
         );
         let mut packet = VmcPacket::new(false, false);
-        packet.fill(&frame, &Matrix3::identity());
+        packet.fill(&frame, &UnitQuaternion::identity());
         let got = messages(packet.packet());
         assert!(got.iter().all(|m| m.addr != address::BONE));
         let vals: Vec<_> = got
@@ -744,7 +751,7 @@ mod tests {
         // Its head nods down: a turn about the model's y (its left) by 20°.
         let nod = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), 20f64.to_radians());
         let q = [nod.w, nod.i, nod.j, nod.k].map(|v| v as f32);
-        let u = unity_rotation(q, &axes);
+        let u = unity_rotation(q, &axes_rotation(&axes));
         // In the head frame that is +20° about x (left); Unity's x is right: (x, -y, -z, w)
         // of it, i.e. the same +x component.
         let s = (10f64.to_radians().sin()) as f32;
@@ -754,7 +761,10 @@ mod tests {
         }
         // The angle of any rotation is kept; the result is a unit quaternion with w >= 0.
         let any = UnitQuaternion::<f64>::from_euler_angles(0.3, -0.7, 1.1);
-        let u = unity_rotation([-any.w, -any.i, -any.j, -any.k].map(|v| v as f32), &axes);
+        let u = unity_rotation(
+            [-any.w, -any.i, -any.j, -any.k].map(|v| v as f32),
+            &axes_rotation(&axes),
+        );
         let norm = u.iter().map(|v| v * v).sum::<f32>().sqrt();
         assert!((norm - 1.0).abs() < 1e-6);
         assert!(
