@@ -248,9 +248,14 @@ fn limits_above_the_hard_caps_are_refused() {
         ("[takes]\nqueue_frames = 4294967295\n", "takes.queue_frames"),
         ("[takes]\nqueue_frames = 0\n", "takes.queue_frames"),
         ("[server]\nmax_clients = 4294967295\n", "server.max_clients"),
+        ("[takes]\nmax_write_mb_s = -1.0\n", "takes.max_write_mb_s"),
+        ("[takes]\nmax_write_mb_s = 1e-300\n", "takes.max_write_mb_s"),
+        ("[takes]\nmax_write_mb_s = inf\n", "takes.max_write_mb_s"),
+        ("[takes]\nmax_write_mb_s = nan\n", "takes.max_write_mb_s"),
     ] {
         let err = parse(text).unwrap_err();
         assert_eq!(err.key(), Some(key), "{text}: {err}");
     }
     assert!(parse("[takes]\nqueue_frames = 3600\n[server]\nmax_clients = 512\n").is_ok());
+    assert!(parse("[takes]\nmax_write_mb_s = 0.5\n").is_ok());
 }
