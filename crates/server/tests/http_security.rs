@@ -437,7 +437,12 @@ async fn a_client_that_does_not_read_its_replies_gets_1008_with_a_reason() {
     // Pings with long ids: their pongs fill the socket while the client does not read.
     let id = "i".repeat(16 * 1024);
     let sender = tokio::spawn(async move {
-        for _ in 0..4000 {
+        for i in 0..4000 {
+            // The first second paced, so that the replies fill the socket before the
+            // queue of unanswered requests overflows; then as fast as it goes.
+            if i < 1000 {
+                tokio::time::sleep(Duration::from_millis(1)).await;
+            }
             let ping = json!({"type": "ping", "id": id}).to_string();
             if tokio::time::timeout(Duration::from_secs(3), tx.send(Message::text(ping)))
                 .await
