@@ -130,6 +130,38 @@ const ITERATIONS: usize = 4;
 /// Skin farther than this from the plane through the forehead dots is not the forehead.
 const OFF_PLANE_M: f64 = 0.025;
 
+/// `x.round() as i64` without the library call `f64::round` becomes on baseline x86-64 (no
+/// SSE4.1 rounding instruction): the projective association rounds two coordinates per
+/// forehead sample and step. Below 2^52 the fraction `x - trunc(x)` is exact, so this is the
+/// same rounding (half away from zero).
+fn round_to_i64(x: f64) -> i64 {
+    if x.abs() < 4.0e15 {
+        let t = x as i64;
+        let frac = x - t as f64;
+        if frac >= 0.5 {
+            t + 1
+        } else if frac <= -0.5 {
+            t - 1
+        } else {
+            t
+        }
+    } else {
+        x.round() as i64
+    }
+}
+
+/// `h += w j jᵀ` on the lower triangle only (with the rounding of nalgebra's `ger`:
+/// `(w j[col]) j[row] + h`): the Cholesky factorisation the normal equations go to reads
+/// nothing else, and the upper triangle is 15 of the 36 products.
+fn add_outer_lower(h: &mut Matrix6<f64>, w: f64, j: &Vector6<f64>) {
+    for col in 0..6 {
+        let s = w * j[col];
+        for row in col..6 {
+            h[(row, col)] = s * j[row] + h[(row, col)];
+        }
+    }
+}
+
 /// A point on the plane through the first three of `dots` and its unit normal.
 fn plane_through(dots: &[Vec3]) -> Option<(Vec3, Vec3)> {
     let [a, b, c] = dots.get(..3)? else {
@@ -276,11 +308,10 @@ impl ForeheadSurface {
             let mut used = 0usize;
             for (p, n) in self.points.iter().zip(&self.normals) {
                 let q = rotation * p + translation;
-                let n = rotation * n;
                 let Some(px) = project(&q) else {
                     continue;
                 };
-                let (x, y) = (px[0].round() as i64, px[1].round() as i64);
+                let (x, y) = (round_to_i64(px[0]), round_to_i64(px[1]));
                 if x < 0 || y < 0 || x >= wd || y >= hd {
                     continue;
                 }
@@ -288,6 +319,7 @@ impl ForeheadSurface {
                 if raw == 0 {
                     continue;
                 }
+                let n = rotation * n;
                 let measured = deproject([x as f64, y as f64], raw as f64 * scale);
                 let r = n.dot(&(measured - q));
                 if r.abs() > OUTLIER_M {
@@ -301,7 +333,7 @@ impl ForeheadSurface {
                 let qn = q.cross(&n);
                 let j = Vector6::new(-qn.x, -qn.y, -qn.z, -n.x, -n.y, -n.z);
                 let w = w_depth * huber;
-                h.ger(w, &j, &j, 1.0);
+                add_outer_lower(&mut h, w, &j);
                 g += w * r * j;
                 used += 1;
             }
@@ -336,10 +368,11 @@ impl ForeheadSurface {
                 let j = dn * dq;
                 for (row, r) in r.iter().enumerate() {
                     let jr = j.row(row).transpose();
-                    h.ger(w_dot, &jr, &jr, 1.0);
+                    add_outer_lower(&mut h, w_dot, &jr);
                     g += w_dot * r * jr;
                 }
             }
+            // Only the lower triangle of `h` is filled, all the factorisation reads.
             let delta = h.cholesky()?.solve(&(-g));
             let omega = delta.fixed_rows::<3>(0).into_owned();
             let v = delta.fixed_rows::<3>(3).into_owned();
