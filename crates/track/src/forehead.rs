@@ -157,7 +157,7 @@ fn add_outer_lower(h: &mut Matrix6<f64>, w: f64, j: &Vector6<f64>) {
     for col in 0..6 {
         let s = w * j[col];
         for row in col..6 {
-            h[(row, col)] = s * j[row] + h[(row, col)];
+            h[(row, col)] += s * j[row];
         }
     }
 }
