@@ -476,3 +476,27 @@ fn components_are_found_the_same_wherever_the_mask_lies_in_the_region() {
         }
     }
 }
+
+#[test]
+fn opening_keeps_round_dots_and_their_centres() {
+    // The opening only decides which components are real: round dots pass it, and their
+    // centres come from the unopened components, as without it.
+    let mut canvas = Canvas::new(160, 120);
+    for c in [[40.3, 50.7], [90.55, 52.2]] {
+        canvas.disc(c, 2.0, GREEN);
+    }
+    canvas.disc([70.4, 20.3], 2.0, BLUE);
+    let depth = flat_depth(160, 120, 600);
+    let detect = |morphology| {
+        Detector::new(DetectConfig {
+            morphology,
+            ..DetectConfig::default()
+        })
+        .unwrap()
+        .detect(&canvas.image(), Some((&depth, 0.001)), 525.0, None)
+        .unwrap()
+    };
+    let plain = detect(Morphology::None);
+    assert_eq!(plain.blobs.len(), 3, "{plain:?}");
+    assert_eq!(detect(Morphology::Open).blobs, plain.blobs);
+}
