@@ -17,7 +17,7 @@ pub const DEGENERATE_MOUTH_M: f64 = 1e-6;
 
 /// Assignment costs are whole numbers: squared pixel distances in this many units per px²
 /// (hundredths, finer than the detector's sub-pixel precision; a gate of a thousand pixels
-/// still costs far less than [`FORBIDDEN`]).
+/// still costs far less than `FORBIDDEN`).
 pub const COST_UNITS_PER_PX2: f64 = 100.0;
 
 /// The cost of a gated-out pair (a candidate outside the dot's gate or of the wrong role):
