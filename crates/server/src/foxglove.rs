@@ -36,7 +36,8 @@ pub const HEAD_CHANNEL: u32 = 1;
 pub const PERFORMER_CHANNEL: u32 = 2;
 /// Channel id of the first `/character/<name>`.
 pub const FIRST_CHARACTER_CHANNEL: u32 = 100;
-/// Channel id of the first `/rig/<name>` (same order as the characters).
+/// Channel id of the first `/rig/<name>` (same order as the characters; with more than 100
+/// characters the rigs' ids start after the last character's).
 pub const FIRST_RIG_CHANNEL: u32 = 200;
 
 /// Status levels of the spec.
@@ -102,9 +103,11 @@ fn channels(info: &StreamInfo) -> Vec<Channel> {
             kind: ChannelKind::Character(c.name.clone()),
         });
     }
+    // After the characters' ids even when there are more than 100 of them.
+    let first_rig = FIRST_RIG_CHANNEL.max(FIRST_CHARACTER_CHANNEL + info.characters.len() as u32);
     for (i, c) in info.characters.iter().enumerate() {
         list.push(Channel {
-            id: FIRST_RIG_CHANNEL + i as u32,
+            id: first_rig + i as u32,
             topic: format!("/rig/{}", c.name),
             kind: ChannelKind::Rig(c.name.clone()),
         });
@@ -617,5 +620,46 @@ async fn send_within(
             "client too slow: a write blocked for {} s",
             timeout.as_secs_f32()
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_character_has_a_rig_channel_and_ids_never_collide() {
+        let mut info = crate::loadgen::synthetic_info(60.0);
+        let ids = |info: &StreamInfo| {
+            let list = channels(info);
+            let mut ids: Vec<u32> = list.iter().map(|c| c.id).collect();
+            ids.sort_unstable();
+            ids.dedup();
+            assert_eq!(ids.len(), list.len(), "ids collide: {list:?}");
+            list
+        };
+        let list = ids(&info);
+        let rig = |name: &str| {
+            list.iter()
+                .find(|c| c.topic == format!("/rig/{name}"))
+                .unwrap()
+                .id
+        };
+        assert_eq!((rig("human"), rig("wolf")), (200, 201));
+        let template = info.characters[0].clone();
+        info.characters = (0..150)
+            .map(|i| {
+                let mut c = template.clone();
+                c.name = format!("c{i}");
+                c
+            })
+            .collect();
+        let list = ids(&info);
+        assert_eq!(
+            list.iter()
+                .filter(|c| matches!(c.kind, ChannelKind::Rig(_)))
+                .count(),
+            150
+        );
     }
 }
