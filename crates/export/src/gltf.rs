@@ -21,10 +21,10 @@ use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 use serde_json::Value;
 
-use crate::output::{parent_dir, PendingFile};
-use crate::reduce::{Key, Reducer};
 use mouthpiece_retarget::rig::{RigSettings, CURVES, CURVE_NAMES};
 
+use crate::output::{parent_dir, PendingFile};
+use crate::reduce::{Key, Reducer};
 use crate::take::RigKeys;
 use crate::{ExportError, MouthRig, TakeFrame};
 
