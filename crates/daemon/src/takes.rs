@@ -4,7 +4,8 @@
 //! `<slate>_T<take, 3 digits>_<UTC start, YYYYMMDDTHHMMSSZ>.mcap`, holding the raw frames
 //! (`/camera/color`, `/camera/depth`, `/camera/calibration`) and every derived channel as JSON:
 //! `/performer/points` (tracked dots, camera frame), `/performer/stabilised` (lip dots in the
-//! neutral mouth frame), `/head`, and `/character/<name>` per character. Every derived message
+//! neutral mouth frame), `/head`, and `/character/<name>` per character (its points, curve,
+//! head and, once the neutral pose is taken, the rig: docs/rig.md). Every derived message
 //! carries `seq`, `t`, `wall_us` and the SMPTE `timecode`; the file's metadata record
 //! `mouthpiece.take` names slate, take, timecode rate and start timecode.
 //!
@@ -64,6 +65,8 @@ pub struct TakeSettings {
     pub queue_frames: usize,
     /// Timecode rate name for the metadata record.
     pub timecode_rate: String,
+    /// `[takes] max_write_mb_s` in bytes per second; `None`: no cap.
+    pub max_write_bytes_s: Option<f64>,
 }
 
 /// One frame's derived data, as written to the take.
@@ -97,6 +100,9 @@ pub struct CharacterRecord {
     pub curve: Option<Vec<[f32; 3]>>,
     /// The character's head and eyes (docs/head.md).
     pub head: Option<mouthpiece_server::CharacterHead>,
+    /// The rig (docs/rig.md): jaw, lip motions and the named curves; `None` before the
+    /// neutral pose is taken.
+    pub rig: Option<mouthpiece_server::RigState>,
 }
 
 /// What the processing thread hands the writer.
@@ -452,7 +458,7 @@ fn open_take(
     slate: &str,
     take: Option<u32>,
     source: &str,
-) -> Result<(TakeInfo, SessionWriter, std::fs::File), TakeError> {
+) -> Result<(TakeInfo, TakeWriter, std::fs::File), TakeError> {
     let folder = &settings.folder;
     std::fs::create_dir_all(folder).map_err(|source| TakeError::Folder {
         path: folder.clone(),
@@ -484,7 +490,7 @@ fn open_take(
         ..WriterOptions::default()
     };
     let mut writer = SessionWriter::new(
-        std::io::BufWriter::with_capacity(1 << 20, file),
+        std::io::BufWriter::with_capacity(1 << 20, TakeFile::new(file, settings.max_write_bytes_s)),
         path.display().to_string(),
         options,
     )?;
@@ -542,6 +548,52 @@ pub fn create_new_take_file(
     })
 }
 
+type TakeWriter = SessionWriter<std::io::BufWriter<TakeFile>>;
+
+/// A take's file, written no faster than `[takes] max_write_mb_s` when that is set: each
+/// write waits until the bytes written so far fit the rate since the file was created.
+struct TakeFile {
+    file: std::fs::File,
+    max_bytes_s: Option<f64>,
+    created: Instant,
+    written: u64,
+}
+
+impl TakeFile {
+    fn new(file: std::fs::File, max_bytes_s: Option<f64>) -> Self {
+        TakeFile {
+            file,
+            max_bytes_s,
+            created: Instant::now(),
+            written: 0,
+        }
+    }
+}
+
+impl std::io::Write for TakeFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.written += n as u64;
+        if let Some(rate) = self.max_bytes_s {
+            let due = Duration::from_secs_f64(self.written as f64 / rate);
+            if let Some(wait) = due.checked_sub(self.created.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl std::io::Seek for TakeFile {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.file.seek(pos)
+    }
+}
+
 /// `fsync` of the take's file and of its folder (so the new name survives a power cut).
 fn sync_take(file: &std::fs::File, path: &Path) -> std::io::Result<()> {
     file.sync_all()?;
@@ -557,7 +609,7 @@ struct WriterResult {
 }
 
 fn write_take(
-    mut writer: SessionWriter,
+    mut writer: TakeWriter,
     items: Receiver<TakeItem>,
     settings: &TakeSettings,
     failed: &AtomicBool,
@@ -608,7 +660,7 @@ fn write_take(
 }
 
 fn write_one(
-    writer: &mut SessionWriter,
+    writer: &mut TakeWriter,
     frame: &Frame,
     derived: &Derived,
 ) -> Result<(), mouthpiece_recording::RecordingError> {
@@ -676,6 +728,9 @@ fn write_one(
         }
         if let Some(head) = &character.head {
             body["head"] = json!(head);
+        }
+        if let Some(rig) = &character.rig {
+            body["rig"] = json!(rig);
         }
         writer.write_json(
             &format!("/character/{}", character.name),
@@ -848,6 +903,7 @@ mod tests {
             min_free_mb: 0,
             queue_frames: 64,
             timecode_rate: "30".into(),
+            max_write_bytes_s: None,
         }
     }
 
@@ -899,9 +955,69 @@ mod tests {
                 confidence: vec![1.0],
                 curve: None,
                 head: Some(Default::default()),
+                rig: (seq >= 5).then(|| rig(seq)),
             }],
             status: serde_json::json!({"calibrating": false}),
         })
+    }
+
+    /// A rig with values that differ per frame.
+    fn rig(seq: u64) -> mouthpiece_server::RigState {
+        let mut rig = mouthpiece_server::RigState::default();
+        rig.jaw.angle_deg = seq as f32;
+        rig.jaw.slide_m = -0.0005 * seq as f32;
+        for (k, c) in rig.curves.0.iter_mut().enumerate() {
+            *c = ((k as u64 + seq) % 10) as f32 / 10.0;
+        }
+        rig
+    }
+
+    /// The `/character/<name>` messages of a take, in order.
+    fn character_messages(path: &Path, name: &str) -> Vec<serde_json::Value> {
+        let mut reader = mouthpiece_recording::MessageReader::open(path).unwrap();
+        let topic = format!("/character/{name}");
+        let mut out = Vec::new();
+        while let Some(message) = reader.next_message().unwrap() {
+            if *message.topic == *topic {
+                out.push(serde_json::from_slice(&message.data).unwrap());
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn the_rig_is_recorded_per_frame_once_there_is_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut takes = Takes::new(settings(dir.path()));
+        let info = start_wait(&mut takes, "rig", None).unwrap();
+        for seq in 0..10 {
+            takes.push(frame(seq), derived(seq));
+        }
+        stop_wait(&mut takes).unwrap();
+        let messages = character_messages(&info.path, "wolf");
+        assert_eq!(messages.len(), 10);
+        for m in &messages {
+            let seq = m["seq"].as_u64().unwrap();
+            if seq < 5 {
+                // Before the neutral pose: no `rig` key at all (as in takes made before the
+                // rig existed), and the rest of the message as ever.
+                assert!(m.get("rig").is_none(), "{m}");
+                assert_eq!(m["points"]["P1"], serde_json::json!([0.07f32, 0.0, 0.0]));
+                continue;
+            }
+            let want = rig(seq);
+            assert_eq!(m["rig"]["jaw"]["angle_deg"], want.jaw.angle_deg, "{m}");
+            assert_eq!(m["rig"]["jaw"]["slide_m"], want.jaw.slide_m, "{m}");
+            let curves = m["rig"]["curves"].as_object().unwrap();
+            let names: std::collections::BTreeSet<&str> =
+                curves.keys().map(String::as_str).collect();
+            let want_names = mouthpiece_server::RIG_CURVE_NAMES.into_iter().collect();
+            assert_eq!(names, want_names, "every curve, by name");
+            for (k, name) in mouthpiece_server::RIG_CURVE_NAMES.iter().enumerate() {
+                assert_eq!(curves[*name], want.curves.0[k], "{name} at {seq}");
+            }
+            assert_eq!(m["rig"]["lips"]["upper"]["rotation"][0], 1.0, "{m}");
+        }
     }
 
     fn topics(path: &Path) -> (std::collections::BTreeMap<String, usize>, Vec<String>) {
@@ -1023,6 +1139,28 @@ mod tests {
     }
 
     #[test]
+    fn a_capped_take_file_writes_no_faster_than_its_cap() {
+        use std::io::Write;
+        let dir = tempfile::tempdir().unwrap();
+        let file = std::fs::File::create(dir.path().join("capped")).unwrap();
+        let mut capped = TakeFile::new(file, Some(1e6));
+        let started = Instant::now();
+        for _ in 0..5 {
+            capped.write_all(&[7u8; 60_000]).unwrap();
+        }
+        // 300 kB at 1 MB/s: 0.3 s at least.
+        assert!(
+            started.elapsed() >= Duration::from_millis(300),
+            "{:?}",
+            started.elapsed()
+        );
+        assert_eq!(
+            std::fs::metadata(dir.path().join("capped")).unwrap().len(),
+            300_000
+        );
+    }
+
+    #[test]
     fn disk_full_stops_the_take_and_says_so() {
         // /dev/full fails every write with ENOSPC.
         let file = std::fs::OpenOptions::new()
@@ -1030,7 +1168,7 @@ mod tests {
             .open("/dev/full")
             .unwrap();
         let writer = SessionWriter::new(
-            std::io::BufWriter::new(file),
+            std::io::BufWriter::new(TakeFile::new(file, None)),
             "/dev/full".into(),
             WriterOptions {
                 flush_interval: Duration::from_millis(10),
