@@ -58,7 +58,7 @@ pub const CURVES: usize = CURVE_NAMES.len();
 pub const DEFAULT_RANGES: [f64; CURVES] = [
     25.0, // jawOpen: degrees of jaw rotation
     0.15, // mouthClose: lower-lip rise against the jaw
-    0.12, // mouthFunnel: lips pushed out and drawn in
+    0.09, // mouthFunnel: lips pushed out and drawn in
     0.25, // mouthPucker: lips drawn in (horizontal scale 1 - s)
     0.10, // mouthLeft
     0.10, // mouthRight
@@ -66,8 +66,8 @@ pub const DEFAULT_RANGES: [f64; CURVES] = [
     0.12, // mouthSmileRight
     0.15, // mouthStretchLeft: corner out
     0.15, // mouthStretchRight
-    0.12, // mouthRollUpper
-    0.20, // mouthRollLower
+    0.10, // mouthRollUpper
+    0.16, // mouthRollLower
     0.10, // mouthUpperUpLeft
     0.10, // mouthUpperUpRight
     0.12, // mouthLowerDownLeft
@@ -75,6 +75,13 @@ pub const DEFAULT_RANGES: [f64; CURVES] = [
     0.15, // mouthPressLeft
     0.15, // mouthPressRight
 ];
+
+/// The weight of depth (z) against the lateral axes (x, y) where a measure combines them:
+/// inverse-variance weighting. A depth camera's depth noise on a lip dot is about twice its
+/// lateral noise (standard deviation; `mouthpiece evaluate --per-dot`: Kinect-like
+/// 1.2–1.6 mm against 0.3–0.75 mm, RealSense-like 0.7–1.0 mm against 0.3–0.5 mm), so its
+/// variance is about four times as large and a millimetre of depth counts a quarter.
+pub const DEPTH_WEIGHT: f64 = 0.25;
 
 /// Index of a curve name in [`CURVE_NAMES`].
 pub fn curve_index(name: &str) -> Option<usize> {
@@ -278,6 +285,8 @@ pub struct RigModel {
     lower_left: Vec<f64>,
     /// Σ x0² over all dots (the horizontal scale fit's denominator).
     sxx: f64,
+    /// Per dot: its weight in the mouth centre's sideways shift ([`midline_weights`]).
+    mid_weight: Vec<f64>,
 }
 
 fn mean_over(idx: &[usize], f: impl Fn(usize) -> f64) -> f64 {
@@ -315,6 +324,7 @@ impl RigModel {
         let lower_left = roles.lower.iter().map(|&i| side(i)).collect();
         let sxx = neutral.lip.iter().map(|p| p.x * p.x).sum::<f64>();
         Ok(Self {
+            mid_weight: midline_weights(&neutral.lip, width),
             pivot: [settings.hinge_up * width, -settings.hinge_back * width],
             neutral: neutral.lip.clone(),
             roles,
@@ -323,6 +333,11 @@ impl RigModel {
             lower_left,
             sxx,
         })
+    }
+
+    /// The neutral lip dots (mouth frame).
+    pub fn neutral(&self) -> &[Vec3] {
+        &self.neutral
     }
 
     /// Neutral mouth width, metres.
@@ -391,23 +406,27 @@ impl RigModel {
         // mouthClose: the lower lip rises against the jaw (lips stay shut while it drops).
         v[1] = (jaw_drop - (du.y - dl.y)) / w;
         // Horizontal scale of the whole mouth (least squares over every dot, the lower lip
-        // without the slide), and of each side.
-        let (mut sxl, mut sxr, mut xxl, mut xxr) = (0.0, 0.0, 0.0, 0.0);
-        for (i, (p, q)) in lip.iter().zip(n0).enumerate() {
-            let x = p.x - if r.lower.contains(&i) { slide } else { 0.0 };
+        // without the slide), and of each side about the mouth's own centre.
+        let x_of = |i: usize| lip[i].x - if r.lower.contains(&i) { slide } else { 0.0 };
+        let centre_shift = centre_shift(&self.mid_weight, |i| x_of(i) - n0[i].x);
+        let (mut sx_all, mut sxl, mut sxr, mut xxl, mut xxr) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (i, q) in n0.iter().enumerate() {
+            let x = x_of(i);
+            sx_all += x * q.x;
+            let xc = x - centre_shift;
             if q.x >= 0.0 {
-                sxl += x * q.x;
+                sxl += xc * q.x;
                 xxl += q.x * q.x;
             } else {
-                sxr += x * q.x;
+                sxr += xc * q.x;
                 xxr += q.x * q.x;
             }
         }
-        let sx = (sxl + sxr) / self.sxx;
-        // mouthFunnel: lips pushed out and drawn in: half the upper lip's mean forward motion
-        // plus half the corners' inward motion (both in mouth widths).
+        let sx = sx_all / self.sxx;
+        // mouthFunnel: lips pushed out and drawn in: the upper lip's mean forward motion at
+        // depth weight plus half the corners' inward motion (both in mouth widths).
         // (The upper lip's push: the lower lip's depends on the jaw's estimate.)
-        v[2] = 0.5 * du.z / w + 0.5 * (1.0 - sx) * 0.5;
+        v[2] = DEPTH_WEIGHT * du.z / w + 0.5 * (1.0 - sx) * 0.5;
         // mouthPucker: drawn in horizontally: 1 − the horizontal scale.
         v[3] = 1.0 - sx;
         // mouthLeft / Right: the whole mouth shifted sideways (mean over every dot).
@@ -426,14 +445,15 @@ impl RigModel {
         let ry = corner_up(r.right, ur, lr);
         v[6] = ly / w;
         v[7] = ry / w;
-        // Stretch: each side's horizontal scale, as the corner's outward motion.
+        // Stretch: each side's horizontal scale about the mouth's centre, as the corner's
+        // outward motion (a whole-mouth shift is mouthLeft/Right, not one side stretching).
         v[8] = 0.5 * (sxl / xxl.max(f64::MIN_POSITIVE) - 1.0);
         v[9] = 0.5 * (sxr / xxr.max(f64::MIN_POSITIVE) - 1.0);
         // Rolls: the upper lip's edge down and back; the lower lip's (without the jaw) up and
         // back.
-        // (Depth is the noisiest axis: the backward part counts half.)
-        v[10] = mean_over(&r.upper, |i| -d(i).y - 0.5 * d(i).z) / w;
-        v[11] = mean_over(&r.lower, |i| free_y(i) - 0.5 * free_z(i)) / w;
+        // (Depth is the noisiest axis: the backward part counts at depth weight.)
+        v[10] = mean_over(&r.upper, |i| -d(i).y - DEPTH_WEIGHT * d(i).z) / w;
+        v[11] = mean_over(&r.lower, |i| free_y(i) - DEPTH_WEIGHT * free_z(i)) / w;
         // Upper lip up / lower lip down, per side.
         let up_l = weighted(&r.upper, &self.upper_left, |i| d(i).y);
         let up_r = weighted_right(&r.upper, &self.upper_left, |i| d(i).y);
@@ -452,6 +472,34 @@ impl RigModel {
             jaw_slide: slide,
         }
     }
+}
+
+/// The mouth centre's sideways shift: the mean of `dx` over the dots weighted by `weight`
+/// (the midline weights of [`midline_weights`]). Named heuristic *centred stretch*: each
+/// side's scale is fitted about the mouth centre moved by this shift, so that a shift of the
+/// whole mouth, or the head-pose residue the stabiliser leaves (a common error of every dot),
+/// does not read as one side stretching and the other narrowing.
+fn centre_shift(weight: &[f64], dx: impl Fn(usize) -> f64) -> f64 {
+    let (mut s, mut ws) = (0.0, 0.0);
+    for (i, w) in weight.iter().enumerate() {
+        s += w * dx(i);
+        ws += w;
+    }
+    if ws > 0.0 {
+        s / ws
+    } else {
+        0.0
+    }
+}
+
+/// Per dot, its weight in the mouth centre's shift: `clamp(1 − |x⁰| / (w/2), 0, 1)`, 1 on the
+/// midline, 0 at the corners, so that one corner pulled out (a one-sided stretch) moves the
+/// centre little and the other side does not read a stretch.
+fn midline_weights(neutral: &[Vec3], width: f64) -> Vec<f64> {
+    neutral
+        .iter()
+        .map(|p| (1.0 - p.x.abs() / (0.5 * width)).clamp(0.0, 1.0))
+        .collect()
 }
 
 fn weighted_right(idx: &[usize], left: &[f64], f: impl Fn(usize) -> f64) -> f64 {
@@ -748,14 +796,14 @@ mod tests {
             (out.curve("mouthPucker") - 0.1 / 0.25).abs() < 1e-9,
             "{out:?}"
         );
-        assert!((out.curve("mouthFunnel") - 0.025 / 0.12).abs() < 1e-9);
+        assert!((out.curve("mouthFunnel") - 0.025 / 0.09).abs() < 1e-9);
         let pushed: Vec<Vec3> = n
             .lip
             .iter()
             .map(|p| p + Vec3::new(0.0, 0.0, 0.003))
             .collect();
         let out = rig.step(&frame(pushed)).clone();
-        assert!((out.curve("mouthFunnel") - 0.5 * 0.003 / w / 0.12).abs() < 1e-9);
+        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.003 / w / 0.09).abs() < 1e-9);
         assert!(
             out.jaw.angle_deg.abs() < 1e-9,
             "a push is not a jaw: {:?}",
@@ -796,6 +844,86 @@ mod tests {
         let out = rig.step(&frame(shifted)).clone();
         assert!(out.curve("mouthLeft") > 0.3 && out.curve("mouthRight") == 0.0);
         assert!(out.jaw.slide_m.abs() < 1e-12, "the jaw moved with the lips");
+    }
+
+    /// Centred stretch: a shift of the whole mouth (or a common error of every dot) is no
+    /// stretch; a widening of both sides is the same stretch on both; one corner pulled out
+    /// leaves the other side unstretched.
+    #[test]
+    fn centred_stretch_ignores_a_whole_mouth_shift() {
+        let n = neutral();
+        let mut rig = rig();
+        let shifted: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| p + Vec3::new(0.003, 0.0, 0.0))
+            .collect();
+        let v = rig.model().measure(&shifted).values;
+        assert!(v[8].abs() < 1e-12 && v[9].abs() < 1e-12, "{:?}", &v[8..10]);
+        // (Fitted about the neutral centre instead, the left side would read 0.09 here.)
+        let wide: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(1.1 * p.x, p.y, p.z))
+            .collect();
+        let v = rig.model().measure(&wide).values;
+        assert!(
+            (v[8] - 0.05).abs() < 1e-12 && (v[9] - 0.05).abs() < 1e-12,
+            "{:?}",
+            &v[8..10]
+        );
+        let out = rig.step(&frame(wide)).clone();
+        assert!((out.curve("mouthStretchLeft") - 0.05 / 0.15).abs() < 1e-9);
+    }
+
+    #[test]
+    fn midline_weights_are_one_on_the_midline_and_zero_at_the_corners() {
+        let n = neutral();
+        let w = n.mouth_width();
+        let m = midline_weights(&n.lip, w);
+        assert_eq!((m[0], m[6]), (0.0, 0.0), "corners");
+        assert_eq!((m[3], m[9]), (1.0, 1.0), "midline");
+        assert!((m[1] - (1.0 - 0.016 / (0.5 * w))).abs() < 1e-12);
+        assert!(m.iter().all(|x| (0.0..=1.0).contains(x)));
+        // A shift of the centre dots only moves the centre by their weighted share.
+        let dx = |i: usize| if i == 3 || i == 9 { 0.001 } else { 0.0 };
+        let want = 0.002 / m.iter().sum::<f64>();
+        assert!((centre_shift(&m, dx) - want).abs() < 1e-15);
+    }
+
+    /// Depth weight: a millimetre of depth counts DEPTH_WEIGHT of a lateral one in the rolls
+    /// and the funnel.
+    #[test]
+    fn depth_counts_at_depth_weight_in_rolls_and_funnel() {
+        let n = neutral();
+        let w = n.mouth_width();
+        let mut rig = rig();
+        // The upper lip pushed back 2 mm, nothing else: a roll of the upper lip by depth only.
+        let mut lip = n.lip.clone();
+        for p in &mut lip[1..6] {
+            p.z -= 0.002;
+        }
+        let v = rig.model().measure(&lip).values;
+        assert!(
+            (v[10] - DEPTH_WEIGHT * 0.002 / w).abs() < 1e-12,
+            "{}",
+            v[10]
+        );
+        // The upper lip down 2 mm counts in full.
+        let mut lip = n.lip.clone();
+        for p in &mut lip[1..6] {
+            p.y -= 0.002;
+        }
+        let v = rig.model().measure(&lip).values;
+        assert!((v[10] - 0.002 / w).abs() < 1e-12, "{}", v[10]);
+        // Both lips pushed forward 4 mm: funnel by depth only.
+        let pushed: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| p + Vec3::new(0.0, 0.0, 0.004))
+            .collect();
+        let out = rig.step(&frame(pushed)).clone();
+        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.004 / w / 0.09).abs() < 1e-9);
     }
 
     #[test]
