@@ -138,11 +138,8 @@ impl RigSettings {
                     format!("is not a curve name (one of {})", CURVE_NAMES.join(", ")),
                 ));
             }
-            if !(v.is_finite() && *v > 0.0 && *v <= 1000.0) {
-                return Err(bad(
-                    &format!("ranges.{name}"),
-                    format!("must be a positive number (at most 1000), got {v}"),
-                ));
+            if !range_ok(*v) {
+                return Err(bad(&format!("ranges.{name}"), range_reason(*v)));
             }
         }
         let mut seen = [false; CURVES];
@@ -170,6 +167,52 @@ impl RigSettings {
     fn configured(&self, i: usize) -> Option<f64> {
         self.ranges.get(CURVE_NAMES[i]).copied()
     }
+}
+
+/// A character's own ranges (`[rig.ranges]` of its file): per curve in [`CURVE_NAMES`] order,
+/// the range that character uses instead of the performer's (`None`: the performer's).
+///
+/// Precedence, for each curve: the character's range, else the `[rig.ranges]` of the daemon
+/// (or `--config`) configuration, else the performer's range learned from the default.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RangeOverrides(pub [Option<f64>; CURVES]);
+
+impl RangeOverrides {
+    /// No range of its own.
+    pub fn is_empty(&self) -> bool {
+        self.0.iter().all(Option::is_none)
+    }
+
+    /// From curve name → range pairs, checked as [`RigSettings::validate`] checks
+    /// `[rig.ranges]`; the error is the offending name and the reason.
+    pub fn from_named<'a>(
+        pairs: impl IntoIterator<Item = (&'a str, f64)>,
+    ) -> Result<Self, (String, String)> {
+        let mut out = Self::default();
+        for (name, v) in pairs {
+            let Some(i) = curve_index(name) else {
+                return Err((
+                    name.to_string(),
+                    format!("is not a curve name (one of {})", CURVE_NAMES.join(", ")),
+                ));
+            };
+            if !range_ok(v) {
+                return Err((name.to_string(), range_reason(v)));
+            }
+            if out.0[i].replace(v).is_some() {
+                return Err((name.to_string(), "is given twice".into()));
+            }
+        }
+        Ok(out)
+    }
+}
+
+fn range_ok(v: f64) -> bool {
+    v.is_finite() && v > 0.0 && v <= 1000.0
+}
+
+fn range_reason(v: f64) -> String {
+    format!("must be a positive number (at most 1000), got {v}")
 }
 
 /// One lip's rigid motion from neutral (mouth frame).
@@ -602,6 +645,42 @@ impl Rig {
         self.learn_until.is_none()
     }
 
+    /// The ranges a character uses: its own where it sets them ([`RangeOverrides`]), the
+    /// performer's ([`Rig::ranges`]) otherwise.
+    pub fn ranges_for(&self, character: &RangeOverrides) -> [f64; CURVES] {
+        let mut out = self.ranges;
+        for (dst, own) in out.iter_mut().zip(character.0) {
+            if let Some(r) = own {
+                *dst = r;
+            }
+        }
+        out
+    }
+
+    /// The last step's output with a character's ranges (the jaw and the lips are the
+    /// performer's; only the curves depend on ranges). No allocation once `out` has its
+    /// curves.
+    pub fn output_for(&self, character: &RangeOverrides, out: &mut RigFrame) {
+        out.jaw = self.out.jaw;
+        out.lips = self.out.lips;
+        if character.is_empty() {
+            out.curves.clone_from(&self.out.curves);
+            return;
+        }
+        let mut values = [0.0; CURVES];
+        curves_from(&self.measures, &self.ranges_for(character), &mut values);
+        if out.curves.0.len() != CURVES {
+            out.curves = RigFrame::default().curves;
+        }
+        for (((name, dst), v), want) in out.curves.0.iter_mut().zip(values).zip(CURVE_NAMES) {
+            if name != want {
+                name.clear();
+                name.push_str(want);
+            }
+            *dst = v;
+        }
+    }
+
     /// One step.
     pub fn step(&mut self, frame: &StabilisedFrame) -> &RigFrame {
         let m = self.model.measure(&frame.lip);
@@ -958,6 +1037,63 @@ mod tests {
         rig.step(&g);
         assert!(!rig.learning());
         assert!((rig.ranges()[0] - 40.0).abs() < 1e-9);
+    }
+
+    /// Precedence of ranges: the character's own, else the configured one, else the
+    /// performer's learned from the default.
+    #[test]
+    fn a_characters_ranges_override_the_configured_and_the_learned_ones() {
+        let n = neutral();
+        let settings = RigSettings {
+            learn_s: 1.0,
+            ranges: Named(vec![("mouthPucker".into(), 0.5), ("jawOpen".into(), 20.0)]),
+            ..RigSettings::default()
+        };
+        let mut rig = Rig::new(&n, settings).unwrap();
+        let jaw = rig.model().jaw_transform(10f64.to_radians(), 0.0);
+        let mut lip: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(0.9 * p.x, p.y, p.z))
+            .collect();
+        for p in &mut lip[7..] {
+            *p = jaw.apply(p);
+        }
+        rig.step(&frame(lip));
+        let own =
+            RangeOverrides::from_named([("jawOpen", 40.0), ("mouthStretchLeft", 0.3)]).unwrap();
+        let r = rig.ranges_for(&own);
+        let i = |name: &str| curve_index(name).unwrap();
+        assert_eq!(r[i("jawOpen")], 40.0, "the character's over the configured");
+        assert_eq!(r[i("mouthPucker")], 0.5, "the configured");
+        assert_eq!(
+            r[i("mouthStretchLeft")],
+            0.3,
+            "the character's over the default"
+        );
+        assert_eq!(r[i("mouthClose")], DEFAULT_RANGES[i("mouthClose")]);
+        let mut out = RigFrame::default();
+        rig.output_for(&own, &mut out);
+        assert!((out.curve("jawOpen") - 10.0 / 40.0).abs() < 1e-9, "{out:?}");
+        assert!((out.curve("mouthPucker") - 0.1 / 0.5).abs() < 1e-9);
+        assert_eq!(out.jaw, rig.output().jaw);
+        assert_eq!(out.lips, rig.output().lips);
+        // Without ranges of its own, the character gets the performer's output.
+        rig.output_for(&RangeOverrides::default(), &mut out);
+        assert_eq!(&out, rig.output());
+        assert!((out.curve("jawOpen") - 10.0 / 20.0).abs() < 1e-9);
+        // Names are checked like [rig.ranges].
+        for (name, v, words) in [
+            ("mouthSmile", 0.1, "not a curve name"),
+            ("jawOpen", 0.0, "positive"),
+            ("jawOpen", f64::NAN, "positive"),
+        ] {
+            let (n, reason) = RangeOverrides::from_named([(name, v)]).unwrap_err();
+            assert!(n == name && reason.contains(words), "{n}: {reason}");
+        }
+        let (n, reason) =
+            RangeOverrides::from_named([("jawOpen", 1.0), ("jawOpen", 2.0)]).unwrap_err();
+        assert!(n == "jawOpen" && reason.contains("twice"), "{reason}");
     }
 
     #[test]
