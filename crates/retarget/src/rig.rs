@@ -14,10 +14,12 @@
 //! - **Lips**: for each lip (its dots and both corners) the rigid motion that best carries the
 //!   neutral dots onto the current ones (Kabsch), and the residual RMS it leaves.
 //! - **Curves**: [`CURVE_NAMES`], each `clamp(measure / range, 0, 1)`; the measures are means
-//!   and least-squares fits over several dots (never one distance), the ranges come from the
-//!   defaults scaled by the performer's mouth width, widened by what the performer does in
-//!   the first seconds after the neutral pose ([`RigSettings::learn_s`]), and overridable per
-//!   curve ([`RigSettings::ranges`]).
+//!   and least-squares fits over several dots (never one distance), depth counts at
+//!   [`DEPTH_WEIGHT`] and each side's stretch is fitted about the mouth's own centre; the
+//!   ranges come from the defaults scaled by the performer's mouth width, widened by what the
+//!   performer does in the first seconds after the neutral pose ([`RigSettings::learn_s`]),
+//!   and overridable per curve ([`RigSettings::ranges`]) and per character
+//!   ([`RangeOverrides`]).
 //!
 //! A step allocates nothing.
 
