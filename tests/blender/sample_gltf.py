@@ -4,7 +4,8 @@ Run by the export tests:
     blender -b --factory-startup --python-exit-code 1 --python sample_gltf.py -- FILE T1 T2 ...
 Prints one JSON line starting with `SAMPLES ` on stdout:
     {"fps": …, "objects": {name: {"parent": …}}, "samples": {"T": {name: [x, y, z]}},
-     "matrices": {"T": {name: 4x4 world matrix, rows}}}
+     "matrices": {"T": {name: 4x4 world matrix, rows}},
+     "shape_keys": {"T": {name: {shape key: value}}}}  (objects whose mesh has shape keys)
 positions are world coordinates in Blender's frame (+Z up; glTF's (x, y, z) is Blender's
 (x, -z, y)), so the caller can check Blender's own conversion and animation evaluation.
 """
@@ -35,6 +36,7 @@ actions = [a.name for a in bpy.data.actions]
 
 samples = {}
 matrices = {}
+shape_keys = {}
 for t in times:
     frame = t * fps
     whole = int(frame // 1)
@@ -42,10 +44,22 @@ for t in times:
     bpy.context.view_layer.update()
     samples[repr(t)] = {o.name: list(o.matrix_world.translation) for o in scene.objects}
     matrices[repr(t)] = {o.name: [list(row) for row in o.matrix_world] for o in scene.objects}
+    shape_keys[repr(t)] = {
+        o.name: {k.name: k.value for k in o.data.shape_keys.key_blocks}
+        for o in scene.objects
+        if o.type == "MESH" and o.data.shape_keys is not None
+    }
 
 print(
     "SAMPLES "
     + json.dumps(
-        {"fps": fps, "objects": objects, "actions": actions, "samples": samples, "matrices": matrices}
+        {
+            "fps": fps,
+            "objects": objects,
+            "actions": actions,
+            "samples": samples,
+            "matrices": matrices,
+            "shape_keys": shape_keys,
+        }
     )
 )

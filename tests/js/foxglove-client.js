@@ -2,7 +2,9 @@
 // Foxglove's own WebSocket client library (@foxglove/ws-protocol) against a mouthpiece server:
 // lists the advertised channels, subscribes to every one, and checks each message against
 // Foxglove's published JSON Schema of its schema name (@foxglove/schemas, validated with ajv;
-// a field the schema does not have is an error too). Prints one JSON summary on stdout.
+// a field the schema does not have is an error too); mouthpiece's own channels are checked
+// the same way against the JSON Schema the server advertises for them. Prints one JSON
+// summary on stdout.
 //
 //     node foxglove-client.js ws://127.0.0.1:9870/ SECONDS
 "use strict";
@@ -17,11 +19,26 @@ const seconds = Number(secondsArg || "3");
 
 const ajv = new Ajv({ strict: false, allErrors: true });
 const validators = {};
-function validatorFor(schemaName) {
+function validatorFor(channel) {
+  const { schemaName } = channel;
   const short = schemaName.replace(/^foxglove\./, "");
-  if (!schemaName.startsWith("foxglove.") || !foxgloveSchemas[short]) return null;
-  if (!validators[short]) validators[short] = ajv.compile(foxgloveSchemas[short]);
-  return validators[short];
+  if (schemaName.startsWith("foxglove.") && foxgloveSchemas[short]) {
+    if (!validators[short]) validators[short] = ajv.compile(foxgloveSchemas[short]);
+    return { validate: validators[short], schema: foxgloveSchemas[short] };
+  }
+  if (channel.schemaEncoding !== "jsonschema") return null;
+  // A channel of our own: its advertised schema.
+  const key = `${channel.id}:${channel.schema}`;
+  if (!validators[key]) {
+    const schema = safeParse(channel.schema);
+    try {
+      validators[key] = { validate: ajv.compile(schema), schema };
+    } catch (e) {
+      problem(`${channel.topic}: advertised schema does not compile: ${e.message}`);
+      validators[key] = null;
+    }
+  }
+  return validators[key];
 }
 
 // Fields of `value` that `schema` does not list (JSON Schema allows them; Foxglove would
@@ -69,13 +86,14 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
   }
   summary.messages[channel.topic] = (summary.messages[channel.topic] || 0) + 1;
   summary.samples[channel.topic] = message;
-  const validate = validatorFor(channel.schemaName);
-  if (validate) {
+  const checker = validatorFor(channel);
+  if (checker) {
+    const { validate, schema } = checker;
     if (!validate(message)) {
       problem(`${channel.topic}: ${ajv.errorsText(validate.errors)}`);
     }
     const extra = [];
-    unknownFields(foxgloveSchemas[channel.schemaName.replace(/^foxglove\./, "")], message, "", extra);
+    unknownFields(schema, message, "", extra);
     if (extra.length) problem(`${channel.topic}: fields not in ${channel.schemaName}: ${extra.slice(0, 5).join(", ")}`);
   }
   if (typeof timestamp !== "bigint" || timestamp <= 0n) {

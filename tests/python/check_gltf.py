@@ -4,7 +4,11 @@ Reads the glTF with nothing but json, struct and numpy (no glTF library, nothing
 the Rust writer), evaluates every point's LINEAR translation channel at every frame time of
 the take, and compares with the take's points. With a character file it also checks that the
 node hierarchy puts each point's rest position where the character file puts it in the model
-(in metres, glTF axes).
+(in metres, glTF axes). When the take has the rig (`rig` on its lines) it checks the `jaw`
+node's rotation keys (about the x axis, by the take's jaw angle) and translation keys (the
+pivot moved by the slide), and the `blendshapes` node: its mesh's morph targets, named by
+`extras.targetNames` as the take names its curves, and one weight per curve and frame equal
+to the take's (0 and the jaw at rest on lines without `rig`).
 
     python check_gltf.py --take TAKE.jsonl --gltf OUT.glb [--character C.toml] [--model-up y|z]
 
@@ -128,7 +132,9 @@ def main():
         assert eyes == ["eye_L", "eye_R"], eyes
     mouth = doc["nodes"][mouth_index]
     assert mouth["name"] == "mouth", mouth.get("name")
-    children = [doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] != "curve"]
+    rig_node_names = ("curve", "jaw", "blendshapes")
+    children = [doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] not in rig_node_names]
+    rig_nodes = {doc["nodes"][i]["name"]: doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] in ("jaw", "blendshapes")}
     names = [c["name"] for c in children]
     curve_groups = [doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] == "curve"]
 
@@ -142,12 +148,23 @@ def main():
     animation = doc["animations"][0]
     by_node = {}
     rotations = {}
+    weights = None
     for ch in animation["channels"]:
         node_name = doc["nodes"][ch["target"]["node"]]["name"]
         sampler = animation["samplers"][ch["sampler"]]
         assert sampler.get("interpolation", "LINEAR") == "LINEAR"
         t = accessor(doc, buffers, sampler["input"])[:, 0]
         v = accessor(doc, buffers, sampler["output"])
+        if ch["target"]["path"] == "weights":
+            assert node_name == "blendshapes", node_name
+            mesh = doc["meshes"][doc["nodes"][ch["target"]["node"]]["mesh"]]
+            targets = len(mesh["primitives"][0]["targets"])
+            assert v.shape[0] == len(t) * targets, (v.shape, len(t), targets)
+            weights = (t, v.reshape(len(t), targets), mesh)
+            continue
+        if node_name == "jaw":
+            rotations["jaw " + ch["target"]["path"]] = (t, v)
+            continue
         if ch["target"]["path"] == "rotation":
             assert node_name in ("head", "eye_L", "eye_R"), node_name
             rotations[node_name] = (t, v)
@@ -207,7 +224,47 @@ def main():
                 err = min(np.abs(got - want).max(), np.abs(got + want).max())
                 head_error = max(head_error, float(err))
 
+    # The rig: jaw and curves, one key per frame.
+    rig_frames = [f.get("rig") for f in frames]
+    rig = {"rig_frames": sum(r is not None for r in rig_frames)}
+    if weights is not None or rig["rig_frames"]:
+        assert rig["rig_frames"] > 0, "rig nodes for a take without rig"
+        assert set(rig_nodes) == {"jaw", "blendshapes"}, list(rig_nodes)
+        t, w, mesh = weights
+        curve_names = list(next(r for r in rig_frames if r is not None)["curves"].keys())
+        assert mesh["extras"]["targetNames"] == curve_names, mesh["extras"]
+        assert mesh["weights"] == [0.0] * len(curve_names), mesh["weights"]
+        # Each target raises its own bar of the meter (two vertices) and nothing else.
+        prim = mesh["primitives"][0]
+        for i, target in enumerate(prim["targets"]):
+            d = accessor(doc, buffers, target["POSITION"])
+            moved = np.flatnonzero(np.abs(d).sum(axis=1))
+            assert list(moved) == [4 * i + 2, 4 * i + 3], (i, moved)
+        assert len(t) == len(frames) and np.array_equal(t, times), "one weight key per frame"
+        want = np.array([[r["curves"][n] if r else 0.0 for n in curve_names] for r in rig_frames])
+        rig["rig_keys"] = int(len(t))
+        rig["target_names"] = curve_names
+        rig["max_weight_error"] = float(np.abs(w - want).max())
+        rt, rq = rotations["jaw rotation"]
+        tt, tv = rotations["jaw translation"]
+        assert np.array_equal(rt, times) and np.array_equal(tt, times)
+        angles = np.array([r["jaw"]["angle_deg"] if r else 0.0 for r in rig_frames])
+        # A rotation about +x only, by the take's angle.
+        assert np.abs(rq[:, 1:3]).max() < 1e-7, "jaw turns about x only"
+        got = np.degrees(2 * np.arctan2(rq[:, 0], rq[:, 3]))
+        rig["max_jaw_angle_error_deg"] = float(np.abs(got - angles).max())
+        rest = np.array(rig_nodes["jaw"]["translation"])
+        scale = 1.0
+        if args.character:
+            scale = UNITS.get(tomllib.load(open(args.character, "rb")).get("units", "m"), 1.0)
+        slides = np.array([r["jaw"]["slide_m"] if r else 0.0 for r in rig_frames]) / scale
+        want_t = rest[None, :] + np.stack([slides, 0 * slides, 0 * slides], axis=1)
+        rig["max_jaw_slide_error"] = float(np.abs(tv - want_t).max())
+        rig["jaw_rest"] = rest.tolist()
+        rig["max_jaw_angle_deg"] = float(np.abs(angles).max())
+
     result = {
+        **rig,
         "head_keys": head_keys,
         "max_head_error": head_error,
         "frames": len(frames),

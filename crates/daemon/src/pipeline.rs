@@ -587,6 +587,7 @@ fn derive(
                     confidence: c.confidence.clone(),
                     curve: c.curve.clone(),
                     head: c.head,
+                    rig: c.rig,
                 }
             })
             .collect(),

@@ -4,7 +4,8 @@
 //! `<slate>_T<take, 3 digits>_<UTC start, YYYYMMDDTHHMMSSZ>.mcap`, holding the raw frames
 //! (`/camera/color`, `/camera/depth`, `/camera/calibration`) and every derived channel as JSON:
 //! `/performer/points` (tracked dots, camera frame), `/performer/stabilised` (lip dots in the
-//! neutral mouth frame), `/head`, and `/character/<name>` per character. Every derived message
+//! neutral mouth frame), `/head`, and `/character/<name>` per character (its points, curve,
+//! head and, once the neutral pose is taken, the rig: docs/rig.md). Every derived message
 //! carries `seq`, `t`, `wall_us` and the SMPTE `timecode`; the file's metadata record
 //! `mouthpiece.take` names slate, take, timecode rate and start timecode.
 //!
@@ -97,6 +98,9 @@ pub struct CharacterRecord {
     pub curve: Option<Vec<[f32; 3]>>,
     /// The character's head and eyes (docs/head.md).
     pub head: Option<mouthpiece_server::CharacterHead>,
+    /// The rig (docs/rig.md): jaw, lip motions and the named curves; `None` before the
+    /// neutral pose is taken.
+    pub rig: Option<mouthpiece_server::RigState>,
 }
 
 /// What the processing thread hands the writer.
@@ -677,6 +681,9 @@ fn write_one(
         if let Some(head) = &character.head {
             body["head"] = json!(head);
         }
+        if let Some(rig) = &character.rig {
+            body["rig"] = json!(rig);
+        }
         writer.write_json(
             &format!("/character/{}", character.name),
             log_time,
@@ -899,9 +906,69 @@ mod tests {
                 confidence: vec![1.0],
                 curve: None,
                 head: Some(Default::default()),
+                rig: (seq >= 5).then(|| rig(seq)),
             }],
             status: serde_json::json!({"calibrating": false}),
         })
+    }
+
+    /// A rig with values that differ per frame.
+    fn rig(seq: u64) -> mouthpiece_server::RigState {
+        let mut rig = mouthpiece_server::RigState::default();
+        rig.jaw.angle_deg = seq as f32;
+        rig.jaw.slide_m = -0.0005 * seq as f32;
+        for (k, c) in rig.curves.0.iter_mut().enumerate() {
+            *c = ((k as u64 + seq) % 10) as f32 / 10.0;
+        }
+        rig
+    }
+
+    /// The `/character/<name>` messages of a take, in order.
+    fn character_messages(path: &Path, name: &str) -> Vec<serde_json::Value> {
+        let mut reader = mouthpiece_recording::MessageReader::open(path).unwrap();
+        let topic = format!("/character/{name}");
+        let mut out = Vec::new();
+        while let Some(message) = reader.next_message().unwrap() {
+            if *message.topic == *topic {
+                out.push(serde_json::from_slice(&message.data).unwrap());
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn the_rig_is_recorded_per_frame_once_there_is_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut takes = Takes::new(settings(dir.path()));
+        let info = start_wait(&mut takes, "rig", None).unwrap();
+        for seq in 0..10 {
+            takes.push(frame(seq), derived(seq));
+        }
+        stop_wait(&mut takes).unwrap();
+        let messages = character_messages(&info.path, "wolf");
+        assert_eq!(messages.len(), 10);
+        for m in &messages {
+            let seq = m["seq"].as_u64().unwrap();
+            if seq < 5 {
+                // Before the neutral pose: no `rig` key at all (as in takes made before the
+                // rig existed), and the rest of the message as ever.
+                assert!(m.get("rig").is_none(), "{m}");
+                assert_eq!(m["points"]["P1"], serde_json::json!([0.07f32, 0.0, 0.0]));
+                continue;
+            }
+            let want = rig(seq);
+            assert_eq!(m["rig"]["jaw"]["angle_deg"], want.jaw.angle_deg, "{m}");
+            assert_eq!(m["rig"]["jaw"]["slide_m"], want.jaw.slide_m, "{m}");
+            let curves = m["rig"]["curves"].as_object().unwrap();
+            let names: std::collections::BTreeSet<&str> =
+                curves.keys().map(String::as_str).collect();
+            let want_names = mouthpiece_server::RIG_CURVE_NAMES.into_iter().collect();
+            assert_eq!(names, want_names, "every curve, by name");
+            for (k, name) in mouthpiece_server::RIG_CURVE_NAMES.iter().enumerate() {
+                assert_eq!(curves[*name], want.curves.0[k], "{name} at {seq}");
+            }
+            assert_eq!(m["rig"]["lips"]["upper"]["rotation"][0], 1.0, "{m}");
+        }
     }
 
     fn topics(path: &Path) -> (std::collections::BTreeMap<String, usize>, Vec<String>) {

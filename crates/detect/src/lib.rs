@@ -10,14 +10,21 @@
 //!
 //! Speed comes from the search region: [`Detector::detect`] takes a rectangle (the tracker
 //! passes the box around where the dots are predicted) and does all image work inside it;
-//! `None` searches the full frame (start-up and re-acquisition).
+//! `None` searches the full frame (start-up and re-acquisition). Within it, connected
+//! components run only over the box holding the class's mask pixels, and the colour weight
+//! and the grown component are computed per component in Rust from the HSV bytes (one table
+//! lookup per pixel, the table made by OpenCV's own `LUT` and `multiply`), so a frame's cost
+//! follows the dots, not the region (docs/performance.md).
 //!
 //! The detector does not name dots; that is the tracker's job (`mouthpiece-track`).
 
 mod config;
 pub mod tune;
 
-use opencv::core::{self, Mat, MatTraitConst, Rect, Scalar, Size, Vec3b, Vector};
+use opencv::core::{
+    self, Mat, MatTrait, MatTraitConst, MatTraitConstManual, MatTraitManual, Rect, Scalar, Size,
+    Vec3b,
+};
 use opencv::imgproc;
 
 use mouthpiece_frame::{ColorImage, DepthImage};
@@ -158,25 +165,21 @@ enum Reject {
 /// once sizes settle.
 pub struct Detector {
     config: DetectConfig,
-    /// Per class: 256-entry LUTs turning hue and saturation into a 0–255 weight.
-    hue_luts: Vec<Mat>,
-    sat_luts: Vec<Mat>,
+    /// Per class: the colour weight (0–255) of each hue and saturation, `[hue * 256 +
+    /// saturation]` ([`weight_table`]).
+    weights: Vec<Vec<u8>>,
     kernel: Mat,
-    dilate_kernel: Mat,
     hsv: Mat,
-    channels: Vector<Mat>,
     mask: Mat,
     range_mask: Mat,
+    or_mask: Mat,
     morphed: Mat,
     labels: Mat,
     stats: Mat,
     centroids: Mat,
-    hue_w: Mat,
-    sat_w: Mat,
-    weight: Mat,
-    comp: Mat,
-    comp_grown: Mat,
     comp_weight: Mat,
+    /// One component's pixels grown by one (the 3x3 dilation), over its local rectangle.
+    grown: Vec<bool>,
     depth_buf: Vec<u16>,
 }
 
@@ -192,14 +195,16 @@ impl Detector {
     /// Validates the configuration and prepares the per-class lookup tables.
     pub fn new(config: DetectConfig) -> Result<Self, DetectError> {
         config.validate()?;
-        let mut hue_luts = Vec::new();
-        let mut sat_luts = Vec::new();
-        for class in &config.classes {
-            let hue = hue_weight_table(&class.hue, config.weight_hue_margin);
-            let sat = saturation_weight_table(class.saturation);
-            hue_luts.push(Mat::from_slice(&hue)?.try_clone()?);
-            sat_luts.push(Mat::from_slice(&sat)?.try_clone()?);
-        }
+        let weights = config
+            .classes
+            .iter()
+            .map(|class| {
+                weight_table(
+                    &hue_weight_table(&class.hue, config.weight_hue_margin),
+                    &saturation_weight_table(class.saturation),
+                )
+            })
+            .collect::<Result<_, _>>()?;
         let rect = |n| imgproc::get_structuring_element_def(imgproc::MORPH_RECT, Size::new(n, n));
         let kernel = match config.morphology {
             Morphology::Close => {
@@ -209,27 +214,18 @@ impl Detector {
         };
         Ok(Self {
             kernel,
-            dilate_kernel: imgproc::get_structuring_element_def(
-                imgproc::MORPH_RECT,
-                Size::new(3, 3),
-            )?,
             config,
-            hue_luts,
-            sat_luts,
+            weights,
             hsv: Mat::default(),
-            channels: Vector::new(),
             mask: Mat::default(),
             range_mask: Mat::default(),
+            or_mask: Mat::default(),
             morphed: Mat::default(),
             labels: Mat::default(),
             stats: Mat::default(),
             centroids: Mat::default(),
-            hue_w: Mat::default(),
-            sat_w: Mat::default(),
-            weight: Mat::default(),
-            comp: Mat::default(),
-            comp_grown: Mat::default(),
             comp_weight: Mat::default(),
+            grown: Vec::new(),
             depth_buf: Vec::new(),
         })
     }
@@ -301,7 +297,6 @@ impl Detector {
         )?;
         let image_roi = Mat::roi(&image, roi.to_cv())?;
         imgproc::cvt_color_def(&image_roi, &mut self.hsv, imgproc::COLOR_BGR2HSV)?;
-        core::split(&self.hsv, &mut self.channels)?;
 
         out.searched = Some(roi);
         for class_idx in 0..self.config.classes.len() {
@@ -334,8 +329,8 @@ impl Detector {
                 core::in_range(&self.hsv, &lower, &upper, &mut self.mask)?;
             } else {
                 core::in_range(&self.hsv, &lower, &upper, &mut self.range_mask)?;
-                let prev = self.mask.try_clone()?;
-                core::bitwise_or_def(&prev, &self.range_mask, &mut self.mask)?;
+                core::bitwise_or_def(&self.mask, &self.range_mask, &mut self.or_mask)?;
+                std::mem::swap(&mut self.mask, &mut self.or_mask);
             }
         }
         // Opening only decides which components are real (it would shave a 2-px dot's rim,
@@ -362,8 +357,15 @@ impl Detector {
             }
             Morphology::None => &self.mask,
         };
+        // Connected components over the box holding the mask's pixels (and one more pixel
+        // round them, where the grown components reach), its corner at even offsets in the
+        // region: OpenCV labels 2x2 blocks in raster order, so the labels and their order are
+        // those of the whole region.
+        let Some(crop) = mask_box(binary)? else {
+            return Ok(());
+        };
         let n = imgproc::connected_components_with_stats(
-            binary,
+            &Mat::roi(binary, crop.to_cv())?,
             &mut self.labels,
             &mut self.stats,
             &mut self.centroids,
@@ -374,19 +376,6 @@ impl Detector {
             return Ok(());
         }
 
-        // The colour weight over the whole region, computed once per class.
-        core::lut(
-            &self.channels.get(0)?,
-            &self.hue_luts[class_idx],
-            &mut self.hue_w,
-        )?;
-        core::lut(
-            &self.channels.get(1)?,
-            &self.sat_luts[class_idx],
-            &mut self.sat_w,
-        )?;
-        core::multiply(&self.hue_w, &self.sat_w, &mut self.weight, 1.0 / 255.0, -1)?;
-
         let cfg = &self.config;
         let (r0, r1) = (cfg.depth_range_m[0], cfg.depth_range_m[1]);
         for label in 1..n {
@@ -395,6 +384,8 @@ impl Detector {
             let by = *self.stats.at_2d::<i32>(label, imgproc::CC_STAT_TOP)?;
             let bw = *self.stats.at_2d::<i32>(label, imgproc::CC_STAT_WIDTH)?;
             let bh = *self.stats.at_2d::<i32>(label, imgproc::CC_STAT_HEIGHT)?;
+            // In the region's coordinates.
+            let (bx, by) = (bx + crop.x, by + crop.y);
             let bbox = PixelRect {
                 x: bx + roi.x,
                 y: by + roi.y,
@@ -465,30 +456,30 @@ impl Detector {
                 width: bw,
                 height: bh,
             });
-            let labels_local = Mat::roi(&self.labels, local.to_cv())?;
-            core::compare(
-                &labels_local,
-                &Scalar::all(label as f64),
-                &mut self.comp,
-                core::CMP_EQ,
+            let open = (self.config.morphology == Morphology::Open).then_some(&self.morphed);
+            let weighed = component_weight(
+                ComponentImages {
+                    labels: &self.labels,
+                    crop,
+                    hsv: &self.hsv,
+                    opened: open,
+                    weights: &self.weights[class_idx],
+                },
+                label,
+                local,
+                &mut self.grown,
+                &mut self.comp_weight,
             )?;
-            imgproc::dilate_def(&self.comp, &mut self.comp_grown, &self.dilate_kernel)?;
-            if self.config.morphology == Morphology::Open {
-                let opened_local = Mat::roi(&self.morphed, local.to_cv())?;
-                core::min(&opened_local, &self.comp, &mut self.comp_weight)?;
-                if core::count_non_zero(&self.comp_weight)? == 0 {
-                    tracing::trace!(
-                        class = class_idx,
-                        ?bbox,
-                        area,
-                        "speckle: nothing left after opening"
-                    );
-                    out.rejected += 1;
-                    continue;
-                }
-            }
-            let weight_local = Mat::roi(&self.weight, local.to_cv())?;
-            core::min(&weight_local, &self.comp_grown, &mut self.comp_weight)?;
+            let Some(sums) = weighed else {
+                tracing::trace!(
+                    class = class_idx,
+                    ?bbox,
+                    area,
+                    "speckle: nothing left after opening"
+                );
+                out.rejected += 1;
+                continue;
+            };
             let m = imgproc::moments(&self.comp_weight, false)?;
             let (center, spread) = if m.m00 > 0.0 {
                 (
@@ -499,9 +490,16 @@ impl Detector {
                     [m.mu20 / m.m00, m.mu11 / m.m00, m.mu02 / m.m00],
                 )
             } else {
-                let cx = *self.centroids.at_2d::<f64>(label, 0)?;
-                let cy = *self.centroids.at_2d::<f64>(label, 1)?;
-                ([cx + roi.x as f64, cy + roi.y as f64], [0.0; 3])
+                // The component's centroid in the region, as OpenCV's statistics give it
+                // (the sums of the pixels' coordinates over their count).
+                let count = area as f64;
+                (
+                    [
+                        sums[0] as f64 / count + roi.x as f64,
+                        sums[1] as f64 / count + roi.y as f64,
+                    ],
+                    [0.0; 3],
+                )
             };
             let blob = Blob {
                 class: class_idx,
@@ -519,6 +517,148 @@ impl Detector {
         }
         Ok(())
     }
+}
+
+/// The box holding `mask`'s non-zero pixels grown by one pixel, its corner moved to even
+/// coordinates, cut to the mask; `None` for an empty mask.
+fn mask_box(mask: &Mat) -> Result<Option<PixelRect>, DetectError> {
+    let (w, h) = (mask.cols() as usize, mask.rows() as usize);
+    if w == 0 || h == 0 {
+        return Ok(None);
+    }
+    let data = mask.data_bytes()?;
+    let (mut x_lo, mut x_hi, mut y_lo, mut y_hi) = (usize::MAX, 0, usize::MAX, 0);
+    for (y, row) in data.chunks_exact(w).enumerate().take(h) {
+        // Most rows are empty: test eight bytes at a time.
+        let (words, rest) = row.split_at(w - w % 8);
+        let empty = words
+            .chunks_exact(8)
+            .all(|c| u64::from_ne_bytes(c.try_into().expect("8 bytes")) == 0)
+            && rest.iter().all(|&b| b == 0);
+        if empty {
+            continue;
+        }
+        let first = row.iter().position(|&b| b != 0).expect("a non-zero byte");
+        let last = row.iter().rposition(|&b| b != 0).expect("a non-zero byte");
+        x_lo = x_lo.min(first);
+        x_hi = x_hi.max(last);
+        y_lo = y_lo.min(y);
+        y_hi = y_hi.max(y);
+    }
+    if y_lo == usize::MAX {
+        return Ok(None);
+    }
+    let even = |v: usize| v.saturating_sub(1) & !1;
+    let (x0, y0) = (even(x_lo), even(y_lo));
+    let (x1, y1) = ((x_hi + 2).min(w), (y_hi + 2).min(h));
+    Ok(Some(PixelRect {
+        x: x0 as i32,
+        y: y0 as i32,
+        width: (x1 - x0) as i32,
+        height: (y1 - y0) as i32,
+    }))
+}
+
+/// The images one component's weight is read from.
+struct ComponentImages<'a> {
+    /// Connected-component labels over `crop` (region coordinates).
+    labels: &'a Mat,
+    crop: PixelRect,
+    /// The region in HSV.
+    hsv: &'a Mat,
+    /// The opened mask over the region, when the class mask is opened.
+    opened: Option<&'a Mat>,
+    /// The class's weight table ([`weight_table`]).
+    weights: &'a [u8],
+}
+
+/// Component `label`'s colour weight over `local` (region coordinates): the weight of each
+/// pixel of the component grown by one pixel (a 3x3 dilation within `local`), 0 elsewhere,
+/// into `out` (`local`'s size). Returns the sums of the component's own pixels' coordinates
+/// in the region, or `None` when the opened mask keeps none of its pixels.
+fn component_weight(
+    images: ComponentImages,
+    label: i32,
+    local: PixelRect,
+    grown: &mut Vec<bool>,
+    out: &mut Mat,
+) -> Result<Option<[u64; 2]>, DetectError> {
+    let ComponentImages {
+        labels,
+        crop,
+        hsv,
+        opened,
+        weights,
+    } = images;
+    let (w, h) = (local.width as usize, local.height as usize);
+    let labels_w = labels.cols() as usize;
+    let labels = labels.data_typed::<i32>()?;
+    let hsv_w = hsv.cols() as usize;
+    let hsv = hsv.data_bytes()?;
+    let opened = opened.map(|m| m.data_bytes()).transpose()?;
+    let (lx, ly) = ((local.x - crop.x) as usize, (local.y - crop.y) as usize);
+    let is_label = |x: usize, y: usize| labels[(ly + y) * labels_w + lx + x] == label;
+    grown.clear();
+    grown.resize(w * h, false);
+    let (mut sums, mut kept) = ([0u64; 2], false);
+    for y in 0..h {
+        for x in 0..w {
+            if !is_label(x, y) {
+                continue;
+            }
+            let (rx, ry) = (local.x as usize + x, local.y as usize + y);
+            sums[0] += rx as u64;
+            sums[1] += ry as u64;
+            kept |= opened.is_none_or(|o| o[ry * hsv_w + rx] != 0);
+            for gy in y.saturating_sub(1)..(y + 2).min(h) {
+                for gx in x.saturating_sub(1)..(x + 2).min(w) {
+                    grown[gy * w + gx] = true;
+                }
+            }
+        }
+    }
+    if !kept {
+        return Ok(None);
+    }
+    // SAFETY: every byte of the new matrix is written below before it is read.
+    unsafe { out.create_rows_cols(h as i32, w as i32, core::CV_8UC1)? };
+    let dst = out.data_bytes_mut()?;
+    for y in 0..h {
+        let row = (local.y as usize + y) * hsv_w + local.x as usize;
+        for x in 0..w {
+            dst[y * w + x] = if grown[y * w + x] {
+                let p = 3 * (row + x);
+                weights[hsv[p] as usize * 256 + hsv[p + 1] as usize]
+            } else {
+                0
+            };
+        }
+    }
+    Ok(Some(sums))
+}
+
+/// A class's colour weight per hue and saturation, `[hue * 256 + saturation]`: the hue
+/// weight times the saturation weight over 255, computed by OpenCV's `LUT` and `multiply`
+/// (as the per-pixel weight image once was), so each value is OpenCV's to the bit.
+fn weight_table(hue: &[u8; 256], sat: &[u8; 256]) -> Result<Vec<u8>, DetectError> {
+    let mut hues = Mat::new_rows_cols_with_default(256, 256, core::CV_8UC1, Scalar::all(0.0))?;
+    let mut sats = hues.try_clone()?;
+    for (i, (h_row, s_row)) in hues
+        .data_bytes_mut()?
+        .chunks_exact_mut(256)
+        .zip(sats.data_bytes_mut()?.chunks_exact_mut(256))
+        .enumerate()
+    {
+        h_row.fill(i as u8);
+        for (j, s) in s_row.iter_mut().enumerate() {
+            *s = j as u8;
+        }
+    }
+    let (mut hue_w, mut sat_w, mut weight) = (Mat::default(), Mat::default(), Mat::default());
+    core::lut(&hues, &Mat::from_slice(hue)?, &mut hue_w)?;
+    core::lut(&sats, &Mat::from_slice(sat)?, &mut sat_w)?;
+    core::multiply(&hue_w, &sat_w, &mut weight, 1.0 / 255.0, -1)?;
+    Ok(weight.data_bytes()?.to_vec())
 }
 
 /// Median of the valid depth readings (metres, inside `range`) in `bbox` grown by `grow`.

@@ -396,3 +396,107 @@ fn a_dot_seen_at_a_grazing_angle_is_found() {
         .unwrap();
     assert!(found.blobs.is_empty(), "{found:?}");
 }
+
+#[test]
+fn the_weight_table_is_opencvs_per_pixel_weight_at_any_image_width() {
+    // The weight was once computed per pixel over the search region with `LUT` and
+    // `multiply`; the table must give the same byte whatever the region's width (OpenCV
+    // runs wide rows through SIMD and the row's tail through scalar code).
+    let classes = default_classes();
+    let class = &classes[0];
+    let hue = hue_weight_table(&class.hue, 12);
+    let sat = saturation_weight_table(class.saturation);
+    let table = weight_table(&hue, &sat).unwrap();
+    let (hue_lut, sat_lut) = (
+        Mat::from_slice(&hue).unwrap(),
+        Mat::from_slice(&sat).unwrap(),
+    );
+    for width in [1usize, 3, 7, 15, 17, 33, 67] {
+        let pairs: Vec<(u8, u8)> = (0..=255u8)
+            .flat_map(|h| (0..=255u8).map(move |s| (h, s)))
+            .collect();
+        for chunk in pairs.chunks(width * 8) {
+            let rows = chunk.len().div_ceil(width);
+            let mut hs = vec![0u8; rows * width];
+            let mut ss = vec![0u8; rows * width];
+            for (i, &(h, s)) in chunk.iter().enumerate() {
+                hs[i] = h;
+                ss[i] = s;
+            }
+            let hm = Mat::new_rows_cols_with_data(rows as i32, width as i32, &hs).unwrap();
+            let sm = Mat::new_rows_cols_with_data(rows as i32, width as i32, &ss).unwrap();
+            let (mut hw, mut sw, mut w) = (Mat::default(), Mat::default(), Mat::default());
+            core::lut(&hm, &hue_lut, &mut hw).unwrap();
+            core::lut(&sm, &sat_lut, &mut sw).unwrap();
+            core::multiply(&hw, &sw, &mut w, 1.0 / 255.0, -1).unwrap();
+            let got = w.data_bytes().unwrap();
+            for (i, &(h, s)) in chunk.iter().enumerate() {
+                assert_eq!(
+                    got[i],
+                    table[h as usize * 256 + s as usize],
+                    "hue {h}, saturation {s}, width {width}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn components_are_found_the_same_wherever_the_mask_lies_in_the_region() {
+    // Connected components run over the box round the mask's pixels only: dots in a corner
+    // of a large region, at odd and even offsets, come out as from a region just round them.
+    let mut canvas = Canvas::new(320, 240);
+    for (i, c) in [[41.3, 37.8], [52.6, 38.4], [47.0, 51.2], [290.5, 201.7]]
+        .iter()
+        .enumerate()
+    {
+        canvas.disc(*c, 2.0, if i % 2 == 0 { GREEN } else { BLUE });
+    }
+    let depth = flat_depth(320, 240, 600);
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    let image = canvas.image();
+    let full = det
+        .detect(&image, Some((&depth, 0.001)), 525.0, None)
+        .unwrap();
+    assert_eq!(full.blobs.len(), 4, "{:?}", full.blobs);
+    for (x, y) in [(0, 0), (1, 1), (30, 27), (31, 26)] {
+        let region = PixelRect {
+            x,
+            y,
+            width: 80,
+            height: 60,
+        };
+        let part = det
+            .detect(&image, Some((&depth, 0.001)), 525.0, Some(region))
+            .unwrap();
+        let inside: Vec<&Blob> = full.blobs.iter().filter(|b| b.center[0] < 100.0).collect();
+        assert_eq!(part.blobs.len(), inside.len(), "region at {x},{y}");
+        for (a, b) in part.blobs.iter().zip(inside) {
+            assert_eq!(a, b, "region at {x},{y}");
+        }
+    }
+}
+
+#[test]
+fn opening_keeps_round_dots_and_their_centres() {
+    // The opening only decides which components are real: round dots pass it, and their
+    // centres come from the unopened components, as without it.
+    let mut canvas = Canvas::new(160, 120);
+    for c in [[40.3, 50.7], [90.55, 52.2]] {
+        canvas.disc(c, 2.0, GREEN);
+    }
+    canvas.disc([70.4, 20.3], 2.0, BLUE);
+    let depth = flat_depth(160, 120, 600);
+    let detect = |morphology| {
+        Detector::new(DetectConfig {
+            morphology,
+            ..DetectConfig::default()
+        })
+        .unwrap()
+        .detect(&canvas.image(), Some((&depth, 0.001)), 525.0, None)
+        .unwrap()
+    };
+    let plain = detect(Morphology::None);
+    assert_eq!(plain.blobs.len(), 3, "{plain:?}");
+    assert_eq!(detect(Morphology::Open).blobs, plain.blobs);
+}

@@ -1,9 +1,11 @@
-//! CSV writer: one row per frame, `t` then x, y, z per point, for spreadsheets and DCC
-//! import scripts. Streams straight to the output (through a temporary file renamed at the
+//! CSV writer: one row per frame, `t` then x, y, z per point (then the head's rotations,
+//! then the rig's jaw and named curves), for spreadsheets and DCC import scripts. Streams straight to the output (through a temporary file renamed at the
 //! end), so memory does not grow with the take.
 
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
+
+use mouthpiece_retarget::rig::{CURVES, CURVE_NAMES};
 
 use crate::output::PendingFile;
 use crate::{ExportError, MouthRig, TakeFrame};
@@ -17,9 +19,12 @@ pub struct CsvSummary {
 
 /// Streaming CSV writer.
 ///
-/// Header: `t,P1_x,P1_y,P1_z,…` (names quoted per RFC 4180 when they need it). Numbers are
-/// written in full (shortest text that reads back to the same f64); a point that is `null`
-/// in the take leaves its three cells empty. Lines end in `\n`.
+/// Header: `t,P1_x,P1_y,P1_z,…` (names quoted per RFC 4180 when they need it), the head's
+/// columns when the first line has `character_head`, then always the rig's
+/// ([`RIG_COLUMNS`], then the curve names). Numbers are written in full (shortest text that
+/// reads back to the same f64); a point that is `null` in the take leaves its three cells
+/// empty, a line without `rig` (before the neutral pose, or a take made before the rig) its
+/// rig cells. Lines end in `\n`.
 pub struct CsvWriter {
     out: PendingFile,
     path: PathBuf,
@@ -34,6 +39,9 @@ pub struct CsvWriter {
 
 /// The head columns' prefixes, in order (docs/head.md).
 pub const HEAD_COLUMNS: [&str; 3] = ["head", "eye_L", "eye_R"];
+
+/// The rig's jaw columns (docs/rig.md), followed by one column per curve name.
+pub const RIG_COLUMNS: [&str; 2] = ["jaw_angle_deg", "jaw_slide_m"];
 
 impl CsvWriter {
     /// Starts `path` (written under a temporary name until [`finish`](Self::finish)).
@@ -80,6 +88,9 @@ impl CsvWriter {
                     }
                 }
             }
+            for column in RIG_COLUMNS.iter().chain(&CURVE_NAMES) {
+                let _ = write!(header, ",{column}");
+            }
             header.push('\n');
             self.row.push_str(&header);
         }
@@ -102,6 +113,17 @@ impl CsvWriter {
         for q in frame.head.iter().flat_map(|h| h.rotations()) {
             let [w, x, y, z] = q;
             let _ = write!(self.row, ",{w},{x},{y},{z}");
+        }
+        match &frame.rig {
+            Some(rig) => {
+                let _ = write!(self.row, ",{},{}", rig.jaw_angle_deg, rig.jaw_slide_m);
+                for v in &rig.curves {
+                    let _ = write!(self.row, ",{v}");
+                }
+            }
+            None => self
+                .row
+                .extend(std::iter::repeat_n(',', RIG_COLUMNS.len() + CURVES)),
         }
         self.row.push('\n');
         self.out
@@ -170,6 +192,7 @@ mod tests {
             points: vec![Some([0.1, -2.5, 3.0]), None],
             curve: None,
             head: None,
+            rig: None,
         })
         .unwrap();
         w.push(&TakeFrame {
@@ -178,16 +201,22 @@ mod tests {
             points: vec![Some([1e-9, 0.0, 1.0]), Some([1.0, 2.0, 3.0])],
             curve: None,
             head: None,
+            rig: None,
         })
         .unwrap();
         let summary = w.finish().unwrap();
         assert_eq!(summary.rows, 2);
         let text = std::fs::read_to_string(&path).unwrap();
+        // A take without a rig: its columns are there, empty.
+        let empty_rig = ",".repeat(20);
         assert_eq!(
             text,
-            "t,P1_x,P1_y,P1_z,\"odd,name_x\",\"odd,name_y\",\"odd,name_z\"\n\
-             0,0.1,-2.5,3,,,\n\
-             0.3333333333333333,0.000000001,0,1,1,2,3\n"
+            format!(
+                "t,P1_x,P1_y,P1_z,\"odd,name_x\",\"odd,name_y\",\"odd,name_z\",{}\n\
+                 0,0.1,-2.5,3,,,{empty_rig}\n\
+                 0.3333333333333333,0.000000001,0,1,1,2,3{empty_rig}\n",
+                rig_header()
+            )
         );
     }
 
@@ -216,6 +245,7 @@ mod tests {
             points: vec![Some([1.0, 2.0, 3.0])],
             curve: None,
             head,
+            rig: None,
         };
         w.push(&frame(1, Some(head))).unwrap();
         let e = w.push(&frame(2, None)).unwrap_err().to_string();
@@ -224,8 +254,64 @@ mod tests {
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(
             text,
-            "t,P1_x,P1_y,P1_z,head_qw,head_qx,head_qy,head_qz,eye_L_qw,eye_L_qx,eye_L_qy,eye_L_qz,eye_R_qw,eye_R_qx,eye_R_qy,eye_R_qz\n\
-             1,1,2,3,0.5,0.5,0.5,0.5,1,0,0,0,0,1,0,0\n"
+            format!(
+                "t,P1_x,P1_y,P1_z,head_qw,head_qx,head_qy,head_qz,eye_L_qw,eye_L_qx,eye_L_qy,eye_L_qz,eye_R_qw,eye_R_qx,eye_R_qy,eye_R_qz,{}\n\
+                 1,1,2,3,0.5,0.5,0.5,0.5,1,0,0,0,0,1,0,0{}\n",
+                rig_header(),
+                ",".repeat(20)
+            )
         );
+    }
+
+    fn rig_header() -> String {
+        let mut columns = vec!["jaw_angle_deg", "jaw_slide_m"];
+        columns.extend(CURVE_NAMES);
+        columns.join(",")
+    }
+
+    #[test]
+    fn rig_columns_hold_the_jaw_and_every_curve() {
+        let dir = tempfile::tempdir().unwrap();
+        let rig = MouthRig::new(
+            None,
+            vec![RigPoint {
+                name: "P1".into(),
+                rest: [0.0; 3],
+            }],
+            nalgebra::Isometry3::identity(),
+        )
+        .unwrap();
+        let path = dir.path().join("take.csv");
+        let mut w = CsvWriter::create(&rig, &path).unwrap();
+        let mut keys = crate::RigKeys::REST;
+        keys.jaw_angle_deg = 14.25;
+        keys.jaw_slide_m = -0.0015;
+        for (k, c) in keys.curves.iter_mut().enumerate() {
+            *c = k as f64 / 32.0;
+        }
+        for (line, rig) in [(1, None), (2, Some(keys))] {
+            w.push(&TakeFrame {
+                line,
+                t: line as f64,
+                points: vec![Some([1.0, 2.0, 3.0])],
+                curve: None,
+                head: None,
+                rig,
+            })
+            .unwrap();
+        }
+        w.finish().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
+        assert_eq!(
+            rows[0][4..],
+            rig_header().split(',').collect::<Vec<_>>()[..]
+        );
+        assert!(rows[1][4..].iter().all(|c| c.is_empty()), "{:?}", rows[1]);
+        assert_eq!(rows[2][4..6], ["14.25", "-0.0015"]);
+        for (k, cell) in rows[2][6..].iter().enumerate() {
+            assert_eq!(cell.parse::<f64>().unwrap(), k as f64 / 32.0);
+        }
+        assert!(rows.iter().all(|r| r.len() == 1 + 3 + 20));
     }
 }

@@ -3,7 +3,10 @@
 //! Document: a `mouth` node placed in the character's model by the rig's placement, one child
 //! node per point (named as in the character file, at its rest position, optionally with a
 //! small marker mesh so viewers show something), and one animation `take` with a LINEAR
-//! translation channel per point, keys at the frames' `t`.
+//! translation channel per point, keys at the frames' `t`. A take with the rig (docs/rig.md)
+//! adds a `jaw` node under `mouth` at the hinge pivot, turning about the hinge axis and
+//! sliding along it, and a `blendshapes` node whose mesh has one morph target per ARKit-named
+//! curve (`mesh.extras.targetNames`), its `weights` animated with the curves.
 //!
 //! Memory stays constant in the take's length: each channel's keys go to its own spool file
 //! (an anonymous temporary file next to the output) as they arrive; only per-channel counts
@@ -18,8 +21,11 @@ use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 use serde_json::Value;
 
+use mouthpiece_retarget::rig::{RigSettings, CURVES, CURVE_NAMES};
+
 use crate::output::{parent_dir, PendingFile};
 use crate::reduce::{Key, Reducer};
+use crate::take::RigKeys;
 use crate::{ExportError, MouthRig, TakeFrame};
 
 /// How the glTF document and its binary buffer are stored.
@@ -63,6 +69,9 @@ pub struct GltfOptions {
     /// Write the character's head and eyes (`head`, `eye_L`, `eye_R` nodes with rotation
     /// channels) when the rig has a head and the take carries `character_head`.
     pub head: bool,
+    /// Write the performer's rig (the `jaw` node's rotation and translation keys, the
+    /// `blendshapes` node's morph-target weights) when the take carries `rig`.
+    pub rig: bool,
 }
 
 impl Default for GltfOptions {
@@ -74,6 +83,7 @@ impl Default for GltfOptions {
             curve: false,
             markers: true,
             head: true,
+            rig: true,
         }
     }
 }
@@ -91,6 +101,10 @@ pub struct GltfSummary {
     pub dropped: u64,
     /// Rotation keys of the head and eyes (not in `samples`, `keys`, `dropped`).
     pub rotation_keys: u64,
+    /// Frames of the rig written (one jaw rotation, one jaw translation and one set of curve
+    /// weights each; frames without `rig` have the jaw at rest and the weights 0); 0 when the
+    /// take has no rig.
+    pub rig_keys: u64,
     /// Files written: the document, and the `.bin` for [`GltfLayout::SeparateBin`].
     pub files: Vec<PathBuf>,
 }
@@ -110,6 +124,35 @@ pub struct GltfWriter {
     /// Index of the head's first rotation channel (then the eyes'), once the first frame
     /// showed that the take has a head.
     head_start: Option<usize>,
+    /// Index of the jaw's rotation channel (then its translation, then the weights), with
+    /// `options.rig`.
+    rig_start: Option<usize>,
+    /// Whether any frame had a `rig` (without one the rig's nodes are left out).
+    rig_seen: bool,
+}
+
+/// What a channel animates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    /// A point's (or curve point's) translation.
+    Point,
+    /// The head's or an eye's rotation.
+    Head,
+    /// The jaw's rotation about the hinge axis.
+    JawRotation,
+    /// The jaw's translation (pivot plus slide).
+    JawTranslation,
+    /// The morph-target weights, one per curve.
+    Weights,
+}
+
+impl Kind {
+    fn is_rig(self) -> bool {
+        matches!(
+            self,
+            Kind::JawRotation | Kind::JawTranslation | Kind::Weights
+        )
+    }
 }
 
 /// One node's channel while the take streams in: a point's translation (3 values a key) or
@@ -121,14 +164,16 @@ struct Channel {
     keys: u64,
     t_bounds: Bounds<1>,
     v_bounds: Bounds<4>,
-    /// Values per key: 3 (translation) or 4 (rotation).
+    /// Values per key: 3 (translation), 4 (rotation) or [`CURVES`] (weights).
     width: usize,
+    kind: Kind,
     /// The last rotation key, to keep consecutive quaternions in one hemisphere.
     last_rotation: Option<[f32; 4]>,
 }
 
-/// Longest spool record: t, then x, y, z (, w) as little-endian f32 (what glTF stores).
-const RECORD: usize = 20;
+/// Longest spool record: t, then the values (x, y, z (, w), or one weight per curve) as
+/// little-endian f32 (what glTF stores).
+const RECORD: usize = 4 + 4 * CURVES;
 
 impl Channel {
     fn new(spool_dir: &Path, reduce: Option<f64>) -> Result<Self, ExportError> {
@@ -142,16 +187,23 @@ impl Channel {
             t_bounds: Bounds::new(),
             v_bounds: Bounds::new(),
             width: 3,
+            kind: Kind::Point,
             last_rotation: None,
         })
     }
 
+    /// A channel of `width` values a key, never reduced.
+    fn unreduced(spool_dir: &Path, kind: Kind, width: usize) -> Result<Self, ExportError> {
+        let mut channel = Self::new(spool_dir, None)?;
+        channel.kind = kind;
+        channel.width = width;
+        Ok(channel)
+    }
+
     /// A rotation channel: never reduced (glTF interpolates rotations spherically, which
     /// the reducer's linear test does not model).
-    fn rotation(spool_dir: &Path) -> Result<Self, ExportError> {
-        let mut channel = Self::new(spool_dir, None)?;
-        channel.width = 4;
-        Ok(channel)
+    fn rotation(spool_dir: &Path, kind: Kind) -> Result<Self, ExportError> {
+        Self::unreduced(spool_dir, kind, 4)
     }
 
     /// Bytes per spool record.
@@ -198,12 +250,21 @@ impl Channel {
         let mut bounds = [0.0f32; 4];
         for (k, c) in v32.iter().enumerate() {
             record[4 + 4 * k..8 + 4 * k].copy_from_slice(&c.to_le_bytes());
-            bounds[k] = *c;
+            if let Some(b) = bounds.get_mut(k) {
+                *b = *c;
+            }
         }
         self.spool.write_all(&record[..4 + 4 * v32.len()])?;
         self.keys += 1;
         self.t_bounds.add(&[t32]);
-        self.v_bounds.add(&bounds);
+        if v32.len() <= 4 {
+            self.v_bounds.add(&bounds);
+        } else {
+            // Weights: a SCALAR accessor, one bound over all of them (component 0).
+            for &c in v32 {
+                self.v_bounds.add(&[c; 4]);
+            }
+        }
         Ok(())
     }
 }
@@ -269,6 +330,8 @@ impl GltfWriter {
             channels,
             frames: 0,
             head_start: None,
+            rig_start: None,
+            rig_seen: false,
         })
     }
 
@@ -341,8 +404,58 @@ impl GltfWriter {
             }
         }
         self.push_head(frame)?;
+        self.push_rig(frame)?;
         self.frames += 1;
         Ok(())
+    }
+
+    /// The rig's keys: the jaw's rotation about the hinge axis (the mouth frame's x axis;
+    /// positive angles open), its translation (the pivot, moved by the slide along the
+    /// axis, in the character's units) and the curves as morph-target weights. A frame
+    /// without `rig` (before the neutral pose) gets the rest keys: jaw closed, weights 0.
+    fn push_rig(&mut self, frame: &TakeFrame) -> Result<(), ExportError> {
+        if self.frames == 0 && self.options.rig {
+            self.rig_start = Some(self.channels.len());
+            for (kind, width) in [
+                (Kind::JawRotation, 4),
+                (Kind::JawTranslation, 3),
+                (Kind::Weights, CURVES),
+            ] {
+                self.channels
+                    .push(Channel::unreduced(&self.spool_dir, kind, width)?);
+            }
+        }
+        let Some(start) = self.rig_start else {
+            return Ok(());
+        };
+        self.rig_seen |= frame.rig.is_some();
+        let rig = frame.rig.unwrap_or(RigKeys::REST);
+        let pivot = jaw_pivot(&self.rig);
+        let half = 0.5 * rig.jaw_angle_deg.to_radians();
+        let slide = rig.jaw_slide_m / self.rig.metres_per_unit().unwrap_or(1.0);
+        let translation = [pivot[0] + slide, pivot[1], pivot[2]];
+        if !translation.iter().all(|c| (*c as f32).is_finite()) {
+            return Err(ExportError::BadLine {
+                source_name: "take".into(),
+                line: frame.line,
+                problem: format!(
+                    "rig.jaw.slide_m = {} is out of the range of glTF's 32-bit floats",
+                    rig.jaw_slide_m
+                ),
+            });
+        }
+        let err = |cause| ExportError::write(&self.spool_dir, cause);
+        self.channels[start]
+            .sample_rotation(frame.t, [half.sin(), 0.0, 0.0, half.cos()])
+            .map_err(err)?;
+        let jaw = &mut self.channels[start + 1];
+        jaw.samples += 1;
+        jaw.write_key((frame.t, translation)).map_err(err)?;
+        let weights = &mut self.channels[start + 2];
+        weights.samples += 1;
+        weights
+            .write_record(frame.t as f32, &rig.curves.map(|w| w as f32))
+            .map_err(err)
     }
 
     /// The head's and eyes' rotation keys: the head node's rotation is the model-axes
@@ -356,7 +469,8 @@ impl GltfWriter {
         {
             self.head_start = Some(self.channels.len());
             for _ in 0..3 {
-                self.channels.push(Channel::rotation(&self.spool_dir)?);
+                self.channels
+                    .push(Channel::rotation(&self.spool_dir, Kind::Head)?);
             }
         }
         let Some(start) = self.head_start else {
@@ -416,7 +530,7 @@ impl GltfWriter {
         }
         let bin_path = out.with_extension("bin");
         let (root, pieces, bin_len) = self.document(&bin_path)?;
-        let points = self.channels.iter().filter(|c| c.width == 3);
+        let points = self.channels.iter().filter(|c| c.kind == Kind::Point);
         let samples: u64 = points.clone().map(|c| c.samples).sum();
         let keys: u64 = points.map(|c| c.keys).sum();
         let summary = GltfSummary {
@@ -427,7 +541,13 @@ impl GltfWriter {
             rotation_keys: self
                 .channels
                 .iter()
-                .filter(|c| c.width == 4)
+                .filter(|c| c.kind == Kind::Head)
+                .map(|c| c.keys)
+                .sum(),
+            rig_keys: self
+                .channels
+                .iter()
+                .filter(|c| c.kind == Kind::Weights && self.rig_seen)
                 .map(|c| c.keys)
                 .sum(),
             files: match self.options.layout {
@@ -581,6 +701,98 @@ impl GltfWriter {
             channel_names.extend((0..rest.len()).map(|i| format!("C{i}")));
             channel_nodes.extend(curve_nodes);
         }
+        let rig_nodes = if self.rig_start.is_some() && self.rig_seen {
+            let pivot = jaw_pivot(&self.rig);
+            let jaw = root.push(json::Node {
+                name: Some("jaw".into()),
+                translation: Some(pivot.map(|c| c as f32)),
+                mesh: marker_mesh,
+                ..Default::default()
+            });
+            let width = meter_width(self.rig.mouth_width());
+            let meter = blendshape_meter(width);
+            let indices_len = meter.indices.len() as u64;
+            let positions_len = meter.positions.len() as u64;
+            let pos_view = view(
+                &mut root,
+                &mut pieces,
+                Piece::Bytes(meter.positions),
+                positions_len,
+                Some(json::buffer::Target::ArrayBuffer),
+            );
+            let idx_view = view(
+                &mut root,
+                &mut pieces,
+                Piece::Bytes(meter.indices),
+                indices_len,
+                Some(json::buffer::Target::ElementArrayBuffer),
+            );
+            let (min, max) = meter.bounds.json();
+            let positions = root.push(accessor(
+                pos_view,
+                meter.vertices,
+                json::accessor::Type::Vec3,
+                json::accessor::ComponentType::F32,
+                Some((min, max)),
+            ));
+            let indices = root.push(accessor(
+                idx_view,
+                indices_len / 2,
+                json::accessor::Type::Scalar,
+                json::accessor::ComponentType::U16,
+                None,
+            ));
+            let mut targets = Vec::with_capacity(CURVES);
+            for (bytes, bounds) in meter.targets {
+                let len = bytes.len() as u64;
+                let target_view = view(
+                    &mut root,
+                    &mut pieces,
+                    Piece::Bytes(bytes),
+                    len,
+                    Some(json::buffer::Target::ArrayBuffer),
+                );
+                targets.push(json::mesh::MorphTarget {
+                    positions: Some(root.push(accessor(
+                        target_view,
+                        meter.vertices,
+                        json::accessor::Type::Vec3,
+                        json::accessor::ComponentType::F32,
+                        Some(bounds.json()),
+                    ))),
+                    normals: None,
+                    tangents: None,
+                });
+            }
+            let names = serde_json::json!({ "targetNames": CURVE_NAMES });
+            let mesh = root.push(json::Mesh {
+                extensions: None,
+                extras: Some(
+                    serde_json::value::to_raw_value(&names).map_err(ExportError::Serialize)?,
+                ),
+                name: Some("blendshapes".into()),
+                primitives: vec![json::mesh::Primitive {
+                    attributes: [(Valid(json::mesh::Semantic::Positions), positions)].into(),
+                    extensions: None,
+                    extras: Default::default(),
+                    indices: Some(indices),
+                    material: None,
+                    mode: Valid(json::mesh::Mode::Triangles),
+                    targets: Some(targets),
+                }],
+                weights: Some(vec![0.0; CURVES]),
+            });
+            let shapes = root.push(json::Node {
+                name: Some("blendshapes".into()),
+                translation: Some([0.0, (-METER_BELOW * width) as f32, 0.0]),
+                mesh: Some(mesh),
+                ..Default::default()
+            });
+            mouth_children.extend([jaw, shapes]);
+            Some([jaw, jaw, shapes])
+        } else {
+            None
+        };
         let transform = mouth_transform(&self.rig, self.options.model_up);
         let mouth = root.push(json::Node {
             name: Some("mouth".into()),
@@ -619,6 +831,17 @@ impl GltfWriter {
             channel_names.extend(["head", "eye_L", "eye_R"].map(String::from));
             channel_nodes.extend([head_node, eye_left, eye_right]);
         }
+        if let Some(nodes) = rig_nodes {
+            channel_names.extend(["jaw", "jaw", "blendshapes"].map(String::from));
+            channel_nodes.extend(nodes);
+        }
+        // The rig's channels come last; without a rig in the take they are left out.
+        let written = self
+            .channels
+            .iter()
+            .filter(|c| self.rig_seen || !c.kind.is_rig())
+            .count();
+        debug_assert_eq!(written, channel_nodes.len());
         let scene = root.push(json::Scene {
             extensions: None,
             extras: Default::default(),
@@ -677,21 +900,33 @@ impl GltfWriter {
                 4 * channel.width as u64 * channel.keys,
                 None,
             );
-            let (min, max) = channel.v_bounds.json_first(channel.width);
-            let (kind, path) = if channel.width == 4 {
-                (
+            let (min, max) = channel.v_bounds.json_first(channel.width.min(4));
+            let (kind, path, count) = match channel.kind {
+                Kind::Head | Kind::JawRotation => (
                     json::accessor::Type::Vec4,
                     json::animation::Property::Rotation,
-                )
-            } else {
-                (
+                    channel.keys,
+                ),
+                Kind::Point | Kind::JawTranslation => (
                     json::accessor::Type::Vec3,
                     json::animation::Property::Translation,
-                )
+                    channel.keys,
+                ),
+                // One SCALAR per target and key, key by key.
+                Kind::Weights => (
+                    json::accessor::Type::Scalar,
+                    json::animation::Property::MorphTargetWeights,
+                    channel.keys * CURVES as u64,
+                ),
+            };
+            let (min, max) = if channel.kind == Kind::Weights {
+                channel.v_bounds.json_first(1)
+            } else {
+                (min, max)
             };
             let output = root.push(accessor(
                 v,
-                channel.keys,
+                count,
                 kind,
                 json::accessor::ComponentType::F32,
                 Some((min, max)),
@@ -742,6 +977,94 @@ impl GltfWriter {
             uri,
         });
         Ok((root, pieces, offset))
+    }
+}
+
+/// Where the `jaw` node sits in the mouth frame (character units): the rig's default hinge
+/// pivot (docs/rig.md), `hinge_up` mouth widths above and `hinge_back` behind the mouth
+/// centre, with the character's own mouth width.
+fn jaw_pivot(rig: &MouthRig) -> [f64; 3] {
+    let settings = RigSettings::default();
+    let w = rig.mouth_width();
+    [0.0, settings.hinge_up * w, -settings.hinge_back * w]
+}
+
+/// How far below the mouth centre the `blendshapes` meter sits, in mouth widths.
+const METER_BELOW: f64 = 1.5;
+
+/// The mouth width the meter is drawn with (a take without a character file may have one of
+/// 0: then 5 cm).
+fn meter_width(width: f64) -> f64 {
+    if width > 0.0 && width.is_finite() {
+        width
+    } else {
+        0.05
+    }
+}
+
+/// The `blendshapes` mesh: a row of one bar per curve (a tenth of a mouth width apart, a
+/// stub at rest), each morph target raising its own bar's top by half a mouth width, so a
+/// viewer playing the weights shows a bar chart of the curves.
+struct Meter {
+    vertices: u64,
+    positions: Vec<u8>,
+    indices: Vec<u8>,
+    bounds: Bounds<3>,
+    /// One POSITION displacement buffer per curve, with its bounds.
+    targets: Vec<(Vec<u8>, Bounds<3>)>,
+}
+
+fn blendshape_meter(width: f64) -> Meter {
+    let w = width as f32;
+    let (pitch, bar, stub, rise) = (0.1 * w, 0.08 * w, 0.02 * w, 0.5 * w);
+    let mut positions = Vec::with_capacity(CURVES * 4 * 12);
+    let mut indices = Vec::with_capacity(CURVES * 6 * 2);
+    let mut bounds = Bounds::new();
+    for i in 0..CURVES {
+        let x0 = (i as f32 - CURVES as f32 / 2.0) * pitch + 0.5 * (pitch - bar);
+        let x1 = x0 + bar;
+        for v in [
+            [x0, 0.0, 0.0],
+            [x1, 0.0, 0.0],
+            [x1, stub, 0.0],
+            [x0, stub, 0.0],
+        ] {
+            bounds.add(&v);
+            for c in v {
+                positions.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        // Counter-clockwise seen from +z (the front).
+        let base = (4 * i) as u16;
+        for k in [0, 1, 2, 0, 2, 3] {
+            indices.extend_from_slice(&(base + k).to_le_bytes());
+        }
+    }
+    let targets = (0..CURVES)
+        .map(|i| {
+            let mut bytes = Vec::with_capacity(CURVES * 4 * 12);
+            let mut b = Bounds::new();
+            for v in 0..4 * CURVES {
+                // The top two corners of bar i.
+                let d = if v / 4 == i && v % 4 >= 2 {
+                    [0.0, rise, 0.0]
+                } else {
+                    [0.0; 3]
+                };
+                b.add(&d);
+                for c in d {
+                    bytes.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+            (bytes, b)
+        })
+        .collect();
+    Meter {
+        vertices: 4 * CURVES as u64,
+        positions,
+        indices,
+        bounds,
+        targets,
     }
 }
 

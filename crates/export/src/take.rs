@@ -9,6 +9,7 @@ use std::collections::HashMap;
 use std::io::BufRead;
 
 use mouthpiece_retarget::jsonl::OutputLine;
+use mouthpiece_retarget::rig::{RigFrame, CURVES, CURVE_NAMES};
 
 use crate::ExportError;
 
@@ -26,6 +27,29 @@ pub struct TakeFrame {
     pub curve: Option<Vec<[f64; 3]>>,
     /// The character's head and eyes (`character_head`), when the take has them.
     pub head: Option<HeadKeys>,
+    /// The rig's jaw and named curves (`rig`, docs/rig.md), when the line has them: not
+    /// before the neutral pose, nor in takes made before the rig.
+    pub rig: Option<RigKeys>,
+}
+
+/// One frame's jaw and ARKit-named curves (docs/rig.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RigKeys {
+    /// Opening angle about the hinge axis (the mouth frame's x axis), degrees, > 0 open.
+    pub jaw_angle_deg: f64,
+    /// Slide along the hinge axis, metres (the performer's), > 0 towards the left.
+    pub jaw_slide_m: f64,
+    /// The curves in [`CURVE_NAMES`] order, 0..1.
+    pub curves: [f64; CURVES],
+}
+
+impl RigKeys {
+    /// The jaw at rest and every curve 0: what a frame without `rig` shows.
+    pub const REST: RigKeys = RigKeys {
+        jaw_angle_deg: 0.0,
+        jaw_slide_m: 0.0,
+        curves: [0.0; CURVES],
+    };
 }
 
 /// One frame's head and eye rotations, unit quaternions `[w, x, y, z]` (docs/head.md): the
@@ -210,13 +234,48 @@ impl<R: BufRead> TakeReader<R> {
                 }
             }
         }
+        let rig = match &parsed.rig {
+            Some(r) => Some(self.rig_keys(r)?),
+            None => None,
+        };
         Ok(Some(TakeFrame {
             line: self.line_no,
             t: parsed.t,
             points,
             curve,
             head,
+            rig,
         }))
+    }
+
+    /// The jaw and the curves of a line's `rig`: every curve of [`CURVE_NAMES`] present (in
+    /// any order; names this version does not know are skipped), values finite and in 0..1.
+    fn rig_keys(&self, rig: &RigFrame) -> Result<RigKeys, ExportError> {
+        let jaw = &rig.jaw;
+        for (what, v) in [("angle_deg", jaw.angle_deg), ("slide_m", jaw.slide_m)] {
+            if !v.is_finite() {
+                return Err(self.bad(format!("rig.jaw.{what} = {v} is not finite")));
+            }
+        }
+        let mut curves = [0.0; CURVES];
+        for (dst, name) in curves.iter_mut().zip(CURVE_NAMES) {
+            let mut values = rig.curves.0.iter().filter(|(n, _)| n == name);
+            let Some(&(_, v)) = values.next() else {
+                return Err(self.bad(format!("rig.curves has no {name}")));
+            };
+            if values.next().is_some() {
+                return Err(self.bad(format!("rig.curves has {name} twice")));
+            }
+            if !(0.0..=1.0).contains(&v) {
+                return Err(self.bad(format!("rig.curves.{name} = {v} is not in 0..1")));
+            }
+            *dst = v;
+        }
+        Ok(RigKeys {
+            jaw_angle_deg: jaw.angle_deg,
+            jaw_slide_m: jaw.slide_m,
+            curves,
+        })
     }
 
     fn check_time(&mut self, t: f64) -> Result<(), ExportError> {
@@ -335,6 +394,58 @@ mod tests {
             e.contains("line 1: not a take line") && e.contains("seq"),
             "{e}"
         );
+    }
+
+    /// `line` with a `rig` whose jaw angle is `angle` and curve k is k/20, curves written
+    /// in reverse order.
+    fn rig_line(t: &str, angle: f64) -> String {
+        let curves: Vec<String> = CURVE_NAMES
+            .iter()
+            .enumerate()
+            .rev()
+            .map(|(k, n)| format!("\"{n}\": {}", k as f64 / 20.0))
+            .collect();
+        let rig = format!(
+            r#""rig": {{"jaw": {{"angle_deg": {angle}, "slide_m": -0.001}}, "lips": {{"upper": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0], "residual": 0}}, "lower": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0], "residual": 0}}}}, "curves": {{{}}}}}"#,
+            curves.join(", ")
+        );
+        line(t, r#"{"P1": [0, 0, 0]}"#)
+            .replace("\"curve\": null", &format!("\"curve\": null, {rig}"))
+    }
+
+    #[test]
+    fn the_rig_is_read_by_curve_name_and_old_takes_have_none() {
+        // A take made before the rig: no `rig` on any line, read as ever.
+        let old = read_all(&line("0", r#"{"P1": [0, 0, 0]}"#)).unwrap();
+        assert_eq!(old[0].rig, None);
+        // A process take: no rig while calibrating, then one.
+        let text = format!(
+            "{}\n{}\n",
+            line("0", r#"{"P1": [0, 0, 0]}"#),
+            rig_line("0.1", 12.5)
+        );
+        let frames = read_all(&text).unwrap();
+        assert_eq!(frames[0].rig, None);
+        let rig = frames[1].rig.unwrap();
+        assert_eq!((rig.jaw_angle_deg, rig.jaw_slide_m), (12.5, -0.001));
+        for (k, v) in rig.curves.iter().enumerate() {
+            assert_eq!(*v, k as f64 / 20.0, "{}", CURVE_NAMES[k]);
+        }
+        // Bad rigs name the key.
+        let e =
+            error_of(&rig_line("0", 12.5).replace("\"mouthPressLeft\"", "\"mouthPressLeftish\""));
+        assert!(
+            e.contains("line 1: rig.curves has no mouthPressLeft"),
+            "{e}"
+        );
+        let e = error_of(&rig_line("0", 12.5).replace(": 0.85", ": 1.5"));
+        assert!(
+            e.contains("line 1: rig.curves.mouthPressRight = 1.5 is not in 0..1"),
+            "{e}"
+        );
+        let e =
+            error_of(&rig_line("0", 12.5).replace("\"angle_deg\": 12.5", "\"angle_deg\": null"));
+        assert!(e.contains("line 1: not a take line"), "{e}");
     }
 
     #[test]

@@ -217,6 +217,11 @@ fn every_layout_passes_the_validator_and_reads_back() {
             "{name}: {check}"
         );
         assert_eq!(check["max_key_time_error"], 0.0, "{check}");
+        // A take without `rig` (made before the rig existed) exports as before: no jaw, no
+        // blend shapes.
+        assert_eq!(check["rig_frames"], 0, "{check}");
+        assert!(check.get("rig_keys").is_none(), "{check}");
+        assert!(!stderr.contains("jaw"), "{stderr}");
     }
     assert!(dir.path().join("take.bin").exists());
     assert!(!dir.path().join("embedded.bin").exists());
@@ -278,14 +283,18 @@ fn csv_has_a_header_and_the_take_exactly() {
     let text = std::fs::read_to_string(&out).unwrap();
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    assert_eq!(header.len(), 1 + 3 * 12);
+    // The points, then the rig's jaw and curves (empty: this take has no `rig`).
+    assert_eq!(header.len(), 1 + 3 * 12 + 2 + 18);
     assert_eq!(&header[..4], ["t", "P1_x", "P1_y", "P1_z"]);
     assert_eq!(header[36], "P12_z");
+    assert_eq!(&header[37..40], ["jaw_angle_deg", "jaw_slide_m", "jawOpen"]);
     for ((t, points), line) in take.iter().zip(lines.by_ref()) {
-        let cells: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
-        assert_eq!(cells[0], *t);
+        let cells: Vec<&str> = line.split(',').collect();
+        let numbers: Vec<f64> = cells[..37].iter().map(|c| c.parse().unwrap()).collect();
+        assert_eq!(numbers[0], *t);
         let flat: Vec<f64> = points.iter().flatten().copied().collect();
-        assert_eq!(&cells[1..], &flat[..]);
+        assert_eq!(&numbers[1..], &flat[..]);
+        assert!(cells[37..].iter().all(|c| c.is_empty()), "{line}");
     }
     assert!(lines.next().is_none());
 }
@@ -502,6 +511,50 @@ fn wolf_take_from_retarget_lands_on_the_wolf_model() {
         check["max_rest_world_error"].as_f64().unwrap() < 1e-6 * width,
         "{check}"
     );
+    // The rig: every frame's jaw and curves, as the take has them.
+    assert!(
+        stderr.contains("jaw, blendshapes: 120 frames of the rig"),
+        "{stderr}"
+    );
+    assert_rig_matches(&check, 120);
+    let names: Vec<&str> = mouthpiece_retarget::rig::CURVE_NAMES.to_vec();
+    assert_eq!(check["target_names"], json!(names), "{check}");
+    // The jaw node at the default hinge pivot, scaled to the wolf's mouth.
+    let rest: Vec<f64> = serde_json::from_value(check["jaw_rest"].clone()).unwrap();
+    for (got, want) in rest.iter().zip([0.0, 0.5 * width, -1.6 * width]) {
+        assert!((got - want).abs() < 1e-6 * width, "jaw at {rest:?}");
+    }
+    // The performer opens the jaw in this take.
+    assert!(
+        check["max_jaw_angle_deg"].as_f64().unwrap() > 2.0,
+        "{check}"
+    );
+
+    // CSV: the rig's columns are the take's numbers, digit for digit.
+    let csv = dir.path().join("wolf.csv");
+    export_ok(&[t, "--out", csv.to_str().unwrap(), "--character", c]);
+    let csv_text = std::fs::read_to_string(&csv).unwrap();
+    let mut rows = csv_text.lines();
+    let header: Vec<&str> = rows.next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let take_lines: Vec<Value> = std::fs::read_to_string(&take)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    for (row, line) in rows.zip(&take_lines) {
+        let cells: Vec<&str> = row.split(',').collect();
+        let cell = |name: &str| cells[column(name)].parse::<f64>().unwrap();
+        let rig = &line["rig"];
+        assert_eq!(
+            cell("jaw_angle_deg"),
+            rig["jaw"]["angle_deg"].as_f64().unwrap()
+        );
+        assert_eq!(cell("jaw_slide_m"), rig["jaw"]["slide_m"].as_f64().unwrap());
+        for name in &names {
+            assert_eq!(cell(name), rig["curves"][name].as_f64().unwrap(), "{name}");
+        }
+    }
 
     let gltf = dir.path().join("wolf.gltf");
     export_ok(&[
@@ -521,6 +574,8 @@ fn wolf_take_from_retarget_lands_on_the_wolf_model() {
         check["max_error"].as_f64().unwrap() <= 0.0005 + 1e-6,
         "{check}"
     );
+    // --reduce leaves the rig's keys alone (every frame).
+    assert_rig_matches(&check, 120);
 
     // Blender: after import the points sit on the wolf model as the artist built it (Blender
     // is Z-up like the model), following the take: model = frame origin + axes · point.
@@ -550,7 +605,56 @@ fn wolf_take_from_retarget_lands_on_the_wolf_model() {
                 );
             }
         }
+        // The jaw turns about the hinge (the mouth frame's x axis) by the take's angle: its
+        // rotation relative to `mouth` (Blender's axis change is a turn about x as well, so
+        // it does not change a rotation about x).
+        let m = &result["matrices"][format!("{t:?}")];
+        let basis = |name: &str| -> nalgebra::Matrix3<f64> {
+            let rows: Vec<Vec<f64>> = serde_json::from_value(m[name].clone()).unwrap();
+            nalgebra::Matrix3::from_fn(|r, c| rows[r][c])
+        };
+        let relative = basis("mouth").try_inverse().unwrap() * basis("jaw");
+        let angle = relative[(2, 1)].atan2(relative[(1, 1)]).to_degrees();
+        let want = frames[i]["rig"]["jaw"]["angle_deg"].as_f64().unwrap();
+        assert!(
+            (angle - want).abs() < 0.01,
+            "jaw at t={t}: Blender {angle}°, take {want}°"
+        );
+        assert!(
+            relative[(0, 0)] > 1.0 - 1e-5,
+            "jaw turns about x only: {relative}"
+        );
+        // The morph weights drive Blender's shape keys, named after the curves.
+        let keys = &result["shape_keys"][format!("{t:?}")]["blendshapes"];
+        for name in ["jawOpen", "mouthFunnel", "mouthSmileLeft"] {
+            let got = keys[name]
+                .as_f64()
+                .unwrap_or_else(|| panic!("shape key {name} at {t}: {keys}"));
+            let want = frames[i]["rig"]["curves"][name].as_f64().unwrap();
+            assert!(
+                (got - want).abs() < 1e-4,
+                "{name} at t={t}: Blender {got}, take {want}"
+            );
+        }
     }
+}
+
+/// The rig's keys of an exported file (as `check_gltf.py` read them) equal the take's: every
+/// weight (f32 rounding), the jaw angle and slide.
+fn assert_rig_matches(check: &Value, frames: u64) {
+    assert_eq!(check["rig_keys"], frames, "{check}");
+    assert!(
+        check["max_weight_error"].as_f64().unwrap() < 1e-7,
+        "{check}"
+    );
+    assert!(
+        check["max_jaw_angle_error_deg"].as_f64().unwrap() < 1e-4,
+        "{check}"
+    );
+    assert!(
+        check["max_jaw_slide_error"].as_f64().unwrap() < 1e-7,
+        "{check}"
+    );
 }
 
 /// A recording (`.mcap`, `.oni`) goes through the processing pipeline first: a GLB the
@@ -609,6 +713,11 @@ fn recordings_are_processed_then_exported() {
             check["max_error"].as_f64().unwrap() < 1e-6,
             "{ext}: {check}"
         );
+        // The rig from the neutral pose on (rest keys while calibrating), equal to
+        // `process`'s own `rig`.
+        let rig_frames = check["rig_frames"].as_u64().unwrap();
+        assert!(rig_frames > 0 && rig_frames < 75, "{ext}: {check}");
+        assert_rig_matches(&check, 75);
 
         let reduced = dir.path().join(format!("{ext}-reduced.glb"));
         let stderr = export_ok(&[

@@ -3,7 +3,7 @@
 //!
 //! Channels, all `json` with a JSON Schema (`schemaEncoding: jsonschema`):
 //! `/head` (id 1), `/performer` (id 2), `/character/<name>` (ids 100, 101, ... in `hello`
-//! order). Server → client: `serverInfo`, `advertise`, `unadvertise`, `status`, and binary
+//! order), `/rig/<name>` (ids 200, 201, ...: the character's rig, docs/rig.md, for plotting). Server → client: `serverInfo`, `advertise`, `unadvertise`, `status`, and binary
 //! Message Data (opcode 0x01). Client → server: `subscribe`, `unsubscribe`; anything else is
 //! answered with an error `status`. Fan-out, lag and slow-client rules are the same as for
 //! `mouthpiece.v1` clients.
@@ -36,6 +36,9 @@ pub const HEAD_CHANNEL: u32 = 1;
 pub const PERFORMER_CHANNEL: u32 = 2;
 /// Channel id of the first `/character/<name>`.
 pub const FIRST_CHARACTER_CHANNEL: u32 = 100;
+/// Channel id of the first `/rig/<name>` (same order as the characters; with more than 100
+/// characters the rigs' ids start after the last character's).
+pub const FIRST_RIG_CHANNEL: u32 = 200;
 
 /// Status levels of the spec.
 const INFO: u8 = 0;
@@ -54,6 +57,8 @@ enum ChannelKind {
     Head,
     Performer,
     Character(String),
+    /// A character's rig: jaw, lips and the named curves (docs/rig.md).
+    Rig(String),
     /// `foxglove.CompressedImage`, `foxglove.ImageAnnotations`, `foxglove.SceneUpdate`,
     /// `foxglove.FrameTransforms` (see [`crate::foxglove_scene`]).
     Image,
@@ -96,6 +101,15 @@ fn channels(info: &StreamInfo) -> Vec<Channel> {
             id: FIRST_CHARACTER_CHANNEL + i as u32,
             topic: format!("/character/{}", c.name),
             kind: ChannelKind::Character(c.name.clone()),
+        });
+    }
+    // After the characters' ids even when there are more than 100 of them.
+    let first_rig = FIRST_RIG_CHANNEL.max(FIRST_CHARACTER_CHANNEL + info.characters.len() as u32);
+    for (i, c) in info.characters.iter().enumerate() {
+        list.push(Channel {
+            id: first_rig + i as u32,
+            topic: format!("/rig/{}", c.name),
+            kind: ChannelKind::Rig(c.name.clone()),
         });
     }
     list
@@ -156,6 +170,11 @@ fn schema(kind: &ChannelKind) -> (String, Value) {
                 "head": crate::head::foxglove_schema()
             }),
             vec!["name", "points"],
+        ),
+        ChannelKind::Rig(_) => (
+            "mouthpiece.Rig",
+            crate::rig::foxglove_properties(),
+            vec!["name", "jaw", "lips", "curves"],
         ),
         ChannelKind::Image
         | ChannelKind::Annotations
@@ -234,6 +253,10 @@ fn payload(
                 v["head"] = crate::head::foxglove_payload(head);
             }
             v
+        }
+        ChannelKind::Rig(name) => {
+            let c = f.characters.iter().find(|c| &c.name == name)?;
+            crate::rig::foxglove_payload(&c.name, c.rig.as_ref()?)
         }
     };
     value["seq"] = json!(frame.seq);
@@ -597,5 +620,46 @@ async fn send_within(
             "client too slow: a write blocked for {} s",
             timeout.as_secs_f32()
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_character_has_a_rig_channel_and_ids_never_collide() {
+        let mut info = crate::loadgen::synthetic_info(60.0);
+        let ids = |info: &StreamInfo| {
+            let list = channels(info);
+            let mut ids: Vec<u32> = list.iter().map(|c| c.id).collect();
+            ids.sort_unstable();
+            ids.dedup();
+            assert_eq!(ids.len(), list.len(), "ids collide: {list:?}");
+            list
+        };
+        let list = ids(&info);
+        let rig = |name: &str| {
+            list.iter()
+                .find(|c| c.topic == format!("/rig/{name}"))
+                .unwrap()
+                .id
+        };
+        assert_eq!((rig("human"), rig("wolf")), (200, 201));
+        let template = info.characters[0].clone();
+        info.characters = (0..150)
+            .map(|i| {
+                let mut c = template.clone();
+                c.name = format!("c{i}");
+                c
+            })
+            .collect();
+        let list = ids(&info);
+        assert_eq!(
+            list.iter()
+                .filter(|c| matches!(c.kind, ChannelKind::Rig(_)))
+                .count(),
+            150
+        );
     }
 }

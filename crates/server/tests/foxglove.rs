@@ -75,7 +75,9 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
             "/scene",
             "/tf",
             "/character/human",
-            "/character/wolf"
+            "/character/wolf",
+            "/rig/human",
+            "/rig/wolf"
         ]
     );
     let mut schemas = serde_json::Map::new();
@@ -95,6 +97,7 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
         {"id": 7, "channelId": id_of("/character/wolf")},
         {"id": 8, "channelId": id_of("/head")},
         {"id": 9, "channelId": id_of("/performer")},
+        {"id": 10, "channelId": id_of("/rig/wolf")},
     ]});
     ws.send(Message::text(subscribe.to_string())).await.unwrap();
     tokio::time::sleep(Duration::from_millis(100)).await;
@@ -103,7 +106,7 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
         server.publish(i);
     }
     let mut seen = std::collections::BTreeMap::new();
-    while seen.values().sum::<u32>() < 9 {
+    while seen.values().sum::<u32>() < 12 {
         if let Fox::Data(sub, ts, payload) = next(&mut ws).await {
             assert!(ts > 1_600_000_000_000_000_000, "wall-clock nanoseconds");
             *seen.entry(sub).or_insert(0) += 1;
@@ -111,6 +114,7 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
                 7 => id_of("/character/wolf"),
                 8 => id_of("/head"),
                 9 => id_of("/performer"),
+                10 => id_of("/rig/wolf"),
                 other => panic!("unknown subscription {other}"),
             };
             payloads.push(json!({"schema": schemas[&channel.to_string()], "payload": payload}));
@@ -118,7 +122,7 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
     }
     assert_eq!(
         seen.into_iter().collect::<Vec<_>>(),
-        [(7, 3), (8, 3), (9, 3)]
+        [(7, 3), (8, 3), (9, 3), (10, 3)]
     );
     let wolf = payloads
         .iter()
@@ -126,6 +130,29 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
         .unwrap();
     assert_eq!(wolf["payload"]["points"].as_array().unwrap().len(), 12);
     assert!(wolf["payload"]["points"][0]["x"].is_number());
+    // The rig channel carries the published frame's rig: jaw and every curve by name.
+    let rig_schema = &schemas[&id_of("/rig/wolf").to_string()];
+    let curve_names = rig_schema["properties"]["curves"]["required"]
+        .as_array()
+        .unwrap();
+    assert_eq!(curve_names.len(), 18, "{rig_schema}");
+    let mut rigs = 0;
+    for p in payloads.iter().filter(|p| p["schema"] == *rig_schema) {
+        let p = &p["payload"];
+        assert_eq!(p["name"], "wolf");
+        let mut frame = mouthpiece_server::StreamFrame::default();
+        mouthpiece_server::loadgen::synthetic_frame(p["seq"].as_u64().unwrap(), 60.0, &mut frame);
+        let rig = frame.characters[1].rig.unwrap();
+        assert_eq!(p["jaw"]["angle_deg"], json!(rig.jaw.angle_deg), "{p}");
+        assert_eq!(p["jaw"]["slide_m"], json!(rig.jaw.slide_m), "{p}");
+        for (k, name) in mouthpiece_server::RIG_CURVE_NAMES.iter().enumerate() {
+            assert_eq!(curve_names[k], *name);
+            assert_eq!(p["curves"][*name], json!(rig.curves.0[k]), "{name}: {p}");
+        }
+        assert_eq!(p["lips"]["lower"]["rotation"]["w"], 1.0, "{p}");
+        rigs += 1;
+    }
+    assert_eq!(rigs, 3);
 
     // Unsubscribe two; only the head remains.
     ws.send(Message::text(
@@ -162,9 +189,9 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
     info.characters.remove(0);
     server.hub.set_info(info);
     let un = next_json_op(&mut ws, "unadvertise").await;
-    assert_eq!(un["channelIds"].as_array().unwrap().len(), 8);
+    assert_eq!(un["channelIds"].as_array().unwrap().len(), 10);
     let adv = next_json_op(&mut ws, "advertise").await;
-    assert_eq!(adv["channels"].as_array().unwrap().len(), 7);
+    assert_eq!(adv["channels"].as_array().unwrap().len(), 8);
     server.stop().await;
 
     // The payloads match the schemas the server advertised.

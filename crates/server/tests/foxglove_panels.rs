@@ -1,7 +1,8 @@
 //! The Foxglove channels that Foxglove Studio's own panels draw (image, image annotations,
-//! 3D scene, transforms), checked with Foxglove's own client library
-//! (`@foxglove/ws-protocol`) and Foxglove's published JSON Schemas (`@foxglove/schemas`,
-//! validated with `ajv`): `tests/js/foxglove-client.js`, installed from the committed lock
+//! 3D scene, transforms), and the rig's channel for the Plot panel, checked with Foxglove's
+//! own client library (`@foxglove/ws-protocol`) and Foxglove's published JSON Schemas
+//! (`@foxglove/schemas`, validated with `ajv`; our own channels against the schema the
+//! server advertises): `tests/js/foxglove-client.js`, installed from the committed lock
 //! file (npm, `scripts/test`). Needs Node.js.
 
 mod common;
@@ -132,6 +133,20 @@ async fn foxglove_studio_panels_get_image_annotations_scene_and_transforms() {
         assert_eq!(c["schemaTitle"], schema, "{c}");
         let n = summary["messages"][topic].as_u64().unwrap_or(0);
         assert!(n >= 2, "{topic}: {n} messages in 3 s");
+    }
+    // The rig, a channel of our own for Foxglove's Plot panel: validated by the client
+    // against the schema the server advertised (any problem is in `problems` above).
+    for name in ["human", "wolf"] {
+        let topic = format!("/rig/{name}");
+        let c = channel(&topic);
+        assert_eq!(c["schemaName"], "mouthpiece.Rig", "{c}");
+        assert_eq!(c["schemaEncoding"], "jsonschema", "{c}");
+        let n = summary["messages"][&topic].as_u64().unwrap_or(0);
+        assert!(n >= 2, "{topic}: {n} messages in 3 s");
+        let sample = &summary["samples"][&topic];
+        assert_eq!(sample["name"], name, "{sample}");
+        assert_eq!(sample["curves"].as_object().unwrap().len(), 18, "{sample}");
+        assert!(sample["jaw"]["angle_deg"].is_number(), "{sample}");
     }
     // Same rate limit as the preview's default (10 images a second).
     let images = summary["messages"]["/camera/image"].as_u64().unwrap();

@@ -108,10 +108,13 @@ impl TrackConfig {
         if self.lip_dots < 4 || !self.lip_dots.is_multiple_of(2) {
             return bad("lip_dots", "must be even and at least 4");
         }
-        if self.forehead_dots < 3 {
+        if self.forehead_dots < crate::MIN_POSE_DOTS {
             return bad(
                 "forehead_dots",
-                "at least 3 forehead dots are needed for the head pose",
+                &format!(
+                    "at least {} forehead dots are needed for the head pose",
+                    crate::MIN_POSE_DOTS
+                ),
             );
         }
         for (key, v) in [

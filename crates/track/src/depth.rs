@@ -6,6 +6,42 @@
 use mouthpiece_frame::DepthImage;
 use nalgebra::{Matrix3, Vector3};
 
+/// The median is taken over a disc of this share of the paint's radius: the paint's rim,
+/// where the colour and depth edges disagree by a pixel or so, is left out (a round figure
+/// from the first depth lookup, never retuned: the disc must still hold a few pixels for
+/// paint 2 px across).
+pub const INNER_DISC_SHARE: f64 = 0.6;
+/// ... and never less than this radius, pixels: the centre pixel and its four neighbours.
+pub const MIN_INNER_DISC_PX: f64 = 1.0;
+/// The median needs at least this many readings (fewer is one pixel's word) ...
+pub const MIN_MEDIAN_READINGS: usize = 3;
+/// ... covering at least this share of the inner disc; below it the centre is mostly a hole
+/// (the sensor's shadow or a flying edge), and a plane over the skin around the dot is fitted
+/// instead.
+pub const MIN_DISC_COVERAGE: f64 = 0.5;
+/// That plane's radius, in paint radii: reaching past the paint onto the skin around it ...
+pub const FALLBACK_PLANE_RADII: f64 = 2.5;
+/// ... and at least this many pixels, so a small dot's fallback still spans a few rows.
+pub const FALLBACK_PLANE_MIN_PX: f64 = 4.0;
+/// Fewest readings a plane is fitted to: three parameters, each pinned by two readings, so
+/// one flying pixel cannot tilt it alone.
+pub const MIN_PLANE_READINGS: usize = 6;
+/// Readings farther than this from the patch's median are another surface, metres: a lip's
+/// curvature across a few pixels is far less, the step to the mouth's interior or the
+/// background more (15 mm from the first lookup; unchanged since).
+pub const OTHER_SURFACE_M: f64 = 0.015;
+/// The second plane keeps readings within this many standard deviations of the first plane's
+/// residuals (the usual three-sigma cut: 0.3 % of normal noise is dropped) ...
+pub const RESIDUAL_SIGMAS: f64 = 3.0;
+/// ... the standard deviation estimated as this many median absolute deviations (the
+/// normal distribution's constant, 1 / Φ⁻¹(3/4)) ...
+pub const SIGMA_PER_MAD: f64 = 1.4826;
+/// ... and the cut never nearer than this, metres: the sensor's depth quantisation at face
+/// distance, where a MAD of zero would otherwise keep only exact readings.
+pub const MIN_RESIDUAL_CUT_M: f64 = 0.001;
+/// Smallest valid raw depth reading: a raw 0 is the sensor's "no reading".
+const MIN_VALID_RAW: f64 = 1.0;
+
 /// Buffers the depth estimates work in, kept by the caller between dots and frames.
 #[derive(Debug, Default)]
 pub struct DepthScratch {
@@ -30,17 +66,16 @@ pub fn depth_at_dot(
     range: [f64; 2],
     scratch: &mut DepthScratch,
 ) -> Option<(f64, DepthMethod)> {
-    let lo = (range[0] / scale).max(1.0);
+    let lo = (range[0] / scale).max(MIN_VALID_RAW);
     let hi = range[1] / scale;
-    // Inner disc: 60 % of the paint's radius, at least the pixel and its 4-neighbours.
-    let inner = (0.6 * radius_px).max(1.0);
+    let inner = (INNER_DISC_SHARE * radius_px).max(MIN_INNER_DISC_PX);
     let DepthScratch {
         samples: buf,
         values: zs,
     } = scratch;
     collect(depth, center, inner, lo, hi, buf);
     let disc_pixels = std::f64::consts::PI * inner * inner;
-    if buf.len() >= 3 && buf.len() as f64 >= 0.5 * disc_pixels {
+    if buf.len() >= MIN_MEDIAN_READINGS && buf.len() as f64 >= MIN_DISC_COVERAGE * disc_pixels {
         zs.clear();
         zs.extend(buf.iter().map(|s| s.2));
         let mid = zs.len() / 2;
@@ -57,7 +92,7 @@ pub fn depth_at_dot(
         depth,
         scale,
         center,
-        (2.5 * radius_px).max(4.0),
+        (FALLBACK_PLANE_RADII * radius_px).max(FALLBACK_PLANE_MIN_PX),
         range,
         scratch,
     )
@@ -121,7 +156,7 @@ fn plane_over(
     scratch: &mut DepthScratch,
     inside: impl Fn(f64, f64) -> bool,
 ) -> Option<(f64, DepthMethod)> {
-    let lo = (range[0] / scale).max(1.0);
+    let lo = (range[0] / scale).max(MIN_VALID_RAW);
     let hi = range[1] / scale;
     let DepthScratch {
         samples: buf,
@@ -129,17 +164,16 @@ fn plane_over(
     } = scratch;
     collect(depth, center, radius, lo, hi, buf);
     buf.retain(|&(dx, dy, _)| inside(dx, dy));
-    if buf.len() < 6 {
+    if buf.len() < MIN_PLANE_READINGS {
         return None;
     }
     zs.clear();
     zs.extend(buf.iter().map(|s| s.2));
     let mid = zs.len() / 2;
     let median = *zs.select_nth_unstable_by(mid, f64::total_cmp).1;
-    // 15 mm: a lip's curvature across a few pixels is far less; a step to another surface is more.
-    let tol = 0.015 / scale;
+    let tol = OTHER_SURFACE_M / scale;
     buf.retain(|s| (s.2 - median).abs() <= tol);
-    if buf.len() < 6 {
+    if buf.len() < MIN_PLANE_READINGS {
         return None;
     }
     // Two passes: the plane through every kept reading, then again without the readings far
@@ -150,10 +184,9 @@ fn plane_over(
     residuals.extend(buf.iter().map(|&s| (s.2 - first.dot(&lift(&s))).abs()));
     let mid = residuals.len() / 2;
     let mad = *residuals.select_nth_unstable_by(mid, f64::total_cmp).1;
-    // 3 σ of the residuals (σ ≈ 1.48 MAD), never below a millimetre (the sensor's quantisation).
-    let keep = (3.0 * 1.4826 * mad).max(0.001 / scale);
+    let keep = (RESIDUAL_SIGMAS * SIGMA_PER_MAD * mad).max(MIN_RESIDUAL_CUT_M / scale);
     buf.retain(|&s| (s.2 - first.dot(&lift(&s))).abs() <= keep);
-    if buf.len() < 6 {
+    if buf.len() < MIN_PLANE_READINGS {
         return None;
     }
     let z = fit_plane(buf)?[0];

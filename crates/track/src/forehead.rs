@@ -42,7 +42,9 @@ impl DepthCrop {
         let x0 = (x_lo - margin_px).floor().clamp(0.0, w_img) as usize;
         let x1 = (x_hi + margin_px).ceil().clamp(0.0, w_img) as usize;
         let y0 = (y_lo - margin_px).floor().clamp(0.0, h_img) as usize;
-        let y1 = (y_hi + margin_px / 3.0).ceil().clamp(0.0, h_img) as usize;
+        let y1 = (y_hi + margin_px / BROW_MARGIN_DIVISOR)
+            .ceil()
+            .clamp(0.0, h_img) as usize;
         let (w, h) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
         let mut data = Vec::with_capacity(w * h);
         for y in y0..y0 + h {
@@ -58,6 +60,45 @@ impl DepthCrop {
     }
 }
 
+/// Below the forehead dots the crop reaches the margin divided by this: the brows lie a few
+/// centimetres below and move with the face, not the head.
+pub const BROW_MARGIN_DIVISOR: f64 = 3.0;
+
+/// A dot's pixel error, pixels (1 σ): the detector's sub-pixel centres scatter by about a
+/// tenth of a pixel on still frames; twice that leaves room for blur.
+pub const DOT_SIGMA_PX: f64 = 0.2;
+/// One forehead sample's depth error, metres (1 σ): above the per-pixel noise, because the
+/// structured-light noise is correlated over a few pixels and neighbouring samples do not
+/// average it away.
+pub const DEPTH_SIGMA_M: f64 = 0.004;
+
+/// A pixel is forehead surface only if it has a valid reading in at least this share of the
+/// calibration window's frames (numerator, denominator): a pixel that flickers in and out is
+/// on an edge or under hair.
+pub const VALID_FRAMES_SHARE: (usize, usize) = (2, 3);
+
+/// Between the samples either side of a surface sample, a depth difference beyond this
+/// share of their distance ...
+pub const MAX_SURFACE_SLOPE: f64 = 0.6;
+/// ... plus this much, metres (about twice the sensor's noise at 0.6 m), is a step in depth
+/// (the head's edge, a dot's paint without readings beside it), not skin.
+pub const SURFACE_STEP_SLACK_M: f64 = 0.004;
+
+/// Fewest surface samples for a surface, and fewest used in a refinement step: below this a
+/// hand or the image's edge hides most of the forehead and the three dots do better alone.
+pub const MIN_SURFACE_SAMPLES: usize = 30;
+
+/// A cross product (of sample differences, metres²) shorter than this gives no normal: the
+/// points are on one line.
+const DEGENERATE_CROSS: f64 = 1e-12;
+
+/// The refinement has converged once a step turns the head by less than this, radians
+/// (0.03°) ...
+pub const CONVERGED_TURN_RAD: f64 = 5e-4;
+/// ... and moves the forehead's middle by less than this, metres: each Gauss–Newton step
+/// cuts the last about tenfold, so what is left is below the sensor's say.
+pub const CONVERGED_SHIFT_M: f64 = 5e-5;
+
 /// How the refinement weighs its two kinds of evidence.
 #[derive(Debug, Clone, Copy)]
 pub struct SurfaceFit {
@@ -71,8 +112,8 @@ pub struct SurfaceFit {
 impl Default for SurfaceFit {
     fn default() -> Self {
         Self {
-            dot_sigma_px: 0.2,
-            depth_sigma_m: 0.004,
+            dot_sigma_px: DOT_SIGMA_PX,
+            depth_sigma_m: DEPTH_SIGMA_M,
         }
     }
 }
@@ -80,12 +121,46 @@ impl Default for SurfaceFit {
 /// Samples farther than this from the measured surface are something else (hair, a hand,
 /// the brows), and not used.
 const OUTLIER_M: f64 = 0.010;
-/// Residuals beyond this are weighed down (Huber).
+/// Residuals beyond this are weighed down (Huber): about the sensor's noise at face distance.
 const HUBER_M: f64 = 0.002;
+/// Most Gauss–Newton steps per frame, a cap on the frame's time: the fit starts from the
+/// three dots' pose, close by, and most frames stop earlier (see [`CONVERGED_TURN_RAD`]).
 const ITERATIONS: usize = 4;
 
 /// Skin farther than this from the plane through the forehead dots is not the forehead.
 const OFF_PLANE_M: f64 = 0.025;
+
+/// `x.round() as i64` without the library call `f64::round` becomes on baseline x86-64 (no
+/// SSE4.1 rounding instruction): the projective association rounds two coordinates per
+/// forehead sample and step. Below 2^52 the fraction `x - trunc(x)` is exact, so this is the
+/// same rounding (half away from zero).
+fn round_to_i64(x: f64) -> i64 {
+    if x.abs() < 4.0e15 {
+        let t = x as i64;
+        let frac = x - t as f64;
+        if frac >= 0.5 {
+            t + 1
+        } else if frac <= -0.5 {
+            t - 1
+        } else {
+            t
+        }
+    } else {
+        x.round() as i64
+    }
+}
+
+/// `h += w j jᵀ` on the lower triangle only (with the rounding of nalgebra's `ger`:
+/// `(w j[col]) j[row] + h`): the Cholesky factorisation the normal equations go to reads
+/// nothing else, and the upper triangle is 15 of the 36 products.
+fn add_outer_lower(h: &mut Matrix6<f64>, w: f64, j: &Vector6<f64>) {
+    for col in 0..6 {
+        let s = w * j[col];
+        for row in col..6 {
+            h[(row, col)] += s * j[row];
+        }
+    }
+}
 
 /// A point on the plane through the first three of `dots` and its unit normal.
 fn plane_through(dots: &[Vec3]) -> Option<(Vec3, Vec3)> {
@@ -94,7 +169,7 @@ fn plane_through(dots: &[Vec3]) -> Option<(Vec3, Vec3)> {
     };
     let n = (b - a).cross(&(c - a));
     let len = n.norm();
-    (len > 1e-12).then(|| ((a + b + c) / 3.0, n / len))
+    (len > DEGENERATE_CROSS).then(|| ((a + b + c) / 3.0, n / len))
 }
 
 /// The forehead at neutral: surface samples with their normals, and the dots.
@@ -122,7 +197,8 @@ impl ForeheadSurface {
     ) -> Option<Self> {
         let last = crops.last()?;
         let (lo, hi) = ((range[0] / scale).max(1.0), range[1] / scale);
-        let need = (2 * crops.len()).div_ceil(3);
+        let (num, den) = VALID_FRAMES_SHARE;
+        let need = (num * crops.len()).div_ceil(den);
         let mean = |x: usize, y: usize| -> Option<f64> {
             let (mut sum, mut n) = (0.0, 0usize);
             for c in crops {
@@ -161,13 +237,13 @@ impl ForeheadSurface {
                 // A step in depth (the edge of the head, a dot's paint without readings
                 // beside it) makes no surface.
                 let (dx, dy) = (r - l, d - u);
-                if (r.z - l.z).abs() > 0.6 * dx.norm() + 0.004
-                    || (d.z - u.z).abs() > 0.6 * dy.norm() + 0.004
+                if (r.z - l.z).abs() > MAX_SURFACE_SLOPE * dx.norm() + SURFACE_STEP_SLACK_M
+                    || (d.z - u.z).abs() > MAX_SURFACE_SLOPE * dy.norm() + SURFACE_STEP_SLACK_M
                 {
                     continue;
                 }
                 let mut n = dx.cross(&dy);
-                if n.norm() < 1e-12 {
+                if n.norm() < DEGENERATE_CROSS {
                     continue;
                 }
                 n.normalize_mut();
@@ -180,7 +256,7 @@ impl ForeheadSurface {
             }
         }
         let centre = points.iter().sum::<Vec3>() / points.len().max(1) as f64;
-        (points.len() >= 30).then_some(Self {
+        (points.len() >= MIN_SURFACE_SAMPLES).then_some(Self {
             points,
             normals,
             dots,
@@ -232,11 +308,10 @@ impl ForeheadSurface {
             let mut used = 0usize;
             for (p, n) in self.points.iter().zip(&self.normals) {
                 let q = rotation * p + translation;
-                let n = rotation * n;
                 let Some(px) = project(&q) else {
                     continue;
                 };
-                let (x, y) = (px[0].round() as i64, px[1].round() as i64);
+                let (x, y) = (round_to_i64(px[0]), round_to_i64(px[1]));
                 if x < 0 || y < 0 || x >= wd || y >= hd {
                     continue;
                 }
@@ -244,6 +319,7 @@ impl ForeheadSurface {
                 if raw == 0 {
                     continue;
                 }
+                let n = rotation * n;
                 let measured = deproject([x as f64, y as f64], raw as f64 * scale);
                 let r = n.dot(&(measured - q));
                 if r.abs() > OUTLIER_M {
@@ -257,11 +333,11 @@ impl ForeheadSurface {
                 let qn = q.cross(&n);
                 let j = Vector6::new(-qn.x, -qn.y, -qn.z, -n.x, -n.y, -n.z);
                 let w = w_depth * huber;
-                h.ger(w, &j, &j, 1.0);
+                add_outer_lower(&mut h, w, &j);
                 g += w * r * j;
                 used += 1;
             }
-            if used < 30 {
+            if used < MIN_SURFACE_SAMPLES {
                 return None;
             }
             for (x, ray) in self.dots.iter().zip(dot_rays) {
@@ -292,10 +368,11 @@ impl ForeheadSurface {
                 let j = dn * dq;
                 for (row, r) in r.iter().enumerate() {
                     let jr = j.row(row).transpose();
-                    h.ger(w_dot, &jr, &jr, 1.0);
+                    add_outer_lower(&mut h, w_dot, &jr);
                     g += w_dot * r * jr;
                 }
             }
+            // Only the lower triangle of `h` is filled, all the factorisation reads.
             let delta = h.cholesky()?.solve(&(-g));
             let omega = delta.fixed_rows::<3>(0).into_owned();
             let v = delta.fixed_rows::<3>(3).into_owned();
@@ -306,9 +383,7 @@ impl ForeheadSurface {
             let shift = (omega.cross(&centre) + v).norm();
             rotation = step * rotation;
             translation = step * translation + v;
-            // Converged: each step cuts the last one about tenfold, so after one of under
-            // 0.03° and 0.05 mm what is left is below the sensor's say.
-            if omega.norm() < 5e-4 && shift < 5e-5 {
+            if omega.norm() < CONVERGED_TURN_RAD && shift < CONVERGED_SHIFT_M {
                 break;
             }
         }

@@ -102,9 +102,14 @@ pub(crate) fn patch_px(size_m: f64, fx: f64, z: f64) -> f64 {
     quantise_px(size_m * fx / z)
 }
 
-/// A pixel length rounded to 1/64 px (see [`patch_px`]).
+/// Patch sizes in pixels are rounded to whole multiples of 1/this px (a binary fraction, exact
+/// in floating point), so that calibrations differing by a 32-bit float's rounding pick the
+/// same pixels.
+pub const PATCH_PX_STEPS: f64 = 64.0;
+
+/// A pixel length rounded to 1/[`PATCH_PX_STEPS`] px (see [`patch_px`]).
 pub(crate) fn quantise_px(px: f64) -> f64 {
-    (px * 64.0).round() / 64.0
+    (px * PATCH_PX_STEPS).round() / PATCH_PX_STEPS
 }
 
 /// A forehead dot's depth: the forehead is smooth, so a plane over a wide patch of skin

@@ -11,6 +11,23 @@ use crate::Vec3;
 /// tracking a frame needs no heap allocation; longer lists spill to the heap and still work.
 pub type Small<T> = SmallVec<[T; 32]>;
 
+/// Corners nearer each other than this (metres), or a forehead this close to the line
+/// through them, give no mouth frame: the geometry cannot say left from right.
+pub const DEGENERATE_MOUTH_M: f64 = 1e-6;
+
+/// Assignment costs are whole numbers: squared pixel distances in this many units per px²
+/// (hundredths, finer than the detector's sub-pixel precision; a gate of a thousand pixels
+/// still costs far less than `FORBIDDEN`).
+pub const COST_UNITS_PER_PX2: f64 = 100.0;
+
+/// The cost of a gated-out pair (a candidate outside the dot's gate or of the wrong role):
+/// above any "missing" cost, so such a pair is never chosen.
+const FORBIDDEN: i64 = 1_000_000_000_000;
+
+/// A dot's "missing" column costs its gate squared plus this (cost units): a candidate just
+/// inside the gate rounds to at most the gate squared, and must still beat "missing".
+const MISSING_TIE_BREAK: i64 = 1;
+
 /// A detected dot with its 3D position, not yet named.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Candidate {
@@ -101,12 +118,12 @@ pub fn label_by_geometry(
         (b, a)
     };
     let x = cands[left].point - cands[right].point;
-    if x.norm() < 1e-6 {
+    if x.norm() < DEGENERATE_MOUTH_M {
         return Err(GeometryFailure::Degenerate);
     }
     let x = x.normalize();
     let y = up - x * up.dot(&x);
-    if y.norm() < 1e-6 {
+    if y.norm() < DEGENERATE_MOUTH_M {
         return Err(GeometryFailure::Degenerate);
     }
     let y = y.normalize();
@@ -141,6 +158,7 @@ pub fn label_by_geometry(
             .saturating_sub(1);
         return Err(GeometryFailure::LipSplit {
             upper,
+            // The rest, less the two corners.
             lower: n.saturating_sub(upper + 2),
         });
     }
@@ -202,9 +220,7 @@ pub fn assign(
         return Small::new();
     }
     let cols: Small<usize> = (0..cands.len()).filter(|&j| !taken[j]).collect();
-    // Costs in hundredths of a pixel squared; a gated-out pair never beats "missing".
-    const FORBIDDEN: i64 = 1_000_000_000_000;
-    let scale = 100.0;
+    let scale = COST_UNITS_PER_PX2;
     let width = cols.len() + rows;
     solver.reset(rows, width, FORBIDDEN);
     for (r, p) in predictions.iter().enumerate() {
@@ -221,7 +237,11 @@ pub fn assign(
             }
         }
         // This dot's own "missing" column costs its gate squared.
-        solver.set(r, cols.len() + r, (gate * gate * scale).round() as i64 + 1);
+        solver.set(
+            r,
+            cols.len() + r,
+            (gate * gate * scale).round() as i64 + MISSING_TIE_BREAK,
+        );
     }
     solver.solve();
     (0..rows)

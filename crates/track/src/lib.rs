@@ -57,6 +57,14 @@ pub type Vec3 = nalgebra::Vector3<f64>;
 /// patch its depth is measured over: the distance the performer sits from the camera.
 pub const DEFAULT_DEPTH_M: f64 = 0.6;
 
+/// Fewest forehead dots that give a head pose (a rigid motion needs three points off one
+/// line); with fewer seen and no forehead surface the head is lost.
+pub const MIN_POSE_DOTS: usize = 3;
+
+/// The One Euro filters' cut-off for the derivative of the filtered value, Hz: the filter's
+/// authors' suggested value, left untuned.
+pub const ONE_EURO_DERIVATIVE_CUTOFF_HZ: f64 = 1.0;
+
 /// The recovery steps' names, in the order they run (`mouthpiece evaluate --steps`).
 pub fn recovery_steps() -> Vec<&'static str> {
     naming::recovery::step_names()
@@ -167,8 +175,7 @@ impl Tracker {
             let params = OneEuroParams {
                 min_cutoff: config.forehead_depth_min_cutoff_hz,
                 beta: config.forehead_depth_beta,
-                // The derivative's cut-off, as the One Euro filter's authors suggest.
-                d_cutoff: 1.0,
+                d_cutoff: ONE_EURO_DERIVATIVE_CUTOFF_HZ,
             };
             vec![OneEuro::new(params); layout.forehead_dots]
         });
@@ -329,7 +336,7 @@ impl Tracker {
             }
             (None, stabilised) => {
                 *stabilised = None;
-                out.status.head_lost = out.dots.forehead.iter().flatten().count() < 3;
+                out.status.head_lost = out.dots.forehead.iter().flatten().count() < MIN_POSE_DOTS;
             }
         }
         out.status.calibrating = self.calibrating;

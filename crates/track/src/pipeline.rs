@@ -112,7 +112,7 @@ impl RetargetSettings {
             one_euro: self.one_euro.map(|[min_cutoff, beta]| OneEuroParams {
                 min_cutoff,
                 beta,
-                d_cutoff: 1.0,
+                d_cutoff: crate::ONE_EURO_DERIVATIVE_CUTOFF_HZ,
             }),
         }
     }

@@ -27,6 +27,10 @@ const PIXEL_GATE_WIDENING_PER_FRAME: f64 = 0.05;
 /// 8 mm would follow over several frames).
 const DEPTH_GATE_WIDENING_PER_FRAME: f64 = 0.2;
 
+/// A search region covering 1/this of the image or more costs about as much as the full
+/// frame, which is searched instead.
+const FULL_FRAME_DIVISOR: i64 = 2;
+
 /// The search region's margin doubles per frame with dots missing, up to 2^this times.
 const SEARCH_GROWTH_MAX_DOUBLINGS: u32 = 4;
 
@@ -213,9 +217,8 @@ impl Tracks {
         let grow = (1u32 << self.frames_with_missing.min(SEARCH_GROWTH_MAX_DOUBLINGS)) as f64;
         let margin = config.roi_margin_px * grow;
         let rect = PixelRect::around(tracks.iter().map(|t| t.predicted_pixel(step_ratio)), margin)?;
-        // A region covering most of the image costs as much as the full frame.
         let full = image[0] as i64 * image[1] as i64;
-        (rect.area() < full / 2).then_some(rect)
+        (rect.area() < full / FULL_FRAME_DIVISOR).then_some(rect)
     }
 
     /// Counts the frame's names (for the search region and for losing the names).

@@ -180,8 +180,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 reduce: args.reduce,
                 curve: args.curve,
                 markers: !args.no_markers && args.rig.is_none(),
-                // A bound mesh has no head joints to carry the head's keys.
+                // A bound mesh has no head joints to carry the head's keys, nor a jaw joint
+                // and blend shapes for the rig's.
                 head: args.rig.is_none(),
+                rig: args.rig.is_none(),
             };
             let dir = spool_dir(&args.out);
             // With --rig the take goes to a temporary GLB first, then onto the rig.
@@ -236,6 +238,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 eprintln!(
                     "head, eye_L, eye_R: {} rotation keys",
                     summary.rotation_keys
+                );
+            }
+            if summary.rig_keys > 0 {
+                eprintln!(
+                    "jaw, blendshapes: {} frames of the rig (jaw rotation and slide, {} curve weights each)",
+                    summary.rig_keys,
+                    mouthpiece_retarget::rig::CURVES
                 );
             }
         }

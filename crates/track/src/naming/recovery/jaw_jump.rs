@@ -30,6 +30,11 @@ pub const GHOST_AREA_SHARE: f64 = 0.5;
 /// times the area.
 pub const BETTER_AREA_RATIO: f64 = 1.3;
 
+/// This many lower-lip dots on ghosts (with as many lip candidates free) say the jaw jumped
+/// even with every lip dot named, and allow the jaw's names one dot fewer: one dot on a
+/// small blob is a faint dot, two are the lower lip left behind.
+pub const GHOSTS_FOR_A_JUMP: usize = 2;
+
 pub(crate) struct JawJump;
 
 impl Step for JawJump {
@@ -61,7 +66,7 @@ impl Step for JawJump {
                 .sum()
         };
         if !((names.lips_named(n) < n && pass.steady_named < list.len())
-            || (on_ghosts >= 2 && free_lips >= 2))
+            || (on_ghosts >= GHOSTS_FOR_A_JUMP && free_lips >= GHOSTS_FOR_A_JUMP))
         {
             return false;
         }
@@ -76,7 +81,7 @@ impl Step for JawJump {
             cands,
             scratch,
         );
-        let slack = usize::from(on_ghosts >= 2);
+        let slack = usize::from(on_ghosts >= GHOSTS_FOR_A_JUMP);
         let (before, after) = (names.lips_named(n), jumped.lips_named(n));
         let better = after > before
             || (after + slack >= before

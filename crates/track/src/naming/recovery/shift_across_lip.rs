@@ -15,6 +15,16 @@ use crate::labels::{self, Candidate, Small};
 /// (half the mouth's width over half the lip dots).
 pub const MAX_ALONG_SHARE: f64 = 0.3;
 
+/// A common shift is looked for only with at least this many lip dots between the corners
+/// missing: one dot alone is the single-dot steps' business.
+pub const MIN_MISSING: usize = 2;
+
+/// With both corners named, a shift must land at least this many missing dots ...
+pub const MIN_LANDED_WITH_CORNERS: usize = 2;
+/// ... with a corner unseen, at least this many (and all the missing dots but one): without
+/// both corners the lip line is less sure, and two dots agree by chance too often.
+pub const MIN_LANDED_WITHOUT_CORNERS: usize = 3;
+
 /// Corners nearer than this (pixels) give no lip line.
 const MIN_LIP_LINE_PX: f64 = 1.0;
 
@@ -39,7 +49,7 @@ impl Step for ShiftAcrossLip {
         let missing: Small<usize> = (0..n)
             .filter(|&i| names.get(i).is_none() && i != left && i != right)
             .collect();
-        if missing.len() < 2 {
+        if missing.len() < MIN_MISSING {
             return false;
         }
         let preds = &pass.preds;
@@ -91,9 +101,9 @@ impl Step for ShiftAcrossLip {
         }
         let enough = |count: usize| {
             if corners_seen {
-                count >= 2
+                count >= MIN_LANDED_WITH_CORNERS
             } else {
-                count >= 3 && count + 1 >= missing.len()
+                count >= MIN_LANDED_WITHOUT_CORNERS && count + 1 >= missing.len()
             }
         };
         let Some((count, _, shift)) = best.filter(|b| enough(b.0)) else {

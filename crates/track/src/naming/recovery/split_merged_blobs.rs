@@ -30,6 +30,11 @@ pub const MERGED_AREA_DOTS: f64 = 1.2;
 /// Halves less than this many paint radii apart are one dot, not two.
 pub const MIN_HALF_SEPARATION_RADII: f64 = 0.5;
 
+/// A merged blob, and the partner dot predicted on it, lie within a dot's diameter (this many
+/// paint radii: two dots side by side have their centres that far apart) plus the smallest
+/// gate of a prediction.
+pub const MERGED_REACH_RADII: f64 = 2.0;
+
 /// Below this (px²) the blob's spread has no cross term: its axes are the image's.
 const ROUND_SPREAD_PX2: f64 = 1e-12;
 
@@ -90,7 +95,7 @@ impl Step for SplitMergedBlobs {
                     let r = ctx.dot_radius_px(cands.list[c].point.z);
                     let big = blob.area as f64 >= MERGED_AREA_DOTS * disc_area(r);
                     let d = dist(cands.list[c].pixel);
-                    (big && d <= 2.0 * r + min_gate).then_some((d, c, r))
+                    (big && d <= MERGED_REACH_RADII * r + min_gate).then_some((d, c, r))
                 })
                 .min_by(|a, b| a.0.total_cmp(&b.0));
             let Some((_, c, r)) = merged else { continue };
@@ -107,7 +112,7 @@ impl Step for SplitMergedBlobs {
                         let e = cands.list[c].pixel;
                         (((q[0] - e[0]).powi(2) + (q[1] - e[1]).powi(2)).sqrt(), j)
                     })
-                    .filter(|&(d, _)| d <= 2.0 * r + min_gate)
+                    .filter(|&(d, _)| d <= MERGED_REACH_RADII * r + min_gate)
                     .min_by(|a, b| a.0.total_cmp(&b.0))
                     .map(|(_, j)| j)
             });
