@@ -439,6 +439,10 @@ pub struct TakesConfig {
     pub min_free_mb: u64,
     /// Frames buffered between processing and the take writer before frames are dropped.
     pub queue_frames: u32,
+    /// Caps the take writer's disk throughput, MB (10^6 bytes) per second; 0: no cap. For a
+    /// takes folder on a disk shared with other recorders; frames beyond the queue are
+    /// dropped from the take as when the disk itself is slow.
+    pub max_write_mb_s: f64,
 }
 
 impl Default for TakesConfig {
@@ -450,6 +454,7 @@ impl Default for TakesConfig {
             flush_s: PositiveSeconds(1.0),
             min_free_mb: 200,
             queue_frames: 120,
+            max_write_mb_s: 0.0,
         }
     }
 }
@@ -662,6 +667,17 @@ impl Config {
                 format!(
                     "expected 1 to {MAX_QUEUE_FRAMES} frames, got {}",
                     self.takes.queue_frames
+                ),
+            ));
+        }
+        if !(self.takes.max_write_mb_s.is_finite()
+            && (self.takes.max_write_mb_s == 0.0 || self.takes.max_write_mb_s >= 0.01))
+        {
+            return Err(fail(
+                "takes.max_write_mb_s",
+                format!(
+                    "expected 0 (no cap) or at least 0.01 MB/s, got {}",
+                    self.takes.max_write_mb_s
                 ),
             ));
         }

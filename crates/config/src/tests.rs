@@ -239,7 +239,15 @@ fn errors_about_tokens_never_quote_the_secret() {
 #[test]
 fn a_token_file_that_never_ends_is_refused() {
     let err = parse("[server]\nread_token = { file = \"/dev/zero\" }\n").unwrap_err();
-    assert!(err.to_string().contains("server.read_token"), "{err}");
+    let mut text = err.to_string();
+    let mut source = std::error::Error::source(&err);
+    while let Some(s) = source {
+        text.push_str(&format!(": {s}"));
+        source = s.source();
+    }
+    assert!(text.contains("server.read_token"), "{text}");
+    // Refused once it runs past a token's length, not when memory runs out.
+    assert!(text.contains("longer than 4096 bytes"), "{text}");
 }
 
 #[test]
@@ -248,9 +256,14 @@ fn limits_above_the_hard_caps_are_refused() {
         ("[takes]\nqueue_frames = 4294967295\n", "takes.queue_frames"),
         ("[takes]\nqueue_frames = 0\n", "takes.queue_frames"),
         ("[server]\nmax_clients = 4294967295\n", "server.max_clients"),
+        ("[takes]\nmax_write_mb_s = -1.0\n", "takes.max_write_mb_s"),
+        ("[takes]\nmax_write_mb_s = 1e-300\n", "takes.max_write_mb_s"),
+        ("[takes]\nmax_write_mb_s = inf\n", "takes.max_write_mb_s"),
+        ("[takes]\nmax_write_mb_s = nan\n", "takes.max_write_mb_s"),
     ] {
         let err = parse(text).unwrap_err();
         assert_eq!(err.key(), Some(key), "{text}: {err}");
     }
     assert!(parse("[takes]\nqueue_frames = 3600\n[server]\nmax_clients = 512\n").is_ok());
+    assert!(parse("[takes]\nmax_write_mb_s = 0.5\n").is_ok());
 }

@@ -154,6 +154,8 @@ async fn serve<F: Factory>(
         min_free_mb: config.takes.min_free_mb,
         queue_frames: config.takes.queue_frames as usize,
         timecode_rate: rate.name().to_owned(),
+        max_write_bytes_s: (config.takes.max_write_mb_s > 0.0)
+            .then_some(config.takes.max_write_mb_s * 1e6),
     });
     let processing = pipeline::spawn(
         processor,

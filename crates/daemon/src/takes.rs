@@ -65,6 +65,8 @@ pub struct TakeSettings {
     pub queue_frames: usize,
     /// Timecode rate name for the metadata record.
     pub timecode_rate: String,
+    /// `[takes] max_write_mb_s` in bytes per second; `None`: no cap.
+    pub max_write_bytes_s: Option<f64>,
 }
 
 /// One frame's derived data, as written to the take.
@@ -456,7 +458,7 @@ fn open_take(
     slate: &str,
     take: Option<u32>,
     source: &str,
-) -> Result<(TakeInfo, SessionWriter, std::fs::File), TakeError> {
+) -> Result<(TakeInfo, TakeWriter, std::fs::File), TakeError> {
     let folder = &settings.folder;
     std::fs::create_dir_all(folder).map_err(|source| TakeError::Folder {
         path: folder.clone(),
@@ -488,7 +490,7 @@ fn open_take(
         ..WriterOptions::default()
     };
     let mut writer = SessionWriter::new(
-        std::io::BufWriter::with_capacity(1 << 20, file),
+        std::io::BufWriter::with_capacity(1 << 20, TakeFile::new(file, settings.max_write_bytes_s)),
         path.display().to_string(),
         options,
     )?;
@@ -546,6 +548,52 @@ pub fn create_new_take_file(
     })
 }
 
+type TakeWriter = SessionWriter<std::io::BufWriter<TakeFile>>;
+
+/// A take's file, written no faster than `[takes] max_write_mb_s` when that is set: each
+/// write waits until the bytes written so far fit the rate since the file was created.
+struct TakeFile {
+    file: std::fs::File,
+    max_bytes_s: Option<f64>,
+    created: Instant,
+    written: u64,
+}
+
+impl TakeFile {
+    fn new(file: std::fs::File, max_bytes_s: Option<f64>) -> Self {
+        TakeFile {
+            file,
+            max_bytes_s,
+            created: Instant::now(),
+            written: 0,
+        }
+    }
+}
+
+impl std::io::Write for TakeFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.written += n as u64;
+        if let Some(rate) = self.max_bytes_s {
+            let due = Duration::from_secs_f64(self.written as f64 / rate);
+            if let Some(wait) = due.checked_sub(self.created.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl std::io::Seek for TakeFile {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.file.seek(pos)
+    }
+}
+
 /// `fsync` of the take's file and of its folder (so the new name survives a power cut).
 fn sync_take(file: &std::fs::File, path: &Path) -> std::io::Result<()> {
     file.sync_all()?;
@@ -561,7 +609,7 @@ struct WriterResult {
 }
 
 fn write_take(
-    mut writer: SessionWriter,
+    mut writer: TakeWriter,
     items: Receiver<TakeItem>,
     settings: &TakeSettings,
     failed: &AtomicBool,
@@ -612,7 +660,7 @@ fn write_take(
 }
 
 fn write_one(
-    writer: &mut SessionWriter,
+    writer: &mut TakeWriter,
     frame: &Frame,
     derived: &Derived,
 ) -> Result<(), mouthpiece_recording::RecordingError> {
@@ -855,6 +903,7 @@ mod tests {
             min_free_mb: 0,
             queue_frames: 64,
             timecode_rate: "30".into(),
+            max_write_bytes_s: None,
         }
     }
 
@@ -1090,6 +1139,28 @@ mod tests {
     }
 
     #[test]
+    fn a_capped_take_file_writes_no_faster_than_its_cap() {
+        use std::io::Write;
+        let dir = tempfile::tempdir().unwrap();
+        let file = std::fs::File::create(dir.path().join("capped")).unwrap();
+        let mut capped = TakeFile::new(file, Some(1e6));
+        let started = Instant::now();
+        for _ in 0..5 {
+            capped.write_all(&[7u8; 60_000]).unwrap();
+        }
+        // 300 kB at 1 MB/s: 0.3 s at least.
+        assert!(
+            started.elapsed() >= Duration::from_millis(300),
+            "{:?}",
+            started.elapsed()
+        );
+        assert_eq!(
+            std::fs::metadata(dir.path().join("capped")).unwrap().len(),
+            300_000
+        );
+    }
+
+    #[test]
     fn disk_full_stops_the_take_and_says_so() {
         // /dev/full fails every write with ENOSPC.
         let file = std::fs::OpenOptions::new()
@@ -1097,7 +1168,7 @@ mod tests {
             .open("/dev/full")
             .unwrap();
         let writer = SessionWriter::new(
-            std::io::BufWriter::new(file),
+            std::io::BufWriter::new(TakeFile::new(file, None)),
             "/dev/full".into(),
             WriterOptions {
                 flush_interval: Duration::from_millis(10),

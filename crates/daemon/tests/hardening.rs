@@ -23,6 +23,8 @@ fn a_character_file_that_never_ends_is_refused() {
     let (_dir, config) = load("[characters]\nfiles = [\"/dev/zero\"]\n");
     let err = check(&config.unwrap()).unwrap_err().to_string();
     assert!(err.contains("characters.files[0]"), "{err}");
+    // Refused once it runs past a megabyte, not when memory runs out.
+    assert!(err.contains("longer than 1048576 bytes"), "{err}");
 }
 
 /// The live pipeline, except that processing panics on the first frame.

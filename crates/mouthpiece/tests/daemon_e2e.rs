@@ -51,6 +51,43 @@ fn write_session(path: &Path, frames: u64) {
     writer.finish().unwrap();
 }
 
+/// Like [`write_session`] but every pixel is noise, so that frames compress little and a
+/// take's size is known from the session's: `frames` frames at 30 fps, 160x120.
+fn write_noisy_session(path: &Path, frames: u64) {
+    let mut writer = SessionWriter::create(path, WriterOptions::default()).unwrap();
+    let calibration = Arc::new(Calibration::registered(Intrinsics::ideal(
+        160, 120, 131.0, 131.0, 79.5, 59.5,
+    )));
+    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    for seq in 0..frames {
+        let mut color = ColorImage::new(160, 120);
+        color.data.iter_mut().for_each(|b| *b = next() as u8);
+        let mut depth = DepthImage::new(160, 120);
+        depth
+            .data
+            .iter_mut()
+            .for_each(|d| *d = 400 + (next() % 1000) as u16);
+        writer
+            .write_frame(&Frame {
+                seq,
+                device_ts_us: seq * 33_333,
+                host_rx: Instant::now(),
+                wall_clock: None,
+                color,
+                depth,
+                calibration: calibration.clone(),
+            })
+            .unwrap();
+    }
+    writer.finish().unwrap();
+}
+
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
@@ -418,6 +455,101 @@ fn sigkill_during_a_take_leaves_a_readable_file() {
     // The cut may fall between a frame's camera messages and its derived ones.
     let wolf = topics.get("/character/wolf").copied().unwrap_or(0);
     assert!(depth - wolf <= 1, "{topics:?}");
+}
+
+/// SIGTERM while the take writer is far behind (its disk capped at a quarter of what the
+/// frames need): the daemon waits for the writer, so the take holds every frame up to the
+/// signal, its summary and footer, and the log says how many frames were kept.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_keeps_the_tail_of_a_take_whose_writer_is_slow() {
+    let dir = tempfile::tempdir().unwrap();
+    let session = dir.path().join("s.mcap");
+    write_noisy_session(&session, 90);
+    // Bytes per frame in a take: the session's (same encoding) plus the derived channels.
+    let per_frame = std::fs::metadata(&session).unwrap().len() as f64 / 90.0 + 2000.0;
+    let cap_mb_s = per_frame * 30.0 / 4.0 / 1e6;
+    let mut daemon = Daemon::start_with_dir(
+        dir,
+        &format!("replay:{}?loop=1", session.display()),
+        &format!("queue_frames = 3600\nmax_write_mb_s = {cap_mb_s:.3}\n"),
+        &[],
+        &[],
+    );
+    let mut ws = daemon.connect().await;
+    wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "frame").await;
+    send(
+        &mut ws,
+        json!({"type": "record", "id": 1, "action": "start", "slate": "slow"}),
+    )
+    .await;
+    let started = wait_for(&mut ws, Duration::from_secs(5), |v| {
+        v["type"] == "result" || v["type"] == "error"
+    })
+    .await;
+    assert_eq!(started["type"], "result", "{started}");
+    let file = PathBuf::from(started["detail"]["file"].as_str().unwrap());
+    // About 1.5 s of take: 45 frames, of which the writer has written about a quarter.
+    let mut last_seen = 0;
+    for _ in 0..45 {
+        let f = wait_for(&mut ws, Duration::from_secs(5), |v| v["type"] == "frame").await;
+        last_seen = f["seq"].as_u64().unwrap();
+    }
+    daemon.signal(libc::SIGTERM);
+    let sent = Instant::now();
+    let status = daemon
+        .wait_exit(Duration::from_secs(30))
+        .unwrap_or_else(|| panic!("no exit within 30 s of SIGTERM\n{}", daemon.log()));
+    let waited = sent.elapsed();
+    let log = daemon.log();
+    eprintln!("SIGTERM to exit: {waited:?} (writer capped at {cap_mb_s:.3} MB/s)");
+    assert!(status.success(), "{status:?}\n{log}");
+    let kept_line = log
+        .lines()
+        .find(|l| l.contains("take closed and synced to disk"))
+        .unwrap_or_else(|| panic!("the log does not say what was kept:\n{log}"));
+    let kept: u64 = kept_line
+        .split("synced to disk: ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{kept_line}"));
+    assert!(kept_line.contains("dropped=0"), "{kept_line}");
+    // The test means something only if the writer was still busy when the signal came.
+    assert!(
+        waited > Duration::from_millis(1500),
+        "the writer drained in {waited:?}: not slow enough for this test\n{log}"
+    );
+    // The file is complete (summary and footer: the reader reaches its end without error)
+    // and holds every frame from the start of the take to the last one sent before SIGTERM.
+    let mut reader = MessageReader::open(&file).unwrap();
+    let (mut depth, mut seqs) = (0u64, Vec::new());
+    loop {
+        match reader.next_message() {
+            Ok(Some(m)) if &*m.topic == "/camera/depth" => depth += 1,
+            Ok(Some(m)) if &*m.topic == "/performer/points" => {
+                let v: Value = serde_json::from_slice(&m.data).unwrap();
+                seqs.push(v["seq"].as_u64().unwrap());
+            }
+            Ok(Some(_)) => {}
+            Ok(None) => break,
+            Err(e) => panic!("the take is cut short after {depth} frames: {e}\n{log}"),
+        }
+    }
+    assert!(
+        !reader.is_truncated(),
+        "the take is cut short after {depth} frames (no summary, no footer)\n{log}"
+    );
+    assert_eq!(depth, kept, "{log}");
+    assert_eq!(seqs.len() as u64, kept);
+    assert!(
+        seqs.windows(2).all(|w| w[1] == w[0] + 1),
+        "frames missing from the take: {seqs:?}"
+    );
+    let last = *seqs.last().unwrap();
+    assert!(
+        last >= last_seen,
+        "the take ends at frame {last}, the clients saw {last_seen} before SIGTERM"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

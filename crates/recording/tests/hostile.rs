@@ -29,6 +29,33 @@ fn a_record_claiming_a_terabyte_is_an_error() {
             "opcode {opcode}: {result:?}"
         );
     }
+    // A chunk whose own length is honest (the file holds it) but whose header says it
+    // decompresses to a terabyte: refused by the record limit, not allocated.
+    let path = dir.path().join("huge-chunk.mcap");
+    let mut body = Vec::new();
+    body.extend_from_slice(&0u64.to_le_bytes()); // message start time
+    body.extend_from_slice(&0u64.to_le_bytes()); // message end time
+    body.extend_from_slice(&(1u64 << 40).to_le_bytes()); // uncompressed size
+    body.extend_from_slice(&1u32.to_le_bytes()); // uncompressed CRC
+    body.extend_from_slice(&4u32.to_le_bytes());
+    body.extend_from_slice(b"zstd");
+    body.extend_from_slice(&16u64.to_le_bytes());
+    body.extend_from_slice(&[0x28, 0xb5, 0x2f, 0xfd, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+    let mut bytes = MAGIC.to_vec();
+    bytes.push(0x06);
+    bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    bytes.extend_from_slice(&body);
+    std::fs::write(&path, &bytes).unwrap();
+    let mut reader = MessageReader::open(&path).unwrap();
+    let result: Result<Vec<_>, _> = (&mut reader).collect();
+    let err = result.expect_err("a chunk claiming a terabyte is an error");
+    let mut text = err.to_string();
+    let mut source = std::error::Error::source(&err);
+    while let Some(s) = source {
+        text.push_str(&format!(": {s}"));
+        source = s.source();
+    }
+    assert!(text.contains("exceeds limit"), "{text}");
 }
 
 /// A session with one calibration (64x48) and one colour + depth pair.
@@ -166,6 +193,19 @@ fn a_raw_image_claiming_gigapixels_is_refused() {
     );
     let err = first_error(&path);
     assert!(err.contains("100000x100000"), "{err}");
+    // An image just over the cap whose pixels are all there (the claim above is also caught
+    // by its missing bytes): refused for its size before it is decoded.
+    let path = dir.path().join("raw-over-cap.mcap");
+    session(
+        &path,
+        ("foxglove_msgs/msg/RawImage", raw_colour(64, 48)),
+        depth(4100, 4100),
+    );
+    let err = first_error(&path);
+    assert!(
+        err.contains("4100x4100") && err.contains("larger than"),
+        "{err}"
+    );
 }
 
 #[test]

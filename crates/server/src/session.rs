@@ -42,21 +42,32 @@ enum Outgoing {
 /// Why the reader stopped; a reason means "close the client with it".
 type ReaderExit = Option<(CloseCode, String)>;
 
+/// The reader's end: why it stopped, and its half of the connection (to linger on).
+type ReaderEnd = (ReaderExit, SplitStream<Ws>);
+
 pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, access: Access, peer: SocketAddr) {
     let (sink, stream) = ws.split();
     let limits = &shared.config.limits;
     let (out_tx, out_rx) = mpsc::channel(limits.control_queue_per_client);
     let started = Instant::now();
     let last_heard = Arc::new(AtomicU64::new(0));
-    let reader = tokio::spawn(read_loop(
-        shared.clone(),
-        stream,
-        out_tx,
-        access,
-        peer,
-        started,
-        last_heard.clone(),
-    ));
+    let reader = tokio::spawn({
+        let (shared, last_heard) = (shared.clone(), last_heard.clone());
+        async move {
+            let mut stream = stream;
+            let exit = read_loop(
+                shared,
+                &mut stream,
+                out_tx,
+                access,
+                peer,
+                started,
+                last_heard,
+            )
+            .await;
+            (exit, stream)
+        }
+    });
     let abort = reader.abort_handle();
     let mut writer = Writer {
         shared: shared.clone(),
@@ -71,10 +82,26 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, access: Access, peer: Sock
         buffer: Vec::new(),
         preview: None,
         health: None,
+        unread: None,
     };
     let reason = writer.run(reader, out_rx, started, last_heard).await;
     abort.abort();
+    if let Some(stream) = writer.unread.take() {
+        linger(writer.sink, stream, limits.write_timeout).await;
+    }
     info!(reason, "client disconnected");
+}
+
+/// After a close frame to a client that may still be sending: reads (and drops) what it
+/// sends until it answers the close or goes, for at most `limit`. Closing a socket that
+/// still holds unread data makes the kernel send a reset, which throws away whatever was
+/// not yet delivered, the close frame included: the client would see a cut (1006) instead
+/// of the code and reason.
+async fn linger(sink: SplitSink<Ws, Message>, stream: SplitStream<Ws>, limit: Duration) {
+    let Ok(mut ws) = stream.reunite(sink) else {
+        return;
+    };
+    let _ = tokio::time::timeout(limit, async { while let Some(Ok(_)) = ws.next().await {} }).await;
 }
 
 struct Writer {
@@ -92,6 +119,8 @@ struct Writer {
     preview: Option<crate::preview::ClientPreview>,
     /// Health figures, while the subscription asks for them.
     health: Option<tokio::sync::watch::Receiver<crate::console::Health>>,
+    /// The reader's half of the connection after the reader asked to close the client.
+    unread: Option<SplitStream<Ws>>,
 }
 
 /// Why the writer stopped (for the log).
@@ -107,7 +136,7 @@ enum SendError {
 impl Writer {
     async fn run(
         &mut self,
-        mut reader: tokio::task::JoinHandle<ReaderExit>,
+        mut reader: tokio::task::JoinHandle<ReaderEnd>,
         mut out_rx: mpsc::Receiver<Outgoing>,
         started: Instant,
         last_heard: Arc<AtomicU64>,
@@ -137,7 +166,10 @@ impl Writer {
                 }
                 exit = &mut reader => {
                     return match exit {
-                        Ok(Some((code, reason))) => self.close(code, &reason).await,
+                        Ok((Some((code, reason)), stream)) => {
+                            self.unread = Some(stream);
+                            self.close(code, &reason).await
+                        }
                         _ => "client closed".into(),
                     };
                 }
@@ -549,7 +581,7 @@ fn error_json(code: ErrorCode, message: impl Into<String>, id: Option<RequestId>
 
 async fn read_loop(
     shared: Arc<Shared>,
-    mut stream: SplitStream<Ws>,
+    stream: &mut SplitStream<Ws>,
     out: mpsc::Sender<Outgoing>,
     access: Access,
     peer: SocketAddr,

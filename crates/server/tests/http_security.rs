@@ -437,7 +437,12 @@ async fn a_client_that_does_not_read_its_replies_gets_1008_with_a_reason() {
     // Pings with long ids: their pongs fill the socket while the client does not read.
     let id = "i".repeat(16 * 1024);
     let sender = tokio::spawn(async move {
-        for _ in 0..4000 {
+        for i in 0..4000 {
+            // The first second paced, so that the replies fill the socket before the
+            // queue of unanswered requests overflows; then as fast as it goes.
+            if i < 1000 {
+                tokio::time::sleep(Duration::from_millis(1)).await;
+            }
             let ping = json!({"type": "ping", "id": id}).to_string();
             if tokio::time::timeout(Duration::from_secs(3), tx.send(Message::text(ping)))
                 .await
@@ -624,7 +629,92 @@ async fn max_clients_is_exact_under_simultaneous_upgrades() {
     assert_eq!((upgraded, full), (3, n - 3), "statuses {statuses:?}");
     assert_eq!(server.hub.clients(), 3);
     drop(open);
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    while server.hub.clients() > 0 && std::time::Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+
+    // Then clients come and go at the cap for three seconds, from threads of their own (not
+    // the server's runtime): every time a place frees up, several upgrades race for it. A
+    // client counts itself from its 101 until just before it closes, so the server holds at
+    // least as many sessions as are counted here: never more than 3.
+    let holding = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let peak = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let end = std::time::Instant::now() + Duration::from_secs(3);
+    let threads: Vec<_> = (0..24)
+        .map(|i| {
+            let (holding, peak) = (holding.clone(), peak.clone());
+            std::thread::spawn(move || churn_at_the_cap(addr, i, end, &holding, &peak))
+        })
+        .collect();
+    let (mut admitted, mut refused) = (0, 0);
+    for t in threads {
+        let (a, r) = t.join().unwrap();
+        admitted += a;
+        refused += r;
+    }
+    let peak = peak.load(std::sync::atomic::Ordering::SeqCst);
+    assert!(
+        peak <= 3,
+        "{peak} clients held an upgraded connection at once with max_clients 3 ({admitted} upgrades, {refused} refused)"
+    );
+    // The cap was met over and over, not just once.
+    assert!(
+        admitted >= 30 && refused >= 30,
+        "{admitted} upgrades, {refused} refused"
+    );
     server.stop().await;
+}
+
+/// One client thread of `max_clients_is_exact_under_simultaneous_upgrades`: upgrades, and
+/// when it gets 101 holds the connection for a moment, until `end`. Returns (upgraded,
+/// refused with 503).
+fn churn_at_the_cap(
+    addr: std::net::SocketAddr,
+    i: u64,
+    end: std::time::Instant,
+    holding: &std::sync::atomic::AtomicUsize,
+    peak: &std::sync::atomic::AtomicUsize,
+) -> (usize, usize) {
+    use std::io::{Read, Write};
+    use std::sync::atomic::Ordering::SeqCst;
+    let head = format!(
+        "GET / HTTP/1.1\r\nHost: {addr}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+         Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\
+         Sec-WebSocket-Protocol: mouthpiece.v1\r\n\r\n"
+    );
+    let (mut admitted, mut refused) = (0, 0);
+    let mut round = 0u64;
+    while std::time::Instant::now() < end {
+        round += 1;
+        let Ok(mut s) = std::net::TcpStream::connect(addr) else {
+            continue;
+        };
+        s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        if s.write_all(head.as_bytes()).is_err() {
+            continue;
+        }
+        let mut buf = Vec::new();
+        let mut chunk = [0u8; 1024];
+        while !buf.windows(4).any(|w| w == b"\r\n\r\n") {
+            match s.read(&mut chunk) {
+                Ok(0) | Err(_) => break,
+                Ok(n) => buf.extend_from_slice(&chunk[..n]),
+            }
+        }
+        match parse_response(&buf).0 {
+            101 => {
+                admitted += 1;
+                let now = holding.fetch_add(1, SeqCst) + 1;
+                peak.fetch_max(now, SeqCst);
+                std::thread::sleep(Duration::from_micros(100 + (i * 37 + round * 53) % 400));
+                holding.fetch_sub(1, SeqCst);
+            }
+            503 => refused += 1,
+            _ => {}
+        }
+    }
+    (admitted, refused)
 }
 
 #[tokio::test]
