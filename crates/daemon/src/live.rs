@@ -231,10 +231,7 @@ impl Processor for LiveProcessor {
         // Characters that could not be bound are left out of the frame.
         let bound = (0..self.pipeline.characters().len()).filter_map(|i| self.pipeline.bound(i));
         let count = bound.clone().count();
-        let rig = self
-            .pipeline
-            .rig()
-            .map(|r| crate::rig::rig_state(r.output()));
+        let rig = self.pipeline.rig();
         stream
             .characters
             .resize_with(count, CharacterFrame::default);
@@ -255,7 +252,8 @@ impl Processor for LiveProcessor {
                 curve.clear();
                 curve.extend(result.curve.iter().map(to_f32));
             }
-            slot.rig = rig;
+            // The performer's rig, with the character's own ranges where it has them.
+            slot.rig = rig.map(|r| crate::rig::rig_state_for(r, &bound.character().rig_ranges));
             slot.head = Some(crate::head::wire(&result.head));
         }
     }

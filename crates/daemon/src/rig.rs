@@ -1,6 +1,8 @@
 //! The retarget core's rig (docs/rig.md) as the server publishes it.
 
-use mouthpiece_retarget::rig::{LipMotion, RigFrame, CURVE_NAMES};
+use mouthpiece_retarget::rig::{
+    curves_from, LipMotion, RangeOverrides, Rig, RigFrame, CURVES, CURVE_NAMES,
+};
 use mouthpiece_server::{RigCurves, RigJaw, RigLip, RigLips, RigState};
 
 fn lip(m: &LipMotion) -> RigLip {
@@ -30,6 +32,20 @@ pub fn rig_state(rig: &RigFrame) -> RigState {
     }
 }
 
+/// The server's copy of one step's rig with a character's own ranges (docs/rig.md:
+/// character, then configuration, then the performer's learned ranges). No allocation.
+pub fn rig_state_for(rig: &Rig, character: &RangeOverrides) -> RigState {
+    let mut state = rig_state(rig.output());
+    if !character.is_empty() {
+        let mut values = [0.0; CURVES];
+        curves_from(rig.measures(), &rig.ranges_for(character), &mut values);
+        for (dst, v) in state.curves.0.iter_mut().zip(values) {
+            *dst = v as f32;
+        }
+    }
+    state
+}
+
 /// Whether the server's curve list is the retarget core's.
 pub fn names_agree() -> bool {
     CURVE_NAMES == mouthpiece_server::RIG_CURVE_NAMES
@@ -48,5 +64,58 @@ mod tests {
         let s = rig_state(&frame);
         assert_eq!(s.curve("mouthPucker"), Some(0.25));
         assert_eq!(s.jaw.angle_deg, 7.0);
+    }
+
+    /// A character with ranges of its own gets its curves with them; one without gets the
+    /// performer's.
+    #[test]
+    fn a_characters_own_ranges_reach_its_entry() {
+        use mouthpiece_retarget::retarget::StabilisedFrame;
+        use mouthpiece_retarget::{NeutralPose, PerformerLayout, RigSettings, RigidTransform};
+        use nalgebra::Vector3;
+        // A 12-dot mouth in its own frame (forehead straight above).
+        let mut lip = vec![Vector3::new(0.025, 0.0, 0.0)];
+        lip.extend((0..5).map(|k| Vector3::new(0.016 - 0.008 * k as f64, 0.006, 0.0)));
+        lip.push(Vector3::new(-0.025, 0.0, 0.0));
+        lip.extend((0..5).map(|k| Vector3::new(-0.016 + 0.008 * k as f64, -0.008, 0.0)));
+        let forehead = [(-0.03, 0.1), (0.03, 0.1), (0.0, 0.12)]
+            .map(|(x, y)| Some(Vector3::new(x, y, -0.01)))
+            .to_vec();
+        let neutral = NeutralPose::from_positions(
+            PerformerLayout::default(),
+            lip.iter().copied().map(Some).collect(),
+            forehead,
+            30,
+        )
+        .unwrap();
+        let settings = RigSettings {
+            learn_s: 0.0,
+            ..RigSettings::default()
+        };
+        let mut rig = Rig::new(&neutral, settings).unwrap();
+        // Lips drawn in by 10 %: pucker 0.1 (default range 0.25).
+        let drawn: Vec<_> = neutral
+            .lip
+            .iter()
+            .map(|p| Vector3::new(0.9 * p.x, p.y, p.z))
+            .collect();
+        rig.step(&StabilisedFrame {
+            t: 0.0,
+            confidence: vec![1.0; 12],
+            lip: drawn,
+            head: RigidTransform::IDENTITY,
+            head_lost: false,
+        });
+        let performer = rig_state_for(&rig, &RangeOverrides::default());
+        assert_eq!(performer, rig_state(rig.output()));
+        assert!((performer.curve("mouthPucker").unwrap() - 0.4).abs() < 1e-6);
+        let own = RangeOverrides::from_named([("mouthPucker", 0.2)]).unwrap();
+        let s = rig_state_for(&rig, &own);
+        assert!(
+            (s.curve("mouthPucker").unwrap() - 0.5).abs() < 1e-6,
+            "{s:?}"
+        );
+        assert_eq!(s.jaw, performer.jaw);
+        assert_eq!(s.curve("mouthFunnel"), performer.curve("mouthFunnel"));
     }
 }

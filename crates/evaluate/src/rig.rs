@@ -7,7 +7,8 @@
 //! - *slide RMS*: the rig's jaw slide against the synthetic jaw's, which does not slide (mm);
 //! - *curve RMS*: each curve against the same curve computed from the ground-truth dots
 //!   (stabilised by the retarget core from the true dots, the same neutral frames), with the
-//!   tracked rig's ranges; the worst curve is reported with its name;
+//!   ranges the character's output uses (its own `[rig.ranges]`, else the tracked rig's); the
+//!   worst curve is reported with its name;
 //! - *correlations*: `jawOpen` with the synthetic jaw angle, `mouthFunnel` with its rounding.
 
 use mouthpiece_retarget::rig::{curves_from, RigModel, RigSettings, CURVES, CURVE_NAMES};
@@ -135,8 +136,10 @@ impl Measure for RigAccuracy {
         let ours = *rig.measures();
         let theirs = model.measure(&out.performer.lip);
         let (mut a, mut b) = ([0.0; CURVES], [0.0; CURVES]);
-        curves_from(&ours, rig.ranges(), &mut a);
-        curves_from(&theirs, rig.ranges(), &mut b);
+        // The ranges the character's output uses: its own, else the performer's.
+        let ranges = rig.ranges_for(&self.character.rig_ranges);
+        curves_from(&ours, &ranges, &mut a);
+        curves_from(&theirs, &ranges, &mut b);
         let m = &mut self.metrics;
         m.frames += 1;
         m.jaw_sq += (ours.jaw_angle - mouth.jaw).to_degrees().powi(2);

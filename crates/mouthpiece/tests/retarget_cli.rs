@@ -476,6 +476,63 @@ fn bad_character_file_exits_2_with_key_and_line() {
     assert!(o.stdout.is_empty());
 }
 
+/// A character's own `[rig.ranges]` reaches the `rig` of its lines; a bad one exits 2 naming
+/// the file, the key and the line.
+#[test]
+fn a_characters_rig_ranges_reach_its_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let wolf = std::fs::read_to_string(repo().join("config/characters/wolf.toml")).unwrap();
+    let run = |text: &str| {
+        let character = dir.path().join("c.toml");
+        std::fs::write(&character, text).unwrap();
+        mouthpiece()
+            .args(["retarget", "--character"])
+            .arg(&character)
+            .arg("--input")
+            .arg(repo().join("tests/data/example-performer.jsonl"))
+            .args(["--out", "-"])
+            .output()
+            .unwrap()
+    };
+    // (jawOpen, jaw angle) per line that has a rig.
+    let jaw = |o: &std::process::Output| -> Vec<(f64, f64)> {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .filter_map(|l| {
+                let v: Value = serde_json::from_str(l).unwrap();
+                let rig = v.get("rig")?;
+                Some((
+                    rig["curves"]["jawOpen"].as_f64().unwrap(),
+                    rig["jaw"]["angle_deg"].as_f64().unwrap(),
+                ))
+            })
+            .collect()
+    };
+    let own = jaw(&run(&format!("{wolf}\n[rig.ranges]\njawOpen = 1000\n")));
+    let default = jaw(&run(&wolf));
+    assert!(!own.is_empty() && own.len() == default.len());
+    assert!(
+        default
+            .iter()
+            .any(|&(c, a)| a > 1.0 && (c - a / 1000.0).abs() > 1e-3),
+        "the jaw opens in the example"
+    );
+    for &(c, a) in &own {
+        assert!((c - (a / 1000.0).clamp(0.0, 1.0)).abs() < 1e-9, "{c} {a}");
+    }
+    let line = wolf.lines().count() + 3;
+    let o = run(&format!("{wolf}\n[rig.ranges]\nmouthSmile = 0.1\n"));
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("c.toml")
+            && err.contains(&format!("line {line}"))
+            && err.contains("rig.ranges.mouthSmile"),
+        "{err}"
+    );
+}
+
 #[test]
 fn existing_output_is_not_clobbered_on_error() {
     let dir = tempfile::tempdir().unwrap();

@@ -86,6 +86,8 @@ pub struct Character {
     pub manual_m: Option<Vec<Vec3>>,
     /// The head and eyes (`[head]`; defaults placed from the mouth when absent).
     pub head: crate::head::HeadConfig,
+    /// The character's own rig ranges (`[rig.ranges]`, docs/rig.md); empty: the performer's.
+    pub rig_ranges: crate::rig::RangeOverrides,
 }
 
 /// Mouth-frame coordinates within this fraction of the mouth width of zero are exactly zero.
@@ -181,6 +183,7 @@ impl Character {
             m_mode,
             manual_m,
             head: crate::head::HeadConfig::default_for(&frame),
+            rig_ranges: crate::rig::RangeOverrides::default(),
         })
     }
 
@@ -234,6 +237,33 @@ struct RawCharacter {
     m: Option<Spanned<Named<Spanned<[f64; 3]>>>>,
     contour: Option<Spanned<RawContour>>,
     head: Option<Spanned<crate::head_file::RawHead>>,
+    rig: Option<RawRig>,
+}
+
+/// A character's `[rig]`: only its ranges (the hinge and the learning window are the
+/// performer's, in the daemon configuration).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRig {
+    ranges: Option<Spanned<Named<Spanned<f64>>>>,
+}
+
+impl RawRig {
+    fn validate(&self, c: &Checker) -> Result<crate::rig::RangeOverrides, Error> {
+        let Some(ranges) = &self.ranges else {
+            return Ok(crate::rig::RangeOverrides::default());
+        };
+        // Each entry on its own first, so that an error names its line.
+        for (name, v) in ranges.get_ref().iter() {
+            crate::rig::RangeOverrides::from_named([(name, *v.get_ref())]).map_err(
+                |(name, reason)| c.err(format!("rig.ranges.{name}"), Some(v.span()), reason),
+            )?;
+        }
+        crate::rig::RangeOverrides::from_named(
+            ranges.get_ref().iter().map(|(n, v)| (n, *v.get_ref())),
+        )
+        .map_err(|(name, reason)| c.err(format!("rig.ranges.{name}"), Some(ranges.span()), reason))
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -485,6 +515,9 @@ impl RawCharacter {
         character.units = self.units;
         if let Some(head) = &self.head {
             character.head = head.get_ref().validate(src, &character)?;
+        }
+        if let Some(rig) = &self.rig {
+            character.rig_ranges = rig.validate(&c)?;
         }
         Ok(character)
     }
@@ -896,6 +929,54 @@ lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
         let (k, l, reason) = invalid(&format!("{SQUARE}[head]\nneck = 1\n"));
         assert_eq!((k.as_str(), l), ("<toml>", Some(9)), "{reason}");
         assert!(reason.contains("unknown field `neck`"), "{reason}");
+    }
+
+    #[test]
+    fn rig_ranges_table_is_read_and_checked() {
+        let c = Character::from_toml_str(SQUARE).unwrap();
+        assert!(
+            c.rig_ranges.is_empty(),
+            "without [rig]: the performer's ranges"
+        );
+        let src = format!("{SQUARE}[rig.ranges]\njawOpen = 30\nmouthFunnel = 0.2\n");
+        let c = Character::from_toml_str(&src).unwrap();
+        let i = |n: &str| crate::rig::curve_index(n).unwrap();
+        assert_eq!(c.rig_ranges.0[i("jawOpen")], Some(30.0));
+        assert_eq!(c.rig_ranges.0[i("mouthFunnel")], Some(0.2));
+        assert_eq!(c.rig_ranges.0.iter().flatten().count(), 2);
+        for (table, key, line, words) in [
+            (
+                "mouthSmile = 0.1",
+                "rig.ranges.mouthSmile",
+                9,
+                "not a curve name",
+            ),
+            (
+                "jawOpen = 30\nmouthPucker = 0",
+                "rig.ranges.mouthPucker",
+                10,
+                "positive",
+            ),
+            ("mouthClose = -1", "rig.ranges.mouthClose", 9, "positive"),
+            ("mouthClose = nan", "rig.ranges.mouthClose", 9, "positive"),
+            (
+                "mouthClose = 1e6",
+                "rig.ranges.mouthClose",
+                9,
+                "at most 1000",
+            ),
+        ] {
+            let src = format!("{SQUARE}[rig.ranges]\n{table}\n");
+            let (k, l, reason) = invalid(&src);
+            assert_eq!((k.as_str(), l), (key, Some(line)), "{table}: {reason}");
+            assert!(reason.contains(words), "{table}: {reason}");
+        }
+        // The hinge and the learning window are the performer's, not the character's.
+        let (k, l, reason) = invalid(&format!("{SQUARE}[rig]\nhinge_up = 0.5\n"));
+        assert_eq!((k.as_str(), l), ("<toml>", Some(9)), "{reason}");
+        assert!(reason.contains("unknown field `hinge_up`"), "{reason}");
+        let (k, _, reason) = invalid(&format!("{SQUARE}[rig.ranges]\njawOpen = \"x\"\n"));
+        assert_eq!(k, "<toml>", "{reason}");
     }
 
     #[test]

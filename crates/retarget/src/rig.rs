@@ -14,10 +14,12 @@
 //! - **Lips**: for each lip (its dots and both corners) the rigid motion that best carries the
 //!   neutral dots onto the current ones (Kabsch), and the residual RMS it leaves.
 //! - **Curves**: [`CURVE_NAMES`], each `clamp(measure / range, 0, 1)`; the measures are means
-//!   and least-squares fits over several dots (never one distance), the ranges come from the
-//!   defaults scaled by the performer's mouth width, widened by what the performer does in
-//!   the first seconds after the neutral pose ([`RigSettings::learn_s`]), and overridable per
-//!   curve ([`RigSettings::ranges`]).
+//!   and least-squares fits over several dots (never one distance), depth counts at
+//!   [`DEPTH_WEIGHT`] and each side's stretch is fitted about the mouth's own centre; the
+//!   ranges come from the defaults scaled by the performer's mouth width, widened by what the
+//!   performer does in the first seconds after the neutral pose ([`RigSettings::learn_s`]),
+//!   and overridable per curve ([`RigSettings::ranges`]) and per character
+//!   ([`RangeOverrides`]).
 //!
 //! A step allocates nothing.
 
@@ -58,7 +60,7 @@ pub const CURVES: usize = CURVE_NAMES.len();
 pub const DEFAULT_RANGES: [f64; CURVES] = [
     25.0, // jawOpen: degrees of jaw rotation
     0.15, // mouthClose: lower-lip rise against the jaw
-    0.12, // mouthFunnel: lips pushed out and drawn in
+    0.09, // mouthFunnel: lips pushed out and drawn in
     0.25, // mouthPucker: lips drawn in (horizontal scale 1 - s)
     0.10, // mouthLeft
     0.10, // mouthRight
@@ -66,8 +68,8 @@ pub const DEFAULT_RANGES: [f64; CURVES] = [
     0.12, // mouthSmileRight
     0.15, // mouthStretchLeft: corner out
     0.15, // mouthStretchRight
-    0.12, // mouthRollUpper
-    0.20, // mouthRollLower
+    0.10, // mouthRollUpper
+    0.16, // mouthRollLower
     0.10, // mouthUpperUpLeft
     0.10, // mouthUpperUpRight
     0.12, // mouthLowerDownLeft
@@ -75,6 +77,13 @@ pub const DEFAULT_RANGES: [f64; CURVES] = [
     0.15, // mouthPressLeft
     0.15, // mouthPressRight
 ];
+
+/// The weight of depth (z) against the lateral axes (x, y) where a measure combines them:
+/// inverse-variance weighting. A depth camera's depth noise on a lip dot is about twice its
+/// lateral noise (standard deviation; `mouthpiece evaluate --per-dot`: Kinect-like
+/// 1.2–1.6 mm against 0.3–0.75 mm, RealSense-like 0.7–1.0 mm against 0.3–0.5 mm), so its
+/// variance is about four times as large and a millimetre of depth counts a quarter.
+pub const DEPTH_WEIGHT: f64 = 0.25;
 
 /// Index of a curve name in [`CURVE_NAMES`].
 pub fn curve_index(name: &str) -> Option<usize> {
@@ -131,11 +140,8 @@ impl RigSettings {
                     format!("is not a curve name (one of {})", CURVE_NAMES.join(", ")),
                 ));
             }
-            if !(v.is_finite() && *v > 0.0 && *v <= 1000.0) {
-                return Err(bad(
-                    &format!("ranges.{name}"),
-                    format!("must be a positive number (at most 1000), got {v}"),
-                ));
+            if !range_ok(*v) {
+                return Err(bad(&format!("ranges.{name}"), range_reason(*v)));
             }
         }
         let mut seen = [false; CURVES];
@@ -163,6 +169,52 @@ impl RigSettings {
     fn configured(&self, i: usize) -> Option<f64> {
         self.ranges.get(CURVE_NAMES[i]).copied()
     }
+}
+
+/// A character's own ranges (`[rig.ranges]` of its file): per curve in [`CURVE_NAMES`] order,
+/// the range that character uses instead of the performer's (`None`: the performer's).
+///
+/// Precedence, for each curve: the character's range, else the `[rig.ranges]` of the daemon
+/// (or `--config`) configuration, else the performer's range learned from the default.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RangeOverrides(pub [Option<f64>; CURVES]);
+
+impl RangeOverrides {
+    /// No range of its own.
+    pub fn is_empty(&self) -> bool {
+        self.0.iter().all(Option::is_none)
+    }
+
+    /// From curve name → range pairs, checked as [`RigSettings::validate`] checks
+    /// `[rig.ranges]`; the error is the offending name and the reason.
+    pub fn from_named<'a>(
+        pairs: impl IntoIterator<Item = (&'a str, f64)>,
+    ) -> Result<Self, (String, String)> {
+        let mut out = Self::default();
+        for (name, v) in pairs {
+            let Some(i) = curve_index(name) else {
+                return Err((
+                    name.to_string(),
+                    format!("is not a curve name (one of {})", CURVE_NAMES.join(", ")),
+                ));
+            };
+            if !range_ok(v) {
+                return Err((name.to_string(), range_reason(v)));
+            }
+            if out.0[i].replace(v).is_some() {
+                return Err((name.to_string(), "is given twice".into()));
+            }
+        }
+        Ok(out)
+    }
+}
+
+fn range_ok(v: f64) -> bool {
+    v.is_finite() && v > 0.0 && v <= 1000.0
+}
+
+fn range_reason(v: f64) -> String {
+    format!("must be a positive number (at most 1000), got {v}")
 }
 
 /// One lip's rigid motion from neutral (mouth frame).
@@ -278,6 +330,8 @@ pub struct RigModel {
     lower_left: Vec<f64>,
     /// Σ x0² over all dots (the horizontal scale fit's denominator).
     sxx: f64,
+    /// Per dot: its weight in the mouth centre's sideways shift ([`midline_weights`]).
+    mid_weight: Vec<f64>,
 }
 
 fn mean_over(idx: &[usize], f: impl Fn(usize) -> f64) -> f64 {
@@ -315,6 +369,7 @@ impl RigModel {
         let lower_left = roles.lower.iter().map(|&i| side(i)).collect();
         let sxx = neutral.lip.iter().map(|p| p.x * p.x).sum::<f64>();
         Ok(Self {
+            mid_weight: midline_weights(&neutral.lip, width),
             pivot: [settings.hinge_up * width, -settings.hinge_back * width],
             neutral: neutral.lip.clone(),
             roles,
@@ -323,6 +378,11 @@ impl RigModel {
             lower_left,
             sxx,
         })
+    }
+
+    /// The neutral lip dots (mouth frame).
+    pub fn neutral(&self) -> &[Vec3] {
+        &self.neutral
     }
 
     /// Neutral mouth width, metres.
@@ -391,23 +451,27 @@ impl RigModel {
         // mouthClose: the lower lip rises against the jaw (lips stay shut while it drops).
         v[1] = (jaw_drop - (du.y - dl.y)) / w;
         // Horizontal scale of the whole mouth (least squares over every dot, the lower lip
-        // without the slide), and of each side.
-        let (mut sxl, mut sxr, mut xxl, mut xxr) = (0.0, 0.0, 0.0, 0.0);
-        for (i, (p, q)) in lip.iter().zip(n0).enumerate() {
-            let x = p.x - if r.lower.contains(&i) { slide } else { 0.0 };
+        // without the slide), and of each side about the mouth's own centre.
+        let x_of = |i: usize| lip[i].x - if r.lower.contains(&i) { slide } else { 0.0 };
+        let centre_shift = centre_shift(&self.mid_weight, |i| x_of(i) - n0[i].x);
+        let (mut sx_all, mut sxl, mut sxr, mut xxl, mut xxr) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (i, q) in n0.iter().enumerate() {
+            let x = x_of(i);
+            sx_all += x * q.x;
+            let xc = x - centre_shift;
             if q.x >= 0.0 {
-                sxl += x * q.x;
+                sxl += xc * q.x;
                 xxl += q.x * q.x;
             } else {
-                sxr += x * q.x;
+                sxr += xc * q.x;
                 xxr += q.x * q.x;
             }
         }
-        let sx = (sxl + sxr) / self.sxx;
-        // mouthFunnel: lips pushed out and drawn in: half the upper lip's mean forward motion
-        // plus half the corners' inward motion (both in mouth widths).
+        let sx = sx_all / self.sxx;
+        // mouthFunnel: lips pushed out and drawn in: the upper lip's mean forward motion at
+        // depth weight plus half the corners' inward motion (both in mouth widths).
         // (The upper lip's push: the lower lip's depends on the jaw's estimate.)
-        v[2] = 0.5 * du.z / w + 0.5 * (1.0 - sx) * 0.5;
+        v[2] = DEPTH_WEIGHT * du.z / w + 0.5 * (1.0 - sx) * 0.5;
         // mouthPucker: drawn in horizontally: 1 − the horizontal scale.
         v[3] = 1.0 - sx;
         // mouthLeft / Right: the whole mouth shifted sideways (mean over every dot).
@@ -426,14 +490,15 @@ impl RigModel {
         let ry = corner_up(r.right, ur, lr);
         v[6] = ly / w;
         v[7] = ry / w;
-        // Stretch: each side's horizontal scale, as the corner's outward motion.
+        // Stretch: each side's horizontal scale about the mouth's centre, as the corner's
+        // outward motion (a whole-mouth shift is mouthLeft/Right, not one side stretching).
         v[8] = 0.5 * (sxl / xxl.max(f64::MIN_POSITIVE) - 1.0);
         v[9] = 0.5 * (sxr / xxr.max(f64::MIN_POSITIVE) - 1.0);
         // Rolls: the upper lip's edge down and back; the lower lip's (without the jaw) up and
         // back.
-        // (Depth is the noisiest axis: the backward part counts half.)
-        v[10] = mean_over(&r.upper, |i| -d(i).y - 0.5 * d(i).z) / w;
-        v[11] = mean_over(&r.lower, |i| free_y(i) - 0.5 * free_z(i)) / w;
+        // (Depth is the noisiest axis: the backward part counts at depth weight.)
+        v[10] = mean_over(&r.upper, |i| -d(i).y - DEPTH_WEIGHT * d(i).z) / w;
+        v[11] = mean_over(&r.lower, |i| free_y(i) - DEPTH_WEIGHT * free_z(i)) / w;
         // Upper lip up / lower lip down, per side.
         let up_l = weighted(&r.upper, &self.upper_left, |i| d(i).y);
         let up_r = weighted_right(&r.upper, &self.upper_left, |i| d(i).y);
@@ -452,6 +517,34 @@ impl RigModel {
             jaw_slide: slide,
         }
     }
+}
+
+/// The mouth centre's sideways shift: the mean of `dx` over the dots weighted by `weight`
+/// (the midline weights of [`midline_weights`]). Named heuristic *centred stretch*: each
+/// side's scale is fitted about the mouth centre moved by this shift, so that a shift of the
+/// whole mouth, or the head-pose residue the stabiliser leaves (a common error of every dot),
+/// does not read as one side stretching and the other narrowing.
+fn centre_shift(weight: &[f64], dx: impl Fn(usize) -> f64) -> f64 {
+    let (mut s, mut ws) = (0.0, 0.0);
+    for (i, w) in weight.iter().enumerate() {
+        s += w * dx(i);
+        ws += w;
+    }
+    if ws > 0.0 {
+        s / ws
+    } else {
+        0.0
+    }
+}
+
+/// Per dot, its weight in the mouth centre's shift: `clamp(1 − |x⁰| / (w/2), 0, 1)`, 1 on the
+/// midline, 0 at the corners, so that one corner pulled out (a one-sided stretch) moves the
+/// centre little and the other side does not read a stretch.
+fn midline_weights(neutral: &[Vec3], width: f64) -> Vec<f64> {
+    neutral
+        .iter()
+        .map(|p| (1.0 - p.x.abs() / (0.5 * width)).clamp(0.0, 1.0))
+        .collect()
 }
 
 fn weighted_right(idx: &[usize], left: &[f64], f: impl Fn(usize) -> f64) -> f64 {
@@ -552,6 +645,42 @@ impl Rig {
     /// Whether the ranges are still being learned (the learning window has not ended).
     pub fn learning(&self) -> bool {
         self.learn_until.is_none()
+    }
+
+    /// The ranges a character uses: its own where it sets them ([`RangeOverrides`]), the
+    /// performer's ([`Rig::ranges`]) otherwise.
+    pub fn ranges_for(&self, character: &RangeOverrides) -> [f64; CURVES] {
+        let mut out = self.ranges;
+        for (dst, own) in out.iter_mut().zip(character.0) {
+            if let Some(r) = own {
+                *dst = r;
+            }
+        }
+        out
+    }
+
+    /// The last step's output with a character's ranges (the jaw and the lips are the
+    /// performer's; only the curves depend on ranges). No allocation once `out` has its
+    /// curves.
+    pub fn output_for(&self, character: &RangeOverrides, out: &mut RigFrame) {
+        out.jaw = self.out.jaw;
+        out.lips = self.out.lips;
+        if character.is_empty() {
+            out.curves.clone_from(&self.out.curves);
+            return;
+        }
+        let mut values = [0.0; CURVES];
+        curves_from(&self.measures, &self.ranges_for(character), &mut values);
+        if out.curves.0.len() != CURVES {
+            out.curves = RigFrame::default().curves;
+        }
+        for (((name, dst), v), want) in out.curves.0.iter_mut().zip(values).zip(CURVE_NAMES) {
+            if name != want {
+                name.clear();
+                name.push_str(want);
+            }
+            *dst = v;
+        }
     }
 
     /// One step.
@@ -748,14 +877,14 @@ mod tests {
             (out.curve("mouthPucker") - 0.1 / 0.25).abs() < 1e-9,
             "{out:?}"
         );
-        assert!((out.curve("mouthFunnel") - 0.025 / 0.12).abs() < 1e-9);
+        assert!((out.curve("mouthFunnel") - 0.025 / 0.09).abs() < 1e-9);
         let pushed: Vec<Vec3> = n
             .lip
             .iter()
             .map(|p| p + Vec3::new(0.0, 0.0, 0.003))
             .collect();
         let out = rig.step(&frame(pushed)).clone();
-        assert!((out.curve("mouthFunnel") - 0.5 * 0.003 / w / 0.12).abs() < 1e-9);
+        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.003 / w / 0.09).abs() < 1e-9);
         assert!(
             out.jaw.angle_deg.abs() < 1e-9,
             "a push is not a jaw: {:?}",
@@ -798,6 +927,86 @@ mod tests {
         assert!(out.jaw.slide_m.abs() < 1e-12, "the jaw moved with the lips");
     }
 
+    /// Centred stretch: a shift of the whole mouth (or a common error of every dot) is no
+    /// stretch; a widening of both sides is the same stretch on both; one corner pulled out
+    /// leaves the other side unstretched.
+    #[test]
+    fn centred_stretch_ignores_a_whole_mouth_shift() {
+        let n = neutral();
+        let mut rig = rig();
+        let shifted: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| p + Vec3::new(0.003, 0.0, 0.0))
+            .collect();
+        let v = rig.model().measure(&shifted).values;
+        assert!(v[8].abs() < 1e-12 && v[9].abs() < 1e-12, "{:?}", &v[8..10]);
+        // (Fitted about the neutral centre instead, the left side would read 0.09 here.)
+        let wide: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(1.1 * p.x, p.y, p.z))
+            .collect();
+        let v = rig.model().measure(&wide).values;
+        assert!(
+            (v[8] - 0.05).abs() < 1e-12 && (v[9] - 0.05).abs() < 1e-12,
+            "{:?}",
+            &v[8..10]
+        );
+        let out = rig.step(&frame(wide)).clone();
+        assert!((out.curve("mouthStretchLeft") - 0.05 / 0.15).abs() < 1e-9);
+    }
+
+    #[test]
+    fn midline_weights_are_one_on_the_midline_and_zero_at_the_corners() {
+        let n = neutral();
+        let w = n.mouth_width();
+        let m = midline_weights(&n.lip, w);
+        assert_eq!((m[0], m[6]), (0.0, 0.0), "corners");
+        assert_eq!((m[3], m[9]), (1.0, 1.0), "midline");
+        assert!((m[1] - (1.0 - 0.016 / (0.5 * w))).abs() < 1e-12);
+        assert!(m.iter().all(|x| (0.0..=1.0).contains(x)));
+        // A shift of the centre dots only moves the centre by their weighted share.
+        let dx = |i: usize| if i == 3 || i == 9 { 0.001 } else { 0.0 };
+        let want = 0.002 / m.iter().sum::<f64>();
+        assert!((centre_shift(&m, dx) - want).abs() < 1e-15);
+    }
+
+    /// Depth weight: a millimetre of depth counts DEPTH_WEIGHT of a lateral one in the rolls
+    /// and the funnel.
+    #[test]
+    fn depth_counts_at_depth_weight_in_rolls_and_funnel() {
+        let n = neutral();
+        let w = n.mouth_width();
+        let mut rig = rig();
+        // The upper lip pushed back 2 mm, nothing else: a roll of the upper lip by depth only.
+        let mut lip = n.lip.clone();
+        for p in &mut lip[1..6] {
+            p.z -= 0.002;
+        }
+        let v = rig.model().measure(&lip).values;
+        assert!(
+            (v[10] - DEPTH_WEIGHT * 0.002 / w).abs() < 1e-12,
+            "{}",
+            v[10]
+        );
+        // The upper lip down 2 mm counts in full.
+        let mut lip = n.lip.clone();
+        for p in &mut lip[1..6] {
+            p.y -= 0.002;
+        }
+        let v = rig.model().measure(&lip).values;
+        assert!((v[10] - 0.002 / w).abs() < 1e-12, "{}", v[10]);
+        // Both lips pushed forward 4 mm: funnel by depth only.
+        let pushed: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| p + Vec3::new(0.0, 0.0, 0.004))
+            .collect();
+        let out = rig.step(&frame(pushed)).clone();
+        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.004 / w / 0.09).abs() < 1e-9);
+    }
+
     #[test]
     fn ranges_are_learned_then_kept_and_configured_ones_are_not_learned() {
         let n = neutral();
@@ -830,6 +1039,63 @@ mod tests {
         rig.step(&g);
         assert!(!rig.learning());
         assert!((rig.ranges()[0] - 40.0).abs() < 1e-9);
+    }
+
+    /// Precedence of ranges: the character's own, else the configured one, else the
+    /// performer's learned from the default.
+    #[test]
+    fn a_characters_ranges_override_the_configured_and_the_learned_ones() {
+        let n = neutral();
+        let settings = RigSettings {
+            learn_s: 1.0,
+            ranges: Named(vec![("mouthPucker".into(), 0.5), ("jawOpen".into(), 20.0)]),
+            ..RigSettings::default()
+        };
+        let mut rig = Rig::new(&n, settings).unwrap();
+        let jaw = rig.model().jaw_transform(10f64.to_radians(), 0.0);
+        let mut lip: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(0.9 * p.x, p.y, p.z))
+            .collect();
+        for p in &mut lip[7..] {
+            *p = jaw.apply(p);
+        }
+        rig.step(&frame(lip));
+        let own =
+            RangeOverrides::from_named([("jawOpen", 40.0), ("mouthStretchLeft", 0.3)]).unwrap();
+        let r = rig.ranges_for(&own);
+        let i = |name: &str| curve_index(name).unwrap();
+        assert_eq!(r[i("jawOpen")], 40.0, "the character's over the configured");
+        assert_eq!(r[i("mouthPucker")], 0.5, "the configured");
+        assert_eq!(
+            r[i("mouthStretchLeft")],
+            0.3,
+            "the character's over the default"
+        );
+        assert_eq!(r[i("mouthClose")], DEFAULT_RANGES[i("mouthClose")]);
+        let mut out = RigFrame::default();
+        rig.output_for(&own, &mut out);
+        assert!((out.curve("jawOpen") - 10.0 / 40.0).abs() < 1e-9, "{out:?}");
+        assert!((out.curve("mouthPucker") - 0.1 / 0.5).abs() < 1e-9);
+        assert_eq!(out.jaw, rig.output().jaw);
+        assert_eq!(out.lips, rig.output().lips);
+        // Without ranges of its own, the character gets the performer's output.
+        rig.output_for(&RangeOverrides::default(), &mut out);
+        assert_eq!(&out, rig.output());
+        assert!((out.curve("jawOpen") - 10.0 / 20.0).abs() < 1e-9);
+        // Names are checked like [rig.ranges].
+        for (name, v, words) in [
+            ("mouthSmile", 0.1, "not a curve name"),
+            ("jawOpen", 0.0, "positive"),
+            ("jawOpen", f64::NAN, "positive"),
+        ] {
+            let (n, reason) = RangeOverrides::from_named([(name, v)]).unwrap_err();
+            assert!(n == name && reason.contains(words), "{n}: {reason}");
+        }
+        let (n, reason) =
+            RangeOverrides::from_named([("jawOpen", 1.0), ("jawOpen", 2.0)]).unwrap_err();
+        assert!(n == "jawOpen" && reason.contains("twice"), "{reason}");
     }
 
     #[test]

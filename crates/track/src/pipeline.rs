@@ -564,10 +564,11 @@ impl Pipeline {
                     },
                 );
                 if let Some(rig) = &self.rig {
-                    self.line
-                        .rig
-                        .get_or_insert_with(Default::default)
-                        .clone_from(rig.output());
+                    // With the character's own ranges where it has them (docs/rig.md).
+                    rig.output_for(
+                        &bound.character().rig_ranges,
+                        self.line.rig.get_or_insert_with(Default::default),
+                    );
                 }
             }
             _ => {

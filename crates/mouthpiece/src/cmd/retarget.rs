@@ -638,10 +638,12 @@ fn emit(
     let result = retargeter.step(line.t, dots).map_err(bad_input)?;
     line_out.update(seq, &result);
     if let Some(r) = rig {
-        line_out
-            .rig
-            .get_or_insert_with(Default::default)
-            .clone_from(r.step(result.performer));
+        r.step(result.performer);
+        // With the character's own ranges where it has them (docs/rig.md).
+        r.output_for(
+            &retargeter.character().character().rig_ranges,
+            line_out.rig.get_or_insert_with(Default::default),
+        );
     }
     out.write_line(line_out)
 }
