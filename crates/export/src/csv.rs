@@ -223,15 +223,7 @@ mod tests {
     #[test]
     fn head_columns_follow_the_points() {
         let dir = tempfile::tempdir().unwrap();
-        let rig = MouthRig::new(
-            None,
-            vec![RigPoint {
-                name: "P1".into(),
-                rest: [0.0; 3],
-            }],
-            nalgebra::Isometry3::identity(),
-        )
-        .unwrap();
+        let rig = one_point_rig();
         let path = dir.path().join("take.csv");
         let mut w = CsvWriter::create(&rig, &path).unwrap();
         let head = crate::HeadKeys {
@@ -263,6 +255,18 @@ mod tests {
         );
     }
 
+    fn one_point_rig() -> MouthRig {
+        MouthRig::new(
+            None,
+            vec![RigPoint {
+                name: "P1".into(),
+                rest: [0.0; 3],
+            }],
+            nalgebra::Isometry3::identity(),
+        )
+        .unwrap()
+    }
+
     fn rig_header() -> String {
         let mut columns = vec!["jaw_angle_deg", "jaw_slide_m"];
         columns.extend(CURVE_NAMES);
@@ -272,15 +276,7 @@ mod tests {
     #[test]
     fn rig_columns_hold_the_jaw_and_every_curve() {
         let dir = tempfile::tempdir().unwrap();
-        let rig = MouthRig::new(
-            None,
-            vec![RigPoint {
-                name: "P1".into(),
-                rest: [0.0; 3],
-            }],
-            nalgebra::Isometry3::identity(),
-        )
-        .unwrap();
+        let rig = one_point_rig();
         let path = dir.path().join("take.csv");
         let mut w = CsvWriter::create(&rig, &path).unwrap();
         let mut keys = crate::RigKeys::REST;

@@ -191,16 +191,7 @@ impl PipelineConfig {
         self.detect.validate()?;
         self.track.validate()?;
         self.retarget.validate()?;
-        self.rig.validate("rig").map_err(|e| match e {
-            mouthpiece_retarget::Error::InvalidSetting { key, reason } => TrackError::Config {
-                key,
-                message: reason,
-            },
-            e => TrackError::Config {
-                key: "rig".into(),
-                message: e.to_string(),
-            },
-        })
+        self.rig.validate("rig").map_err(rig_config_error)
     }
 
     /// A character fits when it has one point per lip dot; the error names the character.
@@ -351,16 +342,7 @@ impl Pipeline {
     /// at once, so a new hinge or a set range applies from the next frame; ranges not set are
     /// learned again over `learn_s` from then on.
     pub fn set_rig_settings(&mut self, settings: RigSettings) -> Result<(), TrackError> {
-        settings.validate("rig").map_err(|e| match e {
-            mouthpiece_retarget::Error::InvalidSetting { key, reason } => TrackError::Config {
-                key,
-                message: reason,
-            },
-            e => TrackError::Config {
-                key: "rig".into(),
-                message: e.to_string(),
-            },
-        })?;
+        settings.validate("rig").map_err(rig_config_error)?;
         if let Some(neutral) = self.tracker.neutral() {
             self.rig = match Rig::new(neutral, settings.clone()) {
                 Ok(rig) => Some(rig),
@@ -608,6 +590,20 @@ impl Pipeline {
             rig: self.rig.as_ref(),
         };
         Ok((line, tracked))
+    }
+}
+
+/// A `[rig]` settings error as a configuration error naming its key.
+fn rig_config_error(e: mouthpiece_retarget::Error) -> TrackError {
+    match e {
+        mouthpiece_retarget::Error::InvalidSetting { key, reason } => TrackError::Config {
+            key,
+            message: reason,
+        },
+        e => TrackError::Config {
+            key: "rig".into(),
+            message: e.to_string(),
+        },
     }
 }
 
