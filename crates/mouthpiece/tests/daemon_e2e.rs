@@ -21,21 +21,20 @@ use tokio_tungstenite::tungstenite::Message;
 type Client =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
-/// A short session: `frames` frames at 30 fps, 160x120, a moving gradient.
-fn write_session(path: &Path, frames: u64) {
+/// A session of `frames` frames at 30 fps, 160x120, whose images `fill` paints per frame.
+fn write_session_with(
+    path: &Path,
+    frames: u64,
+    mut fill: impl FnMut(u64, &mut ColorImage, &mut DepthImage),
+) {
     let mut writer = SessionWriter::create(path, WriterOptions::default()).unwrap();
     let calibration = Arc::new(Calibration::registered(Intrinsics::ideal(
         160, 120, 131.0, 131.0, 79.5, 59.5,
     )));
     for seq in 0..frames {
         let mut color = ColorImage::new(160, 120);
-        color
-            .data
-            .iter_mut()
-            .enumerate()
-            .for_each(|(i, b)| *b = ((i as u64 + seq * 3) % 251) as u8);
         let mut depth = DepthImage::new(160, 120);
-        depth.data.iter_mut().for_each(|d| *d = 600);
+        fill(seq, &mut color, &mut depth);
         writer
             .write_frame(&Frame {
                 seq,
@@ -51,13 +50,21 @@ fn write_session(path: &Path, frames: u64) {
     writer.finish().unwrap();
 }
 
+/// A short session: `frames` frames at 30 fps, 160x120, a moving gradient.
+fn write_session(path: &Path, frames: u64) {
+    write_session_with(path, frames, |seq, color, depth| {
+        color
+            .data
+            .iter_mut()
+            .enumerate()
+            .for_each(|(i, b)| *b = ((i as u64 + seq * 3) % 251) as u8);
+        depth.data.iter_mut().for_each(|d| *d = 600);
+    });
+}
+
 /// Like [`write_session`] but every pixel is noise, so that frames compress little and a
 /// take's size is known from the session's: `frames` frames at 30 fps, 160x120.
 fn write_noisy_session(path: &Path, frames: u64) {
-    let mut writer = SessionWriter::create(path, WriterOptions::default()).unwrap();
-    let calibration = Arc::new(Calibration::registered(Intrinsics::ideal(
-        160, 120, 131.0, 131.0, 79.5, 59.5,
-    )));
     let mut state = 0x2545_f491_4f6c_dd1d_u64;
     let mut next = move || {
         state ^= state << 13;
@@ -65,27 +72,13 @@ fn write_noisy_session(path: &Path, frames: u64) {
         state ^= state << 17;
         state
     };
-    for seq in 0..frames {
-        let mut color = ColorImage::new(160, 120);
+    write_session_with(path, frames, |_, color, depth| {
         color.data.iter_mut().for_each(|b| *b = next() as u8);
-        let mut depth = DepthImage::new(160, 120);
         depth
             .data
             .iter_mut()
             .for_each(|d| *d = 400 + (next() % 1000) as u16);
-        writer
-            .write_frame(&Frame {
-                seq,
-                device_ts_us: seq * 33_333,
-                host_rx: Instant::now(),
-                wall_clock: None,
-                color,
-                depth,
-                calibration: calibration.clone(),
-            })
-            .unwrap();
-    }
-    writer.finish().unwrap();
+    });
 }
 
 fn free_port() -> u16 {

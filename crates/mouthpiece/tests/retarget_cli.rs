@@ -452,6 +452,18 @@ fn stdin_rejects_a_neutral_line_after_the_block() {
     assert_eq!(code, 0, "{err}");
 }
 
+/// `mouthpiece retarget` of the example performer onto `character`, its JSONL to stdout.
+fn retarget_example_to_stdout(character: &Path) -> Output {
+    mouthpiece()
+        .args(["retarget", "--character"])
+        .arg(character)
+        .arg("--input")
+        .arg(repo().join("tests/data/example-performer.jsonl"))
+        .args(["--out", "-"])
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn bad_character_file_exits_2_with_key_and_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -459,14 +471,7 @@ fn bad_character_file_exits_2_with_key_and_line() {
     let wolf = std::fs::read_to_string(repo().join("config/characters/wolf.toml")).unwrap();
     let broken = wolf.replace("units = \"m\"", "units = \"m\"\ncolour = \"grey\"");
     std::fs::write(&character, broken).unwrap();
-    let o = mouthpiece()
-        .args(["retarget", "--character"])
-        .arg(&character)
-        .arg("--input")
-        .arg(repo().join("tests/data/example-performer.jsonl"))
-        .args(["--out", "-"])
-        .output()
-        .unwrap();
+    let o = retarget_example_to_stdout(&character);
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
@@ -485,14 +490,7 @@ fn a_characters_rig_ranges_reach_its_lines() {
     let run = |text: &str| {
         let character = dir.path().join("c.toml");
         std::fs::write(&character, text).unwrap();
-        mouthpiece()
-            .args(["retarget", "--character"])
-            .arg(&character)
-            .arg("--input")
-            .arg(repo().join("tests/data/example-performer.jsonl"))
-            .args(["--out", "-"])
-            .output()
-            .unwrap()
+        retarget_example_to_stdout(&character)
     };
     // (jawOpen, jaw angle) per line that has a rig.
     let jaw = |o: &std::process::Output| -> Vec<(f64, f64)> {
