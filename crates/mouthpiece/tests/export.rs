@@ -451,6 +451,26 @@ fn bad_input_is_exit_2_naming_the_line() {
     }
 }
 
+/// `mouthpiece retarget` of the example performer onto `character`, written to `take`, with
+/// `extra` arguments; fails the test with retarget's stderr if it does not succeed.
+fn retarget_example(character: &Path, take: &Path, extra: &[&str]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(["retarget", "--character"])
+        .arg(character)
+        .arg("--input")
+        .arg(repo().join("tests/data/example-performer.jsonl"))
+        .arg("--out")
+        .arg(take)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "retarget: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// The real chain: `mouthpiece retarget` puts the example performer on the wolf (modelled
 /// Z-up, head tilted), then export with the character file, `--model-up z` and the curve.
 #[test]
@@ -460,20 +480,7 @@ fn wolf_take_from_retarget_lands_on_the_wolf_model() {
     let root = repo();
     let wolf_toml = root.join("config/characters/wolf.toml");
     let take = dir.path().join("wolf.jsonl");
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-        .args(["retarget", "--character"])
-        .arg(&wolf_toml)
-        .arg("--input")
-        .arg(root.join("tests/data/example-performer.jsonl"))
-        .arg("--out")
-        .arg(&take)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "retarget: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    retarget_example(&wolf_toml, &take, &[]);
 
     let glb = dir.path().join("wolf.glb");
     let (t, c, g) = (
@@ -777,25 +784,8 @@ fn a_turn_exported_faces_the_viewpoint_in_blender() {
     let axes = character.frame.axes;
     let viewpoint = character.head.pivot + axes * direction_deg(25.0, -10.0) * 3.0;
     let take = dir.path().join("turn.jsonl");
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-        .args(["retarget", "--character"])
-        .arg(&wolf_toml)
-        .arg("--input")
-        .arg(root.join("tests/data/example-performer.jsonl"))
-        .arg("--out")
-        .arg(&take)
-        .arg("--look-at")
-        .arg(format!(
-            "{},{},{}@1.5",
-            viewpoint.x, viewpoint.y, viewpoint.z
-        ))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "retarget: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let look_at = format!("{},{},{}@1.5", viewpoint.x, viewpoint.y, viewpoint.z);
+    retarget_example(&wolf_toml, &take, &["--look-at", &look_at]);
     let frames: Vec<Value> = std::fs::read_to_string(&take)
         .unwrap()
         .lines()
