@@ -60,7 +60,7 @@ pub const CURVES: usize = CURVE_NAMES.len();
 pub const DEFAULT_RANGES: [f64; CURVES] = [
     25.0, // jawOpen: degrees of jaw rotation
     0.15, // mouthClose: lower-lip rise against the jaw
-    0.09, // mouthFunnel: lips pushed out and drawn in
+    0.15, // mouthFunnel: lips pushed out and drawn in
     0.25, // mouthPucker: lips drawn in (horizontal scale 1 - s)
     0.10, // mouthLeft
     0.10, // mouthRight
@@ -468,10 +468,9 @@ impl RigModel {
             }
         }
         let sx = sx_all / self.sxx;
-        // mouthFunnel: lips pushed out and drawn in: the upper lip's mean forward motion at
-        // depth weight plus half the corners' inward motion (both in mouth widths).
-        // (The upper lip's push: the lower lip's depends on the jaw's estimate.)
-        v[2] = DEPTH_WEIGHT * du.z / w + 0.5 * (1.0 - sx) * 0.5;
+        // mouthFunnel: lips pushed out and drawn in (the upper lip's push: the lower lip's
+        // depends on the jaw's estimate).
+        v[2] = funnel_measure(du.z / w, sx);
         // mouthPucker: drawn in horizontally: 1 − the horizontal scale.
         v[3] = 1.0 - sx;
         // mouthLeft / Right: the whole mouth shifted sideways (mean over every dot).
@@ -517,6 +516,21 @@ impl RigModel {
             jaw_slide: slide,
         }
     }
+}
+
+/// The `mouthFunnel` measure (mouth widths) from the upper lip's mean forward motion
+/// (`forward`, mouth widths) and the horizontal scale `scale` of all dots about the centre:
+/// lips pushed out and drawn into a rounded opening. Two named rules:
+///
+/// - *One weight per axis*: each corner's inward motion, `(1 − scale) · w/2`, counts in full
+///   and the forward motion at [`DEPTH_WEIGHT`], as in the rolls: a millimetre is a
+///   millimetre, depth weighted by its noise (the corners once counted half, giving the
+///   noisy depth twice its share).
+/// - *Drawn in only*: the corners count only when they come in. Spreading (corners pushed
+///   out, `scale > 1`) is another shape (`mouthStretch`), not negative rounding: subtracted,
+///   it cancelled the lips' push in a rounded vowel said with the corners apart.
+pub fn funnel_measure(forward: f64, scale: f64) -> f64 {
+    DEPTH_WEIGHT * forward + 0.5 * (1.0 - scale).max(0.0)
 }
 
 /// The mouth centre's sideways shift: the mean of `dx` over the dots weighted by `weight`
@@ -877,14 +891,18 @@ mod tests {
             (out.curve("mouthPucker") - 0.1 / 0.25).abs() < 1e-9,
             "{out:?}"
         );
-        assert!((out.curve("mouthFunnel") - 0.025 / 0.09).abs() < 1e-9);
+        assert!((out.curve("mouthFunnel") - 0.05 / 0.15).abs() < 1e-9);
         let pushed: Vec<Vec3> = n
             .lip
             .iter()
             .map(|p| p + Vec3::new(0.0, 0.0, 0.003))
             .collect();
         let out = rig.step(&frame(pushed)).clone();
-        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.003 / w / 0.09).abs() < 1e-9);
+        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.003 / w / 0.15).abs() < 1e-9);
+        assert!(
+            out.curve("mouthPucker").abs() < 1e-12,
+            "a push alone is no pucker: the pucker is the narrowing"
+        );
         assert!(
             out.jaw.angle_deg.abs() < 1e-9,
             "a push is not a jaw: {:?}",
@@ -1004,7 +1022,71 @@ mod tests {
             .map(|p| p + Vec3::new(0.0, 0.0, 0.004))
             .collect();
         let out = rig.step(&frame(pushed)).clone();
-        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.004 / w / 0.09).abs() < 1e-9);
+        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.004 / w / 0.15).abs() < 1e-9);
+    }
+
+    /// One weight per axis: in the funnel a corner's inward motion counts millimetre for
+    /// millimetre (a lateral motion, weight 1), the lips' forward motion at DEPTH_WEIGHT.
+    #[test]
+    fn the_funnel_counts_the_corners_inward_motion_in_full() {
+        let n = neutral();
+        let w = n.mouth_width();
+        let model = rig().model().clone();
+        // Every dot 10 % nearer the midline: each corner came in by 10 % of half the width.
+        let drawn: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(0.9 * p.x, p.y, p.z))
+            .collect();
+        let corner_in = (n.lip[0].x - drawn[0].x) / w;
+        assert!((corner_in - 0.05).abs() < 1e-12, "{corner_in}");
+        let v = model.measure(&drawn).values;
+        assert!(
+            (v[2] - corner_in).abs() < 1e-12,
+            "the corners' inward motion in mouth widths: {}",
+            v[2]
+        );
+        // (Counted at half weight, as before the rule, it would read 0.025.)
+        // The same motion forward counts a quarter: 2 mm in, 2 mm out.
+        let mut both = n.lip.clone();
+        for p in &mut both {
+            p.z += 0.002;
+        }
+        let v_fwd = model.measure(&both).values[2];
+        assert!((v_fwd - DEPTH_WEIGHT * 0.002 / w).abs() < 1e-12, "{v_fwd}");
+        assert!((funnel_measure(0.0, 0.9) - 0.05).abs() < 1e-15);
+        assert!((funnel_measure(0.04, 1.0) - DEPTH_WEIGHT * 0.04).abs() < 1e-15);
+    }
+
+    /// Drawn in only: corners pushed out (spreading) do not take away from the lips' push;
+    /// a spread mouth alone reads no funnel (and a stretch on both sides).
+    #[test]
+    fn spreading_does_not_cancel_the_funnel() {
+        let n = neutral();
+        let w = n.mouth_width();
+        let model = rig().model().clone();
+        // Lips pushed 4 mm forward while the mouth is 10 % wider.
+        let spread_pushed: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(1.1 * p.x, p.y, p.z + 0.004))
+            .collect();
+        let v = model.measure(&spread_pushed).values;
+        assert!(
+            (v[2] - DEPTH_WEIGHT * 0.004 / w).abs() < 1e-12,
+            "the push alone: {} (subtracting the spread it would be {})",
+            v[2],
+            DEPTH_WEIGHT * 0.004 / w - 0.05
+        );
+        assert!(v[8] > 0.04 && v[9] > 0.04, "a stretch: {:?}", &v[8..10]);
+        // Spread alone: no funnel (the measure is 0, not negative).
+        let spread: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(1.1 * p.x, p.y, p.z))
+            .collect();
+        assert_eq!(model.measure(&spread).values[2], 0.0);
+        assert_eq!(funnel_measure(0.0, 1.2), 0.0);
     }
 
     #[test]
