@@ -180,6 +180,39 @@ pub struct ForeheadSurface {
     dots: Vec<Vec3>,
     /// The samples' mean.
     centre: Vec3,
+    /// The rays through every column and row of the camera it was built with, when that
+    /// camera has no lens distortion.
+    rays: Option<PixelRays>,
+}
+
+/// For a camera without lens distortion, the normalised image coordinate of every pixel
+/// column, `(x − cx) / fx`, and row, `(y − cy) / fy`: deprojecting a whole pixel is then a
+/// table lookup and a product instead of a division per sample and refinement step (the
+/// same numbers, computed once).
+#[derive(Debug, Clone)]
+struct PixelRays {
+    camera: Intrinsics,
+    columns: Vec<f64>,
+    rows: Vec<f64>,
+}
+
+impl PixelRays {
+    fn new(k: &Intrinsics) -> Option<Self> {
+        if k.has_distortion() {
+            return None;
+        }
+        Some(Self {
+            camera: *k,
+            columns: (0..k.width).map(|x| (x as f64 - k.cx) / k.fx).collect(),
+            rows: (0..k.height).map(|y| (y as f64 - k.cy) / k.fy).collect(),
+        })
+    }
+
+    /// The tables, if they were made for `k` and cover a `width` x `height` image.
+    fn for_camera(&self, k: &Intrinsics, width: usize, height: usize) -> Option<&Self> {
+        (self.camera == *k && self.columns.len() >= width && self.rows.len() >= height)
+            .then_some(self)
+    }
 }
 
 impl ForeheadSurface {
@@ -261,6 +294,7 @@ impl ForeheadSurface {
             normals,
             dots,
             centre,
+            rays: PixelRays::new(k),
         })
     }
 
@@ -295,11 +329,17 @@ impl ForeheadSurface {
                 camera::project(k, q)
             }
         };
-        let deproject = |px: [f64; 2], z: f64| {
-            if ideal {
-                Vec3::from(k.deproject_ideal(px, z))
+        let rays = self
+            .rays
+            .as_ref()
+            .and_then(|r| r.for_camera(k, wd as usize, hd as usize));
+        let deproject = |x: i64, y: i64, z: f64| {
+            if let Some(r) = rays {
+                Vec3::new(r.columns[x as usize] * z, r.rows[y as usize] * z, z)
+            } else if ideal {
+                Vec3::from(k.deproject_ideal([x as f64, y as f64], z))
             } else {
-                camera::deproject(k, px, z)
+                camera::deproject(k, [x as f64, y as f64], z)
             }
         };
         for _ in 0..ITERATIONS {
@@ -320,7 +360,7 @@ impl ForeheadSurface {
                     continue;
                 }
                 let n = rotation * n;
-                let measured = deproject([x as f64, y as f64], raw as f64 * scale);
+                let measured = deproject(x, y, raw as f64 * scale);
                 let r = n.dot(&(measured - q));
                 if r.abs() > OUTLIER_M {
                     continue;
