@@ -117,10 +117,14 @@ fn bad(key: impl Into<String>, message: impl Into<String>) -> DetectError {
     }
 }
 
+/// Most hue ranges over all colour classes together.
+pub const MAX_HUE_RANGES: usize = 32;
+
 impl DetectConfig {
     /// Checks every key; the error names the first bad one as it is written in a file
     /// (`detect.class[1].hue[0]`).
     pub fn validate(&self) -> Result<(), DetectError> {
+        // (Each hue range is one bit of the detector's per-pixel class tables.)
         let finite_pos = |key: &str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(())
@@ -180,6 +184,13 @@ impl DetectConfig {
                     ));
                 }
             }
+            let ranges_so_far: usize = self.classes[..=i].iter().map(|c| c.hue.len()).sum();
+            if ranges_so_far > MAX_HUE_RANGES {
+                return Err(bad(
+                    format!("{key}.hue"),
+                    format!("more than {MAX_HUE_RANGES} hue ranges over all classes"),
+                ));
+            }
             for (name, [lo, hi]) in [("saturation", class.saturation), ("value", class.value)] {
                 if lo > hi {
                     return Err(bad(
@@ -216,6 +227,34 @@ mod tests {
         let err = cfg.validate().unwrap_err().to_string();
         assert!(err.contains("detect.class[0].hue[1]"), "{err}");
         assert!(err.contains("inverted"), "{err}");
+    }
+
+    #[test]
+    fn too_many_hue_ranges_name_the_class_that_goes_over() {
+        let ranges = (0..20)
+            .map(|i| format!("[{i}, {i}]"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let text = format!(
+            r#"
+            [[class]]
+            name = "a"
+            role = "lip"
+            hue = [{ranges}]
+            saturation = [80, 255]
+            value = [40, 255]
+            [[class]]
+            name = "b"
+            role = "forehead"
+            hue = [{ranges}]
+            saturation = [80, 255]
+            value = [40, 255]
+        "#
+        );
+        let cfg: DetectConfig = toml::from_str(&text).unwrap();
+        let err = cfg.validate().unwrap_err().to_string();
+        assert!(err.contains("detect.class[1].hue"), "{err}");
+        assert!(err.contains("more than 32 hue ranges"), "{err}");
     }
 
     #[test]

@@ -170,9 +170,11 @@ pub struct Detector {
     weights: Vec<Vec<u8>>,
     kernel: Mat,
     hsv: Mat,
+    /// The colour thresholds of every class as bit tables ([`RangeBits`]).
+    range_bits: RangeBits,
+    /// Per pixel of the region, the bits of the (class, hue range) pairs it falls in.
+    pixel_bits: Vec<u32>,
     mask: Mat,
-    range_mask: Mat,
-    or_mask: Mat,
     morphed: Mat,
     labels: Mat,
     stats: Mat,
@@ -212,14 +214,15 @@ impl Detector {
             }
             _ => rect(2)?,
         };
+        let range_bits = RangeBits::new(&config.classes);
         Ok(Self {
             kernel,
             config,
             weights,
             hsv: Mat::default(),
+            range_bits,
+            pixel_bits: Vec::new(),
             mask: Mat::default(),
-            range_mask: Mat::default(),
-            or_mask: Mat::default(),
             morphed: Mat::default(),
             labels: Mat::default(),
             stats: Mat::default(),
@@ -297,6 +300,8 @@ impl Detector {
         )?;
         let image_roi = Mat::roi(&image, roi.to_cv())?;
         imgproc::cvt_color_def(&image_roi, &mut self.hsv, imgproc::COLOR_BGR2HSV)?;
+        self.range_bits
+            .classify(self.hsv.data_bytes()?, &mut self.pixel_bits);
 
         out.searched = Some(roi);
         for class_idx in 0..self.config.classes.len() {
@@ -319,20 +324,13 @@ impl Detector {
         fx: f64,
         out: &mut Detections,
     ) -> Result<(), DetectError> {
-        let class = &self.config.classes[class_idx];
-        let [s_lo, s_hi] = class.saturation;
-        let [v_lo, v_hi] = class.value;
-        for (j, [h_lo, h_hi]) in class.hue.iter().enumerate() {
-            let lower = Scalar::new(*h_lo as f64, s_lo as f64, v_lo as f64, 0.0);
-            let upper = Scalar::new(*h_hi as f64, s_hi as f64, v_hi as f64, 0.0);
-            if j == 0 {
-                core::in_range(&self.hsv, &lower, &upper, &mut self.mask)?;
-            } else {
-                core::in_range(&self.hsv, &lower, &upper, &mut self.range_mask)?;
-                core::bitwise_or_def(&self.mask, &self.range_mask, &mut self.or_mask)?;
-                std::mem::swap(&mut self.mask, &mut self.or_mask);
-            }
-        }
+        // SAFETY: `class_mask` writes every byte of the new matrix.
+        unsafe {
+            self.mask
+                .create_rows_cols(self.hsv.rows(), self.hsv.cols(), core::CV_8UC1)?
+        };
+        self.range_bits
+            .class_mask(class_idx, &self.pixel_bits, self.mask.data_bytes_mut()?);
         // Opening only decides which components are real (it would shave a 2-px dot's rim,
         // biasing the centre): components come from the unopened mask and must keep a pixel
         // through the opening. Closing changes the components themselves.
@@ -516,6 +514,71 @@ impl Detector {
             }
         }
         Ok(())
+    }
+}
+
+/// Every class's colour thresholds as bit tables: one bit per (class, hue range) pair, set in
+/// `hue[h]` when `h` is within that hue range, in `saturation[s]` and `value[v]` when they are
+/// within the class's. A pixel is in a class's hue range exactly when the three entries of its
+/// H, S and V share that bit: OpenCV's `inRange` (bounds included) of every range of every
+/// class, ORed per class, in one pass over the region instead of one `inRange` per range, and
+/// three table reads per pixel instead of six comparisons per range.
+#[derive(Debug, Clone)]
+struct RangeBits {
+    hue: [u32; 256],
+    saturation: [u32; 256],
+    value: [u32; 256],
+    /// Per class, the bits of its hue ranges.
+    class: Vec<u32>,
+}
+
+impl RangeBits {
+    /// `classes` as validated ([`config::MAX_HUE_RANGES`] ranges at most).
+    fn new(classes: &[ColorClass]) -> Self {
+        const _: () = assert!(config::MAX_HUE_RANGES <= u32::BITS as usize);
+        let mut bits = Self {
+            hue: [0; 256],
+            saturation: [0; 256],
+            value: [0; 256],
+            class: Vec::with_capacity(classes.len()),
+        };
+        let within = |[lo, hi]: [u8; 2]| move |x: usize| lo as usize <= x && x <= hi as usize;
+        let mut next = 0;
+        for class in classes {
+            let mut class_bits = 0;
+            for &hue in &class.hue {
+                let bit = 1u32 << next;
+                next += 1;
+                class_bits |= bit;
+                for x in (0..256).filter(|&x| within(hue)(x)) {
+                    bits.hue[x] |= bit;
+                }
+                for x in (0..256).filter(|&x| within(class.saturation)(x)) {
+                    bits.saturation[x] |= bit;
+                }
+                for x in (0..256).filter(|&x| within(class.value)(x)) {
+                    bits.value[x] |= bit;
+                }
+            }
+            bits.class.push(class_bits);
+        }
+        bits
+    }
+
+    /// Each pixel's bits, from the region's HSV bytes.
+    fn classify(&self, hsv: &[u8], out: &mut Vec<u32>) {
+        out.clear();
+        out.extend(hsv.chunks_exact(3).map(|p| {
+            self.hue[p[0] as usize] & self.saturation[p[1] as usize] & self.value[p[2] as usize]
+        }));
+    }
+
+    /// Class `class_idx`'s mask (255 inside, 0 outside) from the pixels' bits.
+    fn class_mask(&self, class_idx: usize, pixel_bits: &[u32], mask: &mut [u8]) {
+        let class = self.class[class_idx];
+        for (m, &b) in mask.iter_mut().zip(pixel_bits) {
+            *m = if b & class != 0 { 255 } else { 0 };
+        }
     }
 }
 

@@ -442,6 +442,89 @@ fn the_weight_table_is_opencvs_per_pixel_weight_at_any_image_width() {
 }
 
 #[test]
+fn the_class_masks_are_opencvs_in_range_ored_over_each_classs_hue_ranges() {
+    // Two classes as configured by default, and a red one whose hue wraps (two ranges),
+    // with ranges that touch the byte's ends: every (h, s, v) byte triple of a coarse grid
+    // plus every byte at the bounds themselves.
+    let mut classes = default_classes();
+    classes.push(ColorClass {
+        name: "red".into(),
+        role: DotRole::Lip,
+        hue: vec![[0, 8], [170, 179]],
+        saturation: [0, 200],
+        value: [60, 255],
+    });
+    let bits = RangeBits::new(&classes);
+    let mut levels: Vec<u8> = (0..=255u8).step_by(5).collect();
+    for c in &classes {
+        for r in c.hue.iter().chain([&c.saturation, &c.value]) {
+            for b in [r[0], r[1]] {
+                levels.extend([b.saturating_sub(1), b, b.saturating_add(1)]);
+            }
+        }
+    }
+    levels.sort_unstable();
+    levels.dedup();
+    let mut hsv = Vec::new();
+    for &h in &levels {
+        for &s in &levels {
+            for &v in &levels {
+                hsv.extend([h, s, v]);
+            }
+        }
+    }
+    let pixels = hsv.len() / 3;
+    let image = Mat::new_rows_cols_with_data(1, pixels as i32 * 3, &hsv).unwrap();
+    let image = image.reshape(3, 1).unwrap();
+    let mut pixel_bits = Vec::new();
+    bits.classify(&hsv, &mut pixel_bits);
+    for (idx, class) in classes.iter().enumerate() {
+        let mut expected = Mat::default();
+        for (j, [lo, hi]) in class.hue.iter().enumerate() {
+            let lower = Scalar::new(
+                *lo as f64,
+                class.saturation[0] as f64,
+                class.value[0] as f64,
+                0.0,
+            );
+            let upper = Scalar::new(
+                *hi as f64,
+                class.saturation[1] as f64,
+                class.value[1] as f64,
+                0.0,
+            );
+            let mut range = Mat::default();
+            core::in_range(&image, &lower, &upper, &mut range).unwrap();
+            if j == 0 {
+                expected = range;
+            } else {
+                let mut or = Mat::default();
+                core::bitwise_or_def(&expected, &range, &mut or).unwrap();
+                expected = or;
+            }
+        }
+        let mut mask = vec![0u8; pixels];
+        bits.class_mask(idx, &pixel_bits, &mut mask);
+        let expected = expected.data_bytes().unwrap();
+        let inside = mask.iter().filter(|&&m| m == 255).count();
+        assert!(
+            inside > 0 && inside < pixels,
+            "{}: {inside} of {pixels}",
+            class.name
+        );
+        for (i, (&got, &want)) in mask.iter().zip(expected).enumerate() {
+            assert_eq!(
+                got,
+                want,
+                "{} at hsv {:?}",
+                class.name,
+                &hsv[3 * i..3 * i + 3]
+            );
+        }
+    }
+}
+
+#[test]
 fn components_are_found_the_same_wherever_the_mask_lies_in_the_region() {
     // Connected components run over the box round the mask's pixels only: dots in a corner
     // of a large region, at odd and even offsets, come out as from a region just round them.

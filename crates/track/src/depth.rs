@@ -46,7 +46,30 @@ const MIN_VALID_RAW: f64 = 1.0;
 #[derive(Debug, Default)]
 pub struct DepthScratch {
     samples: Vec<(f64, f64, f64)>,
-    values: Vec<f64>,
+    /// Values a median is selected from, as integer keys in the values' own order (raw
+    /// readings; the bits of non-negative residuals): the selection then compares integers,
+    /// not floats by `total_cmp`, and picks the same value.
+    keys: Vec<u64>,
+}
+
+/// The upper median of `keys`, the `len / 2`-th smallest (reordered: those before it are the
+/// smaller half).
+fn upper_median(keys: &mut [u64]) -> u64 {
+    let mid = keys.len() / 2;
+    *keys.select_nth_unstable(mid).1
+}
+
+/// An order-keeping integer key of a raw reading (a whole number of depth units, as the
+/// samples hold them).
+fn raw_key(z: f64) -> u64 {
+    z as u64
+}
+
+/// An order-keeping integer key of a non-negative float: for those, the IEEE bits order as
+/// the values do.
+fn magnitude_key(x: f64) -> u64 {
+    debug_assert!(x >= 0.0);
+    x.to_bits()
 }
 
 /// How a depth value was obtained.
@@ -69,22 +92,19 @@ pub fn depth_at_dot(
     let lo = (range[0] / scale).max(MIN_VALID_RAW);
     let hi = range[1] / scale;
     let inner = (INNER_DISC_SHARE * radius_px).max(MIN_INNER_DISC_PX);
-    let DepthScratch {
-        samples: buf,
-        values: zs,
-    } = scratch;
+    let DepthScratch { samples: buf, keys } = scratch;
     collect(depth, center, inner, lo, hi, buf);
     let disc_pixels = std::f64::consts::PI * inner * inner;
     if buf.len() >= MIN_MEDIAN_READINGS && buf.len() as f64 >= MIN_DISC_COVERAGE * disc_pixels {
-        zs.clear();
-        zs.extend(buf.iter().map(|s| s.2));
-        let mid = zs.len() / 2;
-        zs.select_nth_unstable_by(mid, f64::total_cmp);
-        let median = if zs.len() % 2 == 1 {
-            zs[mid]
+        keys.clear();
+        keys.extend(buf.iter().map(|s| raw_key(s.2)));
+        let mid = keys.len() / 2;
+        let upper = upper_median(keys) as f64;
+        let median = if keys.len() % 2 == 1 {
+            upper
         } else {
-            let below = zs[..mid].iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            (below + zs[mid]) / 2.0
+            let below = keys[..mid].iter().copied().max().expect("mid ≥ 1") as f64;
+            (below + upper) / 2.0
         };
         return Some((median * scale, DepthMethod::Median));
     }
@@ -158,19 +178,15 @@ fn plane_over(
 ) -> Option<(f64, DepthMethod)> {
     let lo = (range[0] / scale).max(MIN_VALID_RAW);
     let hi = range[1] / scale;
-    let DepthScratch {
-        samples: buf,
-        values: zs,
-    } = scratch;
+    let DepthScratch { samples: buf, keys } = scratch;
     collect(depth, center, radius, lo, hi, buf);
     buf.retain(|&(dx, dy, _)| inside(dx, dy));
     if buf.len() < MIN_PLANE_READINGS {
         return None;
     }
-    zs.clear();
-    zs.extend(buf.iter().map(|s| s.2));
-    let mid = zs.len() / 2;
-    let median = *zs.select_nth_unstable_by(mid, f64::total_cmp).1;
+    keys.clear();
+    keys.extend(buf.iter().map(|s| raw_key(s.2)));
+    let median = upper_median(keys) as f64;
     let tol = OTHER_SURFACE_M / scale;
     buf.retain(|s| (s.2 - median).abs() <= tol);
     if buf.len() < MIN_PLANE_READINGS {
@@ -179,11 +195,12 @@ fn plane_over(
     // Two passes: the plane through every kept reading, then again without the readings far
     // off that plane (the rim of the mouth opening, flying pixels at an edge).
     let first = fit_plane(buf)?;
-    let residuals = zs;
-    residuals.clear();
-    residuals.extend(buf.iter().map(|&s| (s.2 - first.dot(&lift(&s))).abs()));
-    let mid = residuals.len() / 2;
-    let mad = *residuals.select_nth_unstable_by(mid, f64::total_cmp).1;
+    keys.clear();
+    keys.extend(
+        buf.iter()
+            .map(|&s| magnitude_key((s.2 - first.dot(&lift(&s))).abs())),
+    );
+    let mad = f64::from_bits(upper_median(keys));
     let keep = (RESIDUAL_SIGMAS * SIGMA_PER_MAD * mad).max(MIN_RESIDUAL_CUT_M / scale);
     buf.retain(|&s| (s.2 - first.dot(&lift(&s))).abs() <= keep);
     if buf.len() < MIN_PLANE_READINGS {
