@@ -1047,7 +1047,7 @@ mod tests {
             v[2]
         );
         // (Counted at half weight, as before the rule, it would read 0.025.)
-        // The same motion forward counts a quarter: 2 mm in, 2 mm out.
+        // A motion forward counts a quarter: every dot 2 mm out reads a quarter of 2 mm.
         let mut both = n.lip.clone();
         for p in &mut both {
             p.z += 0.002;
