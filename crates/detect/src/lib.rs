@@ -1,7 +1,8 @@
 //! The dot detector: finds painted dots in a colour image with OpenCV.
 //!
 //! Per colour class ([`ColorClass`], HSV ranges, several hue ranges OR-ed so red can wrap):
-//! threshold (`inRange`), a small morphology step, connected components with statistics,
+//! threshold (the HSV ranges, as OpenCV's `inRange` would, for every class in one pass of
+//! table lookups), a small morphology step, connected components with statistics,
 //! filters (area for the distance measured in the registered depth image, fill ratio,
 //! aspect, a valid depth reading nearby), and a sub-pixel centre: the image moments of a
 //! per-pixel colour weight (how close the pixel's hue and saturation are to the paint) over
