@@ -543,7 +543,12 @@ impl RangeBits {
             value: [0; 256],
             class: Vec::with_capacity(classes.len()),
         };
-        let within = |[lo, hi]: [u8; 2]| move |x: usize| lo as usize <= x && x <= hi as usize;
+        // Bounds included, as `inRange`'s; an inverted range marks nothing.
+        let mark = |table: &mut [u32; 256], [lo, hi]: [u8; 2], bit: u32| {
+            for entry in &mut table[lo as usize..=hi as usize] {
+                *entry |= bit;
+            }
+        };
         let mut next = 0;
         for class in classes {
             let mut class_bits = 0;
@@ -551,15 +556,9 @@ impl RangeBits {
                 let bit = 1u32 << next;
                 next += 1;
                 class_bits |= bit;
-                for x in (0..256).filter(|&x| within(hue)(x)) {
-                    bits.hue[x] |= bit;
-                }
-                for x in (0..256).filter(|&x| within(class.saturation)(x)) {
-                    bits.saturation[x] |= bit;
-                }
-                for x in (0..256).filter(|&x| within(class.value)(x)) {
-                    bits.value[x] |= bit;
-                }
+                mark(&mut bits.hue, hue, bit);
+                mark(&mut bits.saturation, class.saturation, bit);
+                mark(&mut bits.value, class.value, bit);
             }
             bits.class.push(class_bits);
         }

@@ -403,32 +403,40 @@ impl ForeheadSurface {
             };
             // Four samples at a time where the CPU can and the camera is ideal (the same
             // numbers, see `lanes`), then the rest one by one, all summed in order.
-            let mut first_single = 0;
             #[cfg(target_arch = "x86_64")]
-            if let (true, Some(rays)) = (lanes && lanes::available(), rays) {
-                let inputs = lanes::StepInputs {
-                    rotation: &rotation,
-                    translation: &translation,
-                    camera: [k.fx, k.fy, k.cx, k.cy],
-                    width: wd,
-                    height: hd,
-                    depth: &depth.data,
-                    scale,
-                    columns: &rays.columns,
-                    rows: &rays.rows,
-                    w_depth,
-                };
-                first_single = self.columns.grouped_len();
-                for first in (0..first_single).step_by(4) {
-                    // SAFETY: `lanes::available` checked the CPU.
-                    for t in unsafe { lanes::four_samples(&self.columns, first, &inputs) }
-                        .into_iter()
-                        .flatten()
-                    {
-                        add(t);
+            let first_single = match (lanes && lanes::available(), rays) {
+                (true, Some(rays)) => {
+                    let inputs = lanes::StepInputs {
+                        rotation: &rotation,
+                        translation: &translation,
+                        camera: [k.fx, k.fy, k.cx, k.cy],
+                        width: wd,
+                        height: hd,
+                        depth: &depth.data,
+                        scale,
+                        columns: &rays.columns,
+                        rows: &rays.rows,
+                        w_depth,
+                    };
+                    let grouped = self.columns.grouped_len();
+                    for first in (0..grouped).step_by(4) {
+                        // SAFETY: `lanes::available` checked the CPU.
+                        for t in unsafe { lanes::four_samples(&self.columns, first, &inputs) }
+                            .into_iter()
+                            .flatten()
+                        {
+                            add(t);
+                        }
                     }
+                    grouped
                 }
-            }
+                _ => 0,
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let first_single = {
+                let _ = lanes;
+                0
+            };
             for (p, n) in self.points.iter().zip(&self.normals).skip(first_single) {
                 if let Some(t) = terms(p, n) {
                     add(t);
