@@ -21,6 +21,8 @@ from scipy.interpolate import BSpline
 from scipy.signal import savgol_filter
 from scipy.spatial.transform import Rotation
 
+import rig_reference
+
 
 # ---------------------------------------------------------------- character (§2, §7)
 
@@ -204,6 +206,7 @@ def run(character, lines, smooth_method="bspline", hold=0.5, decay=0.5, samples=
     d0 = (d0_cam - origin) @ axes
     m = deformation(ch["mode"], d0, ch["p0"], ch["driver"], width, ch["manual"])
 
+    rig = rig_reference.Rig(d0)
     rot, trans = np.eye(3), np.zeros(3)  # last good alignment current -> neutral
     last = [None] * n
     out = []
@@ -257,6 +260,7 @@ def run(character, lines, smooth_method="bspline", hold=0.5, decay=0.5, samples=
             "confidence": {nm: float(conf[ch["driver"][j]]) for j, nm in enumerate(ch["names"])},
             "head": {"rotation": q.tolist(), "translation": head_t.tolist()},
             "head_lost": head_lost,
+            "rig": rig.step(t, d),
             "curve": None if curve is None else
             {"method": smooth_method, "closed": True, "points": np.asarray(curve).tolist()},
         })

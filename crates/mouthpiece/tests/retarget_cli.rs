@@ -87,6 +87,68 @@ fn floats(v: &Value) -> Vec<f64> {
         .collect()
 }
 
+/// The rig of a line against the reference's (`tests/reference/rig_reference.py`, written from
+/// docs/rig.md): the jaw, both lips' rigid motions and every curve, by name and in order.
+fn rig_agrees(got: &Value, expected: &Value, at: &str) {
+    let numbers = |v: &Value| match v.as_f64() {
+        Some(x) => vec![x],
+        None => floats(v),
+    };
+    let close = |what: &str, a: &Value, b: &Value, tol: f64| {
+        let (a, b) = (numbers(a), numbers(b));
+        assert_eq!(a.len(), b.len(), "{at}: rig {what}: {a:?} vs {b:?}");
+        let d = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(d <= tol, "{at}: rig {what} differs by {d}: {a:?} vs {b:?}");
+    };
+    close(
+        "jaw angle",
+        &got["jaw"]["angle_deg"],
+        &expected["jaw"]["angle_deg"],
+        1e-7,
+    );
+    close(
+        "jaw slide",
+        &got["jaw"]["slide_m"],
+        &expected["jaw"]["slide_m"],
+        1e-10,
+    );
+    for lip in ["upper", "lower"] {
+        let (g, e) = (&got["lips"][lip], &expected["lips"][lip]);
+        close(
+            &format!("{lip} lip rotation"),
+            &g["rotation"],
+            &e["rotation"],
+            1e-8,
+        );
+        close(
+            &format!("{lip} lip translation"),
+            &g["translation"],
+            &e["translation"],
+            1e-10,
+        );
+        close(
+            &format!("{lip} lip residual"),
+            &g["residual"],
+            &e["residual"],
+            1e-10,
+        );
+    }
+    let (gc, ec) = (
+        got["curves"].as_object().expect("rig curves"),
+        expected["curves"].as_object().expect("reference curves"),
+    );
+    let names: Vec<_> = gc.keys().collect();
+    assert_eq!(names, ec.keys().collect::<Vec<_>>(), "{at}: curve names");
+    assert_eq!(names.len(), 18, "{at}: curves");
+    for name in names {
+        close(name, &gc[name], &ec[name], 1e-9);
+    }
+}
+
 #[test]
 fn agrees_with_numpy_reference_on_unseen_random_cases() {
     let py = python();
@@ -156,6 +218,7 @@ fn agrees_with_numpy_reference_on_unseen_random_cases() {
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0, f64::max);
             assert!(dt < 1e-9, "{at}: head translation {gt:?} vs {et:?}");
+            rig_agrees(&g["rig"], &e["rig"], &at);
             match (&g["curve"], &e["curve"]) {
                 (Value::Null, Value::Null) => {}
                 (gc, ec) => {

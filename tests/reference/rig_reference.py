@@ -1,0 +1,163 @@
+#!/usr/bin/env python3
+"""Independent reference of mouthpiece's rig (docs/rig.md), in numpy/scipy.
+
+Written from docs/rig.md, not from the Rust code: the jaw (angle and slide about the hinge),
+each lip's rigid motion (scipy's `Rotation.align_vectors`, not the Rust SVD) and the 18
+ARKit-named curves with their default ranges widened over the learning window.
+`retarget_reference.py` calls `Rig.step` with the stabilised dots of every line, and the
+`retarget_cli` tests compare the binary's `rig` with it.
+
+Everything is in the performer's neutral mouth frame (x to the performer's left, y up, z out
+of the mouth; metres), relative to the neutral dots `d0`. Dot roles: the left corner is dot 0,
+the right corner dot n/2, the upper lip the dots between them, the lower lip the rest.
+"""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+CURVE_NAMES = [
+    "jawOpen", "mouthClose", "mouthFunnel", "mouthPucker", "mouthLeft", "mouthRight",
+    "mouthSmileLeft", "mouthSmileRight", "mouthStretchLeft", "mouthStretchRight",
+    "mouthRollUpper", "mouthRollLower", "mouthUpperUpLeft", "mouthUpperUpRight",
+    "mouthLowerDownLeft", "mouthLowerDownRight", "mouthPressLeft", "mouthPressRight",
+]
+
+# docs/rig.md, "The named curves": default ranges (degrees for jawOpen, mouth widths else).
+DEFAULT_RANGES = {
+    "jawOpen": 25.0, "mouthClose": 0.15, "mouthFunnel": 0.15, "mouthPucker": 0.25,
+    "mouthLeft": 0.10, "mouthRight": 0.10, "mouthSmileLeft": 0.12, "mouthSmileRight": 0.12,
+    "mouthStretchLeft": 0.15, "mouthStretchRight": 0.15, "mouthRollUpper": 0.10,
+    "mouthRollLower": 0.16, "mouthUpperUpLeft": 0.10, "mouthUpperUpRight": 0.10,
+    "mouthLowerDownLeft": 0.12, "mouthLowerDownRight": 0.12, "mouthPressLeft": 0.15,
+    "mouthPressRight": 0.15,
+}
+
+DEPTH_WEIGHT = 0.25
+
+
+def rotate_x(v, angle):
+    """(y, z) turned by `angle` about the x axis (y towards z for a positive angle)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([v[0] * c - v[1] * s, v[0] * s + v[1] * c])
+
+
+def lip_motion(a, b):
+    """The rigid motion carrying the dots `a` onto `b` (least squares), as the wire has it."""
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    r, _ = Rotation.align_vectors(b - cb, a - ca)
+    m = r.as_matrix()
+    t = cb - m @ ca
+    residual = np.sqrt(np.mean(np.sum((a @ m.T + t - b) ** 2, axis=1)))
+    x, y, z, w = r.as_quat()
+    q = np.array([w, x, y, z])
+    if q[0] < 0:
+        q = -q
+    return {"rotation": q.tolist(), "translation": t.tolist(), "residual": float(residual)}
+
+
+class Rig:
+    def __init__(self, d0, hinge_up=0.5, hinge_back=1.6, learn_s=4.0, ranges=None):
+        self.d0 = np.asarray(d0, float)
+        n = len(self.d0)
+        self.left, self.right = 0, n // 2
+        self.upper = list(range(1, n // 2))
+        self.lower = list(range(n // 2 + 1, n))
+        self.w = np.linalg.norm(self.d0[self.left] - self.d0[self.right])
+        # The pivot: hinge_up widths above the mouth centre, hinge_back behind it (y, z).
+        self.pivot = np.array([hinge_up * self.w, -hinge_back * self.w])
+        self.learn_s = learn_s
+        self.set = dict(ranges or {})
+        self.ranges = {k: self.set.get(k, v) for k, v in DEFAULT_RANGES.items()}
+        self.start = None
+
+    def side_weight(self, i):
+        """The weight of dot i for the performer's left side (right: 1 − it)."""
+        return float(np.clip(0.5 + self.d0[i, 0] / (self.w / 2), 0.0, 1.0))
+
+    def measures(self, d):
+        d0, w, up, lo = self.d0, self.w, self.upper, self.lower
+        delta = d - d0
+        du = delta[up].mean(axis=0)
+        dl = delta[lo].mean(axis=0)
+        c0 = d0[lo].mean(axis=0)
+        # Jaw angle: the lower-lip centroid turned about the pivot in the (y, z) plane, after
+        # the upper lip's forward motion (shared by both lips) is taken off its motion.
+        r0 = c0[1:] - self.pivot
+        r1 = r0 + np.array([dl[1], dl[2] - du[2]])
+        angle = np.arctan2(r0[0] * r1[1] - r0[1] * r1[0], r0 @ r1)
+        slide = dl[0] - du[0]
+
+        def without_jaw(i):
+            """Dot i's motion with the jaw's rotation and slide undone."""
+            p = d[i].copy()
+            p[0] -= slide
+            p[1:] = self.pivot + rotate_x(p[1:] - self.pivot, -angle)
+            return p - d0[i]
+
+        free = {i: without_jaw(i) for i in lo + [self.left, self.right]}
+        m = {}
+        m["jawOpen"] = np.degrees(angle)
+        jaw_drop = c0[1] - (self.pivot + rotate_x(r0, angle))[0]
+        m["mouthClose"] = (jaw_drop - (du[1] - dl[1])) / w
+        # Horizontal scale: least squares x ≈ s·x0 over every dot (the lower lip's x without
+        # the slide); each side's scale about the centre moved by the midline-weighted shift.
+        x = d[:, 0].copy()
+        x[lo] -= slide
+        x0 = d0[:, 0]
+        s = (x @ x0) / (x0 @ x0)
+        mid = np.clip(1 - np.abs(x0) / (w / 2), 0, 1)
+        centre = (mid @ (x - x0)) / mid.sum() if mid.sum() > 0 else 0.0
+        xc = x - centre
+        left, right = x0 >= 0, x0 < 0
+        s_left = (xc[left] @ x0[left]) / (x0[left] @ x0[left])
+        s_right = (xc[right] @ x0[right]) / (x0[right] @ x0[right])
+        m["mouthFunnel"] = DEPTH_WEIGHT * du[2] / w + max(1 - s, 0) / 2
+        m["mouthPucker"] = 1 - s
+        shift = (d[:, 0] - x0).mean() / w
+        m["mouthLeft"], m["mouthRight"] = shift, -shift
+
+        def corner(c, upper_n, lower_n):
+            cy = 0.5 * (delta[c, 1] + free[c][1])
+            return (cy + delta[upper_n, 1] + free[lower_n][1]) / 3 / w
+
+        m["mouthSmileLeft"] = corner(self.left, up[0], lo[-1])
+        m["mouthSmileRight"] = corner(self.right, up[-1], lo[0])
+        m["mouthStretchLeft"] = (s_left - 1) / 2
+        m["mouthStretchRight"] = (s_right - 1) / 2
+        m["mouthRollUpper"] = np.mean([-delta[i, 1] - DEPTH_WEIGHT * delta[i, 2] for i in up]) / w
+        m["mouthRollLower"] = np.mean([free[i][1] - DEPTH_WEIGHT * free[i][2] for i in lo]) / w
+
+        def sided(idx, values):
+            wl = np.array([self.side_weight(i) for i in idx])
+            v = np.array(values)
+            return (wl @ v) / wl.sum(), ((1 - wl) @ v) / (1 - wl).sum()
+
+        up_l, up_r = sided(up, [delta[i, 1] for i in up])
+        lo_l, lo_r = sided(lo, [free[i][1] for i in lo])
+        m["mouthUpperUpLeft"], m["mouthUpperUpRight"] = up_l / w, up_r / w
+        m["mouthLowerDownLeft"], m["mouthLowerDownRight"] = -lo_l / w, -lo_r / w
+        m["mouthPressLeft"], m["mouthPressRight"] = (lo_l - up_l) / w, (lo_r - up_r) / w
+        return m, angle, slide
+
+    def step(self, t, d):
+        d = np.asarray(d, float)
+        m, angle, slide = self.measures(d)
+        if self.start is None:
+            self.start = t
+        if t - self.start <= self.learn_s:
+            for k, v in m.items():
+                if k not in self.set and np.isfinite(v):
+                    self.ranges[k] = max(self.ranges[k], v)
+        curves = {}
+        for k in CURVE_NAMES:
+            v = m[k] / self.ranges[k]
+            curves[k] = float(np.clip(v, 0, 1)) if np.isfinite(v) else 0.0
+        lips = {}
+        for name, idx in (("upper", self.upper), ("lower", self.lower)):
+            idx = idx + [self.left, self.right]
+            lips[name] = lip_motion(self.d0[idx], d[idx])
+        return {
+            "jaw": {"angle_deg": float(np.degrees(angle)), "slide_m": float(slide)},
+            "lips": lips,
+            "curves": curves,
+        }
