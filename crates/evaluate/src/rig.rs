@@ -81,6 +81,28 @@ impl RigMetrics {
     }
 }
 
+/// One counted frame, kept when [`RigAccuracy::keep_frames`] asks (`mouthpiece evaluate
+/// --rig-frames`): what an outside analysis needs to recompute the figures and split the
+/// error by its source.
+#[derive(Debug, Clone)]
+pub struct RigFrameRecord {
+    pub t: f64,
+    /// The synthetic mouth's own jaw angle (radians) and rounding.
+    pub jaw: f64,
+    pub round: f64,
+    /// Every curve from the tracked dots and from the true dots, [`CURVE_NAMES`] order.
+    pub tracked: [f64; CURVES],
+    pub reference: [f64; CURVES],
+    /// The stabilised lip dots (neutral mouth frame, metres) the two rigs measured, and each
+    /// rig's neutral dots.
+    pub tracked_lip: Vec<[f64; 3]>,
+    pub reference_lip: Vec<[f64; 3]>,
+    pub tracked_neutral: Vec<[f64; 3]>,
+    pub reference_neutral: Vec<[f64; 3]>,
+    /// The ranges both curves were computed with.
+    pub ranges: [f64; CURVES],
+}
+
 /// The measurement in progress: the pipeline's rig against the one the ground truth gives.
 #[derive(Debug)]
 pub struct RigAccuracy {
@@ -92,6 +114,8 @@ pub struct RigAccuracy {
     /// of its neutral pose.
     reference: Option<(Retargeter, RigModel)>,
     pub metrics: RigMetrics,
+    /// Every counted frame, when kept.
+    pub frames: Option<Vec<RigFrameRecord>>,
 }
 
 impl RigAccuracy {
@@ -108,7 +132,14 @@ impl RigAccuracy {
             calibration_s,
             reference: None,
             metrics: RigMetrics::default(),
+            frames: None,
         }
+    }
+
+    /// Keeps every counted frame in [`Self::frames`].
+    pub fn keep_frames(mut self) -> Self {
+        self.frames = Some(Vec::new());
+        self
     }
 }
 
@@ -149,6 +180,21 @@ impl Measure for RigAccuracy {
         }
         m.jaw_open.push(a[0], mouth.jaw);
         m.funnel.push(a[2], mouth.round);
+        if let (Some(frames), Some(tracked)) = (&mut self.frames, &f.tracked.stabilised) {
+            let xyz = |v: &[nalgebra::Vector3<f64>]| v.iter().map(|p| [p.x, p.y, p.z]).collect();
+            frames.push(RigFrameRecord {
+                t: f.t,
+                jaw: mouth.jaw,
+                round: mouth.round,
+                tracked: a,
+                reference: b,
+                tracked_lip: xyz(&tracked.lip),
+                reference_lip: xyz(&out.performer.lip),
+                tracked_neutral: xyz(rig.model().neutral()),
+                reference_neutral: xyz(model.neutral()),
+                ranges,
+            });
+        }
         Ok(())
     }
 }

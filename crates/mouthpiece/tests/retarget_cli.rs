@@ -697,3 +697,77 @@ fn an_output_that_is_not_a_regular_file_is_written_in_place() {
     let text = reader.join().unwrap();
     assert!(text.lines().count() > 10, "{text}");
 }
+
+/// The last table row of `text` whose first cell is `first`, split into its cells.
+fn table_row(text: &str, first: &str) -> Vec<String> {
+    text.lines()
+        .filter(|l| l.starts_with(&format!("| {first} |")))
+        .last()
+        .unwrap_or_else(|| panic!("no row for {first} in:\n{text}"))
+        .trim_matches('|')
+        .split('|')
+        .map(|c| c.trim().to_string())
+        .collect()
+}
+
+/// `evaluate --rig-frames` writes what the rig table is made of: the numpy reference
+/// recomputes every curve from the file's stabilised dots, neutral dots and ranges
+/// (`scripts/rig-error-split.py`), and the worst curve, its RMS and both correlations come
+/// out as `evaluate` printed them; a file that cannot be created is a bad input.
+#[test]
+fn evaluate_rig_frames_are_what_the_rig_table_is_made_of() {
+    let py = python();
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("rig.csv");
+    let out = run_ok(
+        mouthpiece()
+            .args([
+                "evaluate",
+                "--seeds",
+                "1",
+                "--noise",
+                "kinect",
+                "--head-motion",
+            ])
+            .args(["strong", "--seconds", "3", "--character"])
+            .arg(repo().join("config/characters/human.toml"))
+            .arg("--rig-frames")
+            .arg(&csv),
+    );
+    let table = String::from_utf8(out.stdout).unwrap();
+    // seed | noise | motion | frames | jaw | slide | worst | its RMS | jawOpen r | funnel r
+    let rig = table_row(&table, "1");
+    let out = run_ok(
+        Command::new(&py)
+            .arg(repo().join("scripts/rig-error-split.py"))
+            .arg(&csv),
+    );
+    let split = String::from_utf8(out.stdout).unwrap();
+    // seed | noise | motion | frames | recomputed | worst | its RMS | jawOpen r | funnel r | …
+    let mine = table_row(&split, "1");
+    let recomputed: f64 = mine[4].parse().unwrap();
+    assert!(
+        recomputed <= 1e-9,
+        "curves recomputed differ by {recomputed}:\n{split}"
+    );
+    assert_eq!(rig[3], mine[3], "frames:\n{table}\n{split}");
+    assert_eq!(
+        rig[6..10],
+        mine[5..9],
+        "worst curve, RMS, r:\n{table}\n{split}"
+    );
+
+    let bad = mouthpiece()
+        .args(["evaluate", "--seeds", "1", "--character"])
+        .arg(repo().join("config/characters/human.toml"))
+        .arg("--rig-frames")
+        .arg(dir.path().join("missing/rig.csv"))
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("--rig-frames") && err.contains("missing"),
+        "{err}"
+    );
+}

@@ -64,6 +64,11 @@ pub struct Args {
     /// After the rig table, every named curve's RMS per session.
     #[arg(long)]
     pub per_curve: bool,
+    /// Writes every counted frame's rig to this CSV file: the synthetic mouth's jaw and
+    /// rounding, every curve from the tracked and from the true dots, and the stabilised lip
+    /// dots both measured (`scripts/rig-error-split.py` reads it).
+    #[arg(long, value_name = "FILE")]
+    pub rig_frames: Option<PathBuf>,
 }
 
 /// A bad `--layout` is the caller's input (exit code 2); anything else is not.
@@ -105,6 +110,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "--seconds must be more than 2 (the neutral pose takes the first 1.5 s)"
         )));
     }
+    let mut frames_csv = match &args.rig_frames {
+        Some(path) => Some(crate::cmd::evaluate_rig::FramesCsv::create(
+            path,
+            config.track.layout().lip_dots,
+        )?),
+        None => None,
+    };
     println!("{TABLE_HEADER}");
     let mut steps = StepStats::default();
     let mut rig_rows = Vec::new();
@@ -133,6 +145,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     config.track.layout(),
                     config.track.calibration_s,
                 );
+                if frames_csv.is_some() {
+                    rig = rig.keep_frames();
+                }
                 let m = mouthpiece_evaluate::evaluate_with(
                     synth,
                     &config,
@@ -152,9 +167,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     println!("\n{}", m.steps.table());
                     steps.add(&m.steps);
                 }
+                if let (Some(csv), Some(frames)) = (&mut frames_csv, &rig.frames) {
+                    let names = [
+                        seed.to_string(),
+                        format!("{noise:?}"),
+                        format!("{motion:?}"),
+                    ];
+                    csv.session([&names[0], &names[1], &names[2]], frames)?;
+                }
                 rig_rows.push((format!("{seed} | {noise:?} | {motion:?}"), rig.metrics));
             }
         }
+    }
+    if let Some(csv) = frames_csv {
+        csv.finish()?;
     }
     if args.steps {
         println!("All sessions:\n\n{}", steps.table());

@@ -33,3 +33,79 @@ pub fn print_curves(m: &RigMetrics) {
         .collect();
     println!("curve RMS: {}", cells.join(", "));
 }
+
+/// The `--rig-frames` CSV: one row per counted frame of every session.
+pub struct FramesCsv {
+    path: std::path::PathBuf,
+    out: std::io::BufWriter<std::fs::File>,
+}
+
+impl FramesCsv {
+    /// Creates the file and writes the header: the session, the time, the synthetic mouth's
+    /// jaw (degrees) and rounding, every curve from the tracked dots and from the true dots,
+    /// every lip dot's stabilised position (metres, neutral mouth frame), tracked and true,
+    /// each rig's neutral dots, and the ranges both rigs' curves were computed with.
+    pub fn create(path: &std::path::Path, lip_dots: usize) -> anyhow::Result<Self> {
+        use anyhow::Context;
+        let file = std::fs::File::create(path)
+            .with_context(|| format!("--rig-frames: cannot create {}", path.display()))
+            .map_err(crate::exit::bad_input)?;
+        let mut header = vec!["seed,noise,head_motion,t,true_jaw_deg,true_round".to_string()];
+        for side in ["tracked", "reference"] {
+            header.extend(CURVE_NAMES.iter().map(|c| format!("{side}_{c}")));
+        }
+        for side in [
+            "tracked",
+            "reference",
+            "tracked_neutral",
+            "reference_neutral",
+        ] {
+            for i in 0..lip_dots {
+                let dot = mouthpiece_retarget::PerformerLayout::lip_name(i);
+                header.extend(["x", "y", "z"].map(|a| format!("{side}_{dot}_{a}")));
+            }
+        }
+        header.extend(CURVE_NAMES.iter().map(|c| format!("range_{c}")));
+        let mut csv = Self {
+            path: path.to_path_buf(),
+            out: std::io::BufWriter::new(file),
+        };
+        csv.line(&header.join(","))?;
+        Ok(csv)
+    }
+
+    fn line(&mut self, text: &str) -> anyhow::Result<()> {
+        use anyhow::Context;
+        use std::io::Write;
+        writeln!(self.out, "{text}").with_context(|| format!("writing {}", self.path.display()))
+    }
+
+    /// One session's frames.
+    pub fn session(
+        &mut self,
+        label: [&str; 3],
+        frames: &[mouthpiece_evaluate::rig::RigFrameRecord],
+    ) -> anyhow::Result<()> {
+        for f in frames {
+            let mut row = label.map(str::to_string).to_vec();
+            row.extend([f.t, f.jaw.to_degrees(), f.round].map(|v| v.to_string()));
+            row.extend(f.tracked.iter().chain(&f.reference).map(|v| v.to_string()));
+            let dots = f.tracked_lip.iter().chain(&f.reference_lip);
+            for p in dots.chain(&f.tracked_neutral).chain(&f.reference_neutral) {
+                row.extend(p.map(|v| v.to_string()));
+            }
+            row.extend(f.ranges.iter().map(|v| v.to_string()));
+            debug_assert_eq!(row.len(), 6 + 3 * CURVES + 12 * f.tracked_lip.len());
+            self.line(&row.join(","))?;
+        }
+        Ok(())
+    }
+
+    pub fn finish(mut self) -> anyhow::Result<()> {
+        use anyhow::Context;
+        use std::io::Write;
+        self.out
+            .flush()
+            .with_context(|| format!("writing {}", self.path.display()))
+    }
+}
