@@ -701,8 +701,7 @@ fn an_output_that_is_not_a_regular_file_is_written_in_place() {
 /// The last table row of `text` whose first cell is `first`, split into its cells.
 fn table_row(text: &str, first: &str) -> Vec<String> {
     text.lines()
-        .filter(|l| l.starts_with(&format!("| {first} |")))
-        .last()
+        .rfind(|l| l.starts_with(&format!("| {first} |")))
         .unwrap_or_else(|| panic!("no row for {first} in:\n{text}"))
         .trim_matches('|')
         .split('|')
