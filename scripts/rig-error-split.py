@@ -33,7 +33,8 @@ NAMES = rig_reference.CURVE_NAMES
 
 
 def curves(rig, ranges, dots):
-    """The 18 curves of `dots` with fixed `ranges` (no learning: the file's ranges are final)."""
+    """The 18 curves of `dots` with the frame's `ranges` (as the file gives them: learned up to
+    that frame, or set)."""
     m, _, _ = rig.measures(dots)
     return np.array([np.clip(m[k] / ranges[i], 0, 1) if np.isfinite(m[k] / ranges[i]) else 0.0
                      for i, k in enumerate(NAMES)])
@@ -46,15 +47,15 @@ def session_report(rows):
     def block(row, side):
         return np.array([[float(row[f"{side}_{d}_{a}"]) for a in "xyz"] for d in dots])
 
-    ranges = np.array([float(rows[0][f"range_{k}"]) for k in NAMES])
+    ranges = np.array([[float(r[f"range_{k}"]) for k in NAMES] for r in rows])
     tracked_rig = rig_reference.Rig(block(rows[0], "tracked_neutral"))
     true_rig = rig_reference.Rig(block(rows[0], "reference_neutral"))
     tracked_file = np.array([[float(r[f"tracked_{k}"]) for k in NAMES] for r in rows])
     true_file = np.array([[float(r[f"reference_{k}"]) for k in NAMES] for r in rows])
     tracked_dots = np.array([block(r, "tracked") for r in rows])
     true_dots = np.array([block(r, "reference") for r in rows])
-    tracked = np.array([curves(tracked_rig, ranges, d) for d in tracked_dots])
-    true = np.array([curves(true_rig, ranges, d) for d in true_dots])
+    tracked = np.array([curves(tracked_rig, g, d) for g, d in zip(ranges, tracked_dots)])
+    true = np.array([curves(true_rig, g, d) for g, d in zip(ranges, true_dots)])
     recomputed = max(np.abs(tracked - tracked_file).max(), np.abs(true - true_file).max())
 
     rnd = np.array([float(r["true_round"]) for r in rows])
@@ -67,11 +68,11 @@ def session_report(rows):
         return np.corrcoef(x, y)[0, 1]
 
     common = (tracked_dots - true_dots).mean(axis=1, keepdims=True)
-    without_common = np.array([curves(tracked_rig, ranges, d)
-                               for d in tracked_dots - common])
+    without_common = np.array([curves(tracked_rig, g, d)
+                               for g, d in zip(ranges, tracked_dots - common)])
     true_depth = tracked_dots.copy()
     true_depth[:, :, 2] = true_dots[:, :, 2]
-    without_depth_error = np.array([curves(tracked_rig, ranges, d) for d in true_depth])
+    without_depth_error = np.array([curves(tracked_rig, g, d) for g, d in zip(ranges, true_depth)])
     return {
         "frames": len(rows),
         "recomputed": recomputed,
