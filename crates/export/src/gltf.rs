@@ -980,10 +980,14 @@ impl GltfWriter {
     }
 }
 
-/// Where the `jaw` node sits in the mouth frame (character units): the rig's default hinge
-/// pivot (docs/rig.md), `hinge_up` mouth widths above and `hinge_back` behind the mouth
-/// centre, with the character's own mouth width.
+/// Where the `jaw` node sits in the mouth frame (character units): the character's own
+/// `[rig] jaw_pivot`, else the rig's default hinge pivot (docs/rig.md), `hinge_up` mouth
+/// widths above and `hinge_back` behind the mouth centre, with the character's own mouth
+/// width (the performer's `[rig]` hinge describes the performer's head, not the character's).
 fn jaw_pivot(rig: &MouthRig) -> [f64; 3] {
+    if let Some(p) = rig.jaw_pivot() {
+        return p;
+    }
     let settings = RigSettings::default();
     let w = rig.mouth_width();
     [0.0, settings.hinge_up * w, -settings.hinge_back * w]

@@ -35,6 +35,8 @@ pub struct MouthRig {
     placement: Isometry3<f64>,
     metres_per_unit: Option<f64>,
     head: Option<RigHead>,
+    /// Where the jaw hinges, mouth frame (character units), when the character says.
+    jaw_pivot: Option<[f64; 3]>,
 }
 
 /// Where the character's head pivots and its eyes sit, model frame (character units): the
@@ -86,7 +88,25 @@ impl MouthRig {
             placement,
             metres_per_unit: None,
             head: None,
+            jaw_pivot: None,
         })
+    }
+
+    /// Places the jaw's hinge (the character's `[rig] jaw_pivot`), given in the model frame.
+    pub fn with_jaw_pivot(mut self, model: [f64; 3]) -> Result<Self, ExportError> {
+        if !model.iter().all(|c| c.is_finite()) {
+            return Err(ExportError::BadRig("jaw pivot is not finite".into()));
+        }
+        let p = self
+            .placement
+            .inverse_transform_point(&nalgebra::Point3::from(model));
+        self.jaw_pivot = Some([p.x, p.y, p.z]);
+        Ok(self)
+    }
+
+    /// The jaw's hinge in the mouth frame (character units), when the character gave one.
+    pub fn jaw_pivot(&self) -> Option<[f64; 3]> {
+        self.jaw_pivot
     }
 
     /// Gives the rig a head (from the character's `[head]`).
@@ -174,12 +194,15 @@ impl MouthRig {
         )?;
         let h = &character.head;
         let arr = |v: &mouthpiece_retarget::Vec3| [v.x, v.y, v.z];
-        let rig =
+        let mut rig =
             Self::new(Some(character.name.clone()), points, placement)?.with_head(RigHead {
                 pivot: arr(&h.pivot),
                 eye_left: arr(&h.eye_left),
                 eye_right: arr(&h.eye_right),
             })?;
+        if let Some(p) = &character.jaw_pivot {
+            rig = rig.with_jaw_pivot(arr(p))?;
+        }
         match character.units {
             Some(units) => rig.with_metres_per_unit(units.metres_per_unit()),
             None => Ok(rig),

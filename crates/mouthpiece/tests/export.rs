@@ -526,10 +526,35 @@ fn wolf_take_from_retarget_lands_on_the_wolf_model() {
     assert_rig_matches(&check, 120);
     let names: Vec<&str> = mouthpiece_retarget::rig::CURVE_NAMES.to_vec();
     assert_eq!(check["target_names"], json!(names), "{check}");
-    // The jaw node at the default hinge pivot, scaled to the wolf's mouth.
+    // The jaw node at the wolf's own hinge (`[rig] jaw_pivot`, model frame), in its mouth frame.
+    let pivot = character.jaw_pivot.expect("the wolf places its jaw");
+    let want = character.frame.to_mouth(&pivot);
     let rest: Vec<f64> = serde_json::from_value(check["jaw_rest"].clone()).unwrap();
+    for (got, want) in rest.iter().zip(want.iter()) {
+        assert!(
+            (got - want).abs() < 1e-6 * width,
+            "jaw at {rest:?}, want {want}"
+        );
+    }
+    // Without it, at the default hinge ratios scaled to the wolf's mouth.
+    let text = std::fs::read_to_string(&wolf_toml).unwrap();
+    let no_pivot = dir.path().join("wolf-no-pivot.toml");
+    std::fs::write(&no_pivot, &text[..text.find("\n[rig]").unwrap()]).unwrap();
+    let glb2 = dir.path().join("wolf-no-pivot.glb");
+    let c2 = no_pivot.to_str().unwrap();
+    export_ok(&[
+        t,
+        "--out",
+        glb2.to_str().unwrap(),
+        "--character",
+        c2,
+        "--model-up",
+        "z",
+    ]);
+    let check2 = check_gltf_with(&take, &glb2, &["--character", c2, "--model-up", "z"]);
+    let rest: Vec<f64> = serde_json::from_value(check2["jaw_rest"].clone()).unwrap();
     for (got, want) in rest.iter().zip([0.0, 0.5 * width, -1.6 * width]) {
-        assert!((got - want).abs() < 1e-6 * width, "jaw at {rest:?}");
+        assert!((got - want).abs() < 1e-6 * width, "default jaw at {rest:?}");
     }
     // The performer opens the jaw in this take.
     assert!(

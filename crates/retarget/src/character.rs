@@ -88,6 +88,10 @@ pub struct Character {
     pub head: crate::head::HeadConfig,
     /// The character's own rig ranges (`[rig.ranges]`, docs/rig.md); empty: the performer's.
     pub rig_ranges: crate::rig::RangeOverrides,
+    /// Where the character's jaw hinges (`[rig] jaw_pivot`, model frame, character units):
+    /// the exported `jaw` node's place. `None`: placed from the mouth width with the default
+    /// hinge ratios.
+    pub jaw_pivot: Option<Vec3>,
 }
 
 /// Mouth-frame coordinates within this fraction of the mouth width of zero are exactly zero.
@@ -184,6 +188,7 @@ impl Character {
             manual_m,
             head: crate::head::HeadConfig::default_for(&frame),
             rig_ranges: crate::rig::RangeOverrides::default(),
+            jaw_pivot: None,
         })
     }
 
@@ -240,15 +245,23 @@ struct RawCharacter {
     rig: Option<RawRig>,
 }
 
-/// A character's `[rig]`: only its ranges (the hinge and the learning window are the
-/// performer's, in the daemon configuration).
+/// A character's `[rig]`: its ranges and where its own jaw hinges (the performer's hinge and
+/// learning window are in the daemon configuration).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawRig {
     ranges: Option<Spanned<Named<Spanned<f64>>>>,
+    jaw_pivot: Option<Spanned<[f64; 3]>>,
 }
 
 impl RawRig {
+    fn jaw_pivot(&self, c: &Checker) -> Result<Option<Vec3>, Error> {
+        self.jaw_pivot
+            .as_ref()
+            .map(|v| c.finite("rig.jaw_pivot", v))
+            .transpose()
+    }
+
     fn validate(&self, c: &Checker) -> Result<crate::rig::RangeOverrides, Error> {
         let Some(ranges) = &self.ranges else {
             return Ok(crate::rig::RangeOverrides::default());
@@ -518,6 +531,7 @@ impl RawCharacter {
         }
         if let Some(rig) = &self.rig {
             character.rig_ranges = rig.validate(&c)?;
+            character.jaw_pivot = rig.jaw_pivot(&c)?;
         }
         Ok(character)
     }
@@ -976,6 +990,34 @@ lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
         assert_eq!((k.as_str(), l), ("<toml>", Some(9)), "{reason}");
         assert!(reason.contains("unknown field `hinge_up`"), "{reason}");
         let (k, _, reason) = invalid(&format!("{SQUARE}[rig.ranges]\njawOpen = \"x\"\n"));
+        assert_eq!(k, "<toml>", "{reason}");
+    }
+
+    /// `[rig] jaw_pivot`: the character's own hinge, model frame, read as given; a bad one is
+    /// refused naming the key and its line.
+    #[test]
+    fn rig_jaw_pivot_is_read_and_checked() {
+        assert_eq!(Character::from_toml_str(SQUARE).unwrap().jaw_pivot, None);
+        let src = format!("{SQUARE}[rig]\njaw_pivot = [0.0, 1.5, -4.0]\n");
+        let c = Character::from_toml_str(&src).unwrap();
+        assert_eq!(c.jaw_pivot, Some(Vec3::new(0.0, 1.5, -4.0)));
+        let src =
+            format!("{SQUARE}[rig]\njaw_pivot = [0.0, 1.5, -4.0]\n[rig.ranges]\njawOpen = 20\n");
+        let c = Character::from_toml_str(&src).unwrap();
+        assert!(c.jaw_pivot.is_some() && !c.rig_ranges.is_empty());
+        for (value, words) in [
+            ("[0.0, nan, 1.0]", "non-finite"),
+            ("[0.0, 1e12, 1.0]", "beyond"),
+        ] {
+            let (k, l, reason) = invalid(&format!("{SQUARE}[rig]\njaw_pivot = {value}\n"));
+            assert_eq!(
+                (k.as_str(), l),
+                ("rig.jaw_pivot", Some(9)),
+                "{value}: {reason}"
+            );
+            assert!(reason.contains(words), "{value}: {reason}");
+        }
+        let (k, _, reason) = invalid(&format!("{SQUARE}[rig]\njaw_pivot = [0.0, 1.0]\n"));
         assert_eq!(k, "<toml>", "{reason}");
     }
 
