@@ -182,10 +182,11 @@ pub(crate) fn build_forehead_surface(
 
 /// With every forehead dot named and a neutral surface, the forehead dots become the
 /// neutral ones (`reference`) carried by the head motion fitted to the surface and their
-/// pixels.
+/// pixels. `last`: the last frame's head motion.
 pub(crate) fn fit_forehead_surface(
     surface: &ForeheadSurface,
     reference: &[Vec3],
+    last: &RigidTransform,
     forehead: &[Option<usize>],
     cands: &mut [Candidate],
     sensor: &Sensor,
@@ -212,20 +213,13 @@ pub(crate) fn fit_forehead_surface(
     ) else {
         return;
     };
-    // The dots' own fit is off by a degree or two at worst: a refinement that turned or
-    // moved the forehead far from it fitted something else (a hand over most of the
-    // forehead).
-    let turned = ((head.rotation.transpose() * start.rotation).trace() - 1.0) / 2.0;
-    let moved = reference
-        .iter()
-        .map(|p| (head.apply(p) - start.apply(p)).norm())
-        .fold(0.0, f64::max);
-    if turned.clamp(-1.0, 1.0).acos() > SURFACE_FIT_MAX_TURN_RAD || moved > SURFACE_FIT_MAX_SHIFT_M
-    {
-        tracing::debug!(
-            moved_m = moved,
-            "forehead surface fit far from the dots' fit; not used"
-        );
+    // A refinement that turned or moved the forehead far from both the dots' own fit and
+    // the last frame's head fitted something else (a hand over most of the forehead). Near
+    // either is the head: the dots' fit is off by a degree or two at worst, but one dot's
+    // depth gone astray for a frame (a few millimetres over their 4 cm) turns it by more,
+    // while the head turns little between frames (*either anchor*).
+    if !surface_fit_usable(&head, &start, last, reference) {
+        tracing::debug!("forehead surface fit far from the dots' fit and the last head; not used");
         return;
     }
     for (c, reference) in forehead.iter().zip(reference) {
@@ -233,6 +227,28 @@ pub(crate) fn fit_forehead_surface(
             cands[*c].point = head.apply(reference);
         }
     }
+}
+
+/// *Either anchor*: the surface fit is the head when it agrees with the dots' own fit or with
+/// the last frame's head motion (see [`near_enough`]).
+fn surface_fit_usable(
+    fit: &RigidTransform,
+    dots: &RigidTransform,
+    last: &RigidTransform,
+    reference: &[Vec3],
+) -> bool {
+    near_enough(fit, dots, reference) || near_enough(fit, last, reference)
+}
+
+/// Whether two head motions agree within [`SURFACE_FIT_MAX_TURN_RAD`] and, on every
+/// forehead dot (`reference`), [`SURFACE_FIT_MAX_SHIFT_M`].
+fn near_enough(a: &RigidTransform, b: &RigidTransform, reference: &[Vec3]) -> bool {
+    let turned = ((a.rotation.transpose() * b.rotation).trace() - 1.0) / 2.0;
+    let moved = reference
+        .iter()
+        .map(|p| (a.apply(p) - b.apply(p)).norm())
+        .fold(0.0, f64::max);
+    turned.clamp(-1.0, 1.0).acos() <= SURFACE_FIT_MAX_TURN_RAD && moved <= SURFACE_FIT_MAX_SHIFT_M
 }
 
 /// Each forehead dot's depth through its temporal filter (the pixel stays; the dot is
@@ -254,5 +270,60 @@ pub(crate) fn filter_forehead_depths(
             }
             None => filter.reset(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    /// The head turned about the middle of the forehead by `deg` and shifted sideways.
+    fn turned(deg: f64, shift_m: f64) -> RigidTransform {
+        let rotation = Rotation3::from_axis_angle(&Vec3::y_axis(), deg.to_radians()).into_inner();
+        let middle = Vec3::new(0.0, -0.085, 0.6);
+        RigidTransform {
+            rotation,
+            translation: middle - rotation * middle + Vec3::new(shift_m, 0.0, 0.0),
+        }
+    }
+
+    /// *Either anchor*: a fit 6° from the dots' own fit (one dot's depth astray) is still the
+    /// head when it is 1° from the last frame's; 6° from both, or 12 mm off both, it is
+    /// something else (a hand over the forehead).
+    #[test]
+    fn the_surface_fit_is_used_near_the_dots_fit_or_the_last_head() {
+        let forehead = [
+            Vec3::new(-0.02, -0.08, 0.6),
+            Vec3::new(0.0, -0.09, 0.6),
+            Vec3::new(0.02, -0.08, 0.6),
+        ];
+        let fit = turned(10.0, 0.0);
+        assert!(surface_fit_usable(
+            &fit,
+            &turned(9.0, 0.0),
+            &turned(0.0, 0.0),
+            &forehead
+        ));
+        assert!(surface_fit_usable(
+            &fit,
+            &turned(4.0, 0.0),
+            &turned(9.0, 0.0),
+            &forehead
+        ));
+        assert!(!surface_fit_usable(
+            &fit,
+            &turned(4.0, 0.0),
+            &turned(16.0, 0.0),
+            &forehead
+        ));
+        let moved = turned(10.0, 0.012);
+        assert!(!surface_fit_usable(&moved, &fit, &fit, &forehead));
+        assert!(surface_fit_usable(
+            &moved,
+            &turned(10.0, 0.004),
+            &fit,
+            &forehead
+        ));
     }
 }

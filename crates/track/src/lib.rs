@@ -437,6 +437,7 @@ impl Tracker {
             head::fit_forehead_surface(
                 surface,
                 &self.tracks.reference_forehead,
+                &self.tracks.head,
                 &names[n..],
                 cands,
                 sensor,
