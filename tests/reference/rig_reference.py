@@ -1,9 +1,11 @@
 #!/usr/bin/env python3
 """Independent reference of mouthpiece's rig (docs/rig.md), in numpy/scipy.
 
-Written from docs/rig.md, not from the Rust code: the jaw (angle and slide about the hinge),
-each lip's rigid motion (scipy's `Rotation.align_vectors`, not the Rust SVD) and the 18
-ARKit-named curves with their default ranges widened over the learning window.
+Follows docs/rig.md, which defines every number computed here: the jaw (angle and slide
+about the hinge), each lip's rigid motion (scipy's `Rotation.align_vectors`, not the Rust SVD)
+and the 18 ARKit-named curves with their default ranges widened over the learning window.
+Its own code throughout (numpy arrays, not the Rust loops); where the page was not precise
+enough to write it, the page was completed.
 `retarget_reference.py` calls `Rig.step` with the stabilised dots of every line, and the
 `retarget_cli` tests compare the binary's `rig` with it.
 
