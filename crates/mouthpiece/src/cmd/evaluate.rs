@@ -168,12 +168,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     steps.add(&m.steps);
                 }
                 if let (Some(csv), Some(frames)) = (&mut frames_csv, &rig.frames) {
-                    let names = [
-                        seed.to_string(),
-                        format!("{noise:?}"),
-                        format!("{motion:?}"),
-                    ];
-                    csv.session([&names[0], &names[1], &names[2]], frames)?;
+                    csv.session(&format!("{seed},{noise:?},{motion:?}"), frames)?;
                 }
                 rig_rows.push((format!("{seed} | {noise:?} | {motion:?}"), rig.metrics));
             }

@@ -80,14 +80,14 @@ impl FramesCsv {
         writeln!(self.out, "{text}").with_context(|| format!("writing {}", self.path.display()))
     }
 
-    /// One session's frames.
+    /// One session's frames; `session` is its first three cells, `seed,noise,head_motion`.
     pub fn session(
         &mut self,
-        label: [&str; 3],
+        session: &str,
         frames: &[mouthpiece_evaluate::rig::RigFrameRecord],
     ) -> anyhow::Result<()> {
         for f in frames {
-            let mut row = label.map(str::to_string).to_vec();
+            let mut row = vec![session.to_string()];
             row.extend([f.t, f.jaw.to_degrees(), f.round].map(|v| v.to_string()));
             row.extend(f.tracked.iter().chain(&f.reference).map(|v| v.to_string()));
             let dots = f.tracked_lip.iter().chain(&f.reference_lip);
@@ -95,7 +95,7 @@ impl FramesCsv {
                 row.extend(p.map(|v| v.to_string()));
             }
             row.extend(f.ranges.iter().map(|v| v.to_string()));
-            debug_assert_eq!(row.len(), 6 + 3 * CURVES + 12 * f.tracked_lip.len());
+            debug_assert_eq!(row.len(), 4 + 3 * CURVES + 12 * f.tracked_lip.len());
             self.line(&row.join(","))?;
         }
         Ok(())
