@@ -60,7 +60,7 @@ pub use kabsch::RigidTransform;
 pub use layout::{DotId, PerformerDots, PerformerLayout};
 pub use named::Named;
 pub use neutral::{NeutralAccumulator, NeutralPose};
-pub use one_euro::{OneEuro, OneEuroParams};
+pub use one_euro::{OneEuro, OneEuroGroup, OneEuroParams};
 pub use retarget::{
     CharacterFrame, CharacterRetarget, CharacterSettings, MissingDots, RetargetConfig,
     RetargetOutput, Retargeter, StabilisedFrame, Stabiliser,

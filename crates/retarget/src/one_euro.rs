@@ -96,6 +96,75 @@ impl OneEuro {
     }
 }
 
+/// Several signals that move together (the depths of dots on one rigid forehead), each with
+/// its own state but one cutoff for all: the one the fastest of them asks for. With a cutoff
+/// per signal, a head turning fast moves some depths fast and others slowly, the slow ones
+/// lag more, and the lag turns the head; with one cutoff every signal lags alike.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OneEuroGroup {
+    params: OneEuroParams,
+    members: Vec<Option<State>>,
+    /// Per signal, this call's filtered derivative (kept to allocate once).
+    speeds: Vec<f64>,
+}
+
+impl OneEuroGroup {
+    /// `n` signals that have seen nothing yet.
+    pub fn new(params: OneEuroParams, n: usize) -> Self {
+        Self {
+            params,
+            members: vec![None; n],
+            speeds: Vec::with_capacity(n),
+        }
+    }
+
+    /// Forgets every signal's history.
+    pub fn reset(&mut self) {
+        self.members.iter_mut().for_each(|m| *m = None);
+    }
+
+    /// Filters the samples `xs` taken at time `t` in place, one per signal. A `None` sample
+    /// (the signal unseen) forgets that signal's history; a signal seen again, like a new
+    /// one, passes its first sample unchanged. A call at the same time as the previous one
+    /// (or earlier) returns the previous outputs.
+    pub fn filter(&mut self, t: f64, xs: &mut [Option<f64>]) {
+        debug_assert_eq!(xs.len(), self.members.len());
+        let mut fastest: f64 = 0.0;
+        let speeds = &mut self.speeds;
+        speeds.clear();
+        for (m, x) in self.members.iter().zip(xs.iter()) {
+            let dx = match (m, x) {
+                (Some(s), Some(x)) if t > s.t => {
+                    let dt = t - s.t;
+                    let dx_raw = (x - s.x) / dt;
+                    s.dx + alpha(self.params.d_cutoff, dt) * (dx_raw - s.dx)
+                }
+                _ => 0.0,
+            };
+            fastest = fastest.max(dx.abs());
+            speeds.push(dx);
+        }
+        let cutoff = self.params.min_cutoff + self.params.beta * fastest;
+        for ((m, x), &dx) in self
+            .members
+            .iter_mut()
+            .zip(xs.iter_mut())
+            .zip(speeds.iter())
+        {
+            match (m.as_mut(), x.as_mut()) {
+                (_, None) => *m = None,
+                (None, Some(x)) => *m = Some(State { t, x: *x, dx: 0.0 }),
+                (Some(s), Some(x)) if t > s.t => {
+                    let dt = t - s.t;
+                    *x = s.x + alpha(cutoff, dt) * (*x - s.x);
+                    *s = State { t, x: *x, dx };
+                }
+                (Some(s), Some(x)) => *x = s.x,
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -152,5 +221,69 @@ mod tests {
         assert!(OneEuroParams::new(0.0, 0.0).is_err());
         assert!(OneEuroParams::new(1.0, -1.0).is_err());
         assert!(OneEuroParams::new(f64::NAN, 0.0).is_err());
+    }
+
+    /// One signal alone is filtered exactly as by [`OneEuro`].
+    #[test]
+    fn a_group_of_one_is_the_plain_filter() {
+        let params = OneEuroParams::new(2.0, 200.0).unwrap();
+        let mut plain = OneEuro::new(params);
+        let mut group = OneEuroGroup::new(params, 1);
+        for i in 0..200 {
+            let t = i as f64 / 30.0;
+            let x = 0.6 + 0.02 * (t * 7.0).sin() + if i % 3 == 0 { 0.001 } else { -0.0005 };
+            let mut xs = [Some(x)];
+            group.filter(t, &mut xs);
+            assert_eq!(xs[0], Some(plain.filter(t, x)));
+        }
+    }
+
+    /// Two depths of one rigid body turning (one moving five times as fast as the other)
+    /// keep their ratio through the group, as the turn does; filtered apart, the slow one
+    /// lags more and the ratio, the turn, is wrong.
+    #[test]
+    fn a_group_lags_alike_where_separate_filters_do_not() {
+        let params = OneEuroParams::new(2.0, 200.0).unwrap();
+        let mut group = OneEuroGroup::new(params, 2);
+        let mut apart = [OneEuro::new(params), OneEuro::new(params)];
+        let (mut worst_group, mut worst_apart) = (0.0f64, 0.0f64);
+        for i in 0..60 {
+            let t = i as f64 / 30.0;
+            let fast = 0.01 * (t * 6.0).sin();
+            let xs_true = [fast, 0.2 * fast];
+            let mut xs = xs_true.map(Some);
+            group.filter(t, &mut xs);
+            let [a, b] = xs.map(Option::unwrap);
+            let [c, d] = [
+                apart[0].filter(t, xs_true[0]),
+                apart[1].filter(t, xs_true[1]),
+            ];
+            if a.abs() > 1e-4 {
+                worst_group = worst_group.max((b / a - 0.2).abs());
+                worst_apart = worst_apart.max((d / c - 0.2).abs());
+            }
+        }
+        assert!(worst_group < 1e-9, "{worst_group}");
+        assert!(worst_apart > 0.02, "{worst_apart}");
+    }
+
+    /// An unseen signal forgets its history and passes its first sample when it returns;
+    /// a repeated time returns the previous outputs.
+    #[test]
+    fn a_group_member_unseen_starts_afresh() {
+        let params = OneEuroParams::new(1.0, 0.0).unwrap();
+        let mut group = OneEuroGroup::new(params, 2);
+        let mut xs = [Some(0.0), Some(0.0)];
+        group.filter(0.0, &mut xs);
+        let mut xs = [Some(1.0), None];
+        group.filter(0.1, &mut xs);
+        let smoothed = xs[0].unwrap();
+        assert!(smoothed > 0.0 && smoothed < 1.0 && xs[1].is_none());
+        let mut again = [Some(5.0), None];
+        group.filter(0.1, &mut again);
+        assert_eq!(again[0], Some(smoothed));
+        let mut xs = [Some(1.0), Some(3.0)];
+        group.filter(0.2, &mut xs);
+        assert_eq!(xs[1], Some(3.0));
     }
 }

@@ -5,7 +5,7 @@
 
 use mouthpiece_frame::Intrinsics;
 use mouthpiece_retarget::kabsch::kabsch;
-use mouthpiece_retarget::{OneEuro, PerformerLayout, RigidTransform};
+use mouthpiece_retarget::{OneEuroGroup, PerformerLayout, RigidTransform};
 
 use crate::depth::{self, DepthScratch};
 use crate::forehead::{self, DepthCrop, ForeheadSurface};
@@ -251,24 +251,26 @@ fn near_enough(a: &RigidTransform, b: &RigidTransform, reference: &[Vec3]) -> bo
     turned.clamp(-1.0, 1.0).acos() <= SURFACE_FIT_MAX_TURN_RAD && moved <= SURFACE_FIT_MAX_SHIFT_M
 }
 
-/// Each forehead dot's depth through its temporal filter (the pixel stays; the dot is
-/// deprojected again at the filtered depth). A dot unseen starts afresh when it returns,
-/// rather than from a stale depth.
+/// The forehead dots' depths through their temporal filter, one cutoff for all of them
+/// ([`OneEuroGroup`]: a rigid forehead's dots lag alike, so the lag does not turn the head).
+/// The pixels stay; each dot is deprojected again at its filtered depth. A dot unseen starts
+/// afresh when it returns, rather than from a stale depth.
 pub(crate) fn filter_forehead_depths(
-    filters: &mut [OneEuro],
+    filter: &mut OneEuroGroup,
     forehead: &[Option<usize>],
     cands: &mut [Candidate],
     t: f64,
     k: &Intrinsics,
 ) {
-    for (filter, name) in filters.iter_mut().zip(forehead) {
-        match name {
-            Some(c) => {
-                let c = &mut cands[*c];
-                let z = filter.filter(t, c.point.z);
-                c.point = camera::deproject(k, c.pixel, z);
-            }
-            None => filter.reset(),
+    let mut depths: Small<Option<f64>> = forehead
+        .iter()
+        .map(|c| c.map(|c| cands[c].point.z))
+        .collect();
+    filter.filter(t, &mut depths);
+    for (name, z) in forehead.iter().zip(&depths) {
+        if let (Some(c), Some(z)) = (name, z) {
+            let c = &mut cands[*c];
+            c.point = camera::deproject(k, c.pixel, *z);
         }
     }
 }

@@ -39,7 +39,7 @@ use std::sync::Arc;
 use mouthpiece_detect::{DetectConfig, DetectError, Detections, Detector, DotRole};
 use mouthpiece_frame::{Calibration, DepthImage, Frame, Intrinsics};
 use mouthpiece_retarget::{
-    MissingDots, NeutralPose, OneEuro, OneEuroParams, PerformerDots, PerformerLayout,
+    MissingDots, NeutralPose, OneEuroGroup, OneEuroParams, PerformerDots, PerformerLayout,
     RigidTransform, Stabiliser,
 };
 
@@ -148,8 +148,8 @@ pub struct Tracker {
     found: Detections,
     cands: naming::Candidates,
     scratch: naming::Scratch,
-    /// Per forehead dot: its depth filter (`None` when switched off).
-    forehead_depth: Option<Vec<OneEuro>>,
+    /// The forehead dots' depth filter, one cutoff for all (`None` when switched off).
+    forehead_depth: Option<OneEuroGroup>,
     pub(crate) out: TrackedFrame,
 }
 
@@ -177,7 +177,7 @@ impl Tracker {
                 beta: config.forehead_depth_beta,
                 d_cutoff: ONE_EURO_DERIVATIVE_CUTOFF_HZ,
             };
-            vec![OneEuro::new(params); layout.forehead_dots]
+            OneEuroGroup::new(params, layout.forehead_dots)
         });
         Ok(Self {
             forehead_depth,
@@ -267,8 +267,8 @@ impl Tracker {
         self.tracks.forget();
         self.window.clear();
         self.velocity_dt = 0.0;
-        if let Some(filters) = &mut self.forehead_depth {
-            filters.iter_mut().for_each(OneEuro::reset);
+        if let Some(filter) = &mut self.forehead_depth {
+            filter.reset();
         }
         self.check_performer = self.stabiliser.is_some();
     }
@@ -454,8 +454,8 @@ impl Tracker {
             cands,
             &mut self.scratch.depth,
         );
-        if let Some(filters) = &mut self.forehead_depth {
-            head::filter_forehead_depths(filters, &names[n..], cands, t, k);
+        if let Some(filter) = &mut self.forehead_depth {
+            head::filter_forehead_depths(filter, &names[n..], cands, t, k);
         }
         // Fill the output.
         let out = &mut self.out;
