@@ -43,9 +43,10 @@ pub struct TrackConfig {
     /// of it below, towards the brows), metres: the surface the head motion is refined on
     /// once calibrated ([`forehead`]). 0: the head motion from the three dots alone.
     pub forehead_surface_margin_m: f64,
-    /// Temporal filter on each forehead dot's depth (One Euro: cut-off frequency at rest in Hz,
-    /// and how fast it opens with the depth's speed, Hz per m/s). The forehead's depth noise
-    /// is what tilts the head pose; pixels are precise and stay unfiltered. 0 Hz: no filter.
+    /// Temporal filter on the forehead dots' depths (One Euro: cut-off frequency at rest in Hz,
+    /// and how fast it opens with the depth's speed, Hz per m/s; one cutoff for all the dots,
+    /// the fastest one's). The forehead's depth noise is what tilts the head pose; pixels are
+    /// precise and stay unfiltered. 0 Hz: no filter.
     pub forehead_depth_min_cutoff_hz: f64,
     pub forehead_depth_beta: f64,
     /// Margin around the predicted dots for the search region, pixels.

@@ -1,7 +1,7 @@
 //! The head: the head motion the naming uses (from the named forehead dots, or with one of
-//! them hidden from the two seen and the upper lip at rest), each forehead dot's depth (a
-//! plane over a wide patch of skin, then a temporal filter), and once calibrated the head
-//! motion refined on the whole forehead surface ([`crate::forehead`]).
+//! them hidden from the two seen and the upper lip at rest), the forehead dots' depths (a
+//! plane over a wide patch of skin, then one temporal filter for them all), and once
+//! calibrated the head motion refined on the whole forehead surface ([`crate::forehead`]).
 
 use mouthpiece_frame::Intrinsics;
 use mouthpiece_retarget::kabsch::kabsch;
