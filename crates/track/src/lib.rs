@@ -65,6 +65,10 @@ pub const MIN_POSE_DOTS: usize = 3;
 /// authors' suggested value, left untuned.
 pub const ONE_EURO_DERIVATIVE_CUTOFF_HZ: f64 = 1.0;
 
+/// A lip blob between two named neighbours counts (*slipped names*) when it is at least this
+/// many paint radii from each of them: a dot of its own, not a fragment of theirs.
+const BLOB_BETWEEN_SEPARATION_RADII: f64 = 1.5;
+
 /// The recovery steps' names, in the order they run (`mouthpiece evaluate --steps`).
 pub fn recovery_steps() -> Vec<&'static str> {
     naming::recovery::step_names()
@@ -489,14 +493,36 @@ impl Tracker {
         out.status.no_dots = found.blobs.is_empty();
         out.status.too_few_dots = self.tracks.dots.is_none() && cands.len() < names.len();
         out.status.unassigned_blobs = used.iter().filter(|u| !**u).count();
+        let lip_z = names[..n]
+            .iter()
+            .flatten()
+            .map(|&c| cands[c].point.z)
+            .next();
+        let blob_between = naming::checks::blob_between_neighbours(
+            &names[..n],
+            cands,
+            &used,
+            BLOB_BETWEEN_SEPARATION_RADII * sensor.dot_radius_px(lip_z.unwrap_or(DEFAULT_DEPTH_M)),
+        )
+        .is_some();
         out.status.neutral_taken = false;
         out.steps.clear();
         // As much room as the log has, so that copying it never grows the frame's list.
         out.steps.reserve(self.scratch.log.events.capacity());
         out.steps.extend_from_slice(&self.scratch.log.events);
         self.tracks.count(&names);
+        let neutral = self.stabiliser.as_ref().map(|s| s.neutral());
         self.tracks
-            .update(&self.config, self.layout, &names, &self.cands.list);
+            .update(&self.config, self.layout, &names, &self.cands.list, neutral);
+        // After the frame's tracks are kept, so that the next frame names from geometry and
+        // not from these names.
+        if self.tracks.dots.is_some() && self.tracks.names_slipped(blob_between) {
+            tracing::info!(
+                frames = prediction::SLIPPED_NAMES_FRAMES,
+                "a lip blob left between two named neighbours: the names slipped; re-acquiring from geometry"
+            );
+            self.tracks.forget();
+        }
         Ok(())
     }
 

@@ -676,3 +676,60 @@ fn a_steps_leftover_candidates_are_dropped() {
     assert_eq!((cands.len(), cands.blob.len()), (4, 4));
     assert_eq!(names, [Some(0), Some(1), None, Some(2)]);
 }
+
+/// *Slipped names*: a lower lip whose names slipped one place as a piece (each dot on its
+/// neighbour's blob, the last on the corner's) passes the order and corner checks frame
+/// after frame, but leaves D8's own blob unnamed between the corner D7 and D8; after
+/// `SLIPPED_NAMES_FRAMES` such frames the names are forgotten and found again from
+/// geometry, with the head motion still measured from the neutral pose.
+#[test]
+fn names_slipped_along_the_lower_lip_are_found_again() {
+    let mut tr = calibrated_tracker();
+    let h = head(8.0, 4.0, Vec3::new(0.01, 0.0, 0.0));
+    let truth = posed(0.004, &h);
+    let mut seq = 40;
+    for _ in 0..20 {
+        tr.process(&render(seq, &truth, &[])).unwrap();
+        seq += 1;
+    }
+    assert_named_correctly(&tr.out, &truth, &[], 0.0015);
+    // The slip: each lower-lip dot's track takes its neighbour's towards D1.
+    let dots = tr.tracks.dots.as_mut().unwrap();
+    let old = dots.clone();
+    dots[7..11].clone_from_slice(&old[8..12]);
+    dots[11] = old[0].clone();
+    let mut slipped_frames = 0;
+    let mut correct_from = None;
+    for i in 0..(prediction::SLIPPED_NAMES_FRAMES + 6) {
+        let out = tr.process(&render(seq, &truth, &[])).unwrap();
+        seq += 1;
+        let all: Vec<Option<Vec3>> = out
+            .dots
+            .lip
+            .iter()
+            .chain(&out.dots.forehead)
+            .copied()
+            .collect();
+        let wrong = (0..12).any(|d| all[d].is_some_and(|p| (p - truth[d]).norm() > 0.004));
+        slipped_frames += wrong as u32;
+        let all_right = (0..15).all(|d| all[d].is_some_and(|p| (p - truth[d]).norm() < 0.0015));
+        if all_right && correct_from.is_none() {
+            correct_from = Some(i);
+        }
+        if !all_right {
+            correct_from = None;
+        }
+    }
+    assert!(slipped_frames >= 2, "the slip held {slipped_frames} frames");
+    let from = correct_from.expect("named correctly again");
+    assert!(
+        from <= prediction::SLIPPED_NAMES_FRAMES + 1,
+        "right again from frame {from}"
+    );
+    let neutral = tr.neutral().unwrap();
+    let reference: Vec<Vec3> = neutral.forehead_camera.iter().map(|p| p.unwrap()).collect();
+    let s = tr.out.stabilised.as_ref().unwrap();
+    let turned = ((s.head.rotation.transpose() * h.rotation).trace() - 1.0) / 2.0;
+    assert_eq!(tr.tracks.reference_forehead, reference);
+    assert!(turned.clamp(-1.0, 1.0).acos().to_degrees() < 0.7);
+}

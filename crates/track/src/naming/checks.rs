@@ -3,6 +3,7 @@
 //! [`Context`] and the candidates and changes nothing but the names it is given (a name that
 //! breaks a check is dropped: missing beats wrong).
 
+use mouthpiece_detect::DotRole;
 use mouthpiece_retarget::{PerformerLayout, RigidTransform};
 
 use super::Context;
@@ -238,6 +239,56 @@ pub(crate) fn order_and_neighbours(
     keep_corner_neighbours_in_place(ctx, names, cands);
 }
 
+/// Along the lip segment between two named neighbours, an unnamed lip blob must lie this far
+/// from either end (a share of the segment) to count as lying between them.
+pub const BETWEEN_NEIGHBOURS_SPAN: [f64; 2] = [0.2, 0.8];
+
+/// ... and at most this share of the segment's length off it.
+pub const BETWEEN_NEIGHBOURS_OFFSET: f64 = 0.3;
+
+/// *A blob between neighbours*: a lip blob no name took, lying between two lip dots named
+/// next to each other around the mouth (pixels; at least `min_separation_px` from each, so it
+/// is a dot of its own and not a fragment of theirs). A lip whose names slipped one place as
+/// a piece passes every order and corner check, but leaves the first dot's own blob unnamed
+/// between it and its neighbour. Returns the two dots and the blob.
+pub(crate) fn blob_between_neighbours(
+    lip_names: &[Option<usize>],
+    cands: &[Candidate],
+    taken: &[bool],
+    min_separation_px: f64,
+) -> Option<(usize, usize, usize)> {
+    let n = lip_names.len();
+    let free = || (0..cands.len()).filter(|&c| !taken[c] && cands[c].role != DotRole::Forehead);
+    for a in 0..n {
+        let b = (a + 1) % n;
+        let (Some(ca), Some(cb)) = (lip_names[a], lip_names[b]) else {
+            continue;
+        };
+        let (pa, pb) = (cands[ca].pixel, cands[cb].pixel);
+        let along = [pb[0] - pa[0], pb[1] - pa[1]];
+        let len2 = along[0] * along[0] + along[1] * along[1];
+        if len2 <= 0.0 {
+            continue;
+        }
+        let len = len2.sqrt();
+        for c in free() {
+            let p = cands[c].pixel;
+            let rel = [p[0] - pa[0], p[1] - pa[1]];
+            let s = (rel[0] * along[0] + rel[1] * along[1]) / len2;
+            let off = (rel[0] * along[1] - rel[1] * along[0]).abs() / len;
+            let apart = |q: [f64; 2]| (p[0] - q[0]).hypot(p[1] - q[1]) >= min_separation_px;
+            if (BETWEEN_NEIGHBOURS_SPAN[0]..=BETWEEN_NEIGHBOURS_SPAN[1]).contains(&s)
+                && off <= BETWEEN_NEIGHBOURS_OFFSET * len
+                && apart(pa)
+                && apart(pb)
+            {
+                return Some((a, b, c));
+            }
+        }
+    }
+    None
+}
+
 #[cfg(test)]
 mod tests {
     use nalgebra::Rotation3;
@@ -371,5 +422,64 @@ mod tests {
             .iter()
             .enumerate()
             .all(|(i, c)| c.is_none_or(|c| c == i || i == 2 || i == 3)));
+    }
+
+    /// Twelve lip blobs round a mouth 50 px wide (pixels; D1 at the right of the image).
+    fn lip_blobs() -> Vec<Candidate> {
+        (0..12)
+            .map(|i| {
+                let a = std::f64::consts::PI * i as f64 / 6.0;
+                Candidate {
+                    pixel: [320.0 + 25.0 * a.cos(), 250.0 - 12.0 * a.sin()],
+                    point: Vec3::new(0.0, 0.0, 0.6),
+                    role: DotRole::Lip,
+                }
+            })
+            .collect()
+    }
+
+    /// *A blob between neighbours*: the lower lip slipped one place (D8 on D9's blob, …, D11
+    /// on D12's, D12 missing) leaves D8's blob between the corner D7 and D8; right names, or
+    /// a free fragment beside a named dot, leave none.
+    #[test]
+    fn a_slipped_lip_leaves_a_blob_between_neighbours() {
+        let cands = lip_blobs();
+        let right: Vec<Option<usize>> = (0..12).map(Some).collect();
+        let taken = vec![true; 12];
+        assert_eq!(blob_between_neighbours(&right, &cands, &taken, 3.0), None);
+
+        let mut slipped = right.clone();
+        for (dot, name) in slipped.iter_mut().enumerate().take(11).skip(7) {
+            *name = Some(dot + 1);
+        }
+        slipped[11] = None;
+        let mut taken = vec![true; 12];
+        taken[7] = false;
+        assert_eq!(
+            blob_between_neighbours(&slipped, &cands, &taken, 3.0),
+            Some((6, 7, 7))
+        );
+
+        // A free blob three quarters of the way from D3 to D4 (3.3 px from D4): a dot of its
+        // own when dots are 3 px apart, a fragment of D4's when they must be 4 px apart.
+        let mut with_fragment = cands.clone();
+        let (d3, d4) = (cands[2].pixel, cands[3].pixel);
+        with_fragment.push(Candidate {
+            pixel: [
+                d3[0] + 0.75 * (d4[0] - d3[0]),
+                d3[1] + 0.75 * (d4[1] - d3[1]),
+            ],
+            ..cands[3]
+        });
+        let mut taken = vec![true; 13];
+        taken[12] = false;
+        assert_eq!(
+            blob_between_neighbours(&right, &with_fragment, &taken, 3.0),
+            Some((2, 3, 12))
+        );
+        assert_eq!(
+            blob_between_neighbours(&right, &with_fragment, &taken, 4.0),
+            None
+        );
     }
 }
