@@ -195,9 +195,9 @@ pub(crate) struct Tracks {
 
 /// *Slipped names*: after this many frames in a row with a lip blob left unnamed between two
 /// named neighbours (`naming::checks::blob_between_neighbours`), the names are taken to have
-/// slipped along the lip and are forgotten, to be found again from geometry. In 84 sessions
-/// of 6 and 20 s with no slip such a blob stayed at most 4 frames (a motion-blur ghost, a
-/// corner's fold); a lip slipped as one piece kept one for 4 s.
+/// slipped along the lip and are forgotten, to be found again from geometry. In 60 sessions
+/// without a slip (36 of 6 s, 24 of 20 s) such a blob stayed at most 4 frames (a motion-blur
+/// ghost, a corner's fold); a lip slipped as one piece kept one for 4 s.
 pub(crate) const SLIPPED_NAMES_FRAMES: u32 = 8;
 
 impl Tracks {
