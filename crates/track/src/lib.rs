@@ -515,8 +515,12 @@ impl Tracker {
         self.tracks
             .update(&self.config, self.layout, &names, &self.cands.list, neutral);
         // After the frame's tracks are kept, so that the next frame names from geometry and
-        // not from these names.
-        if self.tracks.dots.is_some() && self.tracks.names_slipped(blob_between) {
+        // not from these names; only when geometry can name this frame, so that a lasting
+        // extra blob (a smear of paint the size of a dot) never leaves the dots unnamed.
+        if self.tracks.dots.is_some()
+            && self.tracks.names_slipped(blob_between)
+            && labels::label_by_geometry(&self.cands.list, self.layout).is_ok()
+        {
             tracing::info!(
                 frames = prediction::SLIPPED_NAMES_FRAMES,
                 "a lip blob left between two named neighbours: the names slipped; re-acquiring from geometry"

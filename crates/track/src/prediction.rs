@@ -195,7 +195,8 @@ pub(crate) struct Tracks {
 
 /// *Slipped names*: after this many frames in a row with a lip blob left unnamed between two
 /// named neighbours (`naming::checks::blob_between_neighbours`), the names are taken to have
-/// slipped along the lip and are forgotten, to be found again from geometry. In 60 sessions
+/// slipped along the lip and are forgotten, to be found again from geometry (when geometry
+/// can name the frame: a lasting extra blob must not lose the names). In 60 sessions
 /// without a slip (36 of 6 s, 24 of 20 s) such a blob stayed at most 4 frames (a motion-blur
 /// ghost, a corner's fold); a lip slipped as one piece kept one for 4 s.
 pub(crate) const SLIPPED_NAMES_FRAMES: u32 = 8;
