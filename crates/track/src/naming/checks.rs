@@ -239,8 +239,8 @@ pub(crate) fn order_and_neighbours(
     keep_corner_neighbours_in_place(ctx, names, cands);
 }
 
-/// Along the lip segment between two named neighbours, an unnamed lip blob must lie this far
-/// from either end (a share of the segment) to count as lying between them.
+/// An unnamed lip blob lies between two named neighbours when it projects onto the segment
+/// joining them between these shares of the way from one to the other ...
 pub const BETWEEN_NEIGHBOURS_SPAN: [f64; 2] = [0.2, 0.8];
 
 /// ... and at most this share of the segment's length off it.
