@@ -60,6 +60,21 @@ struct State {
     dx: f64,
 }
 
+impl State {
+    /// The filtered derivative after sample `x` at `t` (later than this state's time).
+    fn speed(&self, params: &OneEuroParams, t: f64, x: f64) -> f64 {
+        let dt = t - self.t;
+        let dx_raw = (x - self.x) / dt;
+        self.dx + alpha(params.d_cutoff, dt) * (dx_raw - self.dx)
+    }
+
+    /// The state after sample `x` at `t`, smoothed at `cutoff` Hz, with derivative `dx`.
+    fn step(&self, cutoff: f64, t: f64, x: f64, dx: f64) -> State {
+        let x_hat = self.x + alpha(cutoff, t - self.t) * (x - self.x);
+        State { t, x: x_hat, dx }
+    }
+}
+
 impl OneEuro {
     /// A filter that has seen nothing yet.
     pub fn new(params: OneEuroParams) -> Self {
@@ -85,14 +100,15 @@ impl OneEuro {
         if dt.is_nan() || dt <= 0.0 {
             return s.x;
         }
-        let dx_raw = (x - s.x) / dt;
-        let a_d = alpha(self.params.d_cutoff, dt);
-        let dx = s.dx + a_d * (dx_raw - s.dx);
-        let cutoff = self.params.min_cutoff + self.params.beta * dx.abs();
-        let a = alpha(cutoff, dt);
-        let x_hat = s.x + a * (x - s.x);
-        self.state = Some(State { t, x: x_hat, dx });
-        x_hat
+        let dx = s.speed(&self.params, t, x);
+        let next = s.step(
+            self.params.min_cutoff + self.params.beta * dx.abs(),
+            t,
+            x,
+            dx,
+        );
+        self.state = Some(next);
+        next.x
     }
 }
 
@@ -134,11 +150,7 @@ impl OneEuroGroup {
         speeds.clear();
         for (m, x) in self.members.iter().zip(xs.iter()) {
             let dx = match (m, x) {
-                (Some(s), Some(x)) if t > s.t => {
-                    let dt = t - s.t;
-                    let dx_raw = (x - s.x) / dt;
-                    s.dx + alpha(self.params.d_cutoff, dt) * (dx_raw - s.dx)
-                }
+                (Some(s), Some(x)) if t > s.t => s.speed(&self.params, t, *x),
                 _ => 0.0,
             };
             fastest = fastest.max(dx.abs());
@@ -155,9 +167,8 @@ impl OneEuroGroup {
                 (_, None) => *m = None,
                 (None, Some(x)) => *m = Some(State { t, x: *x, dx: 0.0 }),
                 (Some(s), Some(x)) if t > s.t => {
-                    let dt = t - s.t;
-                    *x = s.x + alpha(cutoff, dt) * (*x - s.x);
-                    *s = State { t, x: *x, dx };
+                    *s = s.step(cutoff, t, *x, dx);
+                    *x = s.x;
                 }
                 (Some(s), Some(x)) => *x = s.x,
             }

@@ -213,14 +213,18 @@ fn candidates(truth: &[Vec3]) -> Vec<Candidate> {
         .collect()
 }
 
-fn assert_named_correctly(out: &TrackedFrame, truth: &[Vec3], hidden: &[usize], tol_m: f64) {
-    let all: Vec<Option<Vec3>> = out
-        .dots
+/// Every dot of a tracked frame, lip dots then forehead, as `truth` lists them.
+fn all_dots(out: &TrackedFrame) -> Vec<Option<Vec3>> {
+    out.dots
         .lip
         .iter()
         .chain(&out.dots.forehead)
         .copied()
-        .collect();
+        .collect()
+}
+
+fn assert_named_correctly(out: &TrackedFrame, truth: &[Vec3], hidden: &[usize], tol_m: f64) {
+    let all = all_dots(out);
     for (i, (got, want)) in all.iter().zip(truth).enumerate() {
         match got {
             Some(p) => {
@@ -712,13 +716,7 @@ fn names_slipped_along_the_lower_lip_are_found_again() {
     for i in 0..(prediction::SLIPPED_NAMES_FRAMES + 6) {
         let out = tr.process(&render(seq, &truth, &[])).unwrap();
         seq += 1;
-        let all: Vec<Option<Vec3>> = out
-            .dots
-            .lip
-            .iter()
-            .chain(&out.dots.forehead)
-            .copied()
-            .collect();
+        let all = all_dots(out);
         let wrong = (0..12).any(|d| all[d].is_some_and(|p| (p - truth[d]).norm() > 0.004));
         slipped_frames += wrong as u32;
         let all_right = (0..15).all(|d| all[d].is_some_and(|p| (p - truth[d]).norm() < 0.0015));
