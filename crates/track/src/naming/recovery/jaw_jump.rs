@@ -9,6 +9,11 @@
 //! [`BETTER_AREA_RATIO`] times the blob area (one fewer when two or more lower-lip dots were
 //! on ghosts: a corner merged with its neighbour may fail the checks under the new names,
 //! and missing beats five names on ghosts), and the corners are still the extremes.
+//!
+//! Ghosts can be too large to tell by their area (a fast jaw smears the paint too), with
+//! every dot named on its own ghost and no miss anywhere. So on every frame the jump is also
+//! measured from the whole lower lip ([`whole_lip_shift`]) and tried by the same rule, its
+//! names taken only if they land on free paint ([`lands_on_free_blobs`]).
 
 use mouthpiece_detect::DotRole;
 use mouthpiece_retarget::RigidTransform;
@@ -28,6 +33,10 @@ pub const JAW_JUMP_PX: f64 = 12.0;
 /// but seed 32, Kinect-like, strong, 10 s, took the jaw's names wrongly: its worst rig curve
 /// 0.085 → 0.203.)
 pub const GHOST_AREA_SHARE: f64 = 0.5;
+
+/// The whole-lip jump is tried only when it differs from the lost dots' by more than this,
+/// pixels (otherwise it names the frame the same way).
+pub const SAME_SHIFT_PX: f64 = 1.0;
 
 /// The jaw's names with as many lip dots win when their lower lip's blobs cover this many
 /// times the area.
@@ -68,36 +77,44 @@ impl Step for JawJump {
                 .map(|&c| ctx.blobs[cands.blob[c]].area as f64)
                 .sum()
         };
-        if !((names.lips_named(n) < n && pass.steady_named < list.len())
-            || (on_ghosts >= GHOSTS_FOR_A_JUMP && free_lips >= GHOSTS_FOR_A_JUMP))
-        {
-            return false;
-        }
-        let Some(shift) = jaw_shift(ctx, names.as_slice(), &ghosts, list, &pass.head) else {
-            return false;
-        };
-        let (_, jumped) = checked_pass(
-            ctx,
-            &pass.forehead,
-            pass.head,
-            LipMotion::JawJumped(shift),
-            cands,
-            scratch,
-        );
+        let lost = (names.lips_named(n) < n && pass.steady_named < list.len())
+            || (on_ghosts >= GHOSTS_FOR_A_JUMP && free_lips >= GHOSTS_FOR_A_JUMP);
+        // Two estimates of the jump: from the dots that are missing or on ghosts, and from
+        // the whole lower lip (its dots may sit on ghosts too large to tell by their area,
+        // with every dot named).
+        let from_lost = lost
+            .then(|| jaw_shift(ctx, names.as_slice(), &ghosts, list, &pass.head))
+            .flatten();
+        let from_lip = whole_lip_shift(ctx, names.as_slice(), list, &pass.head)
+            .filter(|s| from_lost.is_none_or(|f| (s[0] - f[0]).hypot(s[1] - f[1]) > SAME_SHIFT_PX));
         let slack = usize::from(on_ghosts >= GHOSTS_FOR_A_JUMP);
-        let (before, after) = (names.lips_named(n), jumped.lips_named(n));
-        let better = after > before
-            || (after + slack >= before
-                && lower_area(&jumped, cands) > BETTER_AREA_RATIO * lower_area(names, cands));
-        if better && checks::corners_are_extremes(ctx, jumped.as_slice(), &cands.list) {
-            tracing::debug!(
-                before,
-                jumped = after,
-                ?shift,
-                "the jaw jumped: lower lip named from its shifted places"
+        let estimates = [(from_lost, false), (from_lip, true)];
+        for (shift, whole_lip) in estimates.into_iter().filter_map(|(s, w)| Some((s?, w))) {
+            let (_, jumped) = checked_pass(
+                ctx,
+                &pass.forehead,
+                pass.head,
+                LipMotion::JawJumped(shift),
+                cands,
+                scratch,
             );
-            *names = jumped;
-            return true;
+            let (before, after) = (names.lips_named(n), jumped.lips_named(n));
+            let better = after > before
+                || (after + slack >= before
+                    && lower_area(&jumped, cands) > BETTER_AREA_RATIO * lower_area(names, cands));
+            if better
+                && (!whole_lip || lands_on_free_blobs(names.as_slice(), jumped.as_slice()))
+                && checks::corners_are_extremes(ctx, jumped.as_slice(), &cands.list)
+            {
+                tracing::debug!(
+                    before,
+                    jumped = after,
+                    ?shift,
+                    "the jaw jumped: lower lip named from its shifted places"
+                );
+                *names = jumped;
+                return true;
+            }
         }
         false
     }
@@ -114,15 +131,29 @@ fn jaw_shift(
     cands: &[Candidate],
     head: &RigidTransform,
 ) -> Option<[f64; 2]> {
+    let offsets = jump_offsets(ctx, names, ghosts, cands, head);
+    (!offsets.is_empty()).then(|| median_offset(offsets))
+}
+
+/// For each lower-lip dot between the corners that is missing or flagged in `lost`: the
+/// offset from its prediction to the nearest free lip candidate within [`JAW_JUMP_PX`] and
+/// its depth window, if there is one.
+fn jump_offsets(
+    ctx: &Context,
+    names: &[Option<usize>],
+    lost: &[bool],
+    cands: &[Candidate],
+    head: &RigidTransform,
+) -> Small<[f64; 2]> {
     let n = ctx.layout.lip_dots;
     let preds = lip_predictions(ctx, head, LipMotion::Steady);
     let mut taken: Small<bool> = smallvec::smallvec![false; cands.len()];
     for c in names.iter().flatten() {
         taken[*c] = true;
     }
-    let (mut dx, mut dy): (Small<f64>, Small<f64>) = (Small::new(), Small::new());
+    let mut offsets = Small::new();
     for i in ctx.layout.right_corner() + 1..n {
-        if names[i].is_some() && !ghosts[i] {
+        if names[i].is_some() && !lost[i] {
             continue;
         }
         let window = depth_window(&ctx.tracks[i], head, ctx.config.lip_depth_gate_m);
@@ -134,16 +165,51 @@ fn jaw_shift(
             .map(|(_, c)| [c.pixel[0] - preds[i][0], c.pixel[1] - preds[i][1]])
             .filter(|d| d[0].hypot(d[1]) <= JAW_JUMP_PX)
             .min_by(|a, b| a[0].hypot(a[1]).total_cmp(&b[0].hypot(b[1])));
-        if let Some(d) = nearest {
-            dx.push(d[0]);
-            dy.push(d[1]);
-        }
+        offsets.extend(nearest);
     }
-    let median = |v: &mut Small<f64>| {
+    offsets
+}
+
+/// The median of each coordinate of `offsets` (not empty).
+fn median_offset(offsets: Small<[f64; 2]>) -> [f64; 2] {
+    let median = |mut v: Small<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
-    (!dx.is_empty()).then(|| [median(&mut dx), median(&mut dy)])
+    [
+        median(offsets.iter().map(|d| d[0]).collect()),
+        median(offsets.iter().map(|d| d[1]).collect()),
+    ]
+}
+
+/// How far the whole lower lip jumped beyond its prediction, in pixels (named heuristic
+/// *whole-lip jump*): the median, over the lower-lip dots between the corners, of the offset
+/// from each dot's prediction to the nearest free lip candidate within [`JAW_JUMP_PX`] and
+/// its depth window, named or not. A jaw that jumps leaves every lower-lip dot's ghost
+/// where the lip was, and a dot named on its ghost shows no miss; its paint is then a free
+/// blob just beyond. `None` unless most of the lower lip (more than half its dots) has such
+/// a candidate: the lip moves as one.
+fn whole_lip_shift(
+    ctx: &Context,
+    names: &[Option<usize>],
+    cands: &[Candidate],
+    head: &RigidTransform,
+) -> Option<[f64; 2]> {
+    let all_lost: Small<bool> = smallvec::smallvec![true; ctx.layout.lip_dots];
+    let lower = ctx.layout.lip_dots - ctx.layout.right_corner() - 1;
+    let offsets = jump_offsets(ctx, names, &all_lost, cands, head);
+    (offsets.len() > lower / 2).then(|| median_offset(offsets))
+}
+
+/// Whether every dot named in `jumped` keeps its blob from `names` or takes one no dot had
+/// (named heuristic *lands on free paint*). A lower lip that jumped past its ghosts lands on
+/// paint nobody was named on; names that move onto a neighbour's blob have slipped along the
+/// lip (a head turned far, a corner's large merged blob taken by the dot beside it).
+fn lands_on_free_blobs(names: &[Option<usize>], jumped: &[Option<usize>]) -> bool {
+    jumped.iter().zip(names).all(|(after, before)| match after {
+        Some(c) => Some(*c) == *before || !names.contains(&Some(*c)),
+        None => true,
+    })
 }
 
 /// Per lip dot: whether it is on the lower lip between the corners and named on a blob of
@@ -199,5 +265,147 @@ mod tests {
         );
         assert!(fired);
         assert_eq!(named(&names), identity());
+    }
+
+    /// The jaw drops 9 px within a frame; D8..D11 leave ghosts of 0.7 of their paint where
+    /// they were (too large to pass for ghosts by their area) and are named on them with no
+    /// miss, D12 is hidden. No dot is on a ghost by area, and no free blob lies near the
+    /// hidden dot: only the whole lower lip's jump finds the paint.
+    #[test]
+    fn a_lower_lip_on_large_ghosts_is_named_from_the_whole_lips_jump() {
+        let mut scene = Scene::calibrated();
+        let rest = scene.rest_pixels();
+        let truth = lower_lip_moved(&rest, [0.0, 9.0]);
+        let face = neutral_face();
+        let mut cands = Candidates::default();
+        scene.blobs.clear();
+        for (i, (px, p)) in truth.iter().zip(&face).enumerate() {
+            if i != 11 {
+                let role = if i < 12 {
+                    DotRole::Lip
+                } else {
+                    DotRole::Forehead
+                };
+                scene.push(&mut cands, *px, p.z, role, 1.0);
+            }
+        }
+        let ghosts: Vec<usize> = (7..11)
+            .map(|i| scene.push(&mut cands, rest[i], face[i].z, DotRole::Lip, 0.7))
+            .collect();
+        let mut pass = scene.pass(&rest, &cands);
+        let mut names = scene.first_pass(&pass, &cands);
+        pass.steady_named = names.count();
+        let on_ghosts: Vec<_> = (7..11).map(|i| names.get(i)).collect();
+        assert_eq!(
+            on_ghosts,
+            ghosts.iter().map(|g| Some(*g)).collect::<Vec<_>>()
+        );
+        let fired = JawJump.run(
+            &scene.ctx(),
+            &pass,
+            &mut names,
+            &mut cands,
+            &mut Scratch::default(),
+        );
+        assert!(fired, "{:?}", named(&names));
+        let lower: Vec<_> = (7..12).map(|i| names.get(i)).collect();
+        assert_eq!(lower, vec![Some(7), Some(8), Some(9), Some(10), None]);
+    }
+
+    /// As above with every dot seen and named: the whole lower lip on ghosts of 0.7 of its
+    /// paint, nothing missing, no ghost small enough to count. The whole lip's jump is
+    /// looked for all the same.
+    #[test]
+    fn a_fully_named_lower_lip_on_large_ghosts_moves_to_its_paint() {
+        let mut scene = Scene::calibrated();
+        let rest = scene.rest_pixels();
+        let truth = lower_lip_moved(&rest, [0.0, 9.0]);
+        let mut cands = scene.candidates_at(&truth);
+        let face = neutral_face();
+        for i in 7..12 {
+            scene.push(&mut cands, rest[i], face[i].z, DotRole::Lip, 0.7);
+        }
+        let mut pass = scene.pass(&rest, &cands);
+        let mut names = scene.first_pass(&pass, &cands);
+        pass.steady_named = names.count();
+        let first: Vec<_> = (7..12).map(|i| names.get(i)).collect();
+        assert_eq!(first, (15..20).map(Some).collect::<Vec<_>>());
+        let fired = JawJump.run(
+            &scene.ctx(),
+            &pass,
+            &mut names,
+            &mut cands,
+            &mut Scratch::default(),
+        );
+        assert!(fired, "{:?}", named(&names));
+        assert_eq!(named(&names), identity());
+    }
+
+    /// The lower lip is named on its paint and its ghosts are left free above it, one dot
+    /// hidden: the whole lip's jump points at the ghosts, and naming them would cover less
+    /// paint, so the names stay.
+    #[test]
+    fn a_lower_lip_on_its_paint_keeps_its_names_beside_its_ghosts() {
+        let mut scene = Scene::calibrated();
+        let rest = scene.rest_pixels();
+        let face = neutral_face();
+        let mut cands = Candidates::default();
+        scene.blobs.clear();
+        for (i, (px, p)) in rest.iter().zip(&face).enumerate() {
+            if i != 11 {
+                let role = if i < 12 {
+                    DotRole::Lip
+                } else {
+                    DotRole::Forehead
+                };
+                scene.push(&mut cands, *px, p.z, role, 1.0);
+            }
+        }
+        let above = lower_lip_moved(&rest, [0.0, -5.0]);
+        for i in 7..11 {
+            scene.push(&mut cands, above[i], face[i].z, DotRole::Lip, 0.6);
+        }
+        let mut pass = scene.pass(&rest, &cands);
+        let mut names = scene.first_pass(&pass, &cands);
+        pass.steady_named = names.count();
+        let before = named(&names);
+        assert_eq!(before[7..11], [Some(7), Some(8), Some(9), Some(10)]);
+        assert!(
+            whole_lip_shift(&scene.ctx(), names.as_slice(), &cands.list, &pass.head)
+                .is_some_and(|s| s[1] < -4.0)
+        );
+        let fired = JawJump.run(
+            &scene.ctx(),
+            &pass,
+            &mut names,
+            &mut cands,
+            &mut Scratch::default(),
+        );
+        assert!(!fired);
+        assert_eq!(named(&names), before);
+    }
+
+    #[test]
+    fn landing_on_free_paint_keeps_blobs_or_takes_unnamed_ones() {
+        let names = [Some(0), Some(1), Some(2), None];
+        // Keeps two, takes the unnamed 5, loses one: on free paint.
+        assert!(lands_on_free_blobs(
+            &names,
+            &[Some(0), Some(1), Some(5), None]
+        ));
+        assert!(lands_on_free_blobs(
+            &names,
+            &[None, Some(1), Some(2), Some(7)]
+        ));
+        // Slipped one place along the lip: dot 1 on dot 0's blob, dot 2 on dot 1's.
+        assert!(!lands_on_free_blobs(
+            &names,
+            &[None, Some(0), Some(1), Some(2)]
+        ));
+        // One swap is enough.
+        assert!(!lands_on_free_blobs(
+            &names,
+            &[Some(1), Some(0), Some(2), None]
+        ));
     }
 }
