@@ -85,7 +85,7 @@ impl Default for TrackConfig {
             lip_depth_across_m: 0.0018,
             forehead_surface_margin_m: 0.025,
             forehead_depth_min_cutoff_hz: 2.0,
-            forehead_depth_beta: 200.0,
+            forehead_depth_beta: 400.0,
             roi_margin_px: 20.0,
             full_search_every: 8,
             min_gate_px: 2.5,
