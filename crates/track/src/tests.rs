@@ -537,8 +537,11 @@ fn forehead_depth_jitter_is_filtered() {
         unfiltered > 0.001,
         "the jitter reaches the dots: {unfiltered}"
     );
+    // The filter opens with the depth's speed (`forehead_depth_beta`), and a jump of up to
+    // 2 mm a frame is a speed of 60 mm/s: at the default β it keeps about half of it (0.52;
+    // 0.41 at β 200, where real sessions lagged more behind a turning head).
     assert!(
-        filtered < 0.5 * unfiltered,
+        filtered < 0.6 * unfiltered,
         "filtered {filtered} m against {unfiltered} m unfiltered"
     );
 }
