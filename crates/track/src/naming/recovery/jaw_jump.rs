@@ -277,18 +277,7 @@ mod tests {
         let rest = scene.rest_pixels();
         let truth = lower_lip_moved(&rest, [0.0, 9.0]);
         let face = neutral_face();
-        let mut cands = Candidates::default();
-        scene.blobs.clear();
-        for (i, (px, p)) in truth.iter().zip(&face).enumerate() {
-            if i != 11 {
-                let role = if i < 12 {
-                    DotRole::Lip
-                } else {
-                    DotRole::Forehead
-                };
-                scene.push(&mut cands, *px, p.z, role, 1.0);
-            }
-        }
+        let mut cands = scene.candidates_hiding(&truth, 11);
         let ghosts: Vec<usize> = (7..11)
             .map(|i| scene.push(&mut cands, rest[i], face[i].z, DotRole::Lip, 0.7))
             .collect();
@@ -349,18 +338,7 @@ mod tests {
         let mut scene = Scene::calibrated();
         let rest = scene.rest_pixels();
         let face = neutral_face();
-        let mut cands = Candidates::default();
-        scene.blobs.clear();
-        for (i, (px, p)) in rest.iter().zip(&face).enumerate() {
-            if i != 11 {
-                let role = if i < 12 {
-                    DotRole::Lip
-                } else {
-                    DotRole::Forehead
-                };
-                scene.push(&mut cands, *px, p.z, role, 1.0);
-            }
-        }
+        let mut cands = scene.candidates_hiding(&rest, 11);
         let above = lower_lip_moved(&rest, [0.0, -5.0]);
         for i in 7..11 {
             scene.push(&mut cands, above[i], face[i].z, DotRole::Lip, 0.6);

@@ -164,10 +164,22 @@ impl Scene {
     /// One candidate per pixel (the first 12 lip, the rest forehead), at the depth of the
     /// dot at rest with the same index, each on a blob of one dot's paint.
     pub fn candidates_at(&mut self, pixels: &[[f64; 2]]) -> Candidates {
+        self.candidates_except(pixels, None)
+    }
+
+    /// As [`Scene::candidates_at`] with dot `hidden` unseen (no candidate for it).
+    pub fn candidates_hiding(&mut self, pixels: &[[f64; 2]], hidden: usize) -> Candidates {
+        self.candidates_except(pixels, Some(hidden))
+    }
+
+    fn candidates_except(&mut self, pixels: &[[f64; 2]], hidden: Option<usize>) -> Candidates {
         let face = neutral_face();
         let mut cands = Candidates::default();
         self.blobs.clear();
         for (i, px) in pixels.iter().enumerate() {
+            if Some(i) == hidden {
+                continue;
+            }
             let role = if i < 12 {
                 DotRole::Lip
             } else {
