@@ -247,24 +247,20 @@ mod tests {
         for (px, p) in rest.iter().zip(&face).take(11).skip(8) {
             scene.push(&mut cands, *px, p.z, DotRole::Lip, 0.3);
         }
-        let mut pass = scene.pass(&rest, &cands);
-        let mut names = scene.first_pass(&pass, &cands);
-        pass.steady_named = names.count();
+        let run = scene.run_as_hypothesis(&JawJump, &rest, &mut cands);
         assert_eq!(
-            (names.get(7), names.get(8), names.get(9), names.get(11)),
+            (
+                run.first.get(7),
+                run.first.get(8),
+                run.first.get(9),
+                run.first.get(11)
+            ),
             (None, Some(15), Some(16), None),
             "{:?}",
-            named(&names)
+            named(&run.first)
         );
-        let fired = JawJump.run(
-            &scene.ctx(),
-            &pass,
-            &mut names,
-            &mut cands,
-            &mut Scratch::default(),
-        );
-        assert!(fired);
-        assert_eq!(named(&names), identity());
+        assert!(run.fired);
+        assert_eq!(named(&run.names), identity());
     }
 
     /// The jaw drops 9 px within a frame; D8..D11 leave ghosts of 0.7 of their paint where
@@ -281,23 +277,14 @@ mod tests {
         let ghosts: Vec<usize> = (7..11)
             .map(|i| scene.push(&mut cands, rest[i], face[i].z, DotRole::Lip, 0.7))
             .collect();
-        let mut pass = scene.pass(&rest, &cands);
-        let mut names = scene.first_pass(&pass, &cands);
-        pass.steady_named = names.count();
-        let on_ghosts: Vec<_> = (7..11).map(|i| names.get(i)).collect();
+        let run = scene.run_as_hypothesis(&JawJump, &rest, &mut cands);
+        let on_ghosts: Vec<_> = (7..11).map(|i| run.first.get(i)).collect();
         assert_eq!(
             on_ghosts,
             ghosts.iter().map(|g| Some(*g)).collect::<Vec<_>>()
         );
-        let fired = JawJump.run(
-            &scene.ctx(),
-            &pass,
-            &mut names,
-            &mut cands,
-            &mut Scratch::default(),
-        );
-        assert!(fired, "{:?}", named(&names));
-        let lower: Vec<_> = (7..12).map(|i| names.get(i)).collect();
+        assert!(run.fired, "{:?}", named(&run.names));
+        let lower: Vec<_> = (7..12).map(|i| run.names.get(i)).collect();
         assert_eq!(lower, vec![Some(7), Some(8), Some(9), Some(10), None]);
     }
 
@@ -314,20 +301,11 @@ mod tests {
         for i in 7..12 {
             scene.push(&mut cands, rest[i], face[i].z, DotRole::Lip, 0.7);
         }
-        let mut pass = scene.pass(&rest, &cands);
-        let mut names = scene.first_pass(&pass, &cands);
-        pass.steady_named = names.count();
-        let first: Vec<_> = (7..12).map(|i| names.get(i)).collect();
+        let run = scene.run_as_hypothesis(&JawJump, &rest, &mut cands);
+        let first: Vec<_> = (7..12).map(|i| run.first.get(i)).collect();
         assert_eq!(first, (15..20).map(Some).collect::<Vec<_>>());
-        let fired = JawJump.run(
-            &scene.ctx(),
-            &pass,
-            &mut names,
-            &mut cands,
-            &mut Scratch::default(),
-        );
-        assert!(fired, "{:?}", named(&names));
-        assert_eq!(named(&names), identity());
+        assert!(run.fired, "{:?}", named(&run.names));
+        assert_eq!(named(&run.names), identity());
     }
 
     /// The lower lip is named on its paint and its ghosts are left free above it, one dot
@@ -343,24 +321,18 @@ mod tests {
         for i in 7..11 {
             scene.push(&mut cands, above[i], face[i].z, DotRole::Lip, 0.6);
         }
-        let mut pass = scene.pass(&rest, &cands);
-        let mut names = scene.first_pass(&pass, &cands);
-        pass.steady_named = names.count();
-        let before = named(&names);
+        let run = scene.run_as_hypothesis(&JawJump, &rest, &mut cands);
+        let before = named(&run.first);
         assert_eq!(before[7..11], [Some(7), Some(8), Some(9), Some(10)]);
-        assert!(
-            whole_lip_shift(&scene.ctx(), names.as_slice(), &cands.list, &pass.head)
-                .is_some_and(|s| s[1] < -4.0)
-        );
-        let fired = JawJump.run(
+        assert!(whole_lip_shift(
             &scene.ctx(),
-            &pass,
-            &mut names,
-            &mut cands,
-            &mut Scratch::default(),
-        );
-        assert!(!fired);
-        assert_eq!(named(&names), before);
+            run.first.as_slice(),
+            &cands.list,
+            &run.pass.head
+        )
+        .is_some_and(|s| s[1] < -4.0));
+        assert!(!run.fired);
+        assert_eq!(named(&run.names), before);
     }
 
     #[test]

@@ -64,22 +64,13 @@ mod tests {
         let rest = scene.rest_pixels();
         let overshot = lower_lip_moved(&rest, [0.0, 6.0]);
         let mut cands = scene.candidates_at(&rest);
-        let mut pass = scene.pass(&overshot, &cands);
-        let mut names = scene.first_pass(&pass, &cands);
-        pass.steady_named = names.count();
+        let run = scene.run_as_hypothesis(&StoppedLips, &overshot, &mut cands);
         assert!(
-            (8..11).all(|i| names.get(i).is_none()),
+            (8..11).all(|i| run.first.get(i).is_none()),
             "{:?}",
-            named(&names)
+            named(&run.first)
         );
-        let fired = StoppedLips.run(
-            &scene.ctx(),
-            &pass,
-            &mut names,
-            &mut cands,
-            &mut Scratch::default(),
-        );
-        assert!(fired);
-        assert_eq!(named(&names), identity());
+        assert!(run.fired);
+        assert_eq!(named(&run.names), identity());
     }
 }

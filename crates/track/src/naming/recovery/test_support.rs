@@ -252,6 +252,33 @@ impl Scene {
         names
     }
 
+    /// A hypothesis-stage step as the tracker runs it: the first pass with the lips predicted
+    /// at `preds`, its names counted as the steady hypothesis's, then `step` on them.
+    pub fn run_as_hypothesis(
+        &self,
+        step: &dyn Step,
+        preds: &[[f64; 2]],
+        cands: &mut Candidates,
+    ) -> HypothesisRun {
+        let mut pass = self.pass(preds, cands);
+        let first = self.first_pass(&pass, cands);
+        pass.steady_named = first.count();
+        let mut names = first.clone();
+        let fired = step.run(
+            &self.ctx(),
+            &pass,
+            &mut names,
+            cands,
+            &mut Scratch::default(),
+        );
+        HypothesisRun {
+            pass,
+            first,
+            names,
+            fired,
+        }
+    }
+
     /// The first pass, then `step` on its names.
     pub fn run_after_first_pass(
         &self,
@@ -270,6 +297,15 @@ impl Scene {
         );
         (first, names)
     }
+}
+
+/// What [`Scene::run_as_hypothesis`] saw: the pass, the first pass's names, the step's, and
+/// whether the step changed them.
+pub struct HypothesisRun {
+    pub pass: Pass,
+    pub first: NameSet,
+    pub names: NameSet,
+    pub fired: bool,
 }
 
 /// Candidate indices per dot (`None`: missing), lip dots then forehead.
