@@ -13,7 +13,7 @@
 
 use mouthpiece_retarget::rig::{curves_from, RigModel, RigSettings, CURVES, CURVE_NAMES};
 use mouthpiece_retarget::{Character, PerformerLayout, Retargeter};
-use mouthpiece_synth::GroundTruth;
+use mouthpiece_synth::{GroundTruth, MouthTruth};
 
 use crate::measures::{reference_retargeter, true_dots, true_neutral};
 use crate::{EvaluateError, FrameView, Measure};
@@ -87,9 +87,9 @@ impl RigMetrics {
 #[derive(Debug, Clone)]
 pub struct RigFrameRecord {
     pub t: f64,
-    /// The synthetic mouth's own jaw angle (radians) and rounding.
-    pub jaw: f64,
-    pub round: f64,
+    /// The synthetic mouth's own state (jaw angle in radians, spread, rounding, raise,
+    /// roll-in).
+    pub mouth: MouthTruth,
     /// Every curve from the tracked dots and from the true dots, [`CURVE_NAMES`] order.
     pub tracked: [f64; CURVES],
     pub reference: [f64; CURVES],
@@ -184,8 +184,7 @@ impl Measure for RigAccuracy {
             let xyz = |v: &[nalgebra::Vector3<f64>]| v.iter().map(|p| [p.x, p.y, p.z]).collect();
             frames.push(RigFrameRecord {
                 t: f.t,
-                jaw: mouth.jaw,
-                round: mouth.round,
+                mouth: *mouth,
                 tracked: a,
                 reference: b,
                 tracked_lip: xyz(&tracked.lip),

@@ -42,7 +42,7 @@ pub struct FramesCsv {
 
 impl FramesCsv {
     /// Creates the file and writes the header: the session, the time, the synthetic mouth's
-    /// jaw (degrees) and rounding, every curve from the tracked dots and from the true dots,
+    /// state (jaw in degrees, rounding, spread, raise, roll-in), every curve from the tracked dots and from the true dots,
     /// every lip dot's stabilised position (metres, neutral mouth frame), tracked and true,
     /// each rig's neutral dots, and the ranges both rigs' curves were computed with.
     pub fn create(path: &std::path::Path, lip_dots: usize) -> anyhow::Result<Self> {
@@ -50,7 +50,10 @@ impl FramesCsv {
         let file = std::fs::File::create(path)
             .with_context(|| format!("--rig-frames: cannot create {}", path.display()))
             .map_err(crate::exit::bad_input)?;
-        let mut header = vec!["seed,noise,head_motion,t,true_jaw_deg,true_round".to_string()];
+        let mut header = vec![
+            "seed,noise,head_motion,t,true_jaw_deg,true_round,true_spread,true_raise,true_roll_in"
+                .to_string(),
+        ];
         for side in ["tracked", "reference"] {
             header.extend(CURVE_NAMES.iter().map(|c| format!("{side}_{c}")));
         }
@@ -88,14 +91,23 @@ impl FramesCsv {
     ) -> anyhow::Result<()> {
         for f in frames {
             let mut row = vec![session.to_string()];
-            row.extend([f.t, f.jaw.to_degrees(), f.round].map(|v| v.to_string()));
+            let m = &f.mouth;
+            let truth = [
+                f.t,
+                m.jaw.to_degrees(),
+                m.round,
+                m.spread,
+                m.raise,
+                m.roll_in,
+            ];
+            row.extend(truth.map(|v| v.to_string()));
             row.extend(f.tracked.iter().chain(&f.reference).map(|v| v.to_string()));
             let dots = f.tracked_lip.iter().chain(&f.reference_lip);
             for p in dots.chain(&f.tracked_neutral).chain(&f.reference_neutral) {
                 row.extend(p.map(|v| v.to_string()));
             }
             row.extend(f.ranges.iter().map(|v| v.to_string()));
-            debug_assert_eq!(row.len(), 4 + 3 * CURVES + 12 * f.tracked_lip.len());
+            debug_assert_eq!(row.len(), 7 + 3 * CURVES + 12 * f.tracked_lip.len());
             self.line(&row.join(","))?;
         }
         Ok(())
