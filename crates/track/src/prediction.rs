@@ -83,6 +83,11 @@ pub(crate) enum LipMotion {
     /// As `Steady`, the lower lip between the corners shifted by these pixels besides (the
     /// jaw dropping or snapping shut within one frame).
     JawJumped([f64; 2]),
+    /// As `Steady`, each side of the mouth stretched along the corner line about the
+    /// predicted corners' midpoint by these shares (the performer's left side, then the
+    /// right; 0.1: 10 % further out, -0.1: drawn in): the lips drawn in, spread or shifted
+    /// within one frame.
+    SidesStretched([f64; 2]),
 }
 
 /// Where each lip dot is predicted in the image: its stabilised position (moved on by its
@@ -94,7 +99,7 @@ pub(crate) fn lip_predictions(
     lip_motion: LipMotion,
 ) -> Small<[f64; 2]> {
     let k = ctx.sensor.k;
-    ctx.tracks[..ctx.layout.lip_dots]
+    let mut preds: Small<[f64; 2]> = ctx.tracks[..ctx.layout.lip_dots]
         .iter()
         .map(|t| {
             let q = if t.missing == 0 && lip_motion != LipMotion::Stopped {
@@ -111,7 +116,59 @@ pub(crate) fn lip_predictions(
             }
             _ => p,
         })
-        .collect()
+        .collect();
+    if let LipMotion::SidesStretched(stretch) = lip_motion {
+        stretch_sides(&mut preds, &ctx.layout, stretch);
+    }
+    preds
+}
+
+/// Stretches each side of the mouth along the line through the two corners (`pixels` in
+/// layout order) about the corners' midpoint: a pixel on the left corner's side moves
+/// `stretch[0]` times its distance from the midpoint along that line, one on the right
+/// corner's side `stretch[1]` times; across the line nothing moves. The same share on both
+/// sides scales the width; opposite shares shift the mouth. Coincident corners leave the
+/// pixels as they are.
+pub(crate) fn stretch_sides(pixels: &mut [[f64; 2]], layout: &PerformerLayout, stretch: [f64; 2]) {
+    let Some(line) = CornerLine::of(pixels, layout) else {
+        return;
+    };
+    for p in pixels.iter_mut() {
+        let along = line.along(p);
+        let share = if along >= 0.0 { stretch[0] } else { stretch[1] };
+        *p = line.moved(p, share * along);
+    }
+}
+
+/// The line through the two mouth corners' pixels: its midpoint and the unit direction from
+/// the right corner to the left one.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct CornerLine {
+    mid: [f64; 2],
+    dir: [f64; 2],
+}
+
+impl CornerLine {
+    /// The line of `pixels`' corners (layout order); `None` when they coincide.
+    pub(crate) fn of(pixels: &[[f64; 2]], layout: &PerformerLayout) -> Option<Self> {
+        let (l, r) = (pixels[layout.left_corner()], pixels[layout.right_corner()]);
+        let (dx, dy) = (l[0] - r[0], l[1] - r[1]);
+        let len = dx.hypot(dy);
+        (len > 1e-9).then(|| Self {
+            mid: [0.5 * (l[0] + r[0]), 0.5 * (l[1] + r[1])],
+            dir: [dx / len, dy / len],
+        })
+    }
+
+    /// Where `p` lies along the line from the midpoint, pixels (> 0 on the left corner's side).
+    pub(crate) fn along(&self, p: &[f64; 2]) -> f64 {
+        (p[0] - self.mid[0]) * self.dir[0] + (p[1] - self.mid[1]) * self.dir[1]
+    }
+
+    /// `p` moved `by` pixels along the line.
+    pub(crate) fn moved(&self, p: &[f64; 2], by: f64) -> [f64; 2] {
+        [p[0] + by * self.dir[0], p[1] + by * self.dir[1]]
+    }
 }
 
 /// Where each forehead dot is predicted: on at constant pixel velocity when seen last frame,

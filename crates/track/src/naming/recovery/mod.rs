@@ -14,6 +14,7 @@ mod rest_offsets;
 mod shift_across_lip;
 mod split_merged_blobs;
 mod stopped_lips;
+mod width_jump;
 
 #[cfg(test)]
 pub(crate) mod test_support;
@@ -27,6 +28,7 @@ pub(crate) use rest_offsets::RestOffsets;
 pub(crate) use shift_across_lip::ShiftAcrossLip;
 pub(crate) use split_merged_blobs::SplitMergedBlobs;
 pub(crate) use stopped_lips::StoppedLips;
+pub(crate) use width_jump::WidthJump;
 
 use super::{pixels, Candidates, Context, NameSet, Pass, Scratch};
 use crate::labels::{self, Slot, Small};
@@ -80,7 +82,7 @@ const fn entry(stage: Stage, when: When, step: &'static dyn Step) -> Entry {
 
 /// Every recovery step, in the order they run (within a stage; the stages run in the order
 /// of [`Stage`], see [`super::name_frame`]).
-pub(crate) static STEPS: [Entry; 11] = [
+pub(crate) static STEPS: [Entry; 12] = [
     // Speech moves neighbouring dots together: a missing dot is looked for where its
     // prediction lands moved as its found neighbours moved.
     entry(Stage::InPass, When::Always, &FollowNeighbours),
@@ -97,6 +99,8 @@ pub(crate) static STEPS: [Entry; 11] = [
     entry(Stage::Hypotheses, When::Always, &StoppedLips),
     // A jaw that jumped within a frame: the lower lip named from its shifted places.
     entry(Stage::Hypotheses, When::Always, &JawJump),
+    // Lips drawn in or spread within a frame: every dot named from its scaled place.
+    entry(Stage::Hypotheses, When::Always, &WidthJump),
     // As many candidates as dots: geometry fills in the missing, if it agrees.
     entry(Stage::Named, When::Always, &GeometryFill),
     // Two lip dots merged into one blob: split along its long axis.
