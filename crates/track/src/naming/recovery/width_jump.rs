@@ -84,8 +84,9 @@ impl Step for WidthJump {
 /// predictions within [`ON_PAINT_SHARE`] of a dot's radius of a lip candidate in the dot's
 /// depth window; among equals, the one whose predictions lie nearest their candidates (the
 /// paint fits a range of stretches equally by count). The two sides are independent: a
-/// side's stretch moves only its own dots. `None` unless the stretches put more predictions
-/// on paint than the steady ones and one of them is beyond [`STRETCH_NO_CHANGE`].
+/// side's stretch moves only its own dots; a side that gains nothing stays at 0. `None`
+/// unless a side puts more predictions on paint than its steady ones, one side's stretch is
+/// beyond [`STRETCH_NO_CHANGE`], and the two are not a slide ([`shifted`]).
 fn sides_on_paint(ctx: &Context, pass: &Pass, cands: &[Candidate]) -> Option<[f64; 2]> {
     let n = ctx.layout.lip_dots;
     let line = CornerLine::of(&pass.preds, &ctx.layout)?;
