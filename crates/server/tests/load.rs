@@ -2,8 +2,9 @@
 //! clients, garbage, wrong tokens, 1000 connect/disconnect cycles, half-open connections.
 //!
 //! Latency figures are printed (run with `--nocapture`) and recorded in docs/protocol.md;
-//! the hard 5 ms p99 target is checked by `mouthpiece-loadgen`, not here, because this
-//! machine is shared with other builds. Here the bound is loose and the exactness strict.
+//! the 5 ms p99 target is checked by `mouthpiece-loadgen`, not here: no timed target in a
+//! test. Here the exactness is strict (every frame, in order, to every client) and the only
+//! timing bound is relative (stalled clients do not slow the others).
 
 mod common;
 
@@ -136,8 +137,7 @@ async fn sixty_four_clients_at_60_fps_for_30_s_and_stalled_clients_hurt_nobody()
             .collect::<Vec<_>>()
             .join("\n")
     );
-    // Loose bounds (shared, loaded machine); the figures above are what is reported.
-    assert!(report.latency.p99_ms < 50.0, "{:?}", report.latency);
+    // Stalled clients do not slow the others: a relative bound, loose for a shared machine.
     assert!(
         after.p99_ms <= before.p99_ms * 3.0 + 5.0,
         "stalled clients raised the others' latency: {before:?} -> {after:?}"
