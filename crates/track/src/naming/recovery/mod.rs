@@ -97,10 +97,11 @@ pub(crate) static STEPS: [Entry; 12] = [
     entry(Stage::InPass, When::AfterPrevious, &LeaveGhosts),
     // Lips that stopped dead: named from where they were.
     entry(Stage::Hypotheses, When::Always, &StoppedLips),
-    // A jaw that jumped within a frame: the lower lip named from its shifted places.
-    entry(Stage::Hypotheses, When::Always, &JawJump),
-    // Lips drawn in or spread within a frame: every dot named from its scaled place.
+    // Lips drawn in or spread within a frame: every dot named from its stretched place.
     entry(Stage::Hypotheses, When::Always, &WidthJump),
+    // A jaw that jumped within a frame: the lower lip named from its shifted places (after
+    // the width: its names may keep one dot fewer, which a width taking more would undo).
+    entry(Stage::Hypotheses, When::Always, &JawJump),
     // As many candidates as dots: geometry fills in the missing, if it agrees.
     entry(Stage::Named, When::Always, &GeometryFill),
     // Two lip dots merged into one blob: split along its long axis.
