@@ -65,8 +65,9 @@ pub struct Args {
     #[arg(long)]
     pub per_curve: bool,
     /// Writes every counted frame's rig to this CSV file: the synthetic mouth's state (jaw,
-    /// rounding, spread, raise, roll-in), every curve from the tracked and from the true dots, and the stabilised lip
-    /// dots both measured (`scripts/rig-error-split.py` reads it).
+    /// rounding, spread, raise, roll-in), every curve from the tracked and from the true
+    /// dots, and the stabilised lip dots both measured (`scripts/rig-error-split.py` reads
+    /// it).
     #[arg(long, value_name = "FILE")]
     pub rig_frames: Option<PathBuf>,
 }

@@ -42,9 +42,10 @@ pub struct FramesCsv {
 
 impl FramesCsv {
     /// Creates the file and writes the header: the session, the time, the synthetic mouth's
-    /// state (jaw in degrees, rounding, spread, raise, roll-in), every curve from the tracked dots and from the true dots,
-    /// every lip dot's stabilised position (metres, neutral mouth frame), tracked and true,
-    /// each rig's neutral dots, and the ranges both rigs' curves were computed with.
+    /// state (jaw in degrees, rounding, spread, raise, roll-in), every curve from the tracked
+    /// dots and from the true dots, every lip dot's stabilised position (metres, neutral mouth
+    /// frame), tracked and true, each rig's neutral dots, and the ranges both rigs' curves
+    /// were computed with.
     pub fn create(path: &std::path::Path, lip_dots: usize) -> anyhow::Result<Self> {
         use anyhow::Context;
         let file = std::fs::File::create(path)

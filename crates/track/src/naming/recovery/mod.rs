@@ -180,3 +180,19 @@ pub(crate) fn name_moved(
     }
     found
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The jaw jump keeps the last word on the lower lip: its names may keep one dot fewer
+    /// than the steady ones (a corner merged with its neighbour), and a width jump run after
+    /// it would take one name more back onto the ghosts the jaw left.
+    #[test]
+    fn the_width_jump_runs_before_the_jaw_jump() {
+        let names = step_names();
+        let at = |step: &str| names.iter().position(|n| *n == step).expect(step);
+        assert!(at("stopped-lips") < at("width-jump"));
+        assert!(at("width-jump") < at("jaw-jump"));
+    }
+}
