@@ -18,7 +18,7 @@
 use mouthpiece_detect::DotRole;
 use mouthpiece_retarget::RigidTransform;
 
-use super::{Candidates, Context, NameSet, Pass, Scratch, Step};
+use super::{lips_missing_with_candidates_left, Candidates, Context, NameSet, Pass, Scratch, Step};
 use crate::labels::{Candidate, Small};
 use crate::naming::checked_pass;
 use crate::naming::checks::{self, depth_window, disc_area};
@@ -77,7 +77,7 @@ impl Step for JawJump {
                 .map(|&c| ctx.blobs[cands.blob[c]].area as f64)
                 .sum()
         };
-        let lost = (names.lips_named(n) < n && pass.steady_named < list.len())
+        let lost = lips_missing_with_candidates_left(ctx, pass, names, cands)
             || (on_ghosts >= GHOSTS_FOR_A_JUMP && free_lips >= GHOSTS_FOR_A_JUMP);
         // Two estimates of the jump: from the dots that are missing or on ghosts, and from
         // the whole lower lip (its dots may sit on ghosts too large to tell by their area,

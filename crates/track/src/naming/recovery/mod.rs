@@ -30,9 +30,9 @@ pub(crate) use split_merged_blobs::SplitMergedBlobs;
 pub(crate) use stopped_lips::StoppedLips;
 pub(crate) use width_jump::WidthJump;
 
-use super::{pixels, Candidates, Context, NameSet, Pass, Scratch};
+use super::{checked_pass, checks, pixels, Candidates, Context, NameSet, Pass, Scratch};
 use crate::labels::{self, Slot, Small};
-use crate::prediction;
+use crate::prediction::{self, LipMotion};
 
 /// One recovery step.
 pub(crate) trait Step: Sync {
@@ -179,6 +179,39 @@ pub(crate) fn name_moved(
         }
     }
     found
+}
+
+/// Whether lip dots are missing while the steady hypothesis left candidates nobody took:
+/// when the hypothesis steps look for another lip motion.
+pub(crate) fn lips_missing_with_candidates_left(
+    ctx: &Context,
+    pass: &Pass,
+    names: &NameSet,
+    cands: &Candidates,
+) -> bool {
+    let n = ctx.layout.lip_dots;
+    names.lips_named(n) < n && pass.steady_named < cands.len()
+}
+
+/// Names the frame again with the lips moving as `motion` (the pass's forehead and head
+/// motion), and takes those names when they name more lip dots and the corners are still
+/// the extremes. Returns how many lip dots were named before and after, when taken.
+pub(crate) fn take_if_more_named(
+    ctx: &Context,
+    pass: &Pass,
+    names: &mut NameSet,
+    cands: &mut Candidates,
+    scratch: &mut Scratch,
+    motion: LipMotion,
+) -> Option<(usize, usize)> {
+    let n = ctx.layout.lip_dots;
+    let (_, other) = checked_pass(ctx, &pass.forehead, pass.head, motion, cands, scratch);
+    let (before, after) = (names.lips_named(n), other.lips_named(n));
+    if after > before && checks::corners_are_extremes(ctx, other.as_slice(), &cands.list) {
+        *names = other;
+        return Some((before, after));
+    }
+    None
 }
 
 #[cfg(test)]

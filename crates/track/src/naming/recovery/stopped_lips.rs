@@ -4,8 +4,10 @@
 //! dot predicted where it was last (zero velocity, the same head motion); those names are
 //! taken when they name more lip dots and the corners are still the extremes.
 
-use super::{Candidates, Context, NameSet, Pass, Scratch, Step};
-use crate::naming::{checked_pass, checks};
+use super::{
+    lips_missing_with_candidates_left, take_if_more_named, Candidates, Context, NameSet, Pass,
+    Scratch, Step,
+};
 use crate::prediction::LipMotion;
 
 pub(crate) struct StoppedLips;
@@ -23,30 +25,18 @@ impl Step for StoppedLips {
         cands: &mut Candidates,
         scratch: &mut Scratch,
     ) -> bool {
-        let n = ctx.layout.lip_dots;
-        if names.lips_named(n) == n || pass.steady_named >= cands.len() {
+        if !lips_missing_with_candidates_left(ctx, pass, names, cands) {
             return false;
         }
-        let (_, stopped) = checked_pass(
-            ctx,
-            &pass.forehead,
-            pass.head,
-            LipMotion::Stopped,
-            cands,
-            scratch,
-        );
-        if stopped.lips_named(n) > names.lips_named(n)
-            && checks::corners_are_extremes(ctx, stopped.as_slice(), &cands.list)
-        {
+        let taken = take_if_more_named(ctx, pass, names, cands, scratch, LipMotion::Stopped);
+        if let Some((steady, stopped)) = taken {
             tracing::debug!(
-                steady = names.lips_named(n),
-                stopped = stopped.lips_named(n),
+                steady,
+                stopped,
                 "lips stopped: named from their last places"
             );
-            *names = stopped;
-            return true;
         }
-        false
+        taken.is_some()
     }
 }
 

@@ -12,10 +12,12 @@
 
 use mouthpiece_detect::DotRole;
 
-use super::{Candidates, Context, NameSet, Pass, Scratch, Step};
+use super::{
+    lips_missing_with_candidates_left, take_if_more_named, Candidates, Context, NameSet, Pass,
+    Scratch, Step,
+};
 use crate::labels::{Candidate, Small};
-use crate::naming::checked_pass;
-use crate::naming::checks::{self, depth_window};
+use crate::naming::checks::depth_window;
 #[cfg(test)]
 use crate::prediction::stretch_sides;
 use crate::prediction::{CornerLine, LipMotion};
@@ -47,35 +49,24 @@ impl Step for WidthJump {
         cands: &mut Candidates,
         scratch: &mut Scratch,
     ) -> bool {
-        let n = ctx.layout.lip_dots;
-        if names.lips_named(n) == n || pass.steady_named >= cands.len() {
+        if !lips_missing_with_candidates_left(ctx, pass, names, cands) {
             return false;
         }
         let Some(stretch) = sides_on_paint(ctx, pass, &cands.list) else {
             return false;
         };
-        let (_, stretched) = checked_pass(
-            ctx,
-            &pass.forehead,
-            pass.head,
-            LipMotion::SidesStretched(stretch),
-            cands,
-            scratch,
-        );
-        if stretched.lips_named(n) > names.lips_named(n)
-            && checks::corners_are_extremes(ctx, stretched.as_slice(), &cands.list)
-        {
-            tracing::debug!(
-                steady = names.lips_named(n),
-                stretched = stretched.lips_named(n),
+        let motion = LipMotion::SidesStretched(stretch);
+        let taken = take_if_more_named(ctx, pass, names, cands, scratch, motion);
+        match taken {
+            Some((steady, stretched)) => tracing::debug!(
+                steady,
+                stretched,
                 ?stretch,
                 "the mouth's width jumped: named from stretched places"
-            );
-            *names = stretched;
-            return true;
+            ),
+            None => tracing::trace!(?stretch, "width jump tried, names not taken"),
         }
-        tracing::trace!(?stretch, "width jump tried, names not taken");
-        false
+        taken.is_some()
     }
 }
 
