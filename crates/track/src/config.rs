@@ -49,6 +49,17 @@ pub struct TrackConfig {
     /// precise and stay unfiltered. 0 Hz: no filter.
     pub forehead_depth_min_cutoff_hz: f64,
     pub forehead_depth_beta: f64,
+    /// How far down the face the head's rigid surface reaches below the forehead: the share
+    /// of the way from the lowest forehead dot to the mouth's centre, along the line between
+    /// them, 10 mm either side of it (the nose bridge, skull like the forehead; it sets the
+    /// head's pitch over a longer lever). 0: the forehead alone.
+    pub nose_bridge_reach: f64,
+    /// The head motion's constant-velocity filter (`head_filter`): the head's angular
+    /// acceleration (rad²/s³) and linear acceleration (m²/s³) as the spectral density of
+    /// white noise, against the fitted motion's noise of 0.2° and 0.2 mm per axis. Smaller:
+    /// smoother, slower to follow a change of speed. `[0, 0]`: no filter on the motion, the
+    /// forehead dots' depth filter above instead.
+    pub head_filter_accel: [f64; 2],
     /// Margin around the predicted dots for the search region, pixels.
     pub roi_margin_px: f64,
     /// While dots are missing, search the full frame every this many frames.
@@ -86,6 +97,8 @@ impl Default for TrackConfig {
             forehead_surface_margin_m: 0.025,
             forehead_depth_min_cutoff_hz: 2.0,
             forehead_depth_beta: 400.0,
+            nose_bridge_reach: 0.5,
+            head_filter_accel: [0.05, 0.003],
             roi_margin_px: 20.0,
             full_search_every: 8,
             min_gate_px: 2.5,
@@ -148,6 +161,18 @@ impl TrackConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(key, "must be zero or positive");
             }
+        }
+        if !(self.nose_bridge_reach.is_finite() && (0.0..=1.0).contains(&self.nose_bridge_reach)) {
+            return bad("nose_bridge_reach", "must be within 0..1");
+        }
+        let [turn, shift] = self.head_filter_accel;
+        let off = turn == 0.0 && shift == 0.0;
+        let on = turn.is_finite() && shift.is_finite() && turn > 0.0 && shift > 0.0;
+        if !(off || on) {
+            return bad(
+                "head_filter_accel",
+                "must be two positive numbers [rad²/s³, m²/s³], or [0, 0] for no filter",
+            );
         }
         if self.full_search_every == 0 {
             return bad("full_search_every", "must be at least 1");

@@ -27,12 +27,107 @@ pub struct DepthCrop {
     w: usize,
     h: usize,
     data: Vec<u16>,
+    /// The forehead's box, pixels `[x0, y0, x1, y1)`: what is surface besides the nose.
+    forehead: [usize; 4],
+    /// The nose bridge below it, when the mouth's place is known.
+    nose: Option<NoseStrip>,
+}
+
+/// A strip of pixels down the middle of the face, from the forehead dots towards the mouth:
+/// the nose bridge, which is skull like the forehead (*the nose bridge is skull*). It sits
+/// 5–9 cm below the forehead's middle, so it sets the head's pitch by a longer lever than
+/// the forehead alone, and it lies between the forehead and the mouth the pose is used on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoseStrip {
+    /// Where distances along the strip start (the forehead dots' centroid), pixels.
+    pub origin: [f64; 2],
+    /// Unit direction from the forehead dots' centroid to the mouth's centre.
+    pub dir: [f64; 2],
+    /// The strip's extent along `dir`, pixels from `origin`.
+    pub along: [f64; 2],
+    /// Half its width across `dir`, pixels.
+    pub half_width: f64,
+}
+
+impl NoseStrip {
+    /// The strip for forehead dots at `forehead` pixels and the mouth centred at `mouth`:
+    /// from the lowest forehead dot (along the line to the mouth) down `reach` of the way
+    /// from it to the mouth, `half_width_px` either side of that line. `None` when the
+    /// mouth is not below the forehead dots.
+    pub fn between(
+        forehead: &[[f64; 2]],
+        mouth: [f64; 2],
+        reach: f64,
+        half_width_px: f64,
+    ) -> Option<Self> {
+        let n = forehead.len().max(1) as f64;
+        let origin = [
+            forehead.iter().map(|p| p[0]).sum::<f64>() / n,
+            forehead.iter().map(|p| p[1]).sum::<f64>() / n,
+        ];
+        let (dx, dy) = (mouth[0] - origin[0], mouth[1] - origin[1]);
+        let len = dx.hypot(dy);
+        let positive = |v: f64| v > 0.0; // false for NaN too
+        if !positive(len) || !positive(half_width_px) || !positive(reach) {
+            return None;
+        }
+        let dir = [dx / len, dy / len];
+        let lowest = forehead
+            .iter()
+            .map(|p| (p[0] - origin[0]) * dir[0] + (p[1] - origin[1]) * dir[1])
+            .fold(f64::NEG_INFINITY, f64::max);
+        if lowest >= len {
+            return None;
+        }
+        Some(Self {
+            origin,
+            dir,
+            along: [lowest, lowest + reach.min(1.0) * (len - lowest)],
+            half_width: half_width_px,
+        })
+    }
+
+    /// Whether pixel (x, y) lies on the strip.
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        let (dx, dy) = (x - self.origin[0], y - self.origin[1]);
+        let a = dx * self.dir[0] + dy * self.dir[1];
+        let c = -dx * self.dir[1] + dy * self.dir[0];
+        a >= self.along[0] && a <= self.along[1] && c.abs() <= self.half_width
+    }
+
+    /// The strip's four corners, pixels.
+    fn corners(&self) -> [[f64; 2]; 4] {
+        let [ux, uy] = self.dir;
+        let (nx, ny) = (-uy, ux);
+        let mut out = [[0.0; 2]; 4];
+        for (i, (a, c)) in [
+            (self.along[0], -self.half_width),
+            (self.along[0], self.half_width),
+            (self.along[1], -self.half_width),
+            (self.along[1], self.half_width),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            out[i] = [
+                self.origin[0] + a * ux + c * nx,
+                self.origin[1] + a * uy + c * ny,
+            ];
+        }
+        out
+    }
 }
 
 impl DepthCrop {
     /// The forehead's skin: the box round the forehead dots' pixels grown by `margin_px` to
-    /// the sides and above, and by a third of it below (towards the brows, which move).
-    pub fn around_forehead(depth: &DepthImage, dots: &[[f64; 2]], margin_px: f64) -> Self {
+    /// the sides and above, and by a third of it below (towards the brows, which move), and
+    /// the nose bridge's strip when given.
+    pub fn around_forehead(
+        depth: &DepthImage,
+        dots: &[[f64; 2]],
+        margin_px: f64,
+        nose: Option<NoseStrip>,
+    ) -> Self {
         let (mut x_lo, mut y_lo) = (f64::INFINITY, f64::INFINITY);
         let (mut x_hi, mut y_hi) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
         for p in dots {
@@ -42,19 +137,43 @@ impl DepthCrop {
             y_hi = y_hi.max(p[1]);
         }
         let (w_img, h_img) = (depth.width as f64, depth.height as f64);
-        let x0 = (x_lo - margin_px).floor().clamp(0.0, w_img) as usize;
-        let x1 = (x_hi + margin_px).ceil().clamp(0.0, w_img) as usize;
-        let y0 = (y_lo - margin_px).floor().clamp(0.0, h_img) as usize;
-        let y1 = (y_hi + margin_px / BROW_MARGIN_DIVISOR)
+        let fx0 = (x_lo - margin_px).floor().clamp(0.0, w_img) as usize;
+        let fx1 = (x_hi + margin_px).ceil().clamp(0.0, w_img) as usize;
+        let fy0 = (y_lo - margin_px).floor().clamp(0.0, h_img) as usize;
+        let fy1 = (y_hi + margin_px / BROW_MARGIN_DIVISOR)
             .ceil()
             .clamp(0.0, h_img) as usize;
+        let (mut x0, mut x1, mut y0, mut y1) = (fx0, fx1, fy0, fy1);
+        if let Some(strip) = &nose {
+            for c in strip.corners() {
+                x0 = x0.min(c[0].floor().clamp(0.0, w_img) as usize);
+                x1 = x1.max(c[0].ceil().clamp(0.0, w_img) as usize);
+                y0 = y0.min(c[1].floor().clamp(0.0, h_img) as usize);
+                y1 = y1.max(c[1].ceil().clamp(0.0, h_img) as usize);
+            }
+        }
         let (w, h) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
         let mut data = Vec::with_capacity(w * h);
         for y in y0..y0 + h {
             let row = y * depth.width as usize;
             data.extend_from_slice(&depth.data[row + x0..row + x0 + w]);
         }
-        Self { x0, y0, w, h, data }
+        Self {
+            x0,
+            y0,
+            w,
+            h,
+            data,
+            forehead: [fx0, fy0, fx1, fy1],
+            nose,
+        }
+    }
+
+    /// Whether pixel (x, y) is on the forehead's box or the nose's strip.
+    fn is_skin(&self, x: usize, y: usize) -> bool {
+        let [fx0, fy0, fx1, fy1] = self.forehead;
+        (x >= fx0 && x < fx1 && y >= fy0 && y < fy1)
+            || self.nose.is_some_and(|s| s.contains(x as f64, y as f64))
     }
 
     fn get(&self, x: usize, y: usize) -> Option<u16> {
@@ -261,6 +380,9 @@ impl ForeheadSurface {
         let step = step.max(1);
         for y in (last.y0 + step..last.y0 + last.h.saturating_sub(step)).step_by(step) {
             for x in (last.x0 + step..last.x0 + last.w.saturating_sub(step)).step_by(step) {
+                if !last.is_skin(x, y) {
+                    continue;
+                }
                 let Some(p) = point(x, y) else { continue };
                 if (p - plane.0).dot(&plane.1).abs() > OFF_PLANE_M {
                     continue;
@@ -304,6 +426,11 @@ impl ForeheadSurface {
             points,
             normals,
         })
+    }
+
+    /// The samples' mean, camera frame at neutral: the forehead's middle.
+    pub fn centre(&self) -> Vec3 {
+        self.centre
     }
 
     pub fn samples(&self) -> usize {
@@ -551,7 +678,7 @@ mod tests {
             .iter()
             .map(|p| camera::project(k, p).unwrap())
             .collect();
-        let crop = DepthCrop::around_forehead(neutral, &pixels, 0.025 * k.fx / 0.6);
+        let crop = DepthCrop::around_forehead(neutral, &pixels, 0.025 * k.fx / 0.6, None);
         ForeheadSurface::build(&[&crop], 0.001, [0.2, 2.0], k, dots(), 2).unwrap()
     }
 
@@ -573,6 +700,54 @@ mod tests {
             rotation,
             translation: pivot - rotation * pivot + Vec3::new(0.01, 0.0, 0.005),
         }
+    }
+
+    /// *The nose bridge is skull*: the strip runs from the lowest forehead dot down the line
+    /// to the mouth, `reach` of the way, and follows that line when the face is rolled.
+    #[test]
+    fn the_nose_strip_runs_from_the_forehead_dots_towards_the_mouth() {
+        let forehead = [[300.0, 100.0], [320.0, 80.0], [340.0, 100.0]];
+        let strip = NoseStrip::between(&forehead, [320.0, 300.0], 0.5, 10.0).unwrap();
+        assert!(strip.contains(320.0, 150.0) && strip.contains(328.0, 195.0));
+        assert!(!strip.contains(320.0, 250.0), "beyond its reach");
+        assert!(!strip.contains(335.0, 150.0), "beside it");
+        assert!(
+            !strip.contains(320.0, 95.0),
+            "above the lowest forehead dot"
+        );
+        // The same face rolled by 90°: the mouth to the right of the forehead.
+        let rolled = [[200.0, 300.0], [180.0, 320.0], [200.0, 340.0]];
+        let strip = NoseStrip::between(&rolled, [400.0, 320.0], 0.5, 10.0).unwrap();
+        assert!(strip.contains(250.0, 320.0) && !strip.contains(250.0, 335.0));
+        // No mouth below the forehead dots: no strip.
+        assert!(NoseStrip::between(&forehead, [320.0, 90.0], 0.5, 10.0).is_none());
+    }
+
+    /// The strip's samples join the forehead's, below its box.
+    #[test]
+    fn the_nose_strip_adds_surface_below_the_forehead() {
+        let k = Intrinsics::default_vga();
+        let neutral = render(&RigidTransform::IDENTITY, &k, |_, _| 0.0);
+        let pixels: Vec<[f64; 2]> = dots()
+            .iter()
+            .map(|p| camera::project(&k, p).unwrap())
+            .collect();
+        let margin = 0.025 * k.fx / 0.6;
+        let mouth = camera::project(&k, &Vec3::new(0.0, -0.01, 0.61)).unwrap();
+        let strip = NoseStrip::between(&pixels, mouth, 0.5, 0.01 * k.fx / 0.6);
+        let build = |nose| {
+            let crop = DepthCrop::around_forehead(&neutral, &pixels, margin, nose);
+            ForeheadSurface::build(&[&crop], 0.001, [0.2, 2.0], &k, dots(), 2).unwrap()
+        };
+        let (forehead, both) = (build(None), build(strip));
+        assert!(
+            both.samples() > forehead.samples() + 50,
+            "{} → {}",
+            forehead.samples(),
+            both.samples()
+        );
+        let lowest = forehead.points.iter().map(|p| p.y).fold(f64::MIN, f64::max);
+        assert!(both.points.iter().any(|p| p.y > lowest + 0.02));
     }
 
     #[test]

@@ -9,6 +9,7 @@ use mouthpiece_retarget::{OneEuroGroup, PerformerLayout, RigidTransform};
 
 use crate::depth::{self, DepthScratch};
 use crate::forehead::{self, DepthCrop, ForeheadSurface};
+use crate::head_filter::HeadFilter;
 use crate::labels::{Candidate, Small};
 use crate::{camera, Sensor, Vec3};
 
@@ -137,17 +138,32 @@ pub(crate) fn forehead_dot_depth(
 }
 
 /// The forehead's depth in one calibration frame: the box round the forehead dots' pixels
-/// grown by `margin_m` (see [`DepthCrop::around_forehead`]).
+/// grown by `margin_m` (see [`DepthCrop::around_forehead`]), and the nose bridge's strip
+/// `nose_reach` of the way to the mouth centred at `mouth_px` (0: none).
 pub(crate) fn forehead_crop(
     sensor: &Sensor,
     margin_m: f64,
     pixels: &[[f64; 2]],
     dots: &[Option<Vec3>],
+    mouth_px: Option<[f64; 2]>,
+    nose_reach: f64,
 ) -> DepthCrop {
     let z = dots.iter().flatten().map(|p| p.z).sum::<f64>() / dots.len() as f64;
-    let margin_px = margin_m * sensor.k.fx / z.max(NEAREST_FOREHEAD_M);
-    DepthCrop::around_forehead(sensor.depth, pixels, margin_px)
+    let px_per_m = sensor.k.fx / z.max(NEAREST_FOREHEAD_M);
+    let nose = mouth_px.filter(|_| nose_reach > 0.0).and_then(|mouth| {
+        forehead::NoseStrip::between(
+            pixels,
+            mouth,
+            nose_reach,
+            NOSE_BRIDGE_HALF_WIDTH_M * px_per_m,
+        )
+    });
+    DepthCrop::around_forehead(sensor.depth, pixels, margin_m * px_per_m, nose)
 }
+
+/// Half the nose bridge strip's width, metres: the bridge is 15–20 mm wide, and the eyes'
+/// inner corners lie 15 mm or more either side of the midline.
+pub const NOSE_BRIDGE_HALF_WIDTH_M: f64 = 0.010;
 
 /// The neutral forehead surface from the calibration window's crops (see [`forehead`]).
 pub(crate) fn build_forehead_surface(
@@ -190,7 +206,8 @@ pub(crate) fn fit_forehead_surface(
     forehead: &[Option<usize>],
     cands: &mut [Candidate],
     sensor: &Sensor,
-) {
+    filter: Option<(&mut HeadFilter, f64)>,
+) -> Option<RigidTransform> {
     let rays: Small<Option<Vec3>> = forehead.iter().map(|c| c.map(|c| cands[c].point)).collect();
     let (from, to): (Small<Vec3>, Small<Vec3>) = reference
         .iter()
@@ -198,35 +215,47 @@ pub(crate) fn fit_forehead_surface(
         .filter_map(|(f, r)| r.map(|r| (*f, r)))
         .unzip();
     if from.len() < forehead.len() {
-        return;
+        return None;
     }
-    let Some(start) = kabsch(&from, &to) else {
-        return;
-    };
-    let Some(head) = surface.refine(
+    let start = kabsch(&from, &to)?;
+    let fitted = surface.refine(
         &start,
         &rays,
         sensor.depth,
         sensor.scale,
         sensor.k,
         forehead::SurfaceFit::default(),
-    ) else {
-        return;
-    };
+    );
     // A refinement that turned or moved the forehead far from both the dots' own fit and
     // the last frame's head fitted something else (a hand over most of the forehead). Near
     // either is the head: the dots' fit is off by a degree or two at worst, but one dot's
     // depth gone astray for a frame (a few millimetres over their 4 cm) turns it by more,
     // while the head turns little between frames (*either anchor*).
-    if !surface_fit_usable(&head, &start, last, reference) {
-        tracing::debug!("forehead surface fit far from the dots' fit and the last head; not used");
-        return;
-    }
+    let fitted = fitted.filter(|head| {
+        let usable = surface_fit_usable(head, &start, last, reference);
+        if !usable {
+            tracing::debug!(
+                "forehead surface fit far from the dots' fit and the last head; not used"
+            );
+        }
+        usable
+    });
+    let Some(fitted) = fitted else {
+        // No head motion measured on the surface this frame (a hand, another performer
+        // after a restart): the dots stay as seen, and the filter starts again.
+        if let Some((filter, _)) = filter {
+            filter.reset();
+        }
+        return None;
+    };
+    // The naming goes on from the fitted motion (a filter lags a head that changes speed,
+    // and the lips' predictions would lag with it); the output takes the filtered one.
     for (c, reference) in forehead.iter().zip(reference) {
         if let Some(c) = c {
-            cands[*c].point = head.apply(reference);
+            cands[*c].point = fitted.apply(reference);
         }
     }
+    filter.map(|(filter, t)| filter.update(t, &fitted))
 }
 
 /// *Either anchor*: the surface fit is the head when it agrees with the dots' own fit or with

@@ -27,6 +27,7 @@ pub mod config;
 pub mod depth;
 pub mod forehead;
 pub mod head;
+pub mod head_filter;
 pub mod labels;
 pub mod lip_depth;
 pub mod naming;
@@ -154,6 +155,8 @@ pub struct Tracker {
     scratch: naming::Scratch,
     /// The forehead dots' depth filter, one cutoff for all (`None` when switched off).
     forehead_depth: Option<OneEuroGroup>,
+    /// The head motion's filter, once there is a forehead surface to fit it on.
+    head_filter: Option<head_filter::HeadFilter>,
     pub(crate) out: TrackedFrame,
 }
 
@@ -185,6 +188,7 @@ impl Tracker {
         });
         Ok(Self {
             forehead_depth,
+            head_filter: None,
             layout,
             detector,
             dot_radius_m,
@@ -272,6 +276,9 @@ impl Tracker {
         self.window.clear();
         self.velocity_dt = 0.0;
         if let Some(filter) = &mut self.forehead_depth {
+            filter.reset();
+        }
+        if let Some(filter) = &mut self.head_filter {
             filter.reset();
         }
         self.check_performer = self.stabiliser.is_some();
@@ -437,14 +444,19 @@ impl Tracker {
             }
         }
         let cands = &mut self.cands.list;
-        if let Some(surface) = &self.forehead_surface {
-            head::fit_forehead_surface(
+        let mut filtered_head = None;
+        // While a new neutral pose is taken the old surface is not the reference: the new
+        // pose is measured from the dots as they are seen (another performer's, after a
+        // restart, are not where the old neutral has them).
+        if let Some(surface) = self.forehead_surface.as_ref().filter(|_| !self.calibrating) {
+            filtered_head = head::fit_forehead_surface(
                 surface,
                 &self.tracks.reference_forehead,
                 &self.tracks.head,
                 &names[n..],
                 cands,
                 sensor,
+                self.head_filter.as_mut().map(|f| (f, t)),
             );
         }
         lip_depth::along_the_lips(
@@ -458,8 +470,12 @@ impl Tracker {
             cands,
             &mut self.scratch.depth,
         );
+        // The depth filter stands in for the head filter where that did not run (before the
+        // neutral pose, a forehead dot unseen, a surface fit not used).
         if let Some(filter) = &mut self.forehead_depth {
-            head::filter_forehead_depths(filter, &names[n..], cands, t, k);
+            if filtered_head.is_none() {
+                head::filter_forehead_depths(filter, &names[n..], cands, t, k);
+            }
         }
         // Fill the output.
         let out = &mut self.out;
@@ -481,6 +497,14 @@ impl Tracker {
                 &mut out.dots.forehead[dot - n]
             };
             *slot = p.map(|c| c.point);
+        }
+        if let Some(head) = &filtered_head {
+            let reference = &self.tracks.reference_forehead;
+            for (slot, reference) in out.dots.forehead.iter_mut().zip(reference) {
+                if let Some(p) = slot {
+                    *p = head.apply(reference);
+                }
+            }
         }
         out.status.calibrating = false;
         out.status.head_lost = false;
@@ -547,7 +571,22 @@ impl Tracker {
         let margin_m = self.config.forehead_surface_margin_m;
         let crop = (margin_m > 0.0).then(|| {
             let pixels: Small<[f64; 2]> = self.out.pixels[n..].iter().flatten().copied().collect();
-            head::forehead_crop(sensor, margin_m, &pixels, &dots.forehead)
+            let lips: Small<[f64; 2]> = self.out.pixels[..n].iter().flatten().copied().collect();
+            let mouth = (!lips.is_empty()).then(|| {
+                let k = lips.len() as f64;
+                [
+                    lips.iter().map(|p| p[0]).sum::<f64>() / k,
+                    lips.iter().map(|p| p[1]).sum::<f64>() / k,
+                ]
+            });
+            head::forehead_crop(
+                sensor,
+                margin_m,
+                &pixels,
+                &dots.forehead,
+                mouth,
+                self.config.nose_bridge_reach,
+            )
         });
         if !self.window.push(t, dots, crop, self.calibration_s) {
             return Ok(());
@@ -595,6 +634,22 @@ impl Tracker {
             sensor.k,
             &self.tracks.reference_forehead,
         );
+        let [rotation_accel, shift_accel] = self.config.head_filter_accel;
+        self.head_filter = self
+            .forehead_surface
+            .as_ref()
+            .filter(|_| rotation_accel > 0.0 && shift_accel > 0.0)
+            .map(|surface| {
+                head_filter::HeadFilter::new(
+                    head_filter::HeadFilterParams {
+                        rotation_sigma_rad: head_filter::FITTED_TURN_SIGMA_RAD,
+                        rotation_accel,
+                        shift_sigma_m: head_filter::FITTED_SHIFT_SIGMA_M,
+                        shift_accel,
+                    },
+                    surface.centre(),
+                )
+            });
         self.calibrating = false;
         self.calibration_s = self.config.calibration_s;
         self.window.clear();

@@ -646,6 +646,22 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("track.forehead_dots"), "{err}");
+        for (text, key) in [
+            ("nose_bridge_reach = 1.5", "track.nose_bridge_reach"),
+            ("nose_bridge_reach = -0.1", "track.nose_bridge_reach"),
+            ("head_filter_accel = [0.05, 0.0]", "track.head_filter_accel"),
+            (
+                "head_filter_accel = [-1.0, 0.003]",
+                "track.head_filter_accel",
+            ),
+        ] {
+            let err = PipelineConfig::from_toml_str(&format!("[track]\n{text}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(key), "{text}: {err}");
+        }
+        let off = PipelineConfig::from_toml_str("[track]\nhead_filter_accel = [0, 0]\n");
+        assert_eq!(off.unwrap().track.head_filter_accel, [0.0, 0.0]);
     }
 
     /// `[retarget]` configures every caller's smoothing; bad values name their key.

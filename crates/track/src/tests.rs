@@ -528,11 +528,17 @@ fn forehead_depth_jitter_is_filtered() {
         let mean = zs.iter().sum::<f64>() / zs.len() as f64;
         (zs.iter().map(|z| (z - mean).powi(2)).sum::<f64>() / zs.len() as f64).sqrt()
     };
+    // The depth filter alone: the head motion's filter, which replaces it once the forehead
+    // surface is taken, is tested in `head_filter`.
     let unfiltered = spread(TrackConfig {
         forehead_depth_min_cutoff_hz: 0.0,
+        head_filter_accel: [0.0, 0.0],
         ..TrackConfig::default()
     });
-    let filtered = spread(TrackConfig::default());
+    let filtered = spread(TrackConfig {
+        head_filter_accel: [0.0, 0.0],
+        ..TrackConfig::default()
+    });
     assert!(
         unfiltered > 0.001,
         "the jitter reaches the dots: {unfiltered}"
