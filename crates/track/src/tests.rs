@@ -552,6 +552,62 @@ fn forehead_depth_jitter_is_filtered() {
     );
 }
 
+/// *A head keeps its speed*: a still face whose forehead depth tilts back and forth by up
+/// to a degree from frame to frame (noise the surface fit cannot tell from a nod) gives a
+/// steadier head pose with the head filter than without (both without the depth filter).
+#[test]
+fn the_head_filter_steadies_a_jittering_pitch() {
+    let still = posed(0.0, &RigidTransform::IDENTITY);
+    let k = Intrinsics::default_vga();
+    let middle_row = camera::project(&k, &still[13]).unwrap()[1];
+    let spread = |head_filter_accel: [f64; 2]| {
+        let mut tr = Tracker::new(
+            DetectConfig::default(),
+            TrackConfig {
+                forehead_depth_min_cutoff_hz: 0.0,
+                head_filter_accel,
+                ..TrackConfig::default()
+            },
+        )
+        .unwrap();
+        let (mut sq, mut n) = (0.0, 0);
+        for seq in 0..100u64 {
+            let mut frame = render(seq, &still, &[]);
+            if seq >= 40 {
+                // Depth ramp over the rows: ±1° of pitch at most, a new one every frame.
+                let tilt = (((seq * 7919) % 9) as f64 - 4.0) / 4.0 * 1f64.to_radians();
+                for (i, d) in frame.depth.data.iter_mut().enumerate() {
+                    let row = (i / 640) as f64;
+                    if *d > 0 && *d < 640 {
+                        let dz_mm = tilt * (row - middle_row) / k.fy * 600.0;
+                        *d = (*d as f64 + dz_mm).round() as u16;
+                    }
+                }
+            }
+            let out = tr.process(&frame).unwrap();
+            if let (true, Some(s)) = (seq >= 50, &out.stabilised) {
+                let angle = ((s.head.rotation.trace() - 1.0) / 2.0)
+                    .clamp(-1.0, 1.0)
+                    .acos();
+                sq += angle * angle;
+                n += 1;
+            }
+        }
+        assert!(n > 40, "{n} frames with a head pose");
+        (sq / n as f64).sqrt().to_degrees()
+    };
+    let unfiltered = spread([0.0, 0.0]);
+    let filtered = spread(TrackConfig::default().head_filter_accel);
+    assert!(
+        unfiltered > 0.2,
+        "the jitter reaches the head: {unfiltered}°"
+    );
+    assert!(
+        filtered < 0.7 * unfiltered,
+        "filtered {filtered}° against {unfiltered}° unfiltered"
+    );
+}
+
 #[test]
 fn the_example_config_lists_the_defaults() {
     // config/mouthpiece.toml documents every [detect], [track] and [retarget] key with its
