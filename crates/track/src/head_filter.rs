@@ -272,4 +272,83 @@ mod tests {
         let out = f.update(1.0 + MAX_GAP_S + 0.1, &back);
         assert_eq!(out, back);
     }
+
+    /// The filter against filterpy's Kalman filter (tests/reference/head_filter_fixtures.py):
+    /// a head turning about one fixed axis and its forehead middle moving, measured with
+    /// noise at uneven frame times; the filtered angle and middle agree to 1e-9.
+    #[test]
+    fn agrees_with_filterpy() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../tests/reference/head_filter_fixtures.json"
+        );
+        let fixtures: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let floats = |v: &serde_json::Value| -> Vec<f64> {
+            v.as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect()
+        };
+        let triples = |v: &serde_json::Value| -> Vec<Vec3> {
+            v.as_array()
+                .unwrap()
+                .iter()
+                .map(|p| {
+                    let a = floats(p);
+                    Vec3::new(a[0], a[1], a[2])
+                })
+                .collect()
+        };
+        assert_eq!(
+            fixtures["rotation_sigma_rad"].as_f64(),
+            Some(FITTED_TURN_SIGMA_RAD)
+        );
+        assert_eq!(
+            fixtures["shift_sigma_m"].as_f64(),
+            Some(FITTED_SHIFT_SIGMA_M)
+        );
+        let cases = fixtures["cases"].as_array().unwrap();
+        assert_eq!(cases.len(), 2);
+        for case in cases {
+            let params = HeadFilterParams {
+                rotation_sigma_rad: FITTED_TURN_SIGMA_RAD,
+                rotation_accel: case["rotation_accel"].as_f64().unwrap(),
+                shift_sigma_m: FITTED_SHIFT_SIGMA_M,
+                shift_accel: case["shift_accel"].as_f64().unwrap(),
+            };
+            let anchor = Vec3::new(0.01, -0.1, 0.62);
+            let mut f = HeadFilter::new(params, anchor);
+            let a = floats(&case["axis"]);
+            let axis = nalgebra::Unit::new_normalize(Vec3::new(a[0], a[1], a[2]));
+            let (t, angle) = (floats(&case["t"]), floats(&case["angle"]));
+            let middle = triples(&case["middle"]);
+            let (want_angle, want_middle) = (
+                floats(&case["filtered_angle"]),
+                triples(&case["filtered_middle"]),
+            );
+            for k in 0..t.len() {
+                let rotation = Rotation3::from_axis_angle(&axis, angle[k]).into_inner();
+                let measured = RigidTransform {
+                    rotation,
+                    translation: middle[k] - rotation * anchor,
+                };
+                let out = f.update(t[k], &measured);
+                let turned = Rotation3::from_matrix_unchecked(out.rotation).scaled_axis();
+                assert!(
+                    (turned.dot(&axis) - want_angle[k]).abs() < 1e-9
+                        && (turned - axis.into_inner() * turned.dot(&axis)).norm() < 1e-9,
+                    "frame {k}: {turned:?} against {} about {axis:?}",
+                    want_angle[k]
+                );
+                let got = out.apply(&anchor);
+                assert!(
+                    (got - want_middle[k]).norm() < 1e-9,
+                    "frame {k}: middle {got:?} against {:?}",
+                    want_middle[k]
+                );
+            }
+        }
+    }
 }
