@@ -46,7 +46,9 @@ pub struct TrackConfig {
     /// Temporal filter on the forehead dots' depths (One Euro: cut-off frequency at rest in Hz,
     /// and how fast it opens with the depth's speed, Hz per m/s; one cutoff for all the dots,
     /// the fastest one's). The forehead's depth noise is what tilts the head pose; pixels are
-    /// precise and stay unfiltered. 0 Hz: no filter.
+    /// precise and stay unfiltered. On frames where the head filter runs (a surface fit once
+    /// calibrated, `head_filter_accel` not zero) that filter takes this one's place. 0 Hz: no
+    /// filter.
     pub forehead_depth_min_cutoff_hz: f64,
     pub forehead_depth_beta: f64,
     /// How far down the face the head's rigid surface reaches below the forehead: the share

@@ -241,8 +241,8 @@ pub(crate) fn fit_forehead_surface(
         usable
     });
     let Some(fitted) = fitted else {
-        // No head motion measured on the surface this frame (a hand, another performer
-        // after a restart): the dots stay as seen, and the filter starts again.
+        // No head motion measured on the surface this frame (a hand over the forehead):
+        // the dots stay as seen, and the filter starts again.
         if let Some((filter, _)) = filter {
             filter.reset();
         }
