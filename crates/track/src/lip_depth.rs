@@ -11,6 +11,14 @@ use crate::{camera, Sensor};
 /// sessions of docs/accuracy-tables.md against 0.78–1.22 mm with 0.8).
 pub const LIP_PATCH_NEIGHBOUR_FRACTION: f64 = 0.8;
 
+/// A lip dot's depth from the stretched patch replaces its own only within this distance
+/// (metres) of it (*the stretched patch agrees with the paint*). The two readings of one dot
+/// differ by 0.7–0.8 mm RMS (synthetic sessions, both noise models); where they differ by
+/// several millimetres the long patch has reached past the lip, into the open mouth behind
+/// a lip rolling out of it, and the paint's own patch is the better reading (seed 108,
+/// Kinect-like, strong head motion: one lower-lip dot 14 mm too deep for a frame).
+pub const LIP_PATCH_AGREEMENT_M: f64 = 0.005;
+
 /// Neighbours nearer than this (pixels) give no direction along the lip.
 const MIN_LIP_LINE_PX: f64 = 1.0;
 
@@ -56,7 +64,8 @@ pub(crate) fn lip_depth(
 /// most [`LIP_PATCH_NEIGHBOUR_FRACTION`] of the way to the nearer neighbour) and
 /// `across_m` each way across. A lip is curved across and nearly straight along its line,
 /// so the long patch averages more of the sensor's correlated noise for the same
-/// curvature. Names are settled by then: this only sharpens the depth.
+/// curvature. Names are settled by then: this only sharpens the depth, and a reading further
+/// than [`LIP_PATCH_AGREEMENT_M`] from the dot's own is not used.
 pub(crate) fn along_the_lips(
     sensor: &Sensor,
     [along_m, across_m]: [f64; 2],
@@ -110,7 +119,83 @@ pub(crate) fn along_the_lips(
             sensor.depth_range,
             scratch,
         ) {
-            cands[c].point = camera::deproject(sensor.k, here, z);
+            if (z - z_hint).abs() <= LIP_PATCH_AGREEMENT_M {
+                cands[c].point = camera::deproject(sensor.k, here, z);
+            }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mouthpiece_detect::DotRole;
+    use mouthpiece_frame::{DepthImage, Intrinsics};
+
+    /// Four lip dots, the corners 0 and 2 either side of dot 1 at (50, 40), 10 px apart
+    /// along a horizontal lip; dot 3 unseen. Every dot at `z` metres.
+    fn lip_of_three(k: &Intrinsics, z: f64) -> Vec<Candidate> {
+        [[40.0, 40.0], [50.0, 40.0], [60.0, 40.0]]
+            .into_iter()
+            .map(|pixel| Candidate {
+                pixel,
+                point: camera::deproject(k, pixel, z),
+                role: DotRole::Lip,
+            })
+            .collect()
+    }
+
+    fn depth_of_dot_1(image: &DepthImage, hint_z: f64) -> f64 {
+        let k = Intrinsics::ideal(100, 80, 525.0, 525.0, 49.5, 39.5);
+        let sensor = Sensor {
+            depth: image,
+            scale: 0.001,
+            k: &k,
+            depth_range: [0.2, 2.0],
+            dot_radius_m: 0.002,
+        };
+        let mut cands = lip_of_three(&k, hint_z);
+        along_the_lips(
+            &sensor,
+            [0.009, 0.0018],
+            [0, 2],
+            &[Some(0), Some(1), Some(2), None],
+            &mut cands,
+            &mut DepthScratch::default(),
+        );
+        cands[1].point.z
+    }
+
+    fn image(f: impl Fn(u32, u32) -> u16) -> DepthImage {
+        let mut d = DepthImage::new(100, 80);
+        for y in 0..80 {
+            for x in 0..100 {
+                d.data[(y * 100 + x) as usize] = f(x, y);
+            }
+        }
+        d
+    }
+
+    #[test]
+    fn the_stretched_patch_sharpens_a_dot_on_a_whole_lip() {
+        // The lip at 600 mm all along; the dot's own reading 2 mm off is replaced.
+        let lip = image(|_, y| if (36..=44).contains(&y) { 600 } else { 625 });
+        let z = depth_of_dot_1(&lip, 0.602);
+        assert!((z - 0.600).abs() < 1e-4, "{z}");
+    }
+
+    #[test]
+    fn the_stretched_patch_past_the_lip_is_not_used() {
+        // Only the paint's few millimetres of lip show; along the line either side is the
+        // open mouth, 25 mm behind. The long patch reads the mouth; the dot keeps its own.
+        let spot = image(|x, y| {
+            if x.abs_diff(50) <= 2 && y.abs_diff(40) <= 3 {
+                600
+            } else {
+                625
+            }
+        });
+        let z = depth_of_dot_1(&spot, 0.600);
+        assert!((z - 0.600).abs() < 1e-9, "{z}");
     }
 }
