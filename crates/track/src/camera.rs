@@ -5,6 +5,17 @@ use mouthpiece_frame::{Calibration, DepthImage, Intrinsics};
 
 use crate::Vec3;
 
+/// The mean of `pixels`; `None` when there are none.
+pub fn pixel_mean(pixels: &[[f64; 2]]) -> Option<[f64; 2]> {
+    let n = pixels.len() as f64;
+    (!pixels.is_empty()).then(|| {
+        [
+            pixels.iter().map(|p| p[0]).sum::<f64>() / n,
+            pixels.iter().map(|p| p[1]).sum::<f64>() / n,
+        ]
+    })
+}
+
 /// Removes lens distortion from a pixel: the normalised image coordinates `(x, y)` of the
 /// ray through it (`x = X/Z`, `y = Y/Z`). Fixed-point iteration as OpenCV's
 /// `undistortPoints` does it, run to convergence.

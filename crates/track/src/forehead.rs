@@ -53,18 +53,14 @@ impl NoseStrip {
     /// The strip for forehead dots at `forehead` pixels and the mouth centred at `mouth`:
     /// from the lowest forehead dot (along the line to the mouth) down `reach` of the way
     /// from it to the mouth, `half_width_px` either side of that line. `None` when the
-    /// mouth is not below the forehead dots.
+    /// mouth is not below the forehead dots, or there are none.
     pub fn between(
         forehead: &[[f64; 2]],
         mouth: [f64; 2],
         reach: f64,
         half_width_px: f64,
     ) -> Option<Self> {
-        let n = forehead.len().max(1) as f64;
-        let origin = [
-            forehead.iter().map(|p| p[0]).sum::<f64>() / n,
-            forehead.iter().map(|p| p[1]).sum::<f64>() / n,
-        ];
+        let origin = camera::pixel_mean(forehead)?;
         let (dx, dy) = (mouth[0] - origin[0], mouth[1] - origin[1]);
         let len = dx.hypot(dy);
         let positive = |v: f64| v > 0.0; // false for NaN too
@@ -721,6 +717,8 @@ mod tests {
         assert!(strip.contains(250.0, 320.0) && !strip.contains(250.0, 335.0));
         // No mouth below the forehead dots: no strip.
         assert!(NoseStrip::between(&forehead, [320.0, 90.0], 0.5, 10.0).is_none());
+        // No forehead dots: no strip.
+        assert!(NoseStrip::between(&[], [320.0, 300.0], 0.5, 10.0).is_none());
     }
 
     /// The strip's samples join the forehead's, below its box.

@@ -572,13 +572,7 @@ impl Tracker {
         let crop = (margin_m > 0.0).then(|| {
             let pixels: Small<[f64; 2]> = self.out.pixels[n..].iter().flatten().copied().collect();
             let lips: Small<[f64; 2]> = self.out.pixels[..n].iter().flatten().copied().collect();
-            let mouth = (!lips.is_empty()).then(|| {
-                let k = lips.len() as f64;
-                [
-                    lips.iter().map(|p| p[0]).sum::<f64>() / k,
-                    lips.iter().map(|p| p[1]).sum::<f64>() / k,
-                ]
-            });
+            let mouth = camera::pixel_mean(&lips);
             head::forehead_crop(
                 sensor,
                 margin_m,

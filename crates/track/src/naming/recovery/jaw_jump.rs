@@ -246,21 +246,27 @@ mod tests {
     use super::super::test_support::*;
     use super::*;
 
+    /// The jaw's naming step on a lower lip that jumped `by_px` down within a frame, leaving
+    /// faint ghosts (0.3 of the paint) of D9..D11 where it was, its predictions still there.
+    fn lower_lip_jumped_past_faint_ghosts(by_px: f64) -> HypothesisRun {
+        let mut scene = Scene::calibrated();
+        let rest = scene.rest_pixels();
+        let truth = lower_lip_moved(&rest, [0.0, by_px]);
+        let mut cands = scene.candidates_at(&truth);
+        let face = neutral_face();
+        for (px, p) in rest.iter().zip(&face).take(11).skip(8) {
+            scene.push(&mut cands, *px, p.z, DotRole::Lip, 0.3);
+        }
+        scene.run_as_hypothesis(&JawJump, &rest, &mut cands)
+    }
+
     /// The jaw drops 9 px within a frame: the lower lip between the corners lands beyond every
     /// gate and leaves faint ghosts where it was; D9..D11 are named on their ghosts, D8 and
     /// D12 are missing. The jaw's jump, measured from the missing dots to the free blobs,
     /// names the whole lower lip on its paint.
     #[test]
     fn a_lower_lip_on_its_ghosts_is_named_from_the_jaws_jump() {
-        let mut scene = Scene::calibrated();
-        let rest = scene.rest_pixels();
-        let truth = lower_lip_moved(&rest, [0.0, 9.0]);
-        let mut cands = scene.candidates_at(&truth);
-        let face = neutral_face();
-        for (px, p) in rest.iter().zip(&face).take(11).skip(8) {
-            scene.push(&mut cands, *px, p.z, DotRole::Lip, 0.3);
-        }
-        let run = scene.run_as_hypothesis(&JawJump, &rest, &mut cands);
+        let run = lower_lip_jumped_past_faint_ghosts(9.0);
         assert_eq!(
             (
                 run.first.get(7),
@@ -282,15 +288,7 @@ mod tests {
     /// dots' own jump; the whole lip's jump finds the paint.
     #[test]
     fn a_lower_lip_a_jump_and_a_ghosts_lag_away_is_found() {
-        let mut scene = Scene::calibrated();
-        let rest = scene.rest_pixels();
-        let truth = lower_lip_moved(&rest, [0.0, 14.0]);
-        let mut cands = scene.candidates_at(&truth);
-        let face = neutral_face();
-        for (px, p) in rest.iter().zip(&face).take(11).skip(8) {
-            scene.push(&mut cands, *px, p.z, DotRole::Lip, 0.3);
-        }
-        let run = scene.run_as_hypothesis(&JawJump, &rest, &mut cands);
+        let run = lower_lip_jumped_past_faint_ghosts(14.0);
         assert!(run.fired, "{:?}", named(&run.first));
         assert_eq!(named(&run.names), identity());
     }
