@@ -88,8 +88,10 @@ struct State {
     /// The forehead's middle, camera frame.
     middle: Vec3,
     velocity: Vec3,
-    rotation_axes: [Axis; 3],
-    shift_axes: [Axis; 3],
+    /// One covariance serves the three axes of the turn, one those of the shift: the axes
+    /// share their noise, their acceleration and their times, so theirs stay equal.
+    rotation_axis: Axis,
+    shift_axis: Axis,
 }
 
 /// The filter (see the module's text).
@@ -126,8 +128,8 @@ impl HeadFilter {
             spin: Vec3::zeros(),
             middle,
             velocity: Vec3::zeros(),
-            rotation_axes: [Axis::new(p.rotation_sigma_rad); 3],
-            shift_axes: [Axis::new(p.shift_sigma_m); 3],
+            rotation_axis: Axis::new(p.rotation_sigma_rad),
+            shift_axis: Axis::new(p.shift_sigma_m),
         };
         let s = match &mut self.state {
             Some(s) if t > s.t && t - s.t <= MAX_GAP_S => s,
@@ -145,22 +147,14 @@ impl HeadFilter {
         let turn = Rotation3::from_matrix_unchecked(measured.rotation * predicted.transpose())
             .scaled_axis();
         let shift = middle - predicted_middle;
-        let (r_rot, r_shift) = (p.rotation_sigma_rad.powi(2), p.shift_sigma_m.powi(2));
-        let (mut turn_by, mut shift_by) = (Vec3::zeros(), Vec3::zeros());
-        for i in 0..3 {
-            let a = &mut s.rotation_axes[i];
-            a.predict(dt, p.rotation_accel);
-            let (k0, k1) = a.update(r_rot);
-            turn_by[i] = k0 * turn[i];
-            s.spin[i] += k1 * turn[i];
-            let a = &mut s.shift_axes[i];
-            a.predict(dt, p.shift_accel);
-            let (k0, k1) = a.update(r_shift);
-            shift_by[i] = k0 * shift[i];
-            s.velocity[i] += k1 * shift[i];
-        }
-        s.rotation = Rotation3::new(turn_by).into_inner() * predicted;
-        s.middle = predicted_middle + shift_by;
+        s.rotation_axis.predict(dt, p.rotation_accel);
+        let (turn_gain, spin_gain) = s.rotation_axis.update(p.rotation_sigma_rad.powi(2));
+        s.shift_axis.predict(dt, p.shift_accel);
+        let (shift_gain, velocity_gain) = s.shift_axis.update(p.shift_sigma_m.powi(2));
+        s.spin += spin_gain * turn;
+        s.velocity += velocity_gain * shift;
+        s.rotation = Rotation3::new(turn_gain * turn).into_inner() * predicted;
+        s.middle = predicted_middle + shift_gain * shift;
         RigidTransform {
             rotation: s.rotation,
             translation: s.middle - s.rotation * self.anchor,
