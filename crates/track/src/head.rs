@@ -150,7 +150,8 @@ pub(crate) fn forehead_crop(
 ) -> DepthCrop {
     let z = dots.iter().flatten().map(|p| p.z).sum::<f64>() / dots.len() as f64;
     let px_per_m = sensor.k.fx / z.max(NEAREST_FOREHEAD_M);
-    let nose = mouth_px.filter(|_| nose_reach > 0.0).and_then(|mouth| {
+    // `NoseStrip::between` gives none for a reach of 0.
+    let nose = mouth_px.and_then(|mouth| {
         forehead::NoseStrip::between(
             pixels,
             mouth,
