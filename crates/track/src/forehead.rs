@@ -717,6 +717,8 @@ mod tests {
         assert!(strip.contains(250.0, 320.0) && !strip.contains(250.0, 335.0));
         // No mouth below the forehead dots: no strip.
         assert!(NoseStrip::between(&forehead, [320.0, 90.0], 0.5, 10.0).is_none());
+        // A reach of 0 (`nose_bridge_reach = 0`: the forehead alone): no strip.
+        assert!(NoseStrip::between(&forehead, [320.0, 300.0], 0.0, 10.0).is_none());
         // No forehead dots: no strip.
         assert!(NoseStrip::between(&[], [320.0, 300.0], 0.5, 10.0).is_none());
     }
