@@ -260,7 +260,7 @@ def run(character, lines, smooth_method="bspline", hold=0.5, decay=0.5, samples=
             "confidence": {nm: float(conf[ch["driver"][j]]) for j, nm in enumerate(ch["names"])},
             "head": {"rotation": q.tolist(), "translation": head_t.tolist()},
             "head_lost": head_lost,
-            "rig": rig.step(t, d),
+            "rig": rig.step(t, d, conf > 0),
             "curve": None if curve is None else
             {"method": smooth_method, "closed": True, "points": np.asarray(curve).tolist()},
         })

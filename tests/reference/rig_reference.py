@@ -3,10 +3,14 @@
 
 Follows docs/rig.md, which defines every number computed here: the jaw (angle and slide
 about the hinge), each lip's rigid motion (scipy's `Rotation.align_vectors`, not the Rust SVD)
-and the 18 ARKit-named curves with their default ranges widened over the learning window.
+and the 18 ARKit-named curves with their default ranges widened over the learning window, and
+the unseen dots put where the seen ones say (the Gaussian conditional mean under the covariance
+of the complete steps, computed here with numpy's `cov` over all of them and a solve on the
+seen block, where the Rust keeps running sums and pads one fixed-size system).
 Its own code throughout (numpy arrays, not the Rust loops); where the page was not precise
 enough to write it, the page was completed.
-`retarget_reference.py` calls `Rig.step` with the stabilised dots of every line, and the
+`retarget_reference.py` calls `Rig.step` with the stabilised dots of every line (and which were
+seen), and the
 `retarget_cli` tests compare the binary's `rig` with it.
 
 Everything is in the performer's neutral mouth frame (x to the performer's left, y up, z out
@@ -35,6 +39,10 @@ DEFAULT_RANGES = {
 }
 
 DEPTH_WEIGHT = 0.25
+
+# docs/rig.md, "Unseen dots from the seen ones".
+FILL_LEARN_STEPS = 20
+FILL_NOISE_M = 0.001
 
 
 def rotate_x(v, angle):
@@ -71,6 +79,35 @@ class Rig:
         self.set = dict(ranges or {})
         self.ranges = {k: self.set.get(k, v) for k, v in DEFAULT_RANGES.items()}
         self.start = None
+        # Every complete step's displacement from neutral (3 per dot), for the fill.
+        self.complete = []
+
+    def fill(self, d, seen):
+        """`d` with the unseen dots at their conditional mean given the seen ones, under the
+        mean and covariance of the complete steps so far (numpy's `cov` of all of them)."""
+        seen = np.asarray(seen, bool)
+        x = (d - self.d0).reshape(-1)
+        if seen.all():
+            self.complete.append(x)
+            return d
+        if len(self.complete) < FILL_LEARN_STEPS or not seen.any():
+            return d
+        data = np.array(self.complete)
+        mean, cov = data.mean(axis=0), np.cov(data, rowvar=False)
+        # A lip with none of its dots seen (the corners count for both lips) stays held.
+        corner = seen[self.left] or seen[self.right]
+        upper, lower = corner or seen[self.upper].any(), corner or seen[self.lower].any()
+        moved = ~seen
+        moved[self.upper] &= upper
+        moved[self.lower] &= lower
+        if not moved.any():
+            return d
+        s = np.repeat(seen, 3)
+        u = np.repeat(moved, 3)
+        css = cov[np.ix_(s, s)] + FILL_NOISE_M ** 2 * np.eye(int(s.sum()))
+        x = x.copy()
+        x[u] = mean[u] + cov[np.ix_(u, s)] @ np.linalg.solve(css, x[s] - mean[s])
+        return self.d0 + x.reshape(-1, 3)
 
     def side_weight(self, i):
         """The weight of dot i for the performer's left side (right: 1 − it)."""
@@ -141,8 +178,9 @@ class Rig:
         m["mouthPressLeft"], m["mouthPressRight"] = (lo_l - up_l) / w, (lo_r - up_r) / w
         return m, angle, slide
 
-    def step(self, t, d):
+    def step(self, t, d, seen=None):
         d = np.asarray(d, float)
+        d = self.fill(d, np.ones(len(d), bool) if seen is None else seen)
         m, angle, slide = self.measures(d)
         if self.start is None:
             self.start = t

@@ -93,14 +93,16 @@ pub struct RigFrameRecord {
     /// Every curve from the tracked dots and from the true dots, [`CURVE_NAMES`] order.
     pub tracked: [f64; CURVES],
     pub reference: [f64; CURVES],
-    /// The stabilised lip dots (neutral mouth frame, metres) the two rigs measured, and each
-    /// rig's neutral dots.
+    /// The lip dots (neutral mouth frame, metres) the two rigs measured (the tracked ones with
+    /// the unseen dots filled in, as the rig measured them), and each rig's neutral dots.
     pub tracked_lip: Vec<[f64; 3]>,
     pub reference_lip: Vec<[f64; 3]>,
     pub tracked_neutral: Vec<[f64; 3]>,
     pub reference_neutral: Vec<[f64; 3]>,
     /// The ranges both curves were computed with.
     pub ranges: [f64; CURVES],
+    /// Per tracked lip dot: whether it was seen this frame (not held).
+    pub tracked_seen: Vec<bool>,
 }
 
 /// The measurement in progress: the pipeline's rig against the one the ground truth gives.
@@ -187,11 +189,12 @@ impl Measure for RigAccuracy {
                 mouth: *mouth,
                 tracked: a,
                 reference: b,
-                tracked_lip: xyz(&tracked.lip),
+                tracked_lip: xyz(rig.measured_lip()),
                 reference_lip: xyz(&out.performer.lip),
                 tracked_neutral: xyz(rig.model().neutral()),
                 reference_neutral: xyz(model.neutral()),
                 ranges,
+                tracked_seen: tracked.confidence.iter().map(|&c| c > 0.0).collect(),
             });
         }
         Ok(())

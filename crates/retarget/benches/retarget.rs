@@ -1,6 +1,7 @@
 //! Per-step cost of the retarget core: one performer step (Kabsch + stabilisation) and one
 //! character (closed form + curve), as the daemon runs it for every camera frame; and the
-//! rig's step (jaw, lip fits, named curves).
+//! rig's step (jaw, lip fits, named curves), and the same with dots unseen every other frame
+//! (`rig/step-unseen`).
 //!
 //!     cargo bench -p mouthpiece-retarget --bench retarget
 //!     cargo bench -p mouthpiece-retarget --bench retarget -- rig/step
@@ -59,6 +60,30 @@ fn bench(c: &mut Criterion) {
     c.bench_function("rig/step", |b| {
         b.iter(|| {
             let out = rig.step(black_box(&stabilised[i % stabilised.len()]));
+            i += 1;
+            black_box(out.jaw.angle_deg);
+        })
+    });
+    // The same with every other frame missing a corner and an upper-lip dot: the fill
+    // (docs/rig.md, "Unseen dots from the seen ones") solves for them on those frames and
+    // learns from the complete ones.
+    let with_unseen: Vec<_> = stabilised
+        .iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let mut f = f.clone();
+            if k % 2 == 1 {
+                f.confidence[0] = 0.0;
+                f.confidence[2] = 0.0;
+            }
+            f
+        })
+        .collect();
+    let mut rig = Rig::new(rt.stabiliser().neutral(), RigSettings::default()).unwrap();
+    let mut i = 0usize;
+    c.bench_function("rig/step-unseen", |b| {
+        b.iter(|| {
+            let out = rig.step(black_box(&with_unseen[i % with_unseen.len()]));
             i += 1;
             black_box(out.jaw.angle_deg);
         })

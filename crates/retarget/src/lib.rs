@@ -12,7 +12,8 @@
 //!   [`Retargeter`] (both).
 //! - [`smooth`]: shape smoothing across the points of a step (§8), and [`one_euro`]: the
 //!   temporal filter.
-//! - [`rig`]: jaw, lip motions and ARKit-named mouth curves (docs/rig.md).
+//! - [`rig`]: jaw, lip motions and ARKit-named mouth curves (docs/rig.md); [`lip_fill`]:
+//!   where the rig puts the lip dots it does not see.
 //! - [`head`]: the character's head and eyes: reach test, turns by slerp, following the
 //!   performer.
 //! - [`jsonl`]: the line formats of `mouthpiece retarget` (read by `export`, extended by
@@ -45,6 +46,7 @@ mod head_file;
 pub mod jsonl;
 pub mod kabsch;
 pub mod layout;
+pub mod lip_fill;
 mod named;
 pub mod neutral;
 pub mod one_euro;

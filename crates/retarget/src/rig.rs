@@ -27,6 +27,7 @@ use nalgebra::Rotation3;
 use serde::{Deserialize, Serialize};
 
 use crate::kabsch::kabsch;
+use crate::lip_fill::LipFill;
 use crate::retarget::StabilisedFrame;
 use crate::{Error, Named, NeutralPose, Vec3};
 
@@ -302,6 +303,26 @@ struct Roles {
 }
 
 impl Roles {
+    /// Which unseen dots the fill moves (docs/rig.md, *a lip with no dot seen stays held*):
+    /// the corners, and a lip's dots when one of that lip's dots or a corner is seen. A lip
+    /// with nothing seen is mostly a lip rolled into the mouth, a shape the complete frames
+    /// the fill learns from seldom show; its held dots are nearer.
+    fn fill_wanted(&self, seen: &[bool], out: &mut Vec<bool>) {
+        let corner_seen = seen[self.left] || seen[self.right];
+        let upper = corner_seen || self.upper.iter().any(|&i| seen[i]);
+        let lower = corner_seen || self.lower.iter().any(|&i| seen[i]);
+        out.clear();
+        out.extend((0..seen.len()).map(|i| {
+            if self.upper.contains(&i) {
+                upper
+            } else if self.lower.contains(&i) {
+                lower
+            } else {
+                true
+            }
+        }));
+    }
+
     fn new(n: usize) -> Self {
         let right = n / 2;
         Self {
@@ -599,6 +620,11 @@ pub struct Rig {
     /// Scratch for the lip fits.
     from: Vec<Vec3>,
     to: Vec<Vec3>,
+    /// Unseen dots from the seen ones, and the dots the last step measured.
+    fill: LipFill,
+    lip: Vec<Vec3>,
+    seen: Vec<bool>,
+    fill_wanted: Vec<bool>,
     measures: Measures,
     values: [f64; CURVES],
     out: RigFrame,
@@ -622,6 +648,10 @@ impl Rig {
             start: None,
             from: Vec::with_capacity(n),
             to: Vec::with_capacity(n),
+            fill: LipFill::new(n),
+            lip: Vec::with_capacity(n),
+            seen: Vec::with_capacity(n),
+            fill_wanted: Vec::with_capacity(n),
             measures: Measures {
                 values: [0.0; CURVES],
                 jaw_angle: 0.0,
@@ -654,6 +684,12 @@ impl Rig {
     /// The last step's output.
     pub fn output(&self) -> &RigFrame {
         &self.out
+    }
+
+    /// The lip dots the last step measured (mouth frame): the stabilised ones, with the
+    /// unseen ones put where the seen ones say they are ([`LipFill`]).
+    pub fn measured_lip(&self) -> &[Vec3] {
+        &self.lip
     }
 
     /// Whether the ranges are still being learned (the learning window has not ended).
@@ -699,7 +735,23 @@ impl Rig {
 
     /// One step.
     pub fn step(&mut self, frame: &StabilisedFrame) -> &RigFrame {
-        let m = self.model.measure(&frame.lip);
+        self.lip.clone_from(&frame.lip);
+        self.seen.clear();
+        self.seen.extend(frame.confidence.iter().map(|&c| c > 0.0));
+        if self.seen.iter().all(|&s| s) {
+            self.fill.learn(&self.model.neutral, &self.lip);
+        } else {
+            self.model
+                .roles
+                .fill_wanted(&self.seen, &mut self.fill_wanted);
+            self.fill.fill(
+                &self.model.neutral,
+                &mut self.lip,
+                &self.seen,
+                &self.fill_wanted,
+            );
+        }
+        let m = self.model.measure(&self.lip);
         self.measures = m;
         // Learning: the first `learn_s` seconds widen the ranges of curves not configured.
         let start = *self.start.get_or_insert(frame.t);
@@ -724,14 +776,14 @@ impl Rig {
         let r = &m.roles;
         self.out.lips.upper = lip_motion(
             &m.neutral,
-            &frame.lip,
+            &self.lip,
             r.upper.iter().chain([r.left, r.right].iter()),
             &mut self.from,
             &mut self.to,
         );
         self.out.lips.lower = lip_motion(
             &m.neutral,
-            &frame.lip,
+            &self.lip,
             r.lower.iter().chain([r.left, r.right].iter()),
             &mut self.from,
             &mut self.to,
@@ -874,6 +926,71 @@ mod tests {
             out.curve("mouthPucker").abs() < 1e-12,
             "the slide is not a narrowing"
         );
+    }
+
+    #[test]
+    fn a_held_corner_does_not_hold_the_puckers_width() {
+        let n = neutral();
+        let drawn =
+            |s: f64| -> Vec<Vec3> { n.lip.iter().map(|p| Vec3::new(s * p.x, p.y, p.z)).collect() };
+        let mut rig = rig();
+        // Speech: the mouth draws in and lets go, every dot seen.
+        for k in 0..40 {
+            rig.step(&frame(drawn(
+                1.0 - 0.3 * (0.5 + 0.5 * (0.3 * k as f64).sin()),
+            )));
+        }
+        // Drawn in to 0.8, the left corner lost and held where it was at rest.
+        let mut lip = drawn(0.8);
+        lip[0] = n.lip[0];
+        let mut held = frame(lip);
+        held.confidence[0] = 0.0;
+        let out = rig.step(&held).clone();
+        // What the whole mouth shows (the range was learned: these frames all have t = 0).
+        assert!(
+            (out.curve("mouthPucker") - 0.2 / rig.ranges()[3]).abs() < 0.01,
+            "{}",
+            out.curve("mouthPucker")
+        );
+        let measured = rig.measured_lip()[0];
+        assert!((measured - drawn(0.8)[0]).norm() < 2e-4, "{measured:?}");
+        // Measured as held, the pucker reads a quarter less: the corner 5 mm out.
+        let as_held = rig.model().measure(&held.lip);
+        assert!(as_held.values[3] < 0.16, "{:?}", as_held.values[3]);
+    }
+
+    #[test]
+    fn a_lip_with_no_dot_seen_stays_held() {
+        let n = neutral();
+        let drawn =
+            |s: f64| -> Vec<Vec3> { n.lip.iter().map(|p| Vec3::new(s * p.x, p.y, p.z)).collect() };
+        let mut rig = rig();
+        for k in 0..40 {
+            rig.step(&frame(drawn(
+                1.0 - 0.3 * (0.5 + 0.5 * (0.3 * k as f64).sin()),
+            )));
+        }
+        // The corners and the whole lower lip unseen, held at rest.
+        let mut lip = drawn(0.8);
+        let unseen = [0, 6, 7, 8, 9, 10, 11];
+        for &i in &unseen {
+            lip[i] = n.lip[i];
+        }
+        let mut held = frame(lip.clone());
+        for &i in &unseen {
+            held.confidence[i] = 0.0;
+        }
+        rig.step(&held);
+        // The corners follow the upper lip; the lower lip stays where it was held.
+        for i in [0, 6] {
+            assert!((rig.measured_lip()[i] - drawn(0.8)[i]).norm() < 2e-4);
+        }
+        assert_eq!(&rig.measured_lip()[7..], &lip[7..]);
+        // One lower-lip dot seen: the rest of that lip is moved too.
+        held.confidence[9] = 1.0;
+        held.lip[9] = drawn(0.8)[9];
+        rig.step(&held);
+        assert!((rig.measured_lip()[7] - drawn(0.8)[7]).norm() < 2e-4);
     }
 
     #[test]

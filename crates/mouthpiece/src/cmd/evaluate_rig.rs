@@ -44,8 +44,8 @@ impl FramesCsv {
     /// Creates the file and writes the header: the session, the time, the synthetic mouth's
     /// state (jaw in degrees, rounding, spread, raise, roll-in), every curve from the tracked
     /// dots and from the true dots, every lip dot's stabilised position (metres, neutral mouth
-    /// frame), tracked and true, each rig's neutral dots, and the ranges both rigs' curves
-    /// were computed with.
+    /// frame), tracked and true, each rig's neutral dots, the ranges both rigs' curves
+    /// were computed with, and whether each tracked dot was seen (1) or held (0).
     pub fn create(path: &std::path::Path, lip_dots: usize) -> anyhow::Result<Self> {
         use anyhow::Context;
         let file = std::fs::File::create(path)
@@ -70,6 +70,10 @@ impl FramesCsv {
             }
         }
         header.extend(CURVE_NAMES.iter().map(|c| format!("range_{c}")));
+        header.extend(
+            (0..lip_dots)
+                .map(|i| format!("seen_{}", mouthpiece_retarget::PerformerLayout::lip_name(i))),
+        );
         let mut csv = Self {
             path: path.to_path_buf(),
             out: std::io::BufWriter::new(file),
@@ -108,7 +112,8 @@ impl FramesCsv {
                 row.extend(p.map(|v| v.to_string()));
             }
             row.extend(f.ranges.iter().map(|v| v.to_string()));
-            debug_assert_eq!(row.len(), 7 + 3 * CURVES + 12 * f.tracked_lip.len());
+            row.extend(f.tracked_seen.iter().map(|&s| u8::from(s).to_string()));
+            debug_assert_eq!(row.len(), 7 + 3 * CURVES + 13 * f.tracked_lip.len());
             self.line(&row.join(","))?;
         }
         Ok(())
