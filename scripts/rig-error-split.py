@@ -17,7 +17,10 @@ Per session it prints:
   part of the tracked dots' error that every lip dot shares (the mean of tracked − true over
   the dots, per frame: mostly the head pose's error, which moves every dot alike) is taken off
   the tracked dots; what a perfect head pose would leave;
-- `funnel r, depth error off`: with every tracked dot's depth replaced by the true one.
+- `funnel r, depth error off`: with every tracked dot's depth replaced by the true one;
+- `worst curve, unseen dots true`: the worst curve's RMS (over all curves) once every dot the
+  tracker did not see that frame (`seen_D*` 0; the rig measured it where the seen ones put
+  it) is moved by its true displacement from neutral instead: what a perfect fill would give.
 """
 
 import csv
@@ -70,6 +73,11 @@ def session_report(rows):
     common = (tracked_dots - true_dots).mean(axis=1, keepdims=True)
     without_common = np.array([curves(tracked_rig, g, d)
                                for g, d in zip(ranges, tracked_dots - common)])
+    seen = np.array([[r.get(f"seen_{d}", "1") == "1" for d in dots] for r in rows])
+    true_neutral, tracked_neutral = block(rows[0], "reference_neutral"), block(rows[0], "tracked_neutral")
+    perfect_fill = np.where(seen[:, :, None], tracked_dots,
+                            tracked_neutral + true_dots - true_neutral)
+    with_perfect_fill = np.array([curves(tracked_rig, g, d) for g, d in zip(ranges, perfect_fill)])
     true_depth = tracked_dots.copy()
     true_depth[:, :, 2] = true_dots[:, :, 2]
     without_depth_error = np.array([curves(tracked_rig, g, d) for g, d in zip(ranges, true_depth)])
@@ -83,6 +91,8 @@ def session_report(rows):
         "funnel r, common error off": r(without_common[:, funnel], rnd),
         "funnel r, depth error off": r(without_depth_error[:, funnel], rnd),
         "common error RMS (mm, x y z)": 1e3 * np.sqrt((common[:, 0, :] ** 2).mean(axis=0)),
+        "worst, unseen dots true": np.sqrt(((with_perfect_fill - true) ** 2).mean(axis=0)).max(),
+        "unseen": int((~seen).sum()),
     }
 
 
@@ -96,8 +106,8 @@ def main():
         sessions.setdefault((row["seed"], row["noise"], row["head_motion"]), []).append(row)
     print("| seed | noise | head motion | frames | recomputed | worst curve | its RMS | jawOpen r "
           "| funnel r | on the true dots | common error off | depth error off "
-          "| common error RMS x, y, z (mm) |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| common error RMS x, y, z (mm) | unseen dots | worst curve, unseen dots true |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for (seed, noise, motion), rs in sessions.items():
         s = session_report(rs)
         c = s["common error RMS (mm, x y z)"]
@@ -105,7 +115,8 @@ def main():
               f"| {s['worst'][0]} | {s['worst'][1]:.3f} | {s['jawOpen r']:.3f} "
               f"| {s['funnel r']:.3f} | {s['funnel r, true dots']:.3f} "
               f"| {s['funnel r, common error off']:.3f} | {s['funnel r, depth error off']:.3f} "
-              f"| {c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f} |")
+              f"| {c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f} | {s['unseen']} "
+              f"| {s['worst, unseen dots true']:.3f} |")
 
 
 if __name__ == "__main__":
