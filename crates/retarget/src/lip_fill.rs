@@ -71,9 +71,13 @@ impl LipFill {
     }
 
     /// Learns from a step whose every dot was seen (`lip` and `neutral` in the same frame,
-    /// dot for dot).
+    /// dot for dot). A step with a coordinate that is not finite is not learned: it would
+    /// stay in the sums for the rest of the session.
     pub fn learn(&mut self, neutral: &[Vec3], lip: &[Vec3]) {
         self.load(neutral, lip);
+        if !self.x.iter().all(|v| v.is_finite()) {
+            return;
+        }
         self.steps += 1;
         self.before.copy_from(&self.x);
         self.before -= &self.mean;
@@ -125,6 +129,9 @@ impl LipFill {
         };
         cholesky.solve_mut(&mut self.solution);
         self.system = Some(cholesky.unpack_dirty());
+        if !self.solution.iter().all(|v| v.is_finite()) {
+            return false;
+        }
         for (k, (p, q)) in lip.iter_mut().zip(neutral).enumerate() {
             if !moved(k) {
                 continue;
@@ -228,6 +235,30 @@ mod tests {
         lip[0] = n[0];
         assert!(!fill.fill(&n, &mut lip, &seen, &[false; 6]));
         assert_eq!(lip[0], n[0]);
+    }
+
+    #[test]
+    fn a_step_that_is_not_finite_is_not_learned_nor_used() {
+        let n = neutral();
+        let mut fill = LipFill::new(n.len());
+        for k in 0..30 {
+            fill.learn(&n, &scaled(&n, 1.0 - 0.01 * k as f64));
+        }
+        let mut bad = scaled(&n, 0.9);
+        bad[3].y = f64::NAN;
+        fill.learn(&n, &bad);
+        assert_eq!(fill.steps_learned(), 30);
+        // A seen coordinate that is not finite: the held dot stays.
+        let mut lip = bad.clone();
+        lip[0] = n[0];
+        let seen = [false, true, true, true, true, true];
+        assert!(!fill.fill(&n, &mut lip, &seen, &[true; 6]));
+        assert_eq!(lip[0], n[0]);
+        // And the fill still works on the next good step.
+        let mut lip = scaled(&n, 0.8);
+        lip[0] = n[0];
+        assert!(fill.fill(&n, &mut lip, &seen, &[true; 6]));
+        assert!(lip[0].x.is_finite());
     }
 
     #[test]
