@@ -4,6 +4,8 @@
 //! Everything is in the performer's neutral mouth frame (docs/method.md §2: x towards the
 //! performer's left, y up, z out of the mouth; metres) and relative to the neutral pose.
 //!
+//! - **Unseen dots**: a dot the stabiliser holds is measured where the dots seen in the same
+//!   step put it ([`crate::lip_fill`]), not where it was last seen.
 //! - **Jaw**: a rigid body turning about the hinge axis (the line through the condyles) and
 //!   sliding along it. The axis is the mouth frame's x axis (parallel to the corner line: the
 //!   face is symmetric); its pivot is placed from the neutral mouth width with anatomical
