@@ -42,6 +42,28 @@ fn spec(s: String) -> SourceSpec {
     SourceSpec::parse(&s).unwrap()
 }
 
+/// What a failed match says about the file: for each replayed pair whose colour and depth
+/// were both seen live, the live frames' time apart (device timestamps), counted. A file whose
+/// colour is shifted against its depth (the recorder missed one stream's first frame: it
+/// rewrites each stream's times from its own first frame) shows one non-zero shift.
+fn stream_shift(live: &[Pair], live_ts: &[u64], replayed: &[Pair]) -> String {
+    let mut shifts = std::collections::BTreeMap::<i64, usize>::new();
+    for (c, d) in replayed {
+        let at_colour = live.iter().position(|p| &p.0 == c);
+        let at_depth = live.iter().position(|p| &p.1 == d);
+        if let (Some(i), Some(j)) = (at_colour, at_depth) {
+            *shifts
+                .entry(live_ts[j] as i64 - live_ts[i] as i64)
+                .or_default() += 1;
+        }
+    }
+    format!(
+        "replayed pairs by live depth time minus live colour time (µs): {shifts:?}; {} live, {} replayed",
+        live.len(),
+        replayed.len()
+    )
+}
+
 #[test]
 fn dummy_live_oni_and_mcap_round_trips() {
     let dir = tempfile::tempdir().unwrap();
@@ -70,12 +92,14 @@ fn dummy_live_oni_and_mcap_round_trips() {
 
     // 2. Record the live device to .oni with OpenNI2's recorder.
     let mut recorded_live: Vec<Pair> = Vec::new();
+    let mut recorded_ts: Vec<u64> = Vec::new();
     let limits = RecordLimits {
         seconds: Some(3.0),
         ..Default::default()
     };
     let summary = record_oni(&spec("openni2:Dummy".into()), &config, &oni, &limits, |f| {
-        recorded_live.push(pair(f))
+        recorded_live.push(pair(f));
+        recorded_ts.push(f.device_ts_us);
     })
     .unwrap();
     assert!(summary.frames >= 60, "{summary:?}");
@@ -93,7 +117,12 @@ fn dummy_live_oni_and_mcap_round_trips() {
     let first = recorded_live
         .iter()
         .position(|p| replayed.contains(p))
-        .expect("no live pair in the .oni");
+        .unwrap_or_else(|| {
+            panic!(
+                "no live pair in the .oni; {}",
+                stream_shift(&recorded_live, &recorded_ts, &replayed)
+            )
+        });
     assert!(first <= 2, "the recorder missed {first} pairs at the start");
     let mut it = replayed.iter();
     for (i, p) in recorded_live[first..].iter().enumerate() {
