@@ -136,16 +136,12 @@ impl LipFill {
             if !moved(k) {
                 continue;
             }
-            let mut d = [0.0; 3];
-            for (axis, v) in d.iter_mut().enumerate() {
+            // The solution is 0 at the unseen coordinates, so the whole row serves.
+            let d = Vec3::from_fn(|axis, _| {
                 let u = 3 * k + axis;
-                let mut s = self.mean[u];
-                for j in (0..n).filter(|&j| seen_at(j)) {
-                    s += self.scatter[(u, j)] * scale * self.solution[j];
-                }
-                *v = s;
-            }
-            *p = q + Vec3::new(d[0], d[1], d[2]);
+                self.mean[u] + self.scatter.row(u).dot(&self.solution.transpose()) * scale
+            });
+            *p = q + d;
         }
         true
     }
@@ -161,6 +157,20 @@ mod tests {
             .collect()
     }
 
+    /// A fill that has learned one complete step per scale in `scales`.
+    fn learned(n: &[Vec3], scales: impl IntoIterator<Item = f64>) -> LipFill {
+        let mut fill = LipFill::new(n.len());
+        for s in scales {
+            fill.learn(n, &scaled(n, s));
+        }
+        fill
+    }
+
+    /// Speech: the mouth drawn in by up to 30 % and let go, step `k`.
+    fn speech(k: usize) -> f64 {
+        1.0 - 0.3 * (0.5 + 0.5 * (k as f64 * 0.4).sin())
+    }
+
     /// A mouth that only scales horizontally about its centre (a pucker and its release).
     fn scaled(neutral: &[Vec3], s: f64) -> Vec<Vec3> {
         neutral
@@ -172,10 +182,7 @@ mod tests {
     #[test]
     fn nothing_is_filled_before_enough_complete_steps() {
         let n = neutral();
-        let mut fill = LipFill::new(n.len());
-        for k in 0..FILL_LEARN_STEPS - 1 {
-            fill.learn(&n, &scaled(&n, 1.0 - 0.01 * k as f64));
-        }
+        let mut fill = learned(&n, (0..FILL_LEARN_STEPS - 1).map(|k| 1.0 - 0.01 * k as f64));
         let mut lip = scaled(&n, 0.7);
         let held = n[0];
         lip[0] = held;
@@ -187,11 +194,7 @@ mod tests {
     #[test]
     fn a_lost_corner_follows_the_seen_dots_pucker() {
         let n = neutral();
-        let mut fill = LipFill::new(n.len());
-        for k in 0..60 {
-            let s = 1.0 - 0.3 * (0.5 + 0.5 * (k as f64 * 0.4).sin());
-            fill.learn(&n, &scaled(&n, s));
-        }
+        let mut fill = learned(&n, (0..60).map(speech));
         assert_eq!(fill.steps_learned(), 60);
         // Drawn in to 0.75 of the width, the left corner unseen and held where it was at rest.
         let truth = scaled(&n, 0.75);
@@ -214,11 +217,7 @@ mod tests {
     #[test]
     fn an_unwanted_dot_stays_held_and_is_not_used() {
         let n = neutral();
-        let mut fill = LipFill::new(n.len());
-        for k in 0..60 {
-            let s = 1.0 - 0.3 * (0.5 + 0.5 * (k as f64 * 0.4).sin());
-            fill.learn(&n, &scaled(&n, s));
-        }
+        let mut fill = learned(&n, (0..60).map(speech));
         let truth = scaled(&n, 0.75);
         let mut lip = truth.clone();
         // Both ends unseen and held at rest; only the left one is to be moved.
@@ -240,10 +239,7 @@ mod tests {
     #[test]
     fn a_step_that_is_not_finite_is_not_learned_nor_used() {
         let n = neutral();
-        let mut fill = LipFill::new(n.len());
-        for k in 0..30 {
-            fill.learn(&n, &scaled(&n, 1.0 - 0.01 * k as f64));
-        }
+        let mut fill = learned(&n, (0..30).map(|k| 1.0 - 0.01 * k as f64));
         let mut bad = scaled(&n, 0.9);
         bad[3].y = f64::NAN;
         fill.learn(&n, &bad);
@@ -264,10 +260,7 @@ mod tests {
     #[test]
     fn no_seen_dot_leaves_the_held_ones() {
         let n = neutral();
-        let mut fill = LipFill::new(n.len());
-        for k in 0..30 {
-            fill.learn(&n, &scaled(&n, 1.0 - 0.01 * k as f64));
-        }
+        let mut fill = learned(&n, (0..30).map(|k| 1.0 - 0.01 * k as f64));
         let mut lip = scaled(&n, 0.8);
         let before = lip.clone();
         assert!(!fill.fill(&n, &mut lip, &[false; 6], &[true; 6]));
