@@ -55,15 +55,6 @@ fn bench(c: &mut Criterion) {
     // The rig (docs/rig.md) on stabilised frames: jaw, both lip fits, every curve. The same
     // frames as `examples/rig_cost.rs` counts instructions on.
     let (rt, stabilised) = support::stabilised_frames();
-    let mut rig = Rig::new(rt.stabiliser().neutral(), RigSettings::default()).unwrap();
-    let mut i = 0usize;
-    c.bench_function("rig/step", |b| {
-        b.iter(|| {
-            let out = rig.step(black_box(&stabilised[i % stabilised.len()]));
-            i += 1;
-            black_box(out.jaw.angle_deg);
-        })
-    });
     // The same with every other frame missing a corner and an upper-lip dot: the fill
     // (docs/rig.md, "Unseen dots from the seen ones") solves for them on those frames and
     // learns from the complete ones.
@@ -79,15 +70,17 @@ fn bench(c: &mut Criterion) {
             f
         })
         .collect();
-    let mut rig = Rig::new(rt.stabiliser().neutral(), RigSettings::default()).unwrap();
-    let mut i = 0usize;
-    c.bench_function("rig/step-unseen", |b| {
-        b.iter(|| {
-            let out = rig.step(black_box(&with_unseen[i % with_unseen.len()]));
-            i += 1;
-            black_box(out.jaw.angle_deg);
-        })
-    });
+    for (name, frames) in [("rig/step", &stabilised), ("rig/step-unseen", &with_unseen)] {
+        let mut rig = Rig::new(rt.stabiliser().neutral(), RigSettings::default()).unwrap();
+        let mut i = 0usize;
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                let out = rig.step(black_box(&frames[i % frames.len()]));
+                i += 1;
+                black_box(out.jaw.angle_deg);
+            })
+        });
+    }
 }
 
 criterion_group!(benches, bench);

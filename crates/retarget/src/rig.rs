@@ -876,6 +876,24 @@ mod tests {
         .unwrap()
     }
 
+    /// The neutral lips drawn in horizontally to `s` of their width.
+    fn drawn_in(n: &NeutralPose, s: f64) -> Vec<Vec3> {
+        n.lip.iter().map(|p| Vec3::new(s * p.x, p.y, p.z)).collect()
+    }
+
+    /// A rig that has seen 40 steps of speech, every dot seen: the mouth drawing in by up to
+    /// 30 % and letting go (what the fill of unseen dots learns from).
+    fn rig_after_speech(n: &NeutralPose) -> Rig {
+        let mut rig = rig();
+        for k in 0..40 {
+            rig.step(&frame(drawn_in(
+                n,
+                1.0 - 0.3 * (0.5 + 0.5 * (0.3 * k as f64).sin()),
+            )));
+        }
+        rig
+    }
+
     #[test]
     fn neutral_is_all_zero() {
         let n = neutral();
@@ -933,15 +951,8 @@ mod tests {
     #[test]
     fn a_held_corner_does_not_hold_the_puckers_width() {
         let n = neutral();
-        let drawn =
-            |s: f64| -> Vec<Vec3> { n.lip.iter().map(|p| Vec3::new(s * p.x, p.y, p.z)).collect() };
-        let mut rig = rig();
-        // Speech: the mouth draws in and lets go, every dot seen.
-        for k in 0..40 {
-            rig.step(&frame(drawn(
-                1.0 - 0.3 * (0.5 + 0.5 * (0.3 * k as f64).sin()),
-            )));
-        }
+        let drawn = |s: f64| drawn_in(&n, s);
+        let mut rig = rig_after_speech(&n);
         // Drawn in to 0.8, the left corner lost and held where it was at rest.
         let mut lip = drawn(0.8);
         lip[0] = n.lip[0];
@@ -964,14 +975,8 @@ mod tests {
     #[test]
     fn a_lip_with_no_dot_seen_stays_held() {
         let n = neutral();
-        let drawn =
-            |s: f64| -> Vec<Vec3> { n.lip.iter().map(|p| Vec3::new(s * p.x, p.y, p.z)).collect() };
-        let mut rig = rig();
-        for k in 0..40 {
-            rig.step(&frame(drawn(
-                1.0 - 0.3 * (0.5 + 0.5 * (0.3 * k as f64).sin()),
-            )));
-        }
+        let drawn = |s: f64| drawn_in(&n, s);
+        let mut rig = rig_after_speech(&n);
         // The corners and the whole lower lip unseen, held at rest.
         let mut lip = drawn(0.8);
         let unseen = [0, 6, 7, 8, 9, 10, 11];
