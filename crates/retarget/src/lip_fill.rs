@@ -139,7 +139,7 @@ impl LipFill {
             // The solution is 0 at the unseen coordinates, so the whole row serves.
             let d = Vec3::from_fn(|axis, _| {
                 let u = 3 * k + axis;
-                self.mean[u] + self.scatter.row(u).dot(&self.solution.transpose()) * scale
+                self.mean[u] + self.scatter.row(u).tr_dot(&self.solution) * scale
             });
             *p = q + d;
         }
