@@ -103,6 +103,9 @@ pub struct RigFrameRecord {
     pub ranges: [f64; CURVES],
     /// Per tracked lip dot: whether it was seen this frame (not held).
     pub tracked_seen: Vec<bool>,
+    /// The camera's centre in the tracked neutral mouth frame (metres): a tracked dot's depth
+    /// error lies along the line to it.
+    pub camera: [f64; 3],
 }
 
 /// The measurement in progress: the pipeline's rig against the one the ground truth gives.
@@ -195,6 +198,10 @@ impl Measure for RigAccuracy {
                 reference_neutral: xyz(model.neutral()),
                 ranges,
                 tracked_seen: tracked.confidence.iter().map(|&c| c > 0.0).collect(),
+                camera: {
+                    let c = rig.model().camera_in_mouth(&tracked.head);
+                    [c.x, c.y, c.z]
+                },
             });
         }
         Ok(())

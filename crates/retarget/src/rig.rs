@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 use crate::kabsch::kabsch;
 use crate::lip_fill::LipFill;
 use crate::retarget::StabilisedFrame;
-use crate::{Error, Named, NeutralPose, Vec3};
+use crate::{Error, MouthFrame, Named, NeutralPose, Vec3};
 
 /// The curve names, in wire order (ARKit's blend-shape names; left and right are the
 /// performer's).
@@ -355,6 +355,8 @@ pub struct RigModel {
     sxx: f64,
     /// Per dot: its weight in the mouth centre's sideways shift ([`midline_weights`]).
     mid_weight: Vec<f64>,
+    /// The neutral mouth frame in the camera frame: where the camera is seen from the mouth.
+    frame: MouthFrame,
 }
 
 fn mean_over(idx: &[usize], f: impl Fn(usize) -> f64) -> f64 {
@@ -393,6 +395,7 @@ impl RigModel {
         let sxx = neutral.lip.iter().map(|p| p.x * p.x).sum::<f64>();
         Ok(Self {
             mid_weight: midline_weights(&neutral.lip, width),
+            frame: neutral.frame,
             pivot: [settings.hinge_up * width, -settings.hinge_back * width],
             neutral: neutral.lip.clone(),
             roles,
@@ -406,6 +409,14 @@ impl RigModel {
     /// The neutral lip dots (mouth frame).
     pub fn neutral(&self) -> &[Vec3] {
         &self.neutral
+    }
+
+    /// The camera's centre in the neutral mouth frame for a head pose (the rigid motion carrying
+    /// the neutral head onto the current one in the camera frame): each dot's depth error lies
+    /// along the line from it to this point.
+    pub fn camera_in_mouth(&self, head: &crate::RigidTransform) -> Vec3 {
+        self.frame
+            .to_mouth(&head.rotation.tr_mul(&(-head.translation)))
     }
 
     /// Neutral mouth width, metres.

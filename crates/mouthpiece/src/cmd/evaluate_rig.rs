@@ -45,7 +45,8 @@ impl FramesCsv {
     /// state (jaw in degrees, rounding, spread, raise, roll-in), every curve from the tracked
     /// dots and from the true dots, every lip dot's stabilised position (metres, neutral mouth
     /// frame), tracked and true, each rig's neutral dots, the ranges both rigs' curves
-    /// were computed with, and whether each tracked dot was seen (1) or held (0).
+    /// were computed with, whether each tracked dot was seen (1) or held (0), and where the camera
+    /// is in the tracked neutral mouth frame.
     pub fn create(path: &std::path::Path, lip_dots: usize) -> anyhow::Result<Self> {
         use anyhow::Context;
         let file = std::fs::File::create(path)
@@ -74,6 +75,7 @@ impl FramesCsv {
             (0..lip_dots)
                 .map(|i| format!("seen_{}", mouthpiece_retarget::PerformerLayout::lip_name(i))),
         );
+        header.extend(["camera_x", "camera_y", "camera_z"].map(String::from));
         let mut csv = Self {
             path: path.to_path_buf(),
             out: std::io::BufWriter::new(file),
@@ -113,7 +115,8 @@ impl FramesCsv {
             }
             row.extend(f.ranges.iter().map(|v| v.to_string()));
             row.extend(f.tracked_seen.iter().map(|&s| u8::from(s).to_string()));
-            debug_assert_eq!(row.len(), 7 + 3 * CURVES + 13 * f.tracked_lip.len());
+            row.extend(f.camera.map(|v| v.to_string()));
+            debug_assert_eq!(row.len(), 10 + 3 * CURVES + 13 * f.tracked_lip.len());
             self.line(&row.join(","))?;
         }
         Ok(())
