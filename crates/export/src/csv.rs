@@ -35,6 +35,8 @@ pub struct CsvWriter {
     header: Option<String>,
     /// Whether the rows carry the head columns.
     head: bool,
+    /// What error messages call the take (its file name; "take" until set).
+    source_name: String,
 }
 
 /// The head columns' prefixes, in order (docs/head.md).
@@ -63,7 +65,14 @@ impl CsvWriter {
             row: String::new(),
             header: Some(header),
             head: false,
+            source_name: "take".into(),
         })
+    }
+
+    /// Names the take in error messages (its file).
+    pub fn named(mut self, source_name: impl Into<String>) -> Self {
+        self.source_name = source_name.into();
+        self
     }
 
     /// Appends one frame as a row.
@@ -96,7 +105,7 @@ impl CsvWriter {
         }
         if frame.head.is_some() != self.head {
             return Err(ExportError::BadLine {
-                source_name: "take".into(),
+                source_name: self.source_name.clone(),
                 line: frame.line,
                 problem: "`character_head` on some lines and not on others".into(),
             });
@@ -139,7 +148,7 @@ impl CsvWriter {
         let err = |cause: io::Error| ExportError::write(&path, cause);
         if self.rows == 0 {
             return Err(ExportError::EmptyTake {
-                source_name: "take".into(),
+                source_name: self.source_name,
             });
         }
         self.out.commit().map_err(err)?;

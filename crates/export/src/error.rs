@@ -27,6 +27,9 @@ pub enum ExportError {
     /// The take has no frames at all.
     #[error("{source_name}: the take has no frames")]
     EmptyTake { source_name: String },
+    /// `--curve` was asked for and no line of the take has a `curve` with points.
+    #[error("{source_name}: no line has a `curve` with points (export without --curve)")]
+    NoCurve { source_name: String },
     /// Reading the take failed (including bytes that are not UTF-8).
     #[error("{source_name}: reading line {line}")]
     Read {
@@ -95,6 +98,7 @@ impl ExportError {
                 | Self::Character { .. }
                 | Self::CharacterMismatch { .. }
                 | Self::EmptyTake { .. }
+                | Self::NoCurve { .. }
                 | Self::BadRig(_)
                 | Self::BadTolerance(_)
                 | Self::TooLargeForGlb { .. }

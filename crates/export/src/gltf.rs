@@ -114,9 +114,12 @@ pub struct GltfWriter {
     rig: MouthRig,
     options: GltfOptions,
     spool_dir: PathBuf,
-    /// The points' channels, then the curve's (created at the first frame).
+    /// What error messages call the take (its file name; "take" until set).
+    source_name: String,
+    /// The points' channels, then the curve's (created at the first line with a curve), then
+    /// the head's and the rig's.
     channels: Vec<Channel>,
-    /// Rest positions of the curve's points (the first frame's curve), with `options.curve`.
+    /// Rest positions of the curve's points (the first curve's), with `options.curve`.
     curve_rest: Option<Vec<[f64; 3]>>,
     frames: u64,
     /// Every channel has a key at every frame: one time accessor serves them all.
@@ -322,6 +325,7 @@ impl GltfWriter {
             .map(|_| Channel::new(spool_dir, options.reduce))
             .collect::<Result<Vec<_>, ExportError>>()?;
         Ok(Self {
+            source_name: "take".into(),
             curve_rest: None,
             shared_times: options.reduce.is_none(),
             rig,
@@ -335,6 +339,12 @@ impl GltfWriter {
         })
     }
 
+    /// Names the take in error messages (its file).
+    pub fn named(mut self, source_name: impl Into<String>) -> Self {
+        self.source_name = source_name.into();
+        self
+    }
+
     /// Adds one frame (times strictly increasing, as [`crate::TakeReader`] guarantees).
     pub fn push(&mut self, frame: &TakeFrame) -> Result<(), ExportError> {
         let points = self.rig.points().len();
@@ -345,8 +355,9 @@ impl GltfWriter {
                 frame.points.len(),
             )));
         }
+        let source_name = self.source_name.clone();
         let bad_line = |problem: String| ExportError::BadLine {
-            source_name: "take".into(),
+            source_name: source_name.clone(),
             line: frame.line,
             problem,
         };
@@ -374,33 +385,45 @@ impl GltfWriter {
                         .into(),
                 ));
             };
-            match &self.curve_rest {
-                None => {
-                    if curve.is_empty() {
-                        return Err(bad_line("the `curve` has no points".into()));
+            // A `process` line before the neutral pose has an empty curve: no keys there.
+            if curve.is_empty() {
+                self.shared_times = false;
+            } else {
+                match &self.curve_rest {
+                    None => {
+                        // After the points' channels, before the head's and the rig's.
+                        let points = self.rig.points().len();
+                        for k in 0..curve.len() {
+                            let channel = Channel::new(&self.spool_dir, self.options.reduce)?;
+                            self.channels.insert(points + k, channel);
+                        }
+                        for start in [&mut self.head_start, &mut self.rig_start] {
+                            if let Some(s) = start {
+                                *s += curve.len();
+                            }
+                        }
+                        if self.frames > 0 {
+                            self.shared_times = false;
+                        }
+                        self.curve_rest = Some(curve.clone());
                     }
-                    for _ in curve {
-                        self.channels
-                            .push(Channel::new(&self.spool_dir, self.options.reduce)?);
+                    Some(rest) if rest.len() != curve.len() => {
+                        return Err(bad_line(format!(
+                            "the `curve` has {} points, the first curve's {}",
+                            curve.len(),
+                            rest.len()
+                        )));
                     }
-                    self.curve_rest = Some(curve.clone());
+                    Some(_) => {}
                 }
-                Some(rest) if rest.len() != curve.len() => {
-                    return Err(bad_line(format!(
-                        "the `curve` has {} points, the first line's {}",
-                        curve.len(),
-                        rest.len()
-                    )));
+                for (channel, v) in self.channels[points..].iter_mut().zip(curve) {
+                    if !in_f32(v) {
+                        return Err(bad_line(format!("curve point {v:?} is out of f32 range")));
+                    }
+                    channel
+                        .sample(frame.t, *v)
+                        .map_err(|cause| ExportError::write(&self.spool_dir, cause))?;
                 }
-                Some(_) => {}
-            }
-            for (channel, v) in self.channels[points..].iter_mut().zip(curve) {
-                if !in_f32(v) {
-                    return Err(bad_line(format!("curve point {v:?} is out of f32 range")));
-                }
-                channel
-                    .sample(frame.t, *v)
-                    .map_err(|cause| ExportError::write(&self.spool_dir, cause))?;
             }
         }
         self.push_head(frame)?;
@@ -436,7 +459,7 @@ impl GltfWriter {
         let translation = [pivot[0] + slide, pivot[1], pivot[2]];
         if !translation.iter().all(|c| (*c as f32).is_finite()) {
             return Err(ExportError::BadLine {
-                source_name: "take".into(),
+                source_name: self.source_name.clone(),
                 line: frame.line,
                 problem: format!(
                     "rig.jaw.slide_m = {} is out of the range of glTF's 32-bit floats",
@@ -478,7 +501,7 @@ impl GltfWriter {
         };
         let Some(head) = &frame.head else {
             return Err(ExportError::BadLine {
-                source_name: "take".into(),
+                source_name: self.source_name.clone(),
                 line: frame.line,
                 problem: "no `character_head` on this line, though the first line had one".into(),
             });
@@ -509,7 +532,12 @@ impl GltfWriter {
     pub fn finish(mut self, out: &Path) -> Result<GltfSummary, ExportError> {
         if self.frames == 0 {
             return Err(ExportError::EmptyTake {
-                source_name: "take".into(),
+                source_name: self.source_name,
+            });
+        }
+        if self.options.curve && self.curve_rest.is_none() {
+            return Err(ExportError::NoCurve {
+                source_name: self.source_name,
             });
         }
         let spool_dir = self.spool_dir.clone();

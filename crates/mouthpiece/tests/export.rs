@@ -402,6 +402,14 @@ fn bad_input_is_exit_2_naming_the_line() {
     let good = dir.path().join("good.jsonl");
     write_take(&good, 5, 12);
     let g = good.to_str().unwrap();
+    // Every line's curve empty (a `process` take that never took the neutral pose).
+    let shapeless = dir.path().join("shapeless.jsonl");
+    let text = std::fs::read_to_string(&good).unwrap().replace(
+        "\"curve\": null",
+        r#""curve": {"method": "bspline", "closed": true, "points": []}"#,
+    );
+    std::fs::write(&shapeless, text).unwrap();
+    let e = shapeless.to_str().unwrap();
     let wolf = repo()
         .join("config/characters/wolf.toml")
         .to_str()
@@ -442,7 +450,11 @@ fn bad_input_is_exit_2_naming_the_line() {
         ),
         (
             vec![g, "--out", "x.glb", "--curve"],
-            "line 1: no `curve` on this line",
+            "good.jsonl: line 1: no `curve` on this line",
+        ),
+        (
+            vec![e, "--out", "x.glb", "--curve"],
+            "shapeless.jsonl: no line has a `curve` with points",
         ),
     ] {
         let (code, stderr) = run(&args);
@@ -741,6 +753,26 @@ fn recordings_are_processed_then_exported() {
         );
         let check = check_gltf_with(&take, &glb, &["--character", c]);
         assert_eq!(check["keys"], 900, "{check}");
+        // The mouth outline (`process`'s default smoothing) from the neutral pose on: the
+        // lines before it have no curve points and get no curve keys.
+        let with_curve = dir.path().join(format!("{ext}-curve.glb"));
+        let stderr = export_ok(&[
+            r,
+            "--character",
+            c,
+            "--out",
+            with_curve.to_str().unwrap(),
+            "--curve",
+        ]);
+        assert!(stderr.contains("75 frames"), "{ext}: {stderr}");
+        assert_valid(&with_curve);
+        let curved = check_gltf_with(&take, &with_curve, &["--character", c]);
+        assert!(curved["curve_points"].as_u64().unwrap() > 12, "{curved}");
+        assert!(
+            curved["max_curve_error"].as_f64().unwrap() < 1e-6,
+            "{ext}: {curved}"
+        );
+        assert_rig_matches(&curved, 75);
         assert!(
             check["max_error"].as_f64().unwrap() < 1e-6,
             "{ext}: {check}"

@@ -73,7 +73,8 @@ pub enum Format {
     Gltf,
     /// Binary glTF: one file.
     Glb,
-    /// One row per frame: t, then x, y, z per point.
+    /// One row per frame: t, x, y, z per point, then the head's and eyes' quaternions (when
+    /// the take has a head), the jaw's angle and slide and one column per rig curve.
     Csv,
 }
 
@@ -149,6 +150,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => rig_from_take(&reader, &first)?,
     };
 
+    let source_name = reader.source_name().to_owned();
     let progress = progress_bar(total_bytes);
     let mut frames = Frames {
         first: Some(first),
@@ -157,7 +159,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     match format {
         Format::Csv => {
-            let mut writer = CsvWriter::create(&rig, &args.out).map_err(export_error)?;
+            let mut writer = CsvWriter::create(&rig, &args.out)
+                .map_err(export_error)?
+                .named(source_name);
             while let Some(frame) = frames.next()? {
                 writer.push(&frame).map_err(export_error)?;
             }
@@ -197,7 +201,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Some(stage) => stage.path().join("take.glb"),
                 None => args.out.clone(),
             };
-            let mut writer = GltfWriter::new(rig, options, &dir).map_err(export_error)?;
+            let mut writer = GltfWriter::new(rig, options, &dir)
+                .map_err(export_error)?
+                .named(source_name);
             while let Some(frame) = frames.next()? {
                 writer.push(&frame).map_err(export_error)?;
             }
