@@ -913,3 +913,81 @@ fn a_turn_exported_faces_the_viewpoint_in_blender() {
         .sum();
     assert!(dot.abs() < 0.99, "{before} vs {after}");
 }
+
+/// A recording whose bytes are damaged, not MCAP at all, or empty is the user's bad input:
+/// exit 2, naming the file, and no output left behind.
+#[test]
+fn damaged_recordings_are_exit_2_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let wolf = repo().join("config/characters/wolf.toml");
+    let session = dir.path().join("session.mcap");
+    let out = mouthpiece(&[
+        "synth",
+        "--out",
+        session.to_str().unwrap(),
+        "--seconds",
+        "1",
+        "--seed",
+        "3",
+        "--size",
+        "320x240",
+        "--distance",
+        "0.35",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut bytes = std::fs::read(&session).unwrap();
+    // Overwrite the middle of the file: a chunk whose CRC no longer matches.
+    let mid = bytes.len() / 2;
+    for b in &mut bytes[mid..mid + 4096] {
+        *b ^= 0x5a;
+    }
+    let damaged = dir.path().join("damaged.mcap");
+    std::fs::write(&damaged, &bytes).unwrap();
+    let garbage = dir.path().join("garbage.mcap");
+    std::fs::write(
+        &garbage,
+        b"not an mcap file, though long enough to have a magic",
+    )
+    .unwrap();
+    let empty = dir.path().join("empty.mcap");
+    std::fs::write(&empty, b"").unwrap();
+    let w = wolf.to_str().unwrap();
+    for (file, needle) in [
+        (&damaged, "damaged.mcap: not readable as an MCAP session"),
+        (&garbage, "garbage.mcap: not readable as an MCAP session"),
+        (&empty, "empty.mcap: no frames"),
+    ] {
+        let f = file.to_str().unwrap();
+        let jsonl = dir.path().join("out.jsonl");
+        let glb = dir.path().join("out.glb");
+        for args in [
+            vec![
+                "process",
+                f,
+                "--character",
+                w,
+                "--out",
+                jsonl.to_str().unwrap(),
+            ],
+            vec![
+                "export",
+                f,
+                "--character",
+                w,
+                "--out",
+                glb.to_str().unwrap(),
+            ],
+        ] {
+            let o = mouthpiece(&args);
+            let stderr = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{args:?}: {stderr}");
+            assert!(stderr.contains(needle), "{args:?}: {stderr}");
+        }
+        assert!(!jsonl.exists() && !glb.exists(), "no output from {f}");
+    }
+    assert_no_temporary_files(dir.path());
+}

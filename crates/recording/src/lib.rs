@@ -74,9 +74,13 @@ pub enum RecordingError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{path}: not an MCAP session")]
+    /// Bytes that are not MCAP (a wrong file, a corrupted chunk, a file cut before its
+    /// header). `offset`: how far the file had been read, bytes (the damage lies before it,
+    /// within the last chunk read).
+    #[error("{path}: not readable as an MCAP session (read {offset} bytes)")]
     Mcap {
         path: String,
+        offset: u64,
         #[source]
         source: mcap::McapError,
     },
@@ -110,4 +114,15 @@ pub enum RecordingError {
         #[source]
         source: mcap::McapError,
     },
+}
+
+impl RecordingError {
+    /// The file's content is wrong (not MCAP, a corrupted chunk, a message that does not
+    /// decode), as opposed to the system failing to read or write it: the caller's bad input.
+    pub fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            Self::Mcap { .. } | Self::Decode { .. } | Self::Metadata { .. } | Self::BadFrame { .. }
+        )
+    }
 }

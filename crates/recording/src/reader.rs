@@ -134,6 +134,7 @@ impl MessageReader {
                     self.done = true;
                     return Err(RecordingError::Mcap {
                         path: self.path_string(),
+                        offset: self.bytes_read,
                         source: mcap::McapError::UnexpectedEoc,
                     });
                 }
@@ -168,6 +169,7 @@ impl MessageReader {
                     self.done = true;
                     return Err(RecordingError::Mcap {
                         path: self.path_string(),
+                        offset: self.bytes_read,
                         source,
                     });
                 }
@@ -207,6 +209,7 @@ impl MessageReader {
                     let record = mcap::parse_record(opcode, data).map_err(|source| {
                         RecordingError::Mcap {
                             path: self.path.display().to_string(),
+                            offset: self.bytes_read,
                             source,
                         }
                     })?;
@@ -229,6 +232,7 @@ impl MessageReader {
                             let Some(channel) = self.channels.get(&header.channel_id) else {
                                 return Err(RecordingError::Mcap {
                                     path: self.path.display().to_string(),
+                                    offset: self.bytes_read,
                                     source: mcap::McapError::UnknownChannel(
                                         header.sequence,
                                         header.channel_id,

@@ -114,7 +114,16 @@ impl Input {
 
     pub fn next_frame(&mut self) -> anyhow::Result<Option<Frame>> {
         match self {
-            Input::Mcap(r) => Ok(r.next_frame()?.map(|f| f.frame)),
+            Input::Mcap(r) => Ok(r
+                .next_frame()
+                .map_err(|e| {
+                    if e.is_bad_input() {
+                        bad_input(e)
+                    } else {
+                        e.into()
+                    }
+                })?
+                .map(|f| f.frame)),
             Input::Oni(s) => Ok(s.next_frame()?),
         }
     }
@@ -231,6 +240,12 @@ pub fn process_recording(
         }
     }
     out.flush().context("cannot write output")?;
+    if frames == 0 {
+        return Err(bad_input(anyhow::anyhow!(
+            "{}: no frames (an empty recording, or one cut before its first frame)",
+            setup.input.display()
+        )));
+    }
     if let Some(bar) = progress {
         bar.finish_and_clear();
     }
