@@ -20,8 +20,9 @@ pub struct McapReplay {
     /// (host instant, log time ns) the pacing is measured from.
     anchor: Option<(Instant, u64)>,
     last_log_time: u64,
-    /// The first frame, read at open time to learn the sizes, handed out first.
-    first: Option<Frame>,
+    /// The first two frames (log time, frame), read at open time to learn the sizes and the
+    /// frame rate, handed out first.
+    ahead: std::collections::VecDeque<(u64, Frame)>,
     truncation_warned: bool,
 }
 
@@ -63,6 +64,16 @@ impl McapReplay {
                 ),
                 cause: None,
             })?;
+        // The frame rate from the first two frames' device clocks (a recording does not
+        // state it); unknown (0) for a single frame.
+        let second = reader.next_frame().map_err(|e| recording_error(&spec, e))?;
+        let fps = match &second {
+            Some(s) if s.frame.device_ts_us > first.frame.device_ts_us => {
+                let period_s = (s.frame.device_ts_us - first.frame.device_ts_us) as f64 / 1e6;
+                (100.0 / period_s).round() / 100.0
+            }
+            _ => 0.0,
+        };
         let f = &first.frame;
         let info = SourceInfo {
             spec: spec.clone(),
@@ -71,7 +82,7 @@ impl McapReplay {
             color_height: f.color.height,
             depth_width: f.depth.width,
             depth_height: f.depth.height,
-            fps: 0.0,
+            fps,
             live: false,
         };
         tracing::info!(%spec, "MCAP replay open");
@@ -82,14 +93,18 @@ impl McapReplay {
             speed: replay.speed,
             anchor: None,
             last_log_time: first.log_time,
-            first: Some(first.frame),
+            ahead: [Some(first), second]
+                .into_iter()
+                .flatten()
+                .map(|f| (f.log_time, f.frame))
+                .collect(),
             truncation_warned: false,
         })
     }
 
     /// Continues from `t` after the session's first frame (backwards too).
     pub fn seek(&mut self, t: Duration) -> Result<(), SourceError> {
-        self.first = None;
+        self.ahead.clear();
         self.anchor = None;
         self.reader
             .seek(t)
@@ -118,11 +133,10 @@ impl FrameSource for McapReplay {
     }
 
     fn next_frame(&mut self) -> Result<Option<Frame>, SourceError> {
-        if let Some(mut first) = self.first.take() {
-            let t = self.last_log_time;
-            self.pace(t);
-            first.host_rx = Instant::now();
-            return Ok(Some(first));
+        if let Some((log_time, mut frame)) = self.ahead.pop_front() {
+            self.pace(log_time);
+            frame.host_rx = Instant::now();
+            return Ok(Some(frame));
         }
         match self
             .reader
@@ -184,6 +198,9 @@ mod tests {
             ..ReplaySpec::new(&path)
         };
         let mut replay = McapReplay::open(&spec, &CaptureConfig::default()).unwrap();
+        // The frame rate from the first two frames' device clocks (the recording's, not the
+        // replay speed's).
+        assert_eq!(replay.info().fps, 30.0);
         let before_first = Instant::now();
         let first = replay.next_frame().unwrap().unwrap();
         assert!(first.host_rx >= before_first);
@@ -196,5 +213,12 @@ mod tests {
             second.host_rx - before_first
         );
         assert!(second.host_rx <= handed_out);
+        let third = replay.next_frame().unwrap().unwrap();
+        assert_eq!(
+            [first.seq, second.seq, third.seq],
+            [0, 1, 2],
+            "the frames read ahead at open come first, in order"
+        );
+        assert!(replay.next_frame().unwrap().is_none());
     }
 }

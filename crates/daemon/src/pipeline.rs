@@ -349,8 +349,7 @@ fn publish_source_state<P: Processor>(
         SourceState::Starting => {}
         SourceState::Up(info) => {
             *frame_rate = info.fps;
-            ctx.hub
-                .set_info(processor.stream_info(info.fps, &info.spec));
+            ctx.hub.set_info(processor.stream_info(info.fps, &ctx.spec));
             ctx.hub.update_status(|s| {
                 s.source = WireSourceState::Up;
                 s.message = None;
