@@ -658,6 +658,18 @@ fn one_euro_smooths_over_time_and_bad_values_exit_2() {
         assert_eq!(o.status.code(), Some(2), "--one-euro {bad}");
         assert!(String::from_utf8_lossy(&o.stderr).contains("--one-euro"));
     }
+    // A bad duration is the flag's fault, said before any input line is read.
+    for (flag, bad) in [("--hold", "-1"), ("--decay", "inf"), ("--hold", "x")] {
+        let mut cmd = mouthpiece();
+        example_args(&mut cmd, &example, "-");
+        let o = cmd.arg(format!("{flag}={bad}")).output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag} {bad}: {stderr}");
+        assert!(
+            stderr.contains(flag) && !stderr.contains("neutral pose"),
+            "{stderr}"
+        );
+    }
     let mut cmd = mouthpiece();
     example_args(&mut cmd, &example, "-");
     let o = cmd

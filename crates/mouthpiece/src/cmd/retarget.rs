@@ -83,10 +83,10 @@ pub struct Args {
     #[arg(long, value_name = "MINCUTOFF,BETA", value_parser = parse_one_euro)]
     pub one_euro: Option<OneEuroParams>,
     /// Seconds a missing lip dot keeps its last value (confidence 0).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = parse_seconds)]
     pub hold: f64,
     /// Seconds over which a missing dot then returns to neutral.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = parse_seconds)]
     pub decay: f64,
     /// Turn the character's head to a viewpoint `X,Y,Z` (character model frame) from the
     /// first line at time `T` on (`X,Y,Z@T`; from the start without `@T`). Without it the
@@ -132,6 +132,15 @@ pub fn parse_look_at(s: &str) -> Result<LookAt, String> {
         *dst = v;
     }
     Ok(LookAt { point, from_t })
+}
+
+/// A duration flag: a finite number of seconds, 0 or more (checked with the other flags,
+/// before any input is read).
+fn parse_seconds(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a number of seconds ≥ 0")),
+    }
 }
 
 fn parse_one_euro(s: &str) -> Result<OneEuroParams, String> {
