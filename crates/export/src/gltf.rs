@@ -397,10 +397,11 @@ impl GltfWriter {
                             let channel = Channel::new(&self.spool_dir, self.options.reduce)?;
                             self.channels.insert(points + k, channel);
                         }
-                        for start in [&mut self.head_start, &mut self.rig_start] {
-                            if let Some(s) = start {
-                                *s += curve.len();
-                            }
+                        for start in [&mut self.head_start, &mut self.rig_start]
+                            .into_iter()
+                            .flatten()
+                        {
+                            *start += curve.len();
                         }
                         if self.frames > 0 {
                             self.shared_times = false;
