@@ -260,7 +260,8 @@ def run(character, lines, smooth_method="bspline", hold=0.5, decay=0.5, samples=
             "confidence": {nm: float(conf[ch["driver"][j]]) for j, nm in enumerate(ch["names"])},
             "head": {"rotation": q.tolist(), "translation": head_t.tolist()},
             "head_lost": head_lost,
-            "rig": rig.step(t, d, conf > 0),
+            # The camera's centre (the camera frame's origin) in the neutral mouth frame.
+            "rig": rig.step(t, d, conf > 0, (trans - origin) @ axes),
             "curve": None if curve is None else
             {"method": smooth_method, "closed": True, "points": np.asarray(curve).tolist()},
         })

@@ -4,13 +4,14 @@
 Follows docs/rig.md, which defines every number computed here: the jaw (angle and slide
 about the hinge), each lip's rigid motion (scipy's `Rotation.align_vectors`, not the Rust SVD)
 and the 18 ARKit-named curves with their default ranges widened over the learning window, and
-the unseen dots put where the seen ones say (the Gaussian conditional mean under the covariance
-of the complete steps, computed here with numpy's `cov` over all of them and a solve on the
-seen block, where the Rust keeps running sums and pads one fixed-size system).
+the dots as the rig measures them (the Gaussian conditional mean of the mouth's displacement
+given the seen dots and their noise along and across the camera's ray, under the covariance of
+the complete steps, computed here with numpy's `cov` over all of them and a solve on the seen
+block, where the Rust keeps running sums and pads one fixed-size system).
 Its own code throughout (numpy arrays, not the Rust loops); where the page was not precise
 enough to write it, the page was completed.
-`retarget_reference.py` calls `Rig.step` with the stabilised dots of every line (and which were
-seen), and the
+`retarget_reference.py` calls `Rig.step` with the stabilised dots of every line (which were
+seen, and where the camera is in the mouth frame), and the
 `retarget_cli` tests compare the binary's `rig` with it.
 
 Everything is in the performer's neutral mouth frame (x to the performer's left, y up, z out
@@ -40,9 +41,12 @@ DEFAULT_RANGES = {
 
 DEPTH_WEIGHT = 0.25
 
-# docs/rig.md, "Unseen dots from the seen ones".
+# docs/rig.md, "The dots the rig measures".
 FILL_LEARN_STEPS = 20
-FILL_NOISE_M = 0.001
+RAY_NOISE_M = 0.0012
+ACROSS_NOISE_M = 0.0003
+PRIOR_WIDTH = 2.0
+SHAPE_GATE = 3.0
 
 
 def rotate_x(v, angle):
@@ -82,31 +86,41 @@ class Rig:
         # Every complete step's displacement from neutral (3 per dot), for the fill.
         self.complete = []
 
-    def fill(self, d, seen):
-        """`d` with the unseen dots at their conditional mean given the seen ones, under the
-        mean and covariance of the complete steps so far (numpy's `cov` of all of them)."""
+    def estimate(self, d, seen, camera):
+        """`d` as the rig measures it: the mouth's expected displacement given the seen dots,
+        each with its noise along and across its ray to `camera` (mouth frame), under the
+        complete steps' mean and covariance (numpy's `cov` of all of them, widened by
+        PRIOR_WIDTH): the unseen dots (those a seen dot of their lip or a corner can say
+        something of) always, the seen ones unless the step is farther than SHAPE_GATE from
+        what was learned."""
         seen = np.asarray(seen, bool)
         x = (d - self.d0).reshape(-1)
         if seen.all():
             self.complete.append(x)
-            return d
         if len(self.complete) < FILL_LEARN_STEPS or not seen.any():
             return d
         data = np.array(self.complete)
-        mean, cov = data.mean(axis=0), np.cov(data, rowvar=False)
+        mean, cov = data.mean(axis=0), PRIOR_WIDTH * np.cov(data, rowvar=False)
         # A lip with none of its dots seen (the corners count for both lips) stays held.
         corner = seen[self.left] or seen[self.right]
         upper, lower = corner or seen[self.upper].any(), corner or seen[self.lower].any()
         moved = ~seen
         moved[self.upper] &= upper
         moved[self.lower] &= lower
-        if not moved.any():
-            return d
+        rays = camera - d
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        noise = np.zeros((len(x), len(x)))
+        for k, r in enumerate(rays):
+            noise[3 * k:3 * k + 3, 3 * k:3 * k + 3] = (
+                ACROSS_NOISE_M ** 2 * np.eye(3) + (RAY_NOISE_M ** 2 - ACROSS_NOISE_M ** 2) * np.outer(r, r))
         s = np.repeat(seen, 3)
-        u = np.repeat(moved, 3)
-        css = cov[np.ix_(s, s)] + FILL_NOISE_M ** 2 * np.eye(int(s.sum()))
+        residual = x[s] - mean[s]
+        weights = np.linalg.solve(cov[np.ix_(s, s)] + noise[np.ix_(s, s)], residual)
+        expected = mean + cov[:, s] @ weights
+        distance = residual @ weights / s.sum()
+        u = np.repeat(moved | (seen & (distance <= SHAPE_GATE)), 3)
         x = x.copy()
-        x[u] = mean[u] + cov[np.ix_(u, s)] @ np.linalg.solve(css, x[s] - mean[s])
+        x[u] = expected[u]
         return self.d0 + x.reshape(-1, 3)
 
     def side_weight(self, i):
@@ -178,9 +192,9 @@ class Rig:
         m["mouthPressLeft"], m["mouthPressRight"] = (lo_l - up_l) / w, (lo_r - up_r) / w
         return m, angle, slide
 
-    def step(self, t, d, seen=None):
+    def step(self, t, d, seen=None, camera=(0.0, 0.0, 0.6)):
         d = np.asarray(d, float)
-        d = self.fill(d, np.ones(len(d), bool) if seen is None else seen)
+        d = self.estimate(d, np.ones(len(d), bool) if seen is None else seen, np.asarray(camera, float))
         m, angle, slide = self.measures(d)
         if self.start is None:
             self.start = t

@@ -1,27 +1,56 @@
-//! Where the rig puts a lip dot it does not see this step (docs/rig.md, "Unseen dots from
-//! the seen ones").
+//! Where the rig measures the lip dots (docs/rig.md, "The dots the rig measures").
 //!
 //! The stabiliser holds a missing dot at its last position; that is what the character's
 //! points are made of. The rig's curves need the dot where it is now: a corner lost in a fast
 //! pucker is held wide while the other dots draw in, and `mouthPucker` reads the held width.
+//! And a seen dot's depth is the noisiest number the camera gives, its error lying along the
+//! camera's ray: with the head turned, that ray is no longer the mouth's depth axis and the
+//! error leaks into the sideways motion the curves read.
 //! [`LipFill`] learns, from the steps where every lip dot is seen, the mean and covariance of
-//! the whole mouth's displacement from neutral (one vector of three coordinates per dot), and
-//! puts each unseen dot at its expected displacement given the seen ones: the Gaussian
-//! conditional mean, the best linear prediction from the dots seen in the same step. Lips
-//! move together (a pucker draws every dot in, a smile lifts both corners), so a few seen
-//! dots say much about the others.
+//! the whole mouth's displacement from neutral (one vector of three coordinates per dot). Each
+//! step it takes the mouth's expected displacement given what was seen (the Gaussian
+//! conditional mean): every seen dot measured with its noise (small across the camera's ray,
+//! large along it), every unseen one not measured at all. Lips move together (a pucker draws
+//! every dot in, a smile lifts both corners), so the dots' precise sideways motion says much
+//! about their noisy depth and about the dots not seen.
 
 use nalgebra::{Cholesky, DMatrix, DVector};
 
 use crate::Vec3;
 
-/// Complete steps the fill learns from before it fills anything (fewer: the held dots stay).
-/// Twenty steps, two thirds of a second at 30 Hz, cover a few syllables.
+/// Complete steps learned before the estimate is used (fewer: the dots as the stabiliser gives
+/// them). Twenty steps, two thirds of a second at 30 Hz, cover a few syllables.
 pub const FILL_LEARN_STEPS: usize = 20;
 
-/// The noise of a seen dot's coordinate, metres: added to the seen dots' variances, so that
-/// the prediction does not follow one dot's noise as if it were the mouth's motion.
-pub const FILL_NOISE_M: f64 = 0.001;
+/// A seen dot's noise along the camera's ray, metres: a depth camera's error on a lip dot's
+/// depth (Kinect-like 1.2–1.6 mm, RealSense-like 0.7–1.0 mm on the synthetic sessions).
+pub const RAY_NOISE_M: f64 = 0.0012;
+
+/// A seen dot's noise across the camera's ray, metres: its pixel's precision (a quarter of a
+/// pixel at 0.6 m is 0.3 mm).
+pub const ACROSS_NOISE_M: f64 = 0.0003;
+
+/// *The prior steers depth, not shape*: the learned covariance is widened by this factor.
+/// It is learned from complete steps only, which rarely show the shapes that hide dots (lips
+/// rolled in, a wide opening); widened, it still ties a dot's depth to the mouth's precise
+/// sideways motion, but no longer pulls an unusual shape towards the usual ones.
+pub const PRIOR_WIDTH: f64 = 2.0;
+
+/// *An unlearned shape is taken as measured*: a step whose seen displacement lies farther than
+/// this from what was learned (its squared Mahalanobis distance under the prior and the noise,
+/// per seen coordinate; 0.2 is typical, 2.5 the 99th percentile on the synthetic sessions)
+/// keeps its seen dots as measured (its unseen ones are still estimated). Early in a session
+/// the covariance knows few shapes, and a new expression is not noise.
+pub const SHAPE_GATE: f64 = 3.0;
+
+/// What one [`LipFill::estimate`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Estimated {
+    /// Unseen dots moved to their expected place.
+    pub filled: bool,
+    /// Seen dots moved to their expected place given every seen dot's noise.
+    pub seen: bool,
+}
 
 /// The learned displacement statistics and the buffers of one fill.
 #[derive(Debug, Clone)]
@@ -38,6 +67,8 @@ pub struct LipFill {
     after: DVector<f64>,
     system: Option<DMatrix<f64>>,
     solution: DVector<f64>,
+    /// Scratch: per dot, the unit direction from it to the camera.
+    rays: Vec<Vec3>,
 }
 
 impl LipFill {
@@ -53,6 +84,7 @@ impl LipFill {
             after: DVector::zeros(n),
             system: Some(DMatrix::zeros(n, n)),
             solution: DVector::zeros(n),
+            rays: vec![Vec3::zeros(); dots],
         }
     }
 
@@ -88,52 +120,88 @@ impl LipFill {
     }
 
     /// Moves every dot that is not `seen` and is `wanted` to its expected place given the
-    /// seen ones (the others stay as they are). Returns whether it did: not before
-    /// [`FILL_LEARN_STEPS`] complete steps, not when no dot is seen or none is to be moved;
-    /// then `lip` is left as it was.
-    pub fn fill(
+    /// seen ones, and the seen ones to theirs given every seen dot's noise (`camera`: the
+    /// camera's centre in the same frame; each dot's depth error lies along the line to it),
+    /// unless the step's shape is one not learned ([`SHAPE_GATE`]). Nothing before
+    /// [`FILL_LEARN_STEPS`] complete steps, nor when no dot is seen; then `lip` is left as
+    /// it was.
+    pub fn estimate(
         &mut self,
         neutral: &[Vec3],
         lip: &mut [Vec3],
         seen: &[bool],
         wanted: &[bool],
-    ) -> bool {
+        camera: &Vec3,
+    ) -> Estimated {
         let moved = |k: usize| !seen[k] && wanted[k];
-        if self.steps < FILL_LEARN_STEPS || !seen.contains(&true) || !(0..seen.len()).any(moved) {
-            return false;
+        if self.steps < FILL_LEARN_STEPS || !seen.contains(&true) {
+            return Estimated::default();
         }
         self.load(neutral, lip);
-        let n = self.x.len();
-        let scale = 1.0 / (self.steps - 1) as f64;
-        let noise = FILL_NOISE_M * FILL_NOISE_M;
+        for (k, p) in lip.iter().enumerate() {
+            self.rays[k] = (camera - p).normalize();
+        }
         let seen_at = |i: usize| seen[i / 3];
-        // The seen coordinates' covariance plus noise; an unseen coordinate's row and column
-        // are the identity's, so that one fixed-size system serves every mask (its solution
-        // is 0 there).
+        let usable = (0..self.x.len())
+            .filter(|&i| seen_at(i))
+            .all(|i| self.x[i].is_finite())
+            && self
+                .rays
+                .iter()
+                .enumerate()
+                .all(|(k, r)| !seen[k] || r.iter().all(|v| v.is_finite()));
+        if !usable {
+            return Estimated::default();
+        }
+        let n = self.x.len();
+        let scale = PRIOR_WIDTH / (self.steps - 1) as f64;
+        let (across, along) = (ACROSS_NOISE_M * ACROSS_NOISE_M, RAY_NOISE_M * RAY_NOISE_M);
+        // The seen coordinates' covariance plus their noise (a dot's own 3×3 block:
+        // `across·I + (along − across)·r rᵀ`, r its ray); an unseen coordinate's row and
+        // column are the identity's, so that one fixed-size system serves every mask (its
+        // solution is 0 there).
         let mut system = self.system.take().unwrap_or_else(|| DMatrix::zeros(n, n));
+        let mut coordinates_seen = 0usize;
         for j in 0..n {
             for i in 0..n {
                 system[(i, j)] = match (seen_at(i), seen_at(j)) {
-                    (true, true) => self.scatter[(i, j)] * scale + if i == j { noise } else { 0.0 },
+                    (true, true) => {
+                        let noise = if i / 3 == j / 3 {
+                            let r = &self.rays[i / 3];
+                            (along - across) * r[i % 3] * r[j % 3]
+                                + if i == j { across } else { 0.0 }
+                        } else {
+                            0.0
+                        };
+                        self.scatter[(i, j)] * scale + noise
+                    }
                     _ => f64::from(u8::from(i == j)),
                 };
             }
             self.solution[j] = if seen_at(j) {
+                coordinates_seen += 1;
                 self.x[j] - self.mean[j]
             } else {
                 0.0
             };
         }
+        // The right-hand side, kept for the step's distance from what was learned.
+        self.before.copy_from(&self.solution);
         let Some(cholesky) = Cholesky::new(system) else {
-            return false;
+            return Estimated::default();
         };
         cholesky.solve_mut(&mut self.solution);
         self.system = Some(cholesky.unpack_dirty());
         if !self.solution.iter().all(|v| v.is_finite()) {
-            return false;
+            return Estimated::default();
         }
+        let distance = self.before.dot(&self.solution) / coordinates_seen as f64;
+        let out = Estimated {
+            filled: (0..seen.len()).any(moved),
+            seen: distance <= SHAPE_GATE,
+        };
         for (k, (p, q)) in lip.iter_mut().zip(neutral).enumerate() {
-            if !moved(k) {
+            if !(moved(k) || (seen[k] && out.seen)) {
                 continue;
             }
             // The solution is 0 at the unseen coordinates, so the whole row serves.
@@ -143,7 +211,7 @@ impl LipFill {
             });
             *p = q + d;
         }
-        true
+        out
     }
 }
 
@@ -164,6 +232,11 @@ mod tests {
             fill.learn(n, &scaled(n, s));
         }
         fill
+    }
+
+    /// The camera 0.6 m straight in front of the mouth.
+    fn camera() -> Vec3 {
+        Vec3::new(0.0, 0.0, 0.6)
     }
 
     /// Speech: the mouth drawn in by up to 30 % and let go, step `k`.
@@ -187,7 +260,11 @@ mod tests {
         let held = n[0];
         lip[0] = held;
         let seen = [false, true, true, true, true, true];
-        assert!(!fill.fill(&n, &mut lip, &seen, &[true; 6]));
+        assert!(
+            !fill
+                .estimate(&n, &mut lip, &seen, &[true; 6], &camera())
+                .filled
+        );
         assert_eq!(lip[0], held);
     }
 
@@ -201,7 +278,10 @@ mod tests {
         let mut lip = truth.clone();
         lip[0] = n[0];
         let seen = [false, true, true, true, true, true];
-        assert!(fill.fill(&n, &mut lip, &seen, &[true; 6]));
+        assert!(
+            fill.estimate(&n, &mut lip, &seen, &[true; 6], &camera())
+                .filled
+        );
         // The held corner was 6.25 mm out; filled, it is within a fraction of a millimetre.
         assert!(
             (lip[0] - truth[0]).norm() < 2e-4,
@@ -210,7 +290,12 @@ mod tests {
             truth[0]
         );
         for k in 1..n.len() {
-            assert_eq!(lip[k], truth[k], "a seen dot is never moved");
+            assert!(
+                (lip[k] - truth[k]).norm() < 1e-4,
+                "a seen dot on the learned shape stays where it is: {:?} vs {:?}",
+                lip[k],
+                truth[k]
+            );
         }
     }
 
@@ -225,14 +310,21 @@ mod tests {
         lip[5] = n[5];
         let seen = [false, true, true, true, true, false];
         let wanted = [true, true, true, true, true, false];
-        assert!(fill.fill(&n, &mut lip, &seen, &wanted));
+        assert!(
+            fill.estimate(&n, &mut lip, &seen, &wanted, &camera())
+                .filled
+        );
         // Held, 6.25 mm out; from the four inner dots, within half a millimetre.
         assert!((lip[0] - truth[0]).norm() < 5e-4, "{:?}", lip[0]);
         assert_eq!(lip[5], n[5]);
         // Nothing wanted: nothing done.
         let mut lip = truth.clone();
         lip[0] = n[0];
-        assert!(!fill.fill(&n, &mut lip, &seen, &[false; 6]));
+        assert!(
+            !fill
+                .estimate(&n, &mut lip, &seen, &[false; 6], &camera())
+                .filled
+        );
         assert_eq!(lip[0], n[0]);
     }
 
@@ -248,12 +340,19 @@ mod tests {
         let mut lip = bad.clone();
         lip[0] = n[0];
         let seen = [false, true, true, true, true, true];
-        assert!(!fill.fill(&n, &mut lip, &seen, &[true; 6]));
+        assert!(
+            !fill
+                .estimate(&n, &mut lip, &seen, &[true; 6], &camera())
+                .filled
+        );
         assert_eq!(lip[0], n[0]);
         // And the fill still works on the next good step.
         let mut lip = scaled(&n, 0.8);
         lip[0] = n[0];
-        assert!(fill.fill(&n, &mut lip, &seen, &[true; 6]));
+        assert!(
+            fill.estimate(&n, &mut lip, &seen, &[true; 6], &camera())
+                .filled
+        );
         assert!(lip[0].x.is_finite());
     }
 
@@ -263,7 +362,82 @@ mod tests {
         let mut fill = learned(&n, (0..30).map(|k| 1.0 - 0.01 * k as f64));
         let mut lip = scaled(&n, 0.8);
         let before = lip.clone();
-        assert!(!fill.fill(&n, &mut lip, &[false; 6], &[true; 6]));
+        assert!(
+            !fill
+                .estimate(&n, &mut lip, &[false; 6], &[true; 6], &camera())
+                .filled
+        );
         assert_eq!(lip, before);
+    }
+
+    /// Rounding as the tests' performer does it: drawn in by `1 − s` and pushed forward,
+    /// 8 mm at a third drawn in.
+    fn rounded(neutral: &[Vec3], s: f64) -> Vec<Vec3> {
+        neutral
+            .iter()
+            .map(|p| Vec3::new(p.x * s, p.y, p.z + 0.024 * (1.0 - s)))
+            .collect()
+    }
+
+    #[test]
+    fn a_depth_error_along_the_ray_is_taken_off_a_seen_dot() {
+        let n = neutral();
+        let mut fill = LipFill::new(n.len());
+        for k in 0..60 {
+            fill.learn(&n, &rounded(&n, speech(k)));
+        }
+        // The head turned: the camera off to the side, so a depth error moves a dot sideways
+        // as well. One dot reads 3 mm too far along its ray.
+        let camera = Vec3::new(0.35, 0.0, 0.5);
+        let truth = rounded(&n, 0.8);
+        let mut lip = truth.clone();
+        let ray = (camera - truth[1]).normalize();
+        lip[1] = truth[1] - ray * 0.003;
+        let measured_error = (lip[1] - truth[1]).norm();
+        let out = fill.estimate(&n, &mut lip, &[true; 6], &[true; 6], &camera);
+        assert_eq!(
+            out,
+            Estimated {
+                filled: false,
+                seen: true
+            }
+        );
+        let error = (lip[1] - truth[1]).norm();
+        assert!(
+            error < 0.3 * measured_error,
+            "{error} m left of {measured_error} m"
+        );
+        // Sideways too: the leak of the depth error into x is taken off with it.
+        assert!((lip[1].x - truth[1].x).abs() < 0.3 * (truth[1] - ray * 0.003 - truth[1]).x.abs());
+        for k in [0, 2, 3, 4, 5] {
+            assert!(
+                (lip[k] - truth[k]).norm() < 5e-4,
+                "dot {k} moved by the other's error"
+            );
+        }
+    }
+
+    #[test]
+    fn an_unlearned_shape_is_taken_as_measured() {
+        let n = neutral();
+        let mut fill = LipFill::new(n.len());
+        for k in 0..60 {
+            fill.learn(&n, &rounded(&n, speech(k)));
+        }
+        // A smile never made before: both ends 6 mm up. Far from every learned step, so the
+        // seen dots stay as measured instead of being pulled towards a rounding.
+        let mut smile = rounded(&n, 0.9);
+        smile[0].y += 0.006;
+        smile[5].y += 0.006;
+        let mut lip = smile.clone();
+        let out = fill.estimate(&n, &mut lip, &[true; 6], &[true; 6], &camera());
+        assert_eq!(
+            out,
+            Estimated {
+                filled: false,
+                seen: false
+            }
+        );
+        assert_eq!(lip, smile);
     }
 }

@@ -753,17 +753,18 @@ impl Rig {
         self.seen.extend(frame.confidence.iter().map(|&c| c > 0.0));
         if self.seen.iter().all(|&s| s) {
             self.fill.learn(&self.model.neutral, &self.lip);
-        } else {
-            self.model
-                .roles
-                .fill_wanted(&self.seen, &mut self.fill_wanted);
-            self.fill.fill(
-                &self.model.neutral,
-                &mut self.lip,
-                &self.seen,
-                &self.fill_wanted,
-            );
         }
+        self.model
+            .roles
+            .fill_wanted(&self.seen, &mut self.fill_wanted);
+        let camera = self.model.camera_in_mouth(&frame.head);
+        self.fill.estimate(
+            &self.model.neutral,
+            &mut self.lip,
+            &self.seen,
+            &self.fill_wanted,
+            &camera,
+        );
         let m = self.model.measure(&self.lip);
         self.measures = m;
         // Learning: the first `learn_s` seconds widen the ranges of curves not configured.
