@@ -786,7 +786,7 @@ fn evaluate_rig_frames_are_what_the_rig_table_is_made_of() {
 }
 
 /// The rig measures a dot the tracker did not see where the seen ones put it (docs/rig.md,
-/// "Unseen dots from the seen ones"). Seed 46, Kinect-like, strong head motion, 5 s: the
+/// "The dots the rig measures"). Seed 46, Kinect-like, strong head motion, 5 s: the
 /// lips' press and pucker lose dots for a few frames; measured as held, `mouthPressRight`
 /// was 0.070 against its definition on the true dots; filled, every curve is within 0.05
 /// (0.035 at worst when this test was written). The file says which dots were unseen, and

@@ -55,9 +55,9 @@ fn bench(c: &mut Criterion) {
     // The rig (docs/rig.md) on stabilised frames: jaw, both lip fits, every curve. The same
     // frames as `examples/rig_cost.rs` counts instructions on.
     let (rt, stabilised) = support::stabilised_frames();
-    // The same with every other frame missing a corner and an upper-lip dot: the fill
-    // (docs/rig.md, "Unseen dots from the seen ones") solves for them on those frames and
-    // learns from the complete ones.
+    // The same with every other frame missing a corner and an upper-lip dot: the estimate
+    // (docs/rig.md, "The dots the rig measures") solves for them on those frames, for the
+    // seen dots on every frame, and learns from the complete ones.
     let with_unseen: Vec<_> = stabilised
         .iter()
         .enumerate()

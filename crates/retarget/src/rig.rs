@@ -633,7 +633,8 @@ pub struct Rig {
     /// Scratch for the lip fits.
     from: Vec<Vec3>,
     to: Vec<Vec3>,
-    /// Unseen dots from the seen ones, and the dots the last step measured.
+    /// The dots the rig measures (the unseen ones from the seen ones, the seen ones with
+    /// their depth error along the camera's ray), and those the last step measured.
     fill: LipFill,
     lip: Vec<Vec3>,
     seen: Vec<bool>,
