@@ -985,6 +985,93 @@ mod tests {
         assert!(as_held.values[3] < 0.16, "{:?}", as_held.values[3]);
     }
 
+    /// A turned head's depth noise, which lies along the camera's ray and so partly sideways
+    /// in the mouth frame, does not read as a pucker: the rig measures the seen dots with
+    /// their noise along the ray (docs/rig.md, "The dots the rig measures").
+    #[test]
+    fn depth_noise_of_a_turned_head_does_not_read_as_a_pucker() {
+        // The mouth 0.6 m in front of the camera (OpenCV axes: x right, y down, z forward;
+        // the performer's left on the camera's right).
+        let m = neutral();
+        let to_camera = |p: &Vec3| Vec3::new(p.x, -p.y, 0.6 - p.z);
+        let n = NeutralPose::from_positions(
+            PerformerLayout::default(),
+            m.lip.iter().map(|p| Some(to_camera(p))).collect(),
+            m.forehead_camera
+                .iter()
+                .map(|p| p.map(|p| to_camera(&p)))
+                .collect(),
+            30,
+        )
+        .unwrap();
+        let mut rig = Rig::new(
+            &n,
+            RigSettings {
+                learn_s: 0.0,
+                ..RigSettings::default()
+            },
+        )
+        .unwrap();
+        // The head turned by `yaw` about a vertical axis 10 cm behind the mouth.
+        let head = |yaw: f64| {
+            let rotation = Rotation3::from_axis_angle(&Vec3::y_axis(), yaw).into_inner();
+            let pivot = Vec3::new(0.0, 0.0, 0.7);
+            RigidTransform {
+                rotation,
+                translation: pivot - rotation * pivot,
+            }
+        };
+        // Rounding: drawn in by 1 − s, the lips 8 mm forward at a third drawn in.
+        let rounded = |s: f64| -> Vec<Vec3> {
+            n.lip
+                .iter()
+                .map(|p| Vec3::new(s * p.x, p.y, p.z + 0.024 * (1.0 - s)))
+                .collect()
+        };
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut gauss = move || {
+            // Sum of uniforms, close enough to a normal deviate for this.
+            (0..12)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    (state >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        let mut noisy = |lip: &[Vec3], camera: &Vec3| -> Vec<Vec3> {
+            lip.iter()
+                .map(|p| p + (camera - p).normalize() * (0.0012 * gauss()))
+                .collect()
+        };
+        let (mut raw_sq, mut rig_sq, mut count) = (0.0, 0.0, 0.0);
+        for k in 0..160 {
+            let s = 1.0 - 0.3 * (0.5 + 0.5 * (0.35 * k as f64).sin());
+            let truth = rounded(s);
+            // Facing the camera while it learns, then turned 35° away.
+            let pose = head(if k < 60 { 0.0 } else { 35f64.to_radians() });
+            let camera = rig.model().camera_in_mouth(&pose);
+            let lip = noisy(&truth, &camera);
+            let mut f = frame(lip.clone());
+            f.head = pose;
+            let pucker = rig.step(&f).curve("mouthPucker") * rig.ranges()[3];
+            if k >= 60 {
+                let want = rig.model().measure(&truth).values[3];
+                let raw = rig.model().measure(&lip).values[3];
+                raw_sq += (raw - want).powi(2);
+                rig_sq += (pucker - want).powi(2);
+                count += 1.0;
+            }
+        }
+        let (raw, estimated) = ((raw_sq / count).sqrt(), (rig_sq / count).sqrt());
+        assert!(
+            estimated < 0.65 * raw,
+            "pucker RMS {estimated} measured by the rig, {raw} on the dots as given"
+        );
+    }
+
     #[test]
     fn a_lip_with_no_dot_seen_stays_held() {
         let n = neutral();
