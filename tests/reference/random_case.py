@@ -102,6 +102,14 @@ def main():
                                noise=float(rng.uniform(0, 0.0008)),
                                dropout=float(rng.uniform(0, 0.08)), decimals=None,
                                flag_neutral=bool(rng.random() < 0.85))
+    # Blackouts: a few steps in which no lip dot is seen at all (the tracker named none), and
+    # a few in which the lower lip and both corners are not (a lip rolled in).
+    body = [i for i, line in enumerate(lines) if not line.get("neutral")]
+    for lost in (range(0, 12), [0, 6, 7, 8, 9, 10, 11]):
+        start = int(rng.choice(body[len(body) // 3:-6]))
+        for i in range(start, start + int(rng.integers(2, 6))):
+            for k in lost:
+                lines[i]["points"][f"D{k + 1}"] = None
     with open(os.path.join(a.dir, "input.jsonl"), "w") as f:
         for line in lines:
             f.write(json.dumps(line) + "\n")

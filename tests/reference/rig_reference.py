@@ -85,6 +85,9 @@ class Rig:
         self.start = None
         # Every complete step's displacement from neutral (3 per dot), for the fill.
         self.complete = []
+        # The dots the last step measured, and the stabilised dots it was given.
+        self.measured = None
+        self.given = None
 
     def estimate(self, d, seen, camera):
         """`d` as the rig measures it: the mouth's expected displacement given the seen dots,
@@ -193,8 +196,17 @@ class Rig:
         return m, angle, slide
 
     def step(self, t, d, seen=None, camera=(0.0, 0.0, 0.6)):
-        d = np.asarray(d, float)
-        d = self.estimate(d, np.ones(len(d), bool) if seen is None else seen, np.asarray(camera, float))
+        given = np.asarray(d, float)
+        seen = np.ones(len(given), bool) if seen is None else np.asarray(seen, bool)
+        d = given.copy()
+        if self.given is not None:
+            # A dot the stabiliser holds (unseen, unchanged since the last step) stays where
+            # the rig last measured it.
+            held = ~seen & np.all(given == self.given, axis=1)
+            d[held] = self.measured[held]
+        self.given = given
+        d = self.estimate(d, seen, np.asarray(camera, float))
+        self.measured = d
         m, angle, slide = self.measures(d)
         if self.start is None:
             self.start = t

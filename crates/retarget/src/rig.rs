@@ -638,6 +638,9 @@ pub struct Rig {
     fill: LipFill,
     lip: Vec<Vec3>,
     seen: Vec<bool>,
+    /// The last step's stabilised dots, as given: a dot unseen whose value has not changed
+    /// since is one the stabiliser holds.
+    given: Vec<Vec3>,
     fill_wanted: Vec<bool>,
     measures: Measures,
     values: [f64; CURVES],
@@ -665,6 +668,7 @@ impl Rig {
             fill: LipFill::new(n),
             lip: Vec::with_capacity(n),
             seen: Vec::with_capacity(n),
+            given: Vec::with_capacity(n),
             fill_wanted: Vec::with_capacity(n),
             measures: Measures {
                 values: [0.0; CURVES],
@@ -749,9 +753,21 @@ impl Rig {
 
     /// One step.
     pub fn step(&mut self, frame: &StabilisedFrame) -> &RigFrame {
-        self.lip.clone_from(&frame.lip);
         self.seen.clear();
         self.seen.extend(frame.confidence.iter().map(|&c| c > 0.0));
+        // *A held dot keeps the rig's measure*: a dot the stabiliser holds (unseen, its
+        // value the same as last step's) stays where the rig last measured it, not where it
+        // was last seen; the estimate below may still move it.
+        let held_here = self.given.len() == frame.lip.len() && self.lip.len() == frame.lip.len();
+        for (k, p) in frame.lip.iter().enumerate() {
+            if k >= self.lip.len() {
+                self.lip.push(*p);
+            } else if !(held_here && !self.seen[k] && self.given[k] == *p) {
+                self.lip[k] = *p;
+            }
+        }
+        self.lip.truncate(frame.lip.len());
+        self.given.clone_from(&frame.lip);
         if self.seen.iter().all(|&s| s) {
             self.fill.learn(&self.model.neutral, &self.lip);
         }
@@ -1070,6 +1086,32 @@ mod tests {
             estimated < 0.65 * raw,
             "pucker RMS {estimated} measured by the rig, {raw} on the dots as given"
         );
+    }
+
+    #[test]
+    fn a_held_dot_keeps_the_rigs_measure() {
+        let n = neutral();
+        let drawn = |s: f64| drawn_in(&n, s);
+        let mut rig = rig_after_speech(&n);
+        // Drawn in to 0.8, the left corner lost and held at rest: the rig puts it drawn in.
+        let mut lip = drawn(0.8);
+        lip[0] = n.lip[0];
+        let mut held = frame(lip);
+        held.confidence[0] = 0.0;
+        rig.step(&held);
+        let measured = rig.measured_lip().to_vec();
+        assert!((measured[0] - drawn(0.8)[0]).norm() < 2e-4);
+        // Next step no dot is seen and the stabiliser holds every one: nothing to estimate
+        // from, so the rig keeps what it measured (the corner drawn in, not at rest).
+        let mut none = held.clone();
+        none.confidence.iter_mut().for_each(|c| *c = 0.0);
+        rig.step(&none);
+        assert_eq!(rig.measured_lip(), &measured[..]);
+        // Once the stabiliser moves a held dot (decaying towards neutral), the rig takes it.
+        none.lip[0] = (n.lip[0] + drawn(0.8)[0]) / 2.0;
+        rig.step(&none);
+        assert_eq!(rig.measured_lip()[0], none.lip[0]);
+        assert_eq!(rig.measured_lip()[1..], measured[1..]);
     }
 
     #[test]
