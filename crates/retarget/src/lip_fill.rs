@@ -22,12 +22,13 @@ use crate::Vec3;
 /// them). Twenty steps, two thirds of a second at 30 Hz, cover a few syllables.
 pub const FILL_LEARN_STEPS: usize = 20;
 
-/// A seen dot's noise along the camera's ray, metres: a depth camera's error on a lip dot's
-/// depth (Kinect-like 1.2–1.6 mm, RealSense-like 0.7–1.0 mm on the synthetic sessions).
+/// A seen dot's noise along the camera's ray by default, metres (`[rig] depth_noise_m`): a
+/// depth camera's error on a lip dot's depth (Kinect-like 1.2–1.6 mm, RealSense-like
+/// 0.7–1.0 mm on the synthetic sessions).
 pub const RAY_NOISE_M: f64 = 0.0012;
 
-/// A seen dot's noise across the camera's ray, metres: its pixel's precision (a quarter of a
-/// pixel at 0.6 m is 0.3 mm).
+/// A seen dot's noise across the camera's ray by default, metres (`[rig] pixel_noise_m`): its
+/// pixel's precision (a quarter of a pixel at 0.6 m is 0.3 mm).
 pub const ACROSS_NOISE_M: f64 = 0.0003;
 
 /// *The prior steers depth, not shape*: the learned covariance is widened by this factor.
@@ -69,6 +70,9 @@ pub struct LipFill {
     solution: DVector<f64>,
     /// Scratch: per dot, the unit direction from it to the camera.
     rays: Vec<Vec3>,
+    /// A seen dot's noise along and across its ray, metres.
+    along_m: f64,
+    across_m: f64,
 }
 
 impl LipFill {
@@ -85,7 +89,17 @@ impl LipFill {
             system: Some(DMatrix::zeros(n, n)),
             solution: DVector::zeros(n),
             rays: vec![Vec3::zeros(); dots],
+            along_m: RAY_NOISE_M,
+            across_m: ACROSS_NOISE_M,
         }
+    }
+
+    /// The seen dots' noise along and across the camera's ray, metres (the camera's; the
+    /// defaults are [`RAY_NOISE_M`] and [`ACROSS_NOISE_M`]).
+    pub fn with_noise(mut self, along_m: f64, across_m: f64) -> Self {
+        self.along_m = along_m;
+        self.across_m = across_m;
+        self
     }
 
     /// Complete steps learned so far.
@@ -155,7 +169,7 @@ impl LipFill {
         }
         let n = self.x.len();
         let scale = PRIOR_WIDTH / (self.steps - 1) as f64;
-        let (across, along) = (ACROSS_NOISE_M * ACROSS_NOISE_M, RAY_NOISE_M * RAY_NOISE_M);
+        let (across, along) = (self.across_m * self.across_m, self.along_m * self.along_m);
         // The seen coordinates' covariance plus their noise (a dot's own 3×3 block:
         // `across·I + (along − across)·r rᵀ`, r its ray); an unseen coordinate's row and
         // column are the identity's, so that one fixed-size system serves every mask (its

@@ -104,6 +104,12 @@ pub struct RigSettings {
     /// Seconds after the neutral pose during which ranges widen to what the performer does
     /// (0: the defaults as they are).
     pub learn_s: f64,
+    /// A seen lip dot's depth noise along the camera's ray, metres (the camera's: docs/rig.md,
+    /// "The dots the rig measures").
+    pub depth_noise_m: f64,
+    /// A seen lip dot's noise across the camera's ray, metres (its pixel's precision at the
+    /// booth's distance).
+    pub pixel_noise_m: f64,
     /// Curve name → range of its measure (degrees for `jawOpen`, mouth widths for the
     /// others). A range given here is used as it is (not widened by learning).
     pub ranges: Named<f64>,
@@ -115,6 +121,8 @@ impl Default for RigSettings {
             hinge_up: 0.5,
             hinge_back: 1.6,
             learn_s: 4.0,
+            depth_noise_m: crate::lip_fill::RAY_NOISE_M,
+            pixel_noise_m: crate::lip_fill::ACROSS_NOISE_M,
             ranges: Named::default(),
         }
     }
@@ -131,6 +139,8 @@ impl RigSettings {
             ("hinge_up", self.hinge_up, -5.0, 5.0),
             ("hinge_back", self.hinge_back, 0.2, 10.0),
             ("learn_s", self.learn_s, 0.0, 600.0),
+            ("depth_noise_m", self.depth_noise_m, 0.0001, 0.02),
+            ("pixel_noise_m", self.pixel_noise_m, 0.00005, 0.005),
         ] {
             if !(v.is_finite() && (lo..=hi).contains(&v)) {
                 return Err(bad(key, format!("must be within {lo}..={hi}, got {v}")));
@@ -665,7 +675,7 @@ impl Rig {
             start: None,
             from: Vec::with_capacity(n),
             to: Vec::with_capacity(n),
-            fill: LipFill::new(n),
+            fill: LipFill::new(n).with_noise(settings.depth_noise_m, settings.pixel_noise_m),
             lip: Vec::with_capacity(n),
             seen: Vec::with_capacity(n),
             given: Vec::with_capacity(n),
@@ -884,6 +894,24 @@ mod tests {
         .unwrap()
     }
 
+    /// [`neutral`] 0.6 m in front of a camera (OpenCV axes: x right, y down, z forward; the
+    /// performer's left on the camera's right), as a real session has it: the camera's rays
+    /// run along the mouth frame's z.
+    fn neutral_before_camera() -> NeutralPose {
+        let m = neutral();
+        let to_camera = |p: &Vec3| Vec3::new(p.x, -p.y, 0.6 - p.z);
+        NeutralPose::from_positions(
+            PerformerLayout::default(),
+            m.lip.iter().map(|p| Some(to_camera(p))).collect(),
+            m.forehead_camera
+                .iter()
+                .map(|p| p.map(|p| to_camera(&p)))
+                .collect(),
+            30,
+        )
+        .unwrap()
+    }
+
     fn frame(lip: Vec<Vec3>) -> StabilisedFrame {
         StabilisedFrame {
             t: 0.0,
@@ -1006,20 +1034,7 @@ mod tests {
     /// their noise along the ray (docs/rig.md, "The dots the rig measures").
     #[test]
     fn depth_noise_of_a_turned_head_does_not_read_as_a_pucker() {
-        // The mouth 0.6 m in front of the camera (OpenCV axes: x right, y down, z forward;
-        // the performer's left on the camera's right).
-        let m = neutral();
-        let to_camera = |p: &Vec3| Vec3::new(p.x, -p.y, 0.6 - p.z);
-        let n = NeutralPose::from_positions(
-            PerformerLayout::default(),
-            m.lip.iter().map(|p| Some(to_camera(p))).collect(),
-            m.forehead_camera
-                .iter()
-                .map(|p| p.map(|p| to_camera(&p)))
-                .collect(),
-            30,
-        )
-        .unwrap();
+        let n = neutral_before_camera();
         let mut rig = Rig::new(
             &n,
             RigSettings {
@@ -1086,6 +1101,36 @@ mod tests {
             estimated < 0.65 * raw,
             "pucker RMS {estimated} measured by the rig, {raw} on the dots as given"
         );
+    }
+
+    /// `[rig] depth_noise_m` reaches the estimate: told that the depth is as precise as the
+    /// pixel, the rig leaves a seen dot's depth error where it is.
+    #[test]
+    fn the_configured_depth_noise_is_the_estimates() {
+        let n = neutral_before_camera();
+        let settings = |depth_noise_m: f64| RigSettings {
+            learn_s: 0.0,
+            depth_noise_m,
+            pixel_noise_m: 0.0003,
+            ..RigSettings::default()
+        };
+        let mut moved = Vec::new();
+        for depth_noise_m in [0.0012, 0.0003] {
+            let mut rig = Rig::new(&n, settings(depth_noise_m)).unwrap();
+            for k in 0..40 {
+                rig.step(&frame(drawn_in(
+                    &n,
+                    1.0 - 0.3 * (0.5 + 0.5 * (0.3 * k as f64).sin()),
+                )));
+            }
+            // One dot 3 mm off in depth (the camera is straight in front in these frames).
+            let mut lip = drawn_in(&n, 0.85);
+            lip[3].z += 0.003;
+            rig.step(&frame(lip.clone()));
+            moved.push((rig.measured_lip()[3] - lip[3]).norm());
+        }
+        assert!(moved[0] > 0.0015, "{moved:?}");
+        assert!(moved[1] < 0.6 * moved[0], "{moved:?}");
     }
 
     #[test]
@@ -1466,5 +1511,16 @@ mod tests {
         assert!(e.contains("hinge"), "{e}");
         let s = RigSettings::from_toml_str("learn_s = 0\n[ranges]\njawOpen = 30").unwrap();
         assert_eq!(s.ranges.get("jawOpen"), Some(&30.0));
+        for bad in [
+            "depth_noise_m = 0",
+            "depth_noise_m = 0.5",
+            "pixel_noise_m = -1e-4",
+        ] {
+            let e = RigSettings::from_toml_str(bad).unwrap_err().to_string();
+            let key = bad.split(' ').next().unwrap();
+            assert!(e.contains(&format!("rig.{key}")), "{bad}: {e}");
+        }
+        let s = RigSettings::from_toml_str("depth_noise_m = 0.0007").unwrap();
+        assert_eq!((s.depth_noise_m, s.pixel_noise_m), (0.0007, 0.0003));
     }
 }
