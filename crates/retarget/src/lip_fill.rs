@@ -454,4 +454,59 @@ mod tests {
         );
         assert_eq!(lip, smile);
     }
+
+    /// *The prior steers depth, not shape*: a shape the complete steps did not show (three
+    /// dots 1.5 mm further back, as a lip rolling in) is shrunk towards the learned ones by
+    /// the share the doubled prior gives the noise, a third, not by the half an undoubled one
+    /// would take.
+    #[test]
+    fn the_prior_steers_depth_not_shape() {
+        let n = neutral();
+        let camera = camera();
+        let mut fill = LipFill::new(n.len());
+        // Learned from noisy steps: the depth noise along each dot's ray, as measured.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut gauss = move || {
+            (0..12)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    (state >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        for k in 0..2000 {
+            let lip: Vec<Vec3> = rounded(&n, speech(k))
+                .iter()
+                .map(|p| p + (camera - p).normalize() * (RAY_NOISE_M * gauss()))
+                .collect();
+            fill.learn(&n, &lip);
+        }
+        let shape = |back: f64| {
+            let mut lip = rounded(&n, 0.85);
+            for p in &mut lip[3..] {
+                p.z -= back;
+            }
+            lip
+        };
+        let mut lip = shape(0.0015);
+        let out = fill.estimate(&n, &mut lip, &[true; 6], &[true; 6], &camera);
+        assert_eq!(
+            out,
+            Estimated {
+                filled: false,
+                seen: true
+            }
+        );
+        let kept: f64 = (3..6)
+            .map(|k| (shape(0.0)[k].z - lip[k].z) / 0.0015)
+            .sum::<f64>()
+            / 3.0;
+        assert!(
+            (0.58..0.75).contains(&kept),
+            "kept {kept} of the unlearned shape"
+        );
+    }
 }
