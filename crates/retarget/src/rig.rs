@@ -767,16 +767,17 @@ impl Rig {
         self.seen.extend(frame.confidence.iter().map(|&c| c > 0.0));
         // *A held dot keeps the rig's measure*: a dot the stabiliser holds (unseen, its
         // value the same as last step's) stays where the rig last measured it, not where it
-        // was last seen; the estimate below may still move it.
-        let held_here = self.given.len() == frame.lip.len() && self.lip.len() == frame.lip.len();
-        for (k, p) in frame.lip.iter().enumerate() {
-            if k >= self.lip.len() {
-                self.lip.push(*p);
-            } else if !(held_here && !self.seen[k] && self.given[k] == *p) {
-                self.lip[k] = *p;
+        // was last seen; the estimate below may still move it. (`lip` and `given` have the
+        // last step's length, or none before the first step.)
+        if self.given.len() == frame.lip.len() {
+            for (k, p) in frame.lip.iter().enumerate() {
+                if self.seen[k] || self.given[k] != *p {
+                    self.lip[k] = *p;
+                }
             }
+        } else {
+            self.lip.clone_from(&frame.lip);
         }
-        self.lip.truncate(frame.lip.len());
         self.given.clone_from(&frame.lip);
         if self.seen.iter().all(|&s| s) {
             self.fill.learn(&self.model.neutral, &self.lip);
