@@ -701,6 +701,29 @@ fn assert_rig_matches(check: &Value, frames: u64) {
     );
 }
 
+/// A small synthetic recording (320x240, the camera 0.35 m from the mouth) of `seconds`
+/// from `seed`, written to `path` (`.mcap` or `.oni`).
+fn synth_small(path: &Path, seconds: &str, seed: &str) {
+    let out = mouthpiece(&[
+        "synth",
+        "--out",
+        path.to_str().unwrap(),
+        "--seconds",
+        seconds,
+        "--seed",
+        seed,
+        "--size",
+        "320x240",
+        "--distance",
+        "0.35",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// A recording (`.mcap`, `.oni`) goes through the processing pipeline first: a GLB the
 /// validator accepts, one key per frame and point (fewer with --reduce), the same keys as
 /// exporting `mouthpiece process`'s own output.
@@ -712,24 +735,7 @@ fn recordings_are_processed_then_exported() {
     for ext in ["mcap", "oni"] {
         let session = dir.path().join(format!("session.{ext}"));
         let r = session.to_str().unwrap();
-        let out = mouthpiece(&[
-            "synth",
-            "--out",
-            r,
-            "--seconds",
-            "2.5",
-            "--seed",
-            "5",
-            "--size",
-            "320x240",
-            "--distance",
-            "0.35",
-        ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        synth_small(&session, "2.5", "5");
 
         let glb = dir.path().join(format!("{ext}.glb"));
         let stderr = export_ok(&[r, "--character", c, "--out", glb.to_str().unwrap()]);
@@ -921,24 +927,7 @@ fn damaged_recordings_are_exit_2_naming_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let wolf = repo().join("config/characters/wolf.toml");
     let session = dir.path().join("session.mcap");
-    let out = mouthpiece(&[
-        "synth",
-        "--out",
-        session.to_str().unwrap(),
-        "--seconds",
-        "1",
-        "--seed",
-        "3",
-        "--size",
-        "320x240",
-        "--distance",
-        "0.35",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    synth_small(&session, "1", "3");
     let mut bytes = std::fs::read(&session).unwrap();
     // Overwrite the middle of the file: a chunk whose CRC no longer matches.
     let mid = bytes.len() / 2;

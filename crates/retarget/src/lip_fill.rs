@@ -230,7 +230,7 @@ impl LipFill {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn neutral() -> Vec<Vec3> {
@@ -385,21 +385,44 @@ mod tests {
     }
 
     /// Rounding as the tests' performer does it: drawn in by `1 − s` and pushed forward,
-    /// 8 mm at a third drawn in.
-    fn rounded(neutral: &[Vec3], s: f64) -> Vec<Vec3> {
+    /// 8 mm at a third drawn in (also the rig's tests').
+    pub(crate) fn rounded(neutral: &[Vec3], s: f64) -> Vec<Vec3> {
         neutral
             .iter()
             .map(|p| Vec3::new(p.x * s, p.y, p.z + 0.024 * (1.0 - s)))
             .collect()
     }
 
+    /// A fill that has learned 60 steps of [`rounded`] speech, every dot seen and exact.
+    fn rounding_learned(n: &[Vec3]) -> LipFill {
+        let mut fill = LipFill::new(n.len());
+        for k in 0..60 {
+            fill.learn(n, &rounded(n, speech(k)));
+        }
+        fill
+    }
+
+    /// Standard normal deviates, repeatable from `seed` (a sum of twelve xorshift uniforms:
+    /// close enough to a normal for the tests' noise; also the rig's tests').
+    pub(crate) fn gauss_stream(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            (0..12)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    (state >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        }
+    }
+
     #[test]
     fn a_depth_error_along_the_ray_is_taken_off_a_seen_dot() {
         let n = neutral();
-        let mut fill = LipFill::new(n.len());
-        for k in 0..60 {
-            fill.learn(&n, &rounded(&n, speech(k)));
-        }
+        let mut fill = rounding_learned(&n);
         // The head turned: the camera off to the side, so a depth error moves a dot sideways
         // as well. One dot reads 3 mm too far along its ray.
         let camera = Vec3::new(0.35, 0.0, 0.5);
@@ -434,10 +457,7 @@ mod tests {
     #[test]
     fn an_unlearned_shape_is_taken_as_measured() {
         let n = neutral();
-        let mut fill = LipFill::new(n.len());
-        for k in 0..60 {
-            fill.learn(&n, &rounded(&n, speech(k)));
-        }
+        let mut fill = rounding_learned(&n);
         // A smile never made before: both ends 6 mm up. Far from every learned step, so the
         // seen dots stay as measured instead of being pulled towards a rounding.
         let mut smile = rounded(&n, 0.9);
@@ -465,18 +485,7 @@ mod tests {
         let camera = camera();
         let mut fill = LipFill::new(n.len());
         // Learned from noisy steps: the depth noise along each dot's ray, as measured.
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut gauss = move || {
-            (0..12)
-                .map(|_| {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
-                    (state >> 11) as f64 / (1u64 << 53) as f64
-                })
-                .sum::<f64>()
-                - 6.0
-        };
+        let mut gauss = gauss_stream(0x2545_f491_4f6c_dd1d);
         for k in 0..2000 {
             let lip: Vec<Vec3> = rounded(&n, speech(k))
                 .iter()

@@ -866,6 +866,7 @@ fn lip_motion<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lip_fill::tests::{gauss_stream, rounded};
     use crate::{PerformerLayout, RigidTransform};
 
     /// A 12-dot mouth given directly in its mouth frame (x left, y up, z out): the forehead
@@ -1006,16 +1007,21 @@ mod tests {
         );
     }
 
+    /// The lips drawn in to 0.8, the left corner lost and held where it was at rest.
+    fn corner_held(n: &NeutralPose) -> StabilisedFrame {
+        let mut lip = drawn_in(n, 0.8);
+        lip[0] = n.lip[0];
+        let mut held = frame(lip);
+        held.confidence[0] = 0.0;
+        held
+    }
+
     #[test]
     fn a_held_corner_does_not_hold_the_puckers_width() {
         let n = neutral();
         let drawn = |s: f64| drawn_in(&n, s);
         let mut rig = rig_after_speech(&n);
-        // Drawn in to 0.8, the left corner lost and held where it was at rest.
-        let mut lip = drawn(0.8);
-        lip[0] = n.lip[0];
-        let mut held = frame(lip);
-        held.confidence[0] = 0.0;
+        let held = corner_held(&n);
         let out = rig.step(&held).clone();
         // What the whole mouth shows (the range was learned: these frames all have t = 0).
         assert!(
@@ -1053,26 +1059,7 @@ mod tests {
                 translation: pivot - rotation * pivot,
             }
         };
-        // Rounding: drawn in by 1 − s, the lips 8 mm forward at a third drawn in.
-        let rounded = |s: f64| -> Vec<Vec3> {
-            n.lip
-                .iter()
-                .map(|p| Vec3::new(s * p.x, p.y, p.z + 0.024 * (1.0 - s)))
-                .collect()
-        };
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut gauss = move || {
-            // Sum of uniforms, close enough to a normal deviate for this.
-            (0..12)
-                .map(|_| {
-                    state ^= state << 13;
-                    state ^= state >> 7;
-                    state ^= state << 17;
-                    (state >> 11) as f64 / (1u64 << 53) as f64
-                })
-                .sum::<f64>()
-                - 6.0
-        };
+        let mut gauss = gauss_stream(0x9e37_79b9_7f4a_7c15);
         let mut noisy = |lip: &[Vec3], camera: &Vec3| -> Vec<Vec3> {
             lip.iter()
                 .map(|p| p + (camera - p).normalize() * (0.0012 * gauss()))
@@ -1081,7 +1068,7 @@ mod tests {
         let (mut raw_sq, mut rig_sq, mut count) = (0.0, 0.0, 0.0);
         for k in 0..160 {
             let s = 1.0 - 0.3 * (0.5 + 0.5 * (0.35 * k as f64).sin());
-            let truth = rounded(s);
+            let truth = rounded(&n.lip, s);
             // Facing the camera while it learns, then turned 35° away.
             let pose = head(if k < 60 { 0.0 } else { 35f64.to_radians() });
             let camera = rig.model().camera_in_mouth(&pose);
@@ -1139,11 +1126,8 @@ mod tests {
         let n = neutral();
         let drawn = |s: f64| drawn_in(&n, s);
         let mut rig = rig_after_speech(&n);
-        // Drawn in to 0.8, the left corner lost and held at rest: the rig puts it drawn in.
-        let mut lip = drawn(0.8);
-        lip[0] = n.lip[0];
-        let mut held = frame(lip);
-        held.confidence[0] = 0.0;
+        // The rig puts the held corner drawn in.
+        let held = corner_held(&n);
         rig.step(&held);
         let measured = rig.measured_lip().to_vec();
         assert!((measured[0] - drawn(0.8)[0]).norm() < 2e-4);
