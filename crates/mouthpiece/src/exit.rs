@@ -28,6 +28,19 @@ pub fn bad_input(err: impl Into<anyhow::Error>) -> anyhow::Error {
     anyhow::Error::new(BadInput(err.into()))
 }
 
+/// Wraps an error as bad input (exit code 2) when `bad` says the user's input or
+/// configuration is at fault (the error types' own `is_bad_input()`); otherwise exit 1.
+pub fn bad_input_if<E>(bad: bool, err: E) -> anyhow::Error
+where
+    E: std::error::Error + Send + Sync + 'static,
+{
+    if bad {
+        bad_input(err)
+    } else {
+        anyhow::Error::new(err)
+    }
+}
+
 /// Prints `error: …` and every cause once, and picks the exit code.
 pub fn report(err: &anyhow::Error) -> ExitCode {
     eprintln!("error: {err}");

@@ -11,7 +11,7 @@ use mouthpiece_bind::training::{self, TrainOptions};
 use mouthpiece_bind::{BindError, Method, ModelUp, Network};
 use mouthpiece_export::MouthRig;
 
-use crate::exit::bad_input;
+use crate::exit::{bad_input, bad_input_if};
 
 #[derive(Debug, clap::Args)]
 #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
@@ -150,11 +150,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 fn bind_error(err: BindError) -> anyhow::Error {
-    if err.is_bad_input() {
-        bad_input(err)
-    } else {
-        err.into()
-    }
+    bad_input_if(err.is_bad_input(), err)
 }
 
 fn load_network(model: Option<&Path>) -> anyhow::Result<Network> {
@@ -170,13 +166,7 @@ fn load_network(model: Option<&Path>) -> anyhow::Result<Network> {
 }
 
 fn load_rig(path: &Path) -> anyhow::Result<MouthRig> {
-    MouthRig::load_character(path).map_err(|e| {
-        if e.is_bad_input() {
-            bad_input(e)
-        } else {
-            e.into()
-        }
-    })
+    MouthRig::load_character(path).map_err(|e| bad_input_if(e.is_bad_input(), e))
 }
 
 fn bind(args: Args) -> anyhow::Result<()> {

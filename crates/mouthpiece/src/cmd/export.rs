@@ -15,7 +15,7 @@ use mouthpiece_export::{
 
 use crate::cmd::process::{process_recording, ProcessSetup};
 use crate::cmd::retarget::Smooth;
-use crate::exit::bad_input;
+use crate::exit::{bad_input, bad_input_if};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -278,11 +278,7 @@ impl<R: BufRead> Frames<'_, R> {
 
 /// The user's mistakes exit 2, the machine's exit 1.
 fn export_error(err: ExportError) -> anyhow::Error {
-    if err.is_bad_input() {
-        bad_input(err)
-    } else {
-        err.into()
-    }
+    bad_input_if(err.is_bad_input(), err)
 }
 
 struct TakeInput {

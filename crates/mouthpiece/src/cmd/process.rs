@@ -17,7 +17,7 @@ use mouthpiece_retarget::{Character, ShapeSmoothing};
 use mouthpiece_track::pipeline::{Pipeline, PipelineConfig, RetargetSettings};
 
 use crate::cmd::retarget::Smooth;
-use crate::exit::bad_input;
+use crate::exit::{bad_input, bad_input_if};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -116,13 +116,7 @@ impl Input {
         match self {
             Input::Mcap(r) => Ok(r
                 .next_frame()
-                .map_err(|e| {
-                    if e.is_bad_input() {
-                        bad_input(e)
-                    } else {
-                        e.into()
-                    }
-                })?
+                .map_err(|e| bad_input_if(e.is_bad_input(), e))?
                 .map(|f| f.frame)),
             Input::Oni(s) => Ok(s.next_frame()?),
         }

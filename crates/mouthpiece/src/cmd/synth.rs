@@ -10,7 +10,7 @@ use mouthpiece_capture::oni_write::{OniFrameWriter, OniWriteError};
 use mouthpiece_recording::{ColorEncoding, SessionWriter, WriterOptions};
 use mouthpiece_synth::{DotLayout, HeadMotion, NoiseModel, Synth, SynthConfig};
 
-use crate::exit::bad_input;
+use crate::exit::{bad_input, bad_input_if};
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
 pub enum MotionArg {
@@ -197,13 +197,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("oni"));
     let frames = if is_oni {
-        let oni_error = |e: OniWriteError| {
-            if e.is_bad_input() {
-                bad_input(e)
-            } else {
-                anyhow::Error::new(e)
-            }
-        };
+        let oni_error = |e: OniWriteError| bad_input_if(e.is_bad_input(), e);
         let mut writer = OniFrameWriter::create(&args.out, &calibration, args.fps)
             .map_err(oni_error)
             .with_context(|| format!("cannot write the session {}", args.out.display()))?;
