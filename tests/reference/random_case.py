@@ -105,7 +105,8 @@ def main():
     # Blackouts: a few steps in which no lip dot is seen at all (the tracker named none), and
     # a few in which the lower lip and both corners are not (a lip rolled in).
     body = [i for i, line in enumerate(lines) if not line.get("neutral")]
-    for lost in (range(0, 12), [0, 6, 7, 8, 9, 10, 11]):
+    n = sum(1 for k in lines[0]["points"] if k.startswith("D"))
+    for lost in (range(n), [0] + list(range(n // 2, n))):
         start = int(rng.choice(body[len(body) // 3:-6]))
         for i in range(start, start + int(rng.integers(2, 6))):
             for k in lost:

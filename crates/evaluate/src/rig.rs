@@ -93,8 +93,8 @@ pub struct RigFrameRecord {
     /// Every curve from the tracked dots and from the true dots, [`CURVE_NAMES`] order.
     pub tracked: [f64; CURVES],
     pub reference: [f64; CURVES],
-    /// The lip dots (neutral mouth frame, metres) the two rigs measured (the tracked ones with
-    /// the unseen dots filled in, as the rig measured them), and each rig's neutral dots.
+    /// The lip dots (neutral mouth frame, metres) the two rigs measured (the tracked ones as the
+    /// rig estimated them: the unseen dots from the seen, the seen with their ray noise), and each rig's neutral dots.
     pub tracked_lip: Vec<[f64; 3]>,
     pub reference_lip: Vec<[f64; 3]>,
     pub tracked_neutral: Vec<[f64; 3]>,

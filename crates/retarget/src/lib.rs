@@ -13,7 +13,8 @@
 //! - [`smooth`]: shape smoothing across the points of a step (§8), and [`one_euro`]: the
 //!   temporal filter.
 //! - [`rig`]: jaw, lip motions and ARKit-named mouth curves (docs/rig.md); [`lip_fill`]:
-//!   where the rig puts the lip dots it does not see.
+//!   where the rig measures the lip dots (the unseen ones from the seen, the seen ones with
+//!   their depth error along the camera's ray).
 //! - [`head`]: the character's head and eyes: reach test, turns by slerp, following the
 //!   performer.
 //! - [`jsonl`]: the line formats of `mouthpiece retarget` (read by `export`, extended by
