@@ -111,6 +111,12 @@ def main():
         for i in range(start, start + int(rng.integers(2, 6))):
             for k in lost:
                 lines[i]["points"][f"D{k + 1}"] = None
+    # Misreads: a few steps in which one seen lip dot is read 12 mm deeper (a fast lip's
+    # blurred trail over the open mouth).
+    for i in rng.choice(body[len(body) // 3:], size=3, replace=False):
+        k = f"D{int(rng.integers(n)) + 1}"
+        if lines[i]["points"][k] is not None:
+            lines[i]["points"][k] = [v + dv for v, dv in zip(lines[i]["points"][k], (0.0, 0.0, 0.012))]
     with open(os.path.join(a.dir, "input.jsonl"), "w") as f:
         for line in lines:
             f.write(json.dumps(line) + "\n")

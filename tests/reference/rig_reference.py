@@ -47,6 +47,8 @@ RAY_NOISE_M = 0.0012
 ACROSS_NOISE_M = 0.0003
 PRIOR_WIDTH = 2.0
 SHAPE_GATE = 3.0
+DISOWN_M = 0.006
+DISOWN_WITNESSES = 3
 
 
 def rotate_x(v, angle):
@@ -95,7 +97,7 @@ class Rig:
         complete steps' mean and covariance (numpy's `cov` of all of them, widened by
         PRIOR_WIDTH): the unseen dots (those a seen dot of their lip or a corner can say
         something of) always, the seen ones unless the step is farther than SHAPE_GATE from
-        what was learned."""
+        what was learned, and a seen one the others disown (DISOWN_M) like an unseen one."""
         seen = np.asarray(seen, bool)
         x = (d - self.d0).reshape(-1)
         if seen.all():
@@ -116,12 +118,30 @@ class Rig:
         for k, r in enumerate(rays):
             noise[3 * k:3 * k + 3, 3 * k:3 * k + 3] = (
                 ACROSS_NOISE_M ** 2 * np.eye(3) + (RAY_NOISE_M ** 2 - ACROSS_NOISE_M ** 2) * np.outer(r, r))
-        s = np.repeat(seen, 3)
-        residual = x[s] - mean[s]
-        weights = np.linalg.solve(cov[np.ix_(s, s)] + noise[np.ix_(s, s)], residual)
-        expected = mean + cov[:, s] @ weights
-        distance = residual @ weights / s.sum()
-        u = np.repeat(moved | (seen & (distance <= SHAPE_GATE)), 3)
+
+        def solve(used):
+            s = np.repeat(used, 3)
+            residual = x[s] - mean[s]
+            weights = np.linalg.solve(cov[np.ix_(s, s)] + noise[np.ix_(s, s)], residual)
+            share = np.zeros(len(x))
+            share[s] = residual * weights
+            return mean + cov[:, s] @ weights, residual @ weights / s.sum(), share.reshape(-1, 3).sum(1)
+
+        expected, distance, share = solve(seen)
+        kept = seen
+        disowned = np.zeros(len(seen), bool)
+        # A dot the others disown is not measured: beyond the gate, the seen dot with the
+        # largest share of the distance, when the others (at least DISOWN_WITNESSES) then lie
+        # within it and put that dot farther than DISOWN_M from where it was read.
+        if distance > SHAPE_GATE and seen.sum() > DISOWN_WITNESSES:
+            k = int(np.argmax(np.where(seen, share, -np.inf)))
+            others = seen.copy()
+            others[k] = False
+            e2, d2, _ = solve(others)
+            if d2 <= SHAPE_GATE and np.linalg.norm(e2[3 * k:3 * k + 3] - x[3 * k:3 * k + 3]) > DISOWN_M:
+                expected, distance, kept = e2, d2, others
+                disowned[k] = True
+        u = np.repeat(moved | disowned | (kept & (distance <= SHAPE_GATE)), 3)
         x = x.copy()
         x[u] = expected[u]
         return self.d0 + x.reshape(-1, 3)

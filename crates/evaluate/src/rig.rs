@@ -96,6 +96,8 @@ pub struct RigFrameRecord {
     /// The lip dots (neutral mouth frame, metres) the two rigs measured (the tracked ones as the
     /// rig estimated them: the unseen dots from the seen, the seen with their ray noise), and each rig's neutral dots.
     pub tracked_lip: Vec<[f64; 3]>,
+    /// The tracked lip dots as the stabiliser gave them to the rig (before its estimate).
+    pub stabilised_lip: Vec<[f64; 3]>,
     pub reference_lip: Vec<[f64; 3]>,
     pub tracked_neutral: Vec<[f64; 3]>,
     pub reference_neutral: Vec<[f64; 3]>,
@@ -193,6 +195,7 @@ impl Measure for RigAccuracy {
                 tracked: a,
                 reference: b,
                 tracked_lip: xyz(rig.measured_lip()),
+                stabilised_lip: xyz(&tracked.lip),
                 reference_lip: xyz(&out.performer.lip),
                 tracked_neutral: xyz(rig.model().neutral()),
                 reference_neutral: xyz(model.neutral()),

@@ -1,7 +1,7 @@
 //! Per-step cost of the retarget core: one performer step (Kabsch + stabilisation) and one
 //! character (closed form + curve), as the daemon runs it for every camera frame; and the
 //! rig's step (jaw, lip fits, named curves), and the same with dots unseen every other frame
-//! (`rig/step-unseen`).
+//! (`rig/step-unseen`) or one misread (`rig/step-misread`).
 //!
 //!     cargo bench -p mouthpiece-retarget --bench retarget
 //!     cargo bench -p mouthpiece-retarget --bench retarget -- rig/step
@@ -70,7 +70,24 @@ fn bench(c: &mut Criterion) {
             f
         })
         .collect();
-    for (name, frames) in [("rig/step", &stabilised), ("rig/step-unseen", &with_unseen)] {
+    // The same with every other frame reading an upper-lip dot 12 mm off: the step is beyond
+    // the shape gate there and a second solve, without that dot, disowns it.
+    let with_misread: Vec<_> = stabilised
+        .iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let mut f = f.clone();
+            if k % 2 == 1 {
+                f.lip[3].z -= 0.012;
+            }
+            f
+        })
+        .collect();
+    for (name, frames) in [
+        ("rig/step", &stabilised),
+        ("rig/step-unseen", &with_unseen),
+        ("rig/step-misread", &with_misread),
+    ] {
         let mut rig = Rig::new(rt.stabiliser().neutral(), RigSettings::default()).unwrap();
         let mut i = 0usize;
         c.bench_function(name, |b| {

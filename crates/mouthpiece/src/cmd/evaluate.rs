@@ -66,8 +66,8 @@ pub struct Args {
     pub per_curve: bool,
     /// Writes every counted frame's rig to this CSV file: the synthetic mouth's state (jaw,
     /// rounding, spread, raise, roll-in), every curve from the tracked and from the true
-    /// dots, and the stabilised lip dots both measured (`scripts/rig-error-split.py` reads
-    /// it).
+    /// dots, the lip dots both rigs measured, and the tracked ones as the stabiliser gave
+    /// them (`scripts/rig-error-split.py` reads it).
     #[arg(long, value_name = "FILE")]
     pub rig_frames: Option<PathBuf>,
 }

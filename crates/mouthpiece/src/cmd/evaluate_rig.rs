@@ -45,8 +45,9 @@ impl FramesCsv {
     /// state (jaw in degrees, rounding, spread, raise, roll-in), every curve from the tracked
     /// dots and from the true dots, every lip dot's stabilised position (metres, neutral mouth
     /// frame), tracked and true, each rig's neutral dots, the ranges both rigs' curves
-    /// were computed with, whether each tracked dot was seen (1) or held (0), and where the camera
-    /// is in the tracked neutral mouth frame.
+    /// were computed with, whether each tracked dot was seen (1) or held (0), where the camera
+    /// is in the tracked neutral mouth frame, and the tracked lip dots as the stabiliser gave
+    /// them to the rig (before the rig's estimate).
     pub fn create(path: &std::path::Path, lip_dots: usize) -> anyhow::Result<Self> {
         use anyhow::Context;
         let file = std::fs::File::create(path)
@@ -76,6 +77,10 @@ impl FramesCsv {
                 .map(|i| format!("seen_{}", mouthpiece_retarget::PerformerLayout::lip_name(i))),
         );
         header.extend(["camera_x", "camera_y", "camera_z"].map(String::from));
+        for i in 0..lip_dots {
+            let dot = mouthpiece_retarget::PerformerLayout::lip_name(i);
+            header.extend(["x", "y", "z"].map(|a| format!("stabilised_{dot}_{a}")));
+        }
         let mut csv = Self {
             path: path.to_path_buf(),
             out: std::io::BufWriter::new(file),
@@ -116,7 +121,10 @@ impl FramesCsv {
             row.extend(f.ranges.iter().map(|v| v.to_string()));
             row.extend(f.tracked_seen.iter().map(|&s| u8::from(s).to_string()));
             row.extend(f.camera.map(|v| v.to_string()));
-            debug_assert_eq!(row.len(), 10 + 3 * CURVES + 13 * f.tracked_lip.len());
+            for p in &f.stabilised_lip {
+                row.extend(p.map(|v| v.to_string()));
+            }
+            debug_assert_eq!(row.len(), 10 + 3 * CURVES + 16 * f.tracked_lip.len());
             self.line(&row.join(","))?;
         }
         Ok(())
