@@ -55,36 +55,34 @@ fn bench(c: &mut Criterion) {
     // The rig (docs/rig.md) on stabilised frames: jaw, both lip fits, every curve. The same
     // frames as `examples/rig_cost.rs` counts instructions on.
     let (rt, stabilised) = support::stabilised_frames();
+    // Variants that change every other frame.
+    let every_other = |change: fn(&mut mouthpiece_retarget::StabilisedFrame)| -> Vec<_> {
+        stabilised
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let mut f = f.clone();
+                if k % 2 == 1 {
+                    change(&mut f);
+                }
+                f
+            })
+            .collect()
+    };
     // The same with every other frame missing a corner and an upper-lip dot: the estimate
     // (docs/rig.md, "The dots the rig measures") solves for them on those frames, for the
     // seen dots on every frame, and learns from the complete ones.
-    let with_unseen: Vec<_> = stabilised
-        .iter()
-        .enumerate()
-        .map(|(k, f)| {
-            let mut f = f.clone();
-            if k % 2 == 1 {
-                f.confidence[0] = 0.0;
-                f.confidence[2] = 0.0;
-            }
-            f
-        })
-        .collect();
+    let with_unseen = every_other(|f| {
+        f.confidence[0] = 0.0;
+        f.confidence[2] = 0.0;
+    });
     // The same with every other frame reading an upper-lip dot 12 mm off and missing a corner
     // (so that the misreads are not learned as shapes): the step is beyond the shape gate
     // there and a second solve, without that dot, disowns it.
-    let with_misread: Vec<_> = stabilised
-        .iter()
-        .enumerate()
-        .map(|(k, f)| {
-            let mut f = f.clone();
-            if k % 2 == 1 {
-                f.lip[3].z -= 0.012;
-                f.confidence[0] = 0.0;
-            }
-            f
-        })
-        .collect();
+    let with_misread = every_other(|f| {
+        f.lip[3].z -= 0.012;
+        f.confidence[0] = 0.0;
+    });
     for (name, frames) in [
         ("rig/step", &stabilised),
         ("rig/step-unseen", &with_unseen),

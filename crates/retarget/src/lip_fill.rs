@@ -86,7 +86,7 @@ pub struct LipFill {
     step_solution: DVector<f64>,
     /// Scratch: per dot, the unit direction from it to the camera.
     rays: Vec<Vec3>,
-    /// Scratch: the seen dots without a disowned one.
+    /// Scratch: the seen dots without the one a disowning leaves out.
     kept: Vec<bool>,
     /// A seen dot's noise along and across its ray, metres.
     along_m: f64,
@@ -190,7 +190,6 @@ impl LipFill {
         let Some(mut distance) = self.solve(seen) else {
             return Estimated::default();
         };
-        self.kept.copy_from_slice(seen);
         let mut disowned = None;
         if distance > SHAPE_GATE {
             if let Some((k, d)) = self.disown(seen) {
@@ -202,19 +201,29 @@ impl LipFill {
             seen: distance <= SHAPE_GATE,
             disowned,
         };
-        let scale = PRIOR_WIDTH / (self.steps - 1) as f64;
+        // A disowned dot is seen, and the step then within the gate: it moves with the rest.
         for (k, (p, q)) in lip.iter_mut().zip(neutral).enumerate() {
-            if !(moved(k) || disowned == Some(k) || (self.kept[k] && out.seen)) {
-                continue;
+            if moved(k) || (seen[k] && out.seen) {
+                *p = q + self.expected(k);
             }
-            // The solution is 0 at the coordinates not used, so the whole row serves.
-            let d = Vec3::from_fn(|axis, _| {
-                let u = 3 * k + axis;
-                self.mean[u] + self.scatter.row(u).tr_dot(&self.solution) * scale
-            });
-            *p = q + d;
         }
         out
+    }
+
+    /// The learned covariance's factor: the scatter's sample covariance, widened by
+    /// [`PRIOR_WIDTH`].
+    fn prior_scale(&self) -> f64 {
+        PRIOR_WIDTH / (self.steps - 1) as f64
+    }
+
+    /// Dot `k`'s expected displacement from neutral under the solution in place (it is 0 at
+    /// the coordinates not used, so the whole row serves).
+    fn expected(&self, k: usize) -> Vec3 {
+        let scale = self.prior_scale();
+        Vec3::from_fn(|axis, _| {
+            let u = 3 * k + axis;
+            self.mean[u] + self.scatter.row(u).tr_dot(&self.solution) * scale
+        })
     }
 
     /// Solves for the weights of the `used` dots' deviations from the learned mean
@@ -223,7 +232,7 @@ impl LipFill {
     /// `None` when the system cannot be solved.
     fn solve(&mut self, used: &[bool]) -> Option<f64> {
         let n = self.x.len();
-        let scale = PRIOR_WIDTH / (self.steps - 1) as f64;
+        let scale = self.prior_scale();
         let (across, along) = (self.across_m * self.across_m, self.along_m * self.along_m);
         let used_at = |i: usize| used[i / 3];
         // The used coordinates' covariance plus their noise (a dot's own 3×3 block:
@@ -269,8 +278,8 @@ impl LipFill {
     /// gate whose solution is in place: the seen dot with the largest share of the distance
     /// (the first of equal ones), if at least [`DISOWN_WITNESSES`] other dots are seen, the
     /// others then lie within the gate and put it farther than [`DISOWN_M`] from where it was
-    /// read. Returns it and the others' distance, their solution in place and `self.kept`
-    /// without it; else `None`, the step's own solution put back.
+    /// read. Returns it and the others' distance, their solution in place; else `None`, the
+    /// step's own solution put back.
     fn disown(&mut self, seen: &[bool]) -> Option<(usize, f64)> {
         if seen.iter().filter(|&&s| s).count() <= DISOWN_WITNESSES {
             return None;
@@ -294,15 +303,12 @@ impl LipFill {
         let kept = std::mem::take(&mut self.kept);
         let distance = self.solve(&kept);
         self.kept = kept;
-        let scale = PRIOR_WIDTH / (self.steps - 1) as f64;
-        let off = Vec3::from_fn(|axis, _| {
-            let u = 3 * k + axis;
-            self.mean[u] + self.scatter.row(u).tr_dot(&self.solution) * scale - self.x[u]
-        });
+        let read = Vec3::new(self.x[3 * k], self.x[3 * k + 1], self.x[3 * k + 2]);
         match distance {
-            Some(d) if d <= SHAPE_GATE && off.norm() > DISOWN_M => Some((k, d)),
+            Some(d) if d <= SHAPE_GATE && (self.expected(k) - read).norm() > DISOWN_M => {
+                Some((k, d))
+            }
             _ => {
-                self.kept.copy_from_slice(seen);
                 self.solution.copy_from(&self.step_solution);
                 None
             }
