@@ -9,7 +9,9 @@
 //!   (stabilised by the retarget core from the true dots, the same neutral frames), with the
 //!   ranges the character's output uses (its own `[rig.ranges]`, else the tracked rig's); the
 //!   worst curve is reported with its name;
-//! - *correlations*: `jawOpen` with the synthetic jaw angle, `mouthFunnel` with its rounding.
+//! - *correlations*: `jawOpen` with the synthetic jaw angle, `mouthFunnel` with its rounding,
+//!   and `mouthFunnel` from the true dots with the rounding beside the rounding's standard
+//!   deviation (a performer who hardly rounds leaves the correlation to the noise).
 
 use mouthpiece_retarget::rig::{curves_from, RigModel, RigSettings, CURVES, CURVE_NAMES};
 use mouthpiece_retarget::{Character, PerformerLayout, Retargeter};
@@ -49,6 +51,12 @@ impl Correlation {
         }
         cov / (vx * vy).sqrt()
     }
+
+    /// The standard deviation of the second variable (population, over what was pushed).
+    pub fn y_sd(&self) -> f64 {
+        let n = self.n.max(1.0);
+        (self.syy / n - self.sy * self.sy / (n * n)).max(0.0).sqrt()
+    }
 }
 
 /// One session's rig figures.
@@ -60,6 +68,9 @@ pub struct RigMetrics {
     pub curve_sq: [f64; CURVES],
     pub jaw_open: Correlation,
     pub funnel: Correlation,
+    /// `mouthFunnel` from the true dots against the rounding: what the definition itself
+    /// reaches on the session, without the tracker's error.
+    pub funnel_true: Correlation,
 }
 
 impl RigMetrics {
@@ -187,6 +198,7 @@ impl Measure for RigAccuracy {
         }
         m.jaw_open.push(a[0], mouth.jaw);
         m.funnel.push(a[2], mouth.round);
+        m.funnel_true.push(b[2], mouth.round);
         if let (Some(frames), Some(tracked)) = (&mut self.frames, &f.tracked.stabilised) {
             let xyz = |v: &[nalgebra::Vector3<f64>]| v.iter().map(|p| [p.x, p.y, p.z]).collect();
             frames.push(RigFrameRecord {
@@ -208,5 +220,31 @@ impl Measure for RigAccuracy {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Correlation;
+
+    #[test]
+    fn correlation_and_spread_agree_with_their_definitions() {
+        let mut c = Correlation::default();
+        // y = 2x + 1 with x = 0..4: r = 1, and y's population SD is 2 · sqrt(2).
+        for x in 0..5 {
+            c.push(x as f64, 2.0 * x as f64 + 1.0);
+        }
+        assert!((c.value() - 1.0).abs() < 1e-12);
+        assert!((c.y_sd() - 2.0 * 2f64.sqrt()).abs() < 1e-12);
+        // Anti-correlated, and a constant second variable has no correlation (NaN), SD 0.
+        let mut a = Correlation::default();
+        let mut k = Correlation::default();
+        for x in 0..5 {
+            a.push(x as f64, -(x as f64));
+            k.push(x as f64, 0.3);
+        }
+        assert!((a.value() + 1.0).abs() < 1e-12);
+        assert!(k.value().is_nan());
+        assert!(k.y_sd() < 1e-9);
     }
 }

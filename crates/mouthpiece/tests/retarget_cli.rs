@@ -748,7 +748,8 @@ fn evaluate_rig_frames_are_what_the_rig_table_is_made_of() {
             .arg(&csv),
     );
     let table = String::from_utf8(out.stdout).unwrap();
-    // seed | noise | motion | frames | jaw | slide | worst | its RMS | jawOpen r | funnel r
+    // seed | noise | motion | frames | jaw | slide | worst | its RMS | jawOpen r | funnel r |
+    // funnel r on the true dots | round SD
     let rig = table_row(&table, "32");
     let out = run_ok(
         Command::new(&py)
@@ -756,7 +757,8 @@ fn evaluate_rig_frames_are_what_the_rig_table_is_made_of() {
             .arg(&csv),
     );
     let split = String::from_utf8(out.stdout).unwrap();
-    // seed | noise | motion | frames | recomputed | worst | its RMS | jawOpen r | funnel r | …
+    // seed | noise | motion | frames | recomputed | worst | its RMS | jawOpen r | funnel r |
+    // on the true dots | …
     let mine = table_row(&split, "32");
     let recomputed: f64 = mine[4].parse().unwrap();
     assert!(
@@ -765,9 +767,9 @@ fn evaluate_rig_frames_are_what_the_rig_table_is_made_of() {
     );
     assert_eq!(rig[3], mine[3], "frames:\n{table}\n{split}");
     assert_eq!(
-        rig[6..10],
-        mine[5..9],
-        "worst curve, RMS, r:\n{table}\n{split}"
+        rig[6..11],
+        mine[5..10],
+        "worst curve, RMS, r, r on the true dots:\n{table}\n{split}"
     );
 
     let bad = mouthpiece()

@@ -7,22 +7,24 @@ use mouthpiece_retarget::rig::{CURVES, CURVE_NAMES};
 pub fn print_header() {
     println!();
     println!(
-        "| seed | noise | head motion | frames | jaw RMS (°) | slide RMS (mm) | worst curve | its RMS | jawOpen r (jaw) | mouthFunnel r (round) |"
+        "| seed | noise | head motion | frames | jaw RMS (°) | slide RMS (mm) | worst curve | its RMS | jawOpen r (jaw) | mouthFunnel r (round) | mouthFunnel r, true dots | round SD |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
 }
 
 /// One session's row.
 pub fn print_row(label: &str, m: &RigMetrics) {
     let (worst, rms) = m.worst_curve();
     println!(
-        "| {label} | {} | {:.2} | {:.2} | {worst} | {:.3} | {:.3} | {:.3} |",
+        "| {label} | {} | {:.2} | {:.2} | {worst} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
         m.frames,
         m.jaw_rms_deg(),
         m.slide_rms_mm(),
         rms,
         m.jaw_open.value(),
-        m.funnel.value()
+        m.funnel.value(),
+        m.funnel_true.value(),
+        m.funnel.y_sd()
     );
 }
 
