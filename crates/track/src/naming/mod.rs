@@ -253,8 +253,6 @@ pub(crate) struct Pass {
     pub(crate) gates: Small<labels::Prediction>,
     /// How many dots the steady hypothesis named (after its checks).
     pub(crate) steady_named: usize,
-    /// The lips' motion the predictions were made under (the hypothesis).
-    pub(crate) motion: LipMotion,
 }
 
 /// Buffers kept between frames (a frame allocates nothing once they have grown), and the
@@ -426,7 +424,6 @@ pub(crate) fn checked_pass(
         preds,
         gates,
         steady_named: 0,
-        motion,
     };
     recovery::run_stage(Stage::InPass, ctx, &pass, &mut names, cands, scratch);
     names.apply(

@@ -232,20 +232,13 @@ fn lower_lip_on_ghosts(ctx: &Context, names: &[Option<usize>], cands: &Candidate
     let n = ctx.layout.lip_dots;
     (0..n)
         .map(|i| {
-            i > ctx.layout.right_corner() && names[i].is_some_and(|c| ghost_sized(ctx, cands, c))
+            i > ctx.layout.right_corner()
+                && names[i].is_some_and(|c| {
+                    let r = ctx.dot_radius_px(cands.list[c].point.z);
+                    (ctx.blobs[cands.blob[c]].area as f64) < GHOST_AREA_SHARE * disc_area(r)
+                })
         })
         .collect()
-}
-
-/// Whether candidate `c` is on a blob of less than [`GHOST_AREA_SHARE`] of a dot's area at
-/// its depth (the size of a motion-blur ghost). A candidate no detector blob stands for (a
-/// faint corner) is not.
-pub(crate) fn ghost_sized(ctx: &Context, cands: &Candidates, c: usize) -> bool {
-    let Some(blob) = cands.blob.get(c).and_then(|&b| ctx.blobs.get(b)) else {
-        return false;
-    };
-    let r = ctx.dot_radius_px(cands.list[c].point.z);
-    (blob.area as f64) < GHOST_AREA_SHARE * disc_area(r)
 }
 
 #[cfg(test)]

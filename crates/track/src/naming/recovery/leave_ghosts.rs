@@ -8,26 +8,12 @@
 //! on its own ghost and shows no miss while its neighbour's step since last frame points to
 //! it). Corners neither move nor lead: a corner moves about half as far as the lip beside
 //! it, and a corner name is the one most often on the wrong blob.
-//!
-//! In the jaw's hypothesis ([`super::JawJump`]: the lower lip predicted past its ghosts),
-//! paint is not left for a ghost (named heuristic *the jaw's names keep their paint*): a
-//! dot on a blob of a dot's size does not move onto one of a ghost's size
-//! ([`super::jaw_jump::GHOST_AREA_SHARE`]). Without it, a neighbour that did not follow the
-//! jump (a dot on a corner's merged blob, short of the shifted prediction) read as a
-//! neighbour that moved, and pulled the lower lip back onto its ghosts one dot after the
-//! other (seed 142, Kinect-like, strong, t = 4.67 s: D9–D12 from blobs of 13–16 px onto
-//! ghosts of 3–4 px, so the jaw's names were the steady ones and lost). Not in the other
-//! hypotheses: there a dot's paint can be as small as a ghost (partly hidden, far), and
-//! the same rule everywhere cost more names than it saved (336 sessions: wrong names
-//! 603 → 651).
 
 use mouthpiece_detect::DotRole;
 use mouthpiece_retarget::PerformerLayout;
 
-use super::jaw_jump::ghost_sized;
 use super::{Candidates, Context, NameSet, Pass, Scratch, Step};
 use crate::labels::Small;
-use crate::prediction::LipMotion;
 
 /// A neighbour that moved less than its gate pulls a dot only to a blob within this share
 /// of the gate of where its motion points ...
@@ -110,13 +96,9 @@ fn leave_ghosts_from(
         };
         let base = from[i].expect("a dot with a miss has a place it is measured from");
         let target = [base[0] + moved[0], base[1] + moved[1]];
-        // In the jaw's hypothesis, paint is not left for a ghost.
-        let on_paint = matches!(pass.motion, LipMotion::JawJumped(_))
-            && names.get(i).is_some_and(|c| !ghost_sized(ctx, cands, c));
         let better = (0..list.len())
             .filter(|&j| !names.taken()[j] && list[j].role != DotRole::Forehead)
             .filter(|&j| (list[j].point.z - g.z).abs() <= g.z_gate)
-            .filter(|&j| !(on_paint && ghost_sized(ctx, cands, j)))
             .map(|j| {
                 let p = list[j].pixel;
                 (j, norm([p[0] - target[0], p[1] - target[1]]))
@@ -154,38 +136,5 @@ mod tests {
         let (first, names) = scene.run_after_first_pass(&LeaveGhosts, &pass, &mut cands);
         assert_eq!(first.get(9), Some(ghost), "the first pass takes the ghost");
         assert_eq!(named(&names), identity());
-    }
-
-    /// The jaw's names keep their paint: D8 sits 2.8 px above its prediction (on a blob that
-    /// did not follow the lip), which reads as a neighbour that moved; D9 is on its paint at
-    /// its prediction, and a faint ghost lies where D8's miss points from there. In the jaw's
-    /// hypothesis D9 keeps its paint (without the rule it took the ghost).
-    #[test]
-    fn a_dot_on_its_paint_does_not_leave_it_for_a_ghost() {
-        let mut scene = Scene::calibrated();
-        let rest = scene.rest_pixels();
-        let mut truth = rest.clone();
-        truth[7][1] -= 2.8;
-        let mut cands = scene.candidates_at(&truth);
-        let ghost_px = [rest[8][0], rest[8][1] - 2.8];
-        let ghost = scene.push(&mut cands, ghost_px, 0.596, DotRole::Lip, 0.3);
-        // The jaw's hypothesis: the predictions already carry the lower lip's jump.
-        let mut pass = scene.pass(&rest, &cands);
-        pass.motion = LipMotion::JawJumped([0.0, 2.8]);
-        let (first, names) = scene.run_after_first_pass(&LeaveGhosts, &pass, &mut cands);
-        assert_eq!(
-            named(&first),
-            identity(),
-            "the first pass names every dot on its paint"
-        );
-        assert_eq!(
-            named(&names),
-            identity(),
-            "D9 keeps its paint, not ghost {ghost}"
-        );
-        // In the steady hypothesis the step is as it was: D9 follows its neighbour's miss.
-        pass.motion = LipMotion::Steady;
-        let (_, names) = scene.run_after_first_pass(&LeaveGhosts, &pass, &mut cands);
-        assert_eq!(names.get(8), Some(ghost));
     }
 }

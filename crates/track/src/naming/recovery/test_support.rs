@@ -13,7 +13,7 @@ use crate::config::TrackConfig;
 use crate::head::HeadReference;
 use crate::labels::{self, Candidate, Slot, Small};
 use crate::naming::checks::disc_area;
-use crate::prediction::{self, DotTrack, LipMotion};
+use crate::prediction::{self, DotTrack};
 use crate::{camera, Sensor, Vec3};
 
 /// The paint's radius (the detector's default), metres.
@@ -229,7 +229,6 @@ impl Scene {
             preds,
             gates,
             steady_named: 0,
-            motion: LipMotion::Steady,
         }
     }
 
