@@ -14,6 +14,7 @@ use mouthpiece_retarget::PerformerLayout;
 
 use super::{Candidates, Context, NameSet, Pass, Scratch, Step};
 use crate::labels::Small;
+use crate::naming::checks::disc_area;
 
 /// A neighbour that moved less than its gate pulls a dot only to a blob within this share
 /// of the gate of where its motion points ...
@@ -21,6 +22,15 @@ pub const NEAR_REACH_SHARE: f64 = 0.25;
 /// ... and only when the two misses differ by more than this share of the gate (a ghost
 /// nearer the prediction than the dot wins the assignment; 12 sessions: wrong names 13 → 8).
 pub const NEAR_APART_SHARE: f64 = 0.5;
+
+/// A neighbour named on a blob of at least this many dots' area leads no one (named
+/// heuristic *a merged blob leads no one*): its centre lies between two dots' paint (a
+/// corner merged with the dot beside it), so its miss is the merge's, not the lip's motion.
+/// Seed 142, Kinect-like, strong, t = 4.67 s: in the jaw's hypothesis D8 on a corner's
+/// merged blob of 2.8 dots' area, short of its prediction shifted by the jaw's jump, pulled
+/// D9–D12 from their paint (13–16 px) back onto their ghosts (3–4 px) one after the other,
+/// so the jaw's names were the steady ones and lost.
+pub const MERGED_LEADS_NO_ONE_DOTS: f64 = 2.0;
 
 pub(crate) struct LeaveGhosts;
 
@@ -79,6 +89,7 @@ fn leave_ghosts_from(
         let Some(moved) = [(i + n - 1) % n, (i + 1) % n]
             .iter()
             .filter(|&&j| !is_corner(j))
+            .filter(|&&j| !names.get(j).is_some_and(|c| on_merged_blob(ctx, cands, c)))
             .filter_map(|&j| miss(names, j))
             .max_by(|a, b| norm(*a).total_cmp(&norm(*b)))
         else {
@@ -114,6 +125,16 @@ fn leave_ghosts_from(
     changed
 }
 
+/// Whether candidate `c` is on a detector blob of at least [`MERGED_LEADS_NO_ONE_DOTS`]
+/// dots' area at its depth.
+fn on_merged_blob(ctx: &Context, cands: &Candidates, c: usize) -> bool {
+    let Some(blob) = cands.blob.get(c).and_then(|&b| ctx.blobs.get(b)) else {
+        return false;
+    };
+    let r = ctx.dot_radius_px(cands.list[c].point.z);
+    blob.area as f64 >= MERGED_LEADS_NO_ONE_DOTS * disc_area(r)
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::test_support::*;
@@ -136,5 +157,31 @@ mod tests {
         let (first, names) = scene.run_after_first_pass(&LeaveGhosts, &pass, &mut cands);
         assert_eq!(first.get(9), Some(ghost), "the first pass takes the ghost");
         assert_eq!(named(&names), identity());
+    }
+
+    /// A merged blob leads no one: D8 sits 2.8 px above its prediction on a blob of three
+    /// dots' area (merged with paint beside it); D9 is on its paint at its prediction, and a
+    /// faint ghost lies where D8's miss points from there. D9 keeps its paint. With D8 on a
+    /// blob of one dot's area, the same miss leads D9 onto the blob (the step as before).
+    #[test]
+    fn a_dot_on_a_merged_blob_leads_no_one() {
+        for (d8_area, d9_leaves) in [(3.0, false), (1.0, true)] {
+            let mut scene = Scene::calibrated();
+            let rest = scene.rest_pixels();
+            let mut truth = rest.clone();
+            truth[7][1] -= 2.8;
+            let mut cands = scene.candidates_hiding(&truth, 7);
+            let face = neutral_face();
+            let d8 = scene.push(&mut cands, truth[7], face[7].z, DotRole::Lip, d8_area);
+            let ghost_px = [rest[8][0], rest[8][1] - 2.8];
+            let ghost = scene.push(&mut cands, ghost_px, 0.596, DotRole::Lip, 0.3);
+            let paint = (0..cands.len()).find(|&c| cands.list[c].pixel == truth[8]);
+            let pass = scene.pass(&rest, &cands);
+            let (first, names) = scene.run_after_first_pass(&LeaveGhosts, &pass, &mut cands);
+            assert_eq!(first.get(7), Some(d8), "D8 named on its blob");
+            assert_eq!(first.get(8), paint, "D9 named on its paint");
+            let expected = if d9_leaves { Some(ghost) } else { paint };
+            assert_eq!(names.get(8), expected, "D8 of {d8_area} dots' area");
+        }
     }
 }
