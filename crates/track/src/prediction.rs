@@ -140,12 +140,16 @@ pub(crate) fn stretch_sides(pixels: &mut [[f64; 2]], layout: &PerformerLayout, s
     }
 }
 
-/// The line through the two mouth corners' pixels: its midpoint and the unit direction from
-/// the right corner to the left one.
+/// Corners nearer than this (pixels) give no line to measure a shift along.
+pub(crate) const MIN_CORNER_LINE_PX: f64 = 1.0;
+
+/// The line through the two mouth corners' pixels: its midpoint, the unit direction from
+/// the right corner to the left one, and the corners' distance.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct CornerLine {
     mid: [f64; 2],
     dir: [f64; 2],
+    len: f64,
 }
 
 impl CornerLine {
@@ -157,7 +161,21 @@ impl CornerLine {
         (len > 1e-9).then(|| Self {
             mid: [0.5 * (l[0] + r[0]), 0.5 * (l[1] + r[1])],
             dir: [dx / len, dy / len],
+            len,
         })
+    }
+
+    /// The line of `pixels`' corners when they are at least [`MIN_CORNER_LINE_PX`] apart.
+    pub(crate) fn measurable(pixels: &[[f64; 2]], layout: &PerformerLayout) -> Option<Self> {
+        Self::of(pixels, layout).filter(|line| line.len >= MIN_CORNER_LINE_PX)
+    }
+
+    /// Whether `shift` (pixels) has a component along the line of more than `share` of the
+    /// lip dots' spacing (half the corners' distance over half of `lip_dots`).
+    pub(crate) fn runs_along(&self, shift: &[f64; 2], lip_dots: usize, share: f64) -> bool {
+        let along = shift[0] * self.dir[0] + shift[1] * self.dir[1];
+        let spacing = 2.0 * self.len / lip_dots as f64;
+        along.abs() > share * spacing
     }
 
     /// Where `p` lies along the line from the midpoint, pixels (> 0 on the left corner's side).

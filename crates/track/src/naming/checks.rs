@@ -6,7 +6,7 @@
 use mouthpiece_detect::DotRole;
 use mouthpiece_retarget::{PerformerLayout, RigidTransform};
 
-use super::Context;
+use super::{Candidates, Context};
 use crate::labels::{Candidate, Small};
 use crate::prediction::DotTrack;
 use crate::Vec3;
@@ -36,6 +36,18 @@ pub(crate) fn depth_window(track: &DotTrack, head: &RigidTransform, gate: f64) -
 /// Area (pixels) of a disc of radius `r` pixels: what a dot's paint covers.
 pub(crate) fn disc_area(r: f64) -> f64 {
     std::f64::consts::PI * r * r
+}
+
+/// The area (pixels) of the detector blob candidate `c` stands on, and of one dot's paint
+/// at the candidate's depth; `None` for a candidate no blob stands for (a faint corner).
+pub(crate) fn blob_and_paint_area(
+    ctx: &Context,
+    cands: &Candidates,
+    c: usize,
+) -> Option<(f64, f64)> {
+    let blob = ctx.blobs.get(*cands.blob.get(c)?)?;
+    let paint = disc_area(ctx.dot_radius_px(cands.list[c].point.z));
+    Some((blob.area as f64, paint))
 }
 
 /// Names that break the walk around the mouth are dropped: in the neutral mouth frame (head

@@ -23,8 +23,8 @@ use mouthpiece_retarget::RigidTransform;
 use super::{lips_missing_with_candidates_left, Candidates, Context, NameSet, Pass, Scratch, Step};
 use crate::labels::{Candidate, Small};
 use crate::naming::checked_pass;
-use crate::naming::checks::{self, depth_window, disc_area};
-use crate::prediction::{lip_predictions, LipMotion};
+use crate::naming::checks::{self, blob_and_paint_area, depth_window};
+use crate::prediction::{lip_predictions, CornerLine, LipMotion};
 
 /// Farthest a lower-lip dot that is missing or on a ghost is looked for beyond its
 /// prediction when the jaw jumps, pixels (the synthetic jaw moves the lower lip up to 13 px
@@ -227,21 +227,10 @@ fn whole_lip_shift(
 
 /// Whether `shift` (pixels) runs along the lip: its component along the line through the
 /// predicted corners (`preds`, layout order) is more than [`ALONG_LIP_SHARE`] of the lip
-/// dots' spacing (half the corners' distance over half the lip dots). Corners too close to
-/// give a line: no.
+/// dots' spacing. Corners too close to give a line: no.
 fn runs_along_the_lip(ctx: &Context, preds: &[[f64; 2]], shift: [f64; 2]) -> bool {
-    let (l, r) = (
-        preds[ctx.layout.left_corner()],
-        preds[ctx.layout.right_corner()],
-    );
-    let line = [l[0] - r[0], l[1] - r[1]];
-    let length = line[0].hypot(line[1]);
-    if length < 1.0 {
-        return false;
-    }
-    let along = (shift[0] * line[0] + shift[1] * line[1]).abs() / length;
-    let spacing = 2.0 * length / ctx.layout.lip_dots as f64;
-    along > ALONG_LIP_SHARE * spacing
+    CornerLine::measurable(preds, &ctx.layout)
+        .is_some_and(|line| line.runs_along(&shift, ctx.layout.lip_dots, ALONG_LIP_SHARE))
 }
 
 /// Whether every dot named in `jumped` keeps its blob from `names` or takes one no dot had
@@ -264,8 +253,8 @@ fn lower_lip_on_ghosts(ctx: &Context, names: &[Option<usize>], cands: &Candidate
         .map(|i| {
             i > ctx.layout.right_corner()
                 && names[i].is_some_and(|c| {
-                    let r = ctx.dot_radius_px(cands.list[c].point.z);
-                    (ctx.blobs[cands.blob[c]].area as f64) < GHOST_AREA_SHARE * disc_area(r)
+                    blob_and_paint_area(ctx, cands, c)
+                        .is_some_and(|(blob, paint)| blob < GHOST_AREA_SHARE * paint)
                 })
         })
         .collect()

@@ -14,7 +14,7 @@ use mouthpiece_retarget::PerformerLayout;
 
 use super::{Candidates, Context, NameSet, Pass, Scratch, Step};
 use crate::labels::Small;
-use crate::naming::checks::disc_area;
+use crate::naming::checks::blob_and_paint_area;
 
 /// A neighbour that moved less than its gate pulls a dot only to a blob within this share
 /// of the gate of where its motion points ...
@@ -128,11 +128,8 @@ fn leave_ghosts_from(
 /// Whether candidate `c` is on a detector blob of at least [`MERGED_LEADS_NO_ONE_DOTS`]
 /// dots' area at its depth.
 fn on_merged_blob(ctx: &Context, cands: &Candidates, c: usize) -> bool {
-    let Some(blob) = cands.blob.get(c).and_then(|&b| ctx.blobs.get(b)) else {
-        return false;
-    };
-    let r = ctx.dot_radius_px(cands.list[c].point.z);
-    blob.area as f64 >= MERGED_LEADS_NO_ONE_DOTS * disc_area(r)
+    blob_and_paint_area(ctx, cands, c)
+        .is_some_and(|(blob, paint)| blob >= MERGED_LEADS_NO_ONE_DOTS * paint)
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@ use mouthpiece_detect::DotRole;
 
 use super::{name_moved, Candidates, Context, NameSet, Pass, Scratch, Step};
 use crate::labels::{self, Candidate, Small};
+use crate::prediction::CornerLine;
 
 /// Largest part of a shift along the lip line, as a share of the spacing between lip dots
 /// (half the mouth's width over half the lip dots).
@@ -24,9 +25,6 @@ pub const MIN_LANDED_WITH_CORNERS: usize = 2;
 /// ... with a corner unseen, at least this many (and all the missing dots but one): without
 /// both corners the lip line is less sure, and two dots agree by chance too often.
 pub const MIN_LANDED_WITHOUT_CORNERS: usize = 3;
-
-/// Corners nearer than this (pixels) give no lip line.
-const MIN_LIP_LINE_PX: f64 = 1.0;
 
 pub(crate) struct ShiftAcrossLip;
 
@@ -53,16 +51,9 @@ impl Step for ShiftAcrossLip {
             return false;
         }
         let preds = &pass.preds;
-        let along = [
-            preds[left][0] - preds[right][0],
-            preds[left][1] - preds[right][1],
-        ];
-        let length = (along[0] * along[0] + along[1] * along[1]).sqrt();
-        if length < MIN_LIP_LINE_PX {
+        let Some(line) = CornerLine::measurable(preds, &ctx.layout) else {
             return false;
-        }
-        let along = [along[0] / length, along[1] / length];
-        let spacing = 2.0 * length / n as f64;
+        };
         let list = &cands.list;
         let free: Small<usize> = (0..list.len())
             .filter(|&j| !names.taken()[j] && list[j].role != DotRole::Forehead)
@@ -80,7 +71,7 @@ impl Step for ShiftAcrossLip {
                 let g = &gates[i];
                 let c = &list[j].pixel;
                 let shift = [c[0] - g.pixel[0], c[1] - g.pixel[1]];
-                if (shift[0] * along[0] + shift[1] * along[1]).abs() > MAX_ALONG_SHARE * spacing {
+                if line.runs_along(&shift, n, MAX_ALONG_SHARE) {
                     continue;
                 }
                 let (mut count, mut residual) = (0, 0.0);
