@@ -66,6 +66,19 @@ pub const BETTER_AREA_RATIO: f64 = 1.3;
 /// on the next dot's paint, 26 wrong names until the slipped-names check).
 pub const ALONG_LIP_SHARE: f64 = 0.5;
 
+/// The jaw's names with as many lip dots that land on free paint, their lower lip on at
+/// least as much paint, also win when its depths miss the dots' last depths by less than this
+/// share of the frame's names' misses ([`lower_lip_depth_miss`]; named heuristic *the jaw's
+/// lip keeps its depth*). A ghost is the colour of where the lip was, but the camera's depth
+/// there is whatever surface is there now: the lip's rim or the mouth behind it. Ghosts as
+/// large as the paint (a bright blur) lose by their area only at [`BETTER_AREA_RATIO`] (seed
+/// 108, Kinect-like, strong, 10 s, t = 8.17 s: the lower lip on ghosts 5–9 mm deeper than its
+/// last depths, the jaw's names on paint within 1–3 mm, 73 px² against 65; the lower lip read
+/// rolled in, 7 mm too high). Not on less paint: a lip closing past its ghosts can leave them
+/// at its last depths (seed 62, Kinect-like, strong, 10 s, t = 2.33 s: blobs of 3–5 px² at the
+/// last depths against the paint 4 mm off).
+pub const KEEPS_DEPTH_RATIO: f64 = 0.5;
+
 /// This many lower-lip dots on ghosts (with as many lip candidates free) say the jaw jumped
 /// even with every lip dot named, and allow the jaw's names one dot fewer: one dot on a
 /// small blob is a faint dot, two are the lower lip left behind.
@@ -131,10 +144,18 @@ impl Step for JawJump {
             let tries = [(lower_lip_only, true), (Some(jumped), must_land)];
             for (jumped, must_land) in tries.into_iter().filter_map(|(j, m)| Some((j?, m))) {
                 let (before, after) = (names.lips_named(n), jumped.lips_named(n));
+                let as_many = after + slack >= before;
+                let (area_jumped, area_names) =
+                    (lower_area(&jumped, cands), lower_area(names, cands));
+                let depth_miss = |names: &NameSet| {
+                    lower_lip_depth_miss(ctx, names.as_slice(), &cands.list, &pass.head)
+                };
                 let better = after > before
-                    || (after + slack >= before
-                        && lower_area(&jumped, cands)
-                            > BETTER_AREA_RATIO * lower_area(names, cands));
+                    || (as_many && area_jumped > BETTER_AREA_RATIO * area_names)
+                    || (must_land
+                        && as_many
+                        && area_jumped >= area_names
+                        && depth_miss(&jumped) < KEEPS_DEPTH_RATIO * depth_miss(names));
                 if better
                     && (!must_land || lands_on_free_blobs(names.as_slice(), jumped.as_slice()))
                     && checks::corners_are_extremes(ctx, jumped.as_slice(), &cands.list)
@@ -234,6 +255,25 @@ fn whole_lip_shift(
     let lower = ctx.layout.lip_dots - ctx.layout.right_corner() - 1;
     let offsets = jump_offsets(ctx, names, &all_lost, cands, head, WHOLE_LIP_JUMP_PX);
     (offsets.len() > lower / 2).then(|| median_offset(offsets))
+}
+
+/// The sum, over the lower-lip dots between the corners named in `names`, of how far each
+/// candidate's depth lies outside its dot's depth window with no gate (its last depth and
+/// its last place carried by the head's motion), metres.
+fn lower_lip_depth_miss(
+    ctx: &Context,
+    names: &[Option<usize>],
+    cands: &[Candidate],
+    head: &RigidTransform,
+) -> f64 {
+    (ctx.layout.right_corner() + 1..ctx.layout.lip_dots)
+        .filter_map(|i| {
+            let c = names[i]?;
+            let [lo, hi] = depth_window(&ctx.tracks[i], head, 0.0);
+            let z = cands[c].point.z;
+            Some((lo - z).max(z - hi).max(0.0))
+        })
+        .sum()
 }
 
 /// Whether `shift` (pixels) runs along the lip: its component along the line through the
@@ -532,5 +572,58 @@ mod tests {
         assert!(merged.taken()[6] && !merged.taken()[2] && !merged.taken()[7]);
         let onto_the_upper_lip = NameSet::of([Some(0), Some(5), Some(6), Some(1), Some(9)], 10);
         assert!(with_the_upper_lip_of(&names, &onto_the_upper_lip, 1, 4).is_none());
+    }
+
+    /// The jaw drops 6 px within a frame and leaves ghosts of the lower lip where it was, at
+    /// `ghost_area` of a dot's paint and `ghost_dz` metres deeper than the dots' last depths;
+    /// the frame names the lower lip on them. The lower lip's paint is at its last depths,
+    /// on `paint_area` of a dot's paint. The names after the jaw's step.
+    fn lower_lip_left_on_ghosts(ghost_area: f64, ghost_dz: f64, paint_area: f64) -> NameSet {
+        let mut scene = Scene::calibrated();
+        let rest = scene.rest_pixels();
+        let truth = lower_lip_moved(&rest, [0.0, 6.0]);
+        let face = neutral_face();
+        let mut cands = scene.candidates_at(&truth[..7]);
+        for i in 7..12 {
+            scene.push(&mut cands, truth[i], face[i].z, DotRole::Lip, paint_area);
+        }
+        for i in 12..15 {
+            scene.push(&mut cands, truth[i], face[i].z, DotRole::Forehead, 1.0);
+        }
+        for i in 7..12 {
+            scene.push(
+                &mut cands,
+                rest[i],
+                face[i].z + ghost_dz,
+                DotRole::Lip,
+                ghost_area,
+            );
+        }
+        let run = scene.run_as_hypothesis(&JawJump, &rest, &mut cands);
+        let first: Vec<_> = (7..12).map(|i| run.first.get(i)).collect();
+        assert_eq!(first, (15..20).map(Some).collect::<Vec<_>>());
+        run.names
+    }
+
+    /// Ghosts nearly as large as the paint (0.9 against 1.0: no ghost by its area, and not
+    /// 1.3 times the paint) but 6 mm deeper than the lip was: the jaw's names, on the paint
+    /// at the lip's depths, win by their depth.
+    #[test]
+    fn the_jaws_lip_keeps_its_depth() {
+        assert_eq!(
+            named(&lower_lip_left_on_ghosts(0.9, 0.006, 1.0)),
+            identity()
+        );
+        // The ghosts at the lip's depths: nothing tells them from the paint.
+        let at_depth = lower_lip_left_on_ghosts(0.9, 0.0, 1.0);
+        assert_eq!(at_depth.get(9), Some(17), "{:?}", named(&at_depth));
+    }
+
+    /// The jaw's lower lip at the lip's depths but on less paint than the frame's (0.6
+    /// against 0.9): its depth does not outweigh the paint.
+    #[test]
+    fn the_jaws_depth_does_not_outweigh_less_paint() {
+        let names = lower_lip_left_on_ghosts(0.9, 0.006, 0.6);
+        assert_eq!(names.get(9), Some(17), "{:?}", named(&names));
     }
 }
