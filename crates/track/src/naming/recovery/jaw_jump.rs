@@ -15,9 +15,11 @@
 //! measured from the whole lower lip ([`whole_lip_shift`], reaching further:
 //! [`WHOLE_LIP_JUMP_PX`]) and tried by the same rule, its names taken only if they land on
 //! free paint ([`lands_on_free_blobs`]); so are the missing dots' when their jump runs along
-//! the lip rather than across it ([`ALONG_LIP_SHARE`]). The jaw carries the lower lip alone:
-//! when the frame left it on ghosts, the jaw's lower lip is first tried with the frame's
-//! upper lip ([`with_the_upper_lip_of`]).
+//! the lip rather than across it ([`ALONG_LIP_SHARE`]). Names that must land on free paint
+//! also win with as many lip dots on at least as much paint when their lower lip keeps its
+//! depth far better ([`KEEPS_DEPTH_RATIO`]). The jaw carries the lower lip alone: when the
+//! frame left it on ghosts, the jaw's lower lip is first tried with the frame's upper lip
+//! ([`with_the_upper_lip_of`]).
 
 use mouthpiece_detect::DotRole;
 use mouthpiece_retarget::RigidTransform;
@@ -147,8 +149,8 @@ impl Step for JawJump {
                 let as_many = after + slack >= before;
                 let (area_jumped, area_names) =
                     (lower_area(&jumped, cands), lower_area(names, cands));
-                let depth_miss = |names: &NameSet| {
-                    lower_lip_depth_miss(ctx, names.as_slice(), &cands.list, &pass.head)
+                let depth_miss = |set: &NameSet| {
+                    lower_lip_depth_miss(ctx, set.as_slice(), &cands.list, &pass.head)
                 };
                 let better = after > before
                     || (as_many && area_jumped > BETTER_AREA_RATIO * area_names)
