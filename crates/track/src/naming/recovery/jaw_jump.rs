@@ -127,6 +127,8 @@ impl Step for JawJump {
         let from_lip = whole_lip_shift(ctx, names.as_slice(), list, &pass.head)
             .filter(|s| from_lost.is_none_or(|f| (s[0] - f[0]).hypot(s[1] - f[1]) > SAME_SHIFT_PX));
         let slack = usize::from(on_ghosts >= GHOSTS_FOR_A_JUMP);
+        // The frame's names do not change until one try is taken.
+        let (before, area_names) = (names.lips_named(n), lower_area(names, cands));
         let estimates = [(from_lost, false), (from_lip, true)];
         for (shift, whole_lip) in estimates.into_iter().filter_map(|(s, w)| Some((s?, w))) {
             let must_land = whole_lip || runs_along_the_lip(ctx, &pass.preds, shift);
@@ -145,10 +147,9 @@ impl Step for JawJump {
                 .flatten();
             let tries = [(lower_lip_only, true), (Some(jumped), must_land)];
             for (jumped, must_land) in tries.into_iter().filter_map(|(j, m)| Some((j?, m))) {
-                let (before, after) = (names.lips_named(n), jumped.lips_named(n));
+                let after = jumped.lips_named(n);
                 let as_many = after + slack >= before;
-                let (area_jumped, area_names) =
-                    (lower_area(&jumped, cands), lower_area(names, cands));
+                let area_jumped = lower_area(&jumped, cands);
                 let depth_miss = |set: &NameSet| {
                     lower_lip_depth_miss(ctx, set.as_slice(), &cands.list, &pass.head)
                 };
