@@ -28,10 +28,11 @@ use crate::{
 
 /// Events buffered between the OpenNI thread and the pairing here.
 const READER_CAPACITY: usize = 8;
-/// A file that delivers nothing for this long has ended (a truncated recording).
-const FILE_STALL: Duration = Duration::from_secs(2);
-/// Time given to OpenNI2's recorder thread to handle its start message.
-const RECORDER_START_PAUSE: Duration = Duration::from_millis(100);
+/// A file player that delivers nothing for this long, before the frame counts its file
+/// declares are read, has stopped. The counts end every readable file (a truncated one is
+/// repaired first, with its counts), so this only ends a player that broke; it is long so
+/// that a loaded machine's scheduling pauses never end a replay early.
+const FILE_STALL: Duration = Duration::from_secs(15);
 
 impl Stamped for OwnedFrame {
     fn ts_us(&self) -> u64 {
@@ -313,7 +314,7 @@ fn open_session(
                 message: format!("{what}: {e}"),
                 cause: Some(Box::new(e)),
             };
-            let recorder =
+            let mut recorder =
                 Recorder::create(path).map_err(|e| err("cannot create the .oni recorder", e))?;
             recorder
                 .attach(&depth, false)
@@ -324,9 +325,8 @@ fn open_session(
             recorder
                 .start()
                 .map_err(|e| err("cannot start recording", e))?;
-            // oniRecorderStart only queues a start message for the recorder's thread;
-            // frames that arrive before it is handled are not recorded.
-            std::thread::sleep(RECORDER_START_PAUSE);
+            // Returns once the recorder's thread has taken the start: frames from here on
+            // are recorded.
             tracing::info!(file = %path.display(), "recording .oni with OpenNI2's recorder");
             Some(recorder)
         }

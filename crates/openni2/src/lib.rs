@@ -574,7 +574,13 @@ impl Drop for FrameReader {
 pub struct Recorder {
     id: u64,
     finished: bool,
+    path: std::path::PathBuf,
+    attached: usize,
 }
+
+/// How long [`Recorder::start`] waits for OpenNI2's recorder thread to take its start
+/// message before calling it a failure (a loaded machine takes milliseconds, not seconds).
+const RECORDER_START_TIMEOUT: Duration = Duration::from_secs(30);
 
 impl Recorder {
     /// Creates the file (truncating it) and the recorder.
@@ -588,18 +594,55 @@ impl Recorder {
         Ok(Recorder {
             id,
             finished: false,
+            path: path.to_path_buf(),
+            attached: 0,
         })
     }
 
     /// Attaches a stream; lossy compression lets OpenNI2 store colour as JPEG.
-    pub fn attach(&self, stream: &Stream, allow_lossy: bool) -> Result<()> {
+    pub fn attach(&mut self, stream: &Stream, allow_lossy: bool) -> Result<()> {
         let (id, sid) = (self.id, stream.id);
-        runtime::get()?.call(move |s| s.attach_to_recorder(id, sid, allow_lossy))?
+        runtime::get()?.call(move |s| s.attach_to_recorder(id, sid, allow_lossy))??;
+        self.attached += 1;
+        Ok(())
     }
 
+    /// Starts recording, and returns once the recorder records: frames that arrive before
+    /// that are lost, and a stream whose first frame is lost is shifted against the other
+    /// (OpenNI2 rewrites each stream's timestamps from its own first recorded frame).
+    ///
+    /// `oniRecorderStart` only queues a message for the recorder's own thread, which then
+    /// writes each attached node's `NODE_STATE_READY` and `NODE_DATA_BEGIN` records and
+    /// sets its started flag. Waiting for those records in the file (the recorder writes
+    /// with plain `write` calls, no buffering) makes the start independent of how soon that
+    /// thread runs; the flag is set a few instructions after the last record, which the
+    /// short pause after it covers.
     pub fn start(&self) -> Result<()> {
         let id = self.id;
-        runtime::get()?.call(move |s| s.start_recorder(id))?
+        runtime::get()?.call(move |s| s.start_recorder(id))??;
+        let deadline = Instant::now() + RECORDER_START_TIMEOUT;
+        loop {
+            let begun = oni_file::list_records(&self.path, true)
+                .map(|records| {
+                    records
+                        .iter()
+                        .filter(|r| r.kind == oni_file::record_type::NODE_DATA_BEGIN)
+                        .count()
+                })
+                .unwrap_or(0);
+            if begun >= self.attached {
+                std::thread::sleep(Duration::from_millis(5));
+                return Ok(());
+            }
+            if Instant::now() > deadline {
+                return Err(Error::Runtime(format!(
+                    "OpenNI2's recorder did not start writing {} within {} s",
+                    self.path.display(),
+                    RECORDER_START_TIMEOUT.as_secs()
+                )));
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
     }
 
     /// Stops the recorded streams and the recording, and destroys the recorder; the file is
