@@ -470,16 +470,13 @@ pub struct Slate(pub String);
 impl TryFrom<String> for Slate {
     type Error = String;
     fn try_from(s: String) -> Result<Self, String> {
-        // The protocol's rule (the daemon's tests check that they agree).
-        let ok = s.len() <= 64
-            && s.chars().next().is_some_and(|c| c.is_ascii_alphanumeric())
-            && s.chars()
-                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
-        if ok {
+        // The one rule for takes' names (client requests and the command line use it too).
+        if mouthpiece_output::valid_slate(&s) {
             Ok(Slate(s))
         } else {
             Err(format!(
-                "expected a slate of 1-64 letters, digits, '-', '_' or '.', starting with a letter or digit, got {s:?}"
+                "expected a slate of {}, got {s:?}",
+                mouthpiece_output::SLATE_RULE
             ))
         }
     }

@@ -281,7 +281,7 @@ impl HealthMeter {
             capture_to_publish_ms: self.capture_to_publish.as_secs_f64() * 1e3 / frames,
             disk_free_mb: std::fs::create_dir_all(&self.takes_folder)
                 .ok()
-                .and_then(|()| crate::takes::free_mb(&self.takes_folder)),
+                .and_then(|()| mouthpiece_takes::free_mb(&self.takes_folder)),
             image: self.image,
         };
         self.started = now;

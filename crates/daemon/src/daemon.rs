@@ -24,7 +24,7 @@ use crate::error::CheckError;
 use crate::notify::Notifier;
 use crate::pipeline::{self, Command, Processor};
 use crate::source::{self, SourceShared, SourceState};
-use crate::takes::{TakeSettings, Takes};
+use mouthpiece_takes::{TakeSettings, Takes};
 
 /// How long the exit waits for a take still recording to be written out and synced.
 pub const TAKE_DRAIN_LIMIT: Duration = Duration::from_secs(20);

@@ -15,7 +15,6 @@
 //! - [`notify`]: systemd's notify protocol (READY, STATUS, WATCHDOG, STOPPING);
 //! - [`osc`]: the rig, head and eyes as VMC protocol messages over UDP, from its own sender
 //!   thread behind a bounded queue;
-//! - [`throttle`]: repeated warnings at most once per interval;
 //! - [`logging`]: journald-friendly `tracing` set-up.
 //!
 //! Threads: the source thread, the processing thread, one take-writer thread while a take
@@ -40,10 +39,10 @@ pub mod rig;
 pub mod settings;
 pub mod slot;
 pub mod source;
-pub mod takes;
-pub mod throttle;
 
 pub use daemon::{run, DaemonError, RunOptions};
+/// Takes (one MCAP file per take from its own writer thread) live in their own crate.
+pub use mouthpiece_takes as takes;
 
 /// Runs the daemon with the real pipeline: detect + track + retarget ([`live`]).
 pub fn run_live(config: mouthpiece_config::Config, options: RunOptions) -> Result<(), DaemonError> {

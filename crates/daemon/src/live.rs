@@ -16,7 +16,7 @@ use crate::error::CheckError;
 use crate::factory::Factory;
 use crate::pipeline::{Output, Processor};
 use crate::source::Opener;
-use crate::throttle::Throttle;
+use mouthpiece_output::Throttle;
 
 /// Everything a (re)load produces.
 #[derive(Debug, Clone)]

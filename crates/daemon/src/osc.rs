@@ -19,12 +19,12 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use mouthpiece_config::Config;
-use mouthpiece_server::{OscCounters, OscTargetCounters, RigCurves, StreamFrame, RIG_CURVE_NAMES};
+use mouthpiece_server::{OscCounters, OscTargetCounters, RigCurves, StreamFrame, CURVE_NAMES};
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion};
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
 
 use crate::error::CheckError;
-use crate::throttle::Throttle;
+use mouthpiece_output::Throttle;
 
 /// Frames waiting for the sender thread; a full queue drops its oldest frame.
 pub const QUEUE_FRAMES: usize = 8;
@@ -217,7 +217,7 @@ impl VmcPacket {
             args.extend([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0].map(OscType::Float));
             content.push(message(address::BONE, args));
         }
-        for name in RIG_CURVE_NAMES {
+        for name in CURVE_NAMES {
             content.push(message(
                 address::BLEND_VAL,
                 vec![OscType::String(name.to_owned()), OscType::Float(0.0)],
@@ -695,7 +695,7 @@ mod tests {
             assert_eq!(
                 m.args,
                 [
-                    OscType::String(RIG_CURVE_NAMES[i].into()),
+                    OscType::String(CURVE_NAMES[i].into()),
                     OscType::Float(curves[i])
                 ]
             );

@@ -23,7 +23,7 @@ use serde_json::json;
 
 use crate::slot::Taken;
 use crate::source::{SourceShared, SourceState};
-use crate::takes::{CharacterRecord, Derived, HeadRecord, TakeEnded, Takes};
+use mouthpiece_takes::{CharacterRecord, Derived, TakeEnded, Takes};
 
 /// Per-frame flags a processor reports besides the stream frame.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -218,7 +218,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                 // Wall clock of receipt: what the audio recorder beside us saw at that moment.
                 let wall = SystemTime::now() - frame.host_rx.elapsed();
                 frame.wall_clock = Some(wall);
-                let wall_us = crate::takes::unix_us(wall);
+                let wall_us = mouthpiece_takes::unix_us(wall);
                 out.flags.neutral_taken = false;
                 processor.process(&frame, &mut out);
                 if processor.take_info_changed() {
@@ -462,7 +462,7 @@ fn start_take<R>(ctx: &mut Context<R>, slate: &str, take: Option<u32>, done: Tak
                     slate: info.slate.clone(),
                     take: info.take,
                     file: Some(file.clone()),
-                    started_wall_us: Some(crate::takes::unix_us(info.started)),
+                    started_wall_us: Some(mouthpiece_takes::unix_us(info.started)),
                 };
                 hub.update_status(|s| {
                     s.recording = Some(recording);
@@ -558,11 +558,7 @@ fn derive(
             .zip(out.performer_camera.iter().copied())
             .collect(),
         stabilised,
-        head: HeadRecord {
-            rotation: stream.head.rotation,
-            translation: stream.head.translation,
-            lost: stream.head.lost,
-        },
+        head: stream.head.clone(),
         characters: stream
             .characters
             .iter()

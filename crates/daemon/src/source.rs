@@ -14,7 +14,7 @@ use mouthpiece_frame::{Frame, FrameSource, SourceError, SourceInfo};
 
 use crate::backoff::Backoff;
 use crate::slot::LatestSlot;
-use crate::throttle::Throttle;
+use mouthpiece_output::Throttle;
 
 /// Opens the source; called again after every loss.
 pub type Opener = Box<dyn FnMut() -> Result<Box<dyn FrameSource>, SourceError> + Send>;
@@ -195,17 +195,7 @@ pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "(no message)".into())
 }
 
-/// `error: cause: cause`, for status messages and logs.
-pub fn error_chain(err: &dyn std::error::Error) -> String {
-    let mut text = err.to_string();
-    let mut cause = err.source();
-    while let Some(c) = cause {
-        text.push_str(": ");
-        text.push_str(&c.to_string());
-        cause = c.source();
-    }
-    text
-}
+pub use mouthpiece_output::error_chain;
 
 #[cfg(test)]
 mod tests {

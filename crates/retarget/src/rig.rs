@@ -34,30 +34,8 @@ use crate::retarget::StabilisedFrame;
 use crate::{Error, MouthFrame, Named, NeutralPose, Vec3};
 
 /// The curve names, in wire order (ARKit's blend-shape names; left and right are the
-/// performer's).
-pub const CURVE_NAMES: [&str; 18] = [
-    "jawOpen",
-    "mouthClose",
-    "mouthFunnel",
-    "mouthPucker",
-    "mouthLeft",
-    "mouthRight",
-    "mouthSmileLeft",
-    "mouthSmileRight",
-    "mouthStretchLeft",
-    "mouthStretchRight",
-    "mouthRollUpper",
-    "mouthRollLower",
-    "mouthUpperUpLeft",
-    "mouthUpperUpRight",
-    "mouthLowerDownLeft",
-    "mouthLowerDownRight",
-    "mouthPressLeft",
-    "mouthPressRight",
-];
-
-/// Number of curves.
-pub const CURVES: usize = CURVE_NAMES.len();
+/// performer's): the output vocabulary's one list.
+pub use mouthpiece_output::curves::{curve_index, CURVES, CURVE_NAMES};
 
 /// Default range of each curve's measure: degrees for `jawOpen`, mouth widths for the rest.
 pub const DEFAULT_RANGES: [f64; CURVES] = [
@@ -87,11 +65,6 @@ pub const DEFAULT_RANGES: [f64; CURVES] = [
 /// 1.2–1.6 mm against 0.3–0.75 mm, RealSense-like 0.7–1.0 mm against 0.3–0.5 mm), so its
 /// variance is about four times as large and a millimetre of depth counts a quarter.
 pub const DEPTH_WEIGHT: f64 = 0.25;
-
-/// Index of a curve name in [`CURVE_NAMES`].
-pub fn curve_index(name: &str) -> Option<usize> {
-    CURVE_NAMES.iter().position(|n| *n == name)
-}
 
 /// Rig settings: the `[rig]` table of a character file or of the daemon configuration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

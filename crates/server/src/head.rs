@@ -1,54 +1,13 @@
 //! Characters' heads on the wire (docs/head.md): the per-character `head` entry of `frame`,
 //! the `look_at` request's checks, and the Foxglove form.
 
-use serde::{Deserialize, Serialize};
+use mouthpiece_output::CharacterHead;
 use serde_json::{json, Value};
 
 use crate::hub::StreamInfo;
 
 /// Largest coordinate a `look_at` point may have (as the dot coordinates of the retarget core).
 pub const MAX_LOOK_AT_COORDINATE: f64 = 1e6;
-
-/// What drives a character's head.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum LookMode {
-    /// The performer's head rotation, scaled and limited to the character's reach.
-    #[default]
-    Follow,
-    /// Turning to, or facing, a viewpoint set with `look_at`.
-    LookAt,
-}
-
-/// One character's head and eyes in one frame.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct CharacterHead {
-    /// The head's rotation about its pivot, the character's model frame, `[w, x, y, z]`.
-    pub rotation: [f32; 4],
-    /// The left eye's rotation relative to the head, `[w, x, y, z]`.
-    pub eye_left: [f32; 4],
-    /// The right eye's rotation relative to the head, `[w, x, y, z]`.
-    pub eye_right: [f32; 4],
-    /// What drives the head.
-    pub mode: LookMode,
-    /// With a viewpoint: whether the head can face it; `null` while following.
-    pub in_reach: Option<bool>,
-    /// How far the current turn has come, 0..=1 (1 when none is under way).
-    pub progress: f32,
-}
-
-impl Default for CharacterHead {
-    fn default() -> Self {
-        Self {
-            rotation: [1.0, 0.0, 0.0, 0.0],
-            eye_left: [1.0, 0.0, 0.0, 0.0],
-            eye_right: [1.0, 0.0, 0.0, 0.0],
-            mode: LookMode::Follow,
-            in_reach: None,
-            progress: 1.0,
-        }
-    }
-}
 
 /// Checks a `look_at` point: three finite numbers within ±[`MAX_LOOK_AT_COORDINATE`].
 pub fn check_point(p: &[f64; 3]) -> Result<(), String> {

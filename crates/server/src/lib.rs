@@ -91,15 +91,17 @@ pub use foxglove::{
     check_client_message as check_foxglove_client_message, FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL,
     MAX_SUBSCRIPTIONS_PER_CLIENT, PERFORMER_CHANNEL,
 };
-pub use head::{CharacterHead, LookMode};
 pub use hub::{
-    CharacterFrame, CharacterInfo, ControlCommand, ControlFailure, ControlOutcome, ControlReceiver,
-    ControlRequest, HeadPose, Hub, HubConfig, PerformerFrame, Recording, SourceState, Status,
-    StreamFrame, StreamInfo,
+    CharacterInfo, ControlCommand, ControlFailure, ControlOutcome, ControlReceiver, ControlRequest,
+    Hub, HubConfig, Recording, SourceState, Status, StreamInfo,
+};
+/// The output vocabulary the hub publishes, defined once in `mouthpiece-output`.
+pub use mouthpiece_output::{
+    CharacterFrame, CharacterHead, HeadPose, LookMode, PerformerFrame, RigCurves, RigJaw, RigLip,
+    RigLips, RigState, StreamFrame, CURVE_NAMES,
 };
 pub use osc::{OscCounters, OscTargetCounters, OscTargetFigures};
 pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
-pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RIG_CURVE_NAMES};
 pub use server::run;
 
 /// Loads the certificate and key as [`run`] will, so that a configuration check refuses

@@ -149,14 +149,14 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
         lost: false,
     };
     let confidence = vec![1.0; POINTS];
-    let mut rig = crate::rig::RigState::default();
+    let mut rig = mouthpiece_output::RigState::default();
     rig.jaw.angle_deg = 20.0 * open;
     rig.curves.0[0] = 0.8 * open;
     rig.curves.0[6] = smile.max(0.0);
     rig.curves.0[7] = smile.max(0.0);
     // The heads turn with the performer's yaw; the eyes turn back against it.
     let (c, s) = ((yaw / 2.0).cos(), (yaw / 2.0).sin());
-    let head = Some(crate::head::CharacterHead {
+    let head = Some(mouthpiece_output::CharacterHead {
         rotation: [c, 0.0, s, 0.0],
         eye_left: [c, 0.0, -s, 0.0],
         eye_right: [c, 0.0, -s, 0.0],

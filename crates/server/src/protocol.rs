@@ -375,8 +375,8 @@ struct CharacterView<'a> {
     #[serde(skip_serializing_if = "Option::is_none")]
     curve: Option<&'a [[f32; 3]]>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    rig: Option<&'a crate::rig::RigState>,
-    head: Option<&'a crate::head::CharacterHead>,
+    rig: Option<&'a mouthpiece_output::RigState>,
+    head: Option<&'a mouthpiece_output::CharacterHead>,
 }
 
 impl<'a> FrameView<'a> {
@@ -608,30 +608,15 @@ fn validate(message: &ClientMessage) -> Result<(), String> {
             action: RecordAction::Start,
             slate: Some(slate),
             ..
-        } if !valid_slate(slate) => Err(format!("record: slate {SLATE_RULE}, got {slate:?}")),
+        } if !valid_slate(slate) => {
+            Err(format!("record: slate must be {SLATE_RULE}, got {slate:?}"))
+        }
         ClientMessage::LookAt { point: Some(p), .. } => crate::head::check_point(p),
         _ => Ok(()),
     }
 }
 
-/// The slate rule in words, for error messages.
-pub const SLATE_RULE: &str =
-    "must be 1-64 letters, digits, '-', '_' or '.', starting with a letter or digit";
-
-/// Whether `slate` may name a take: it becomes the start of a file name, so 1-64 of
-/// `A-Z a-z 0-9 - _ .`, starting with a letter or digit (not `.`: hidden, `..`; not `-`:
-/// read as an option by command-line tools). The daemon applies the same rule to slates
-/// from its configuration and its command line.
-pub fn valid_slate(slate: &str) -> bool {
-    slate.len() <= 64
-        && slate
-            .chars()
-            .next()
-            .is_some_and(|c| c.is_ascii_alphanumeric())
-        && slate
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
-}
+pub use mouthpiece_output::{valid_slate, SLATE_RULE};
 
 #[cfg(test)]
 mod tests {

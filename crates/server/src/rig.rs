@@ -1,97 +1,8 @@
-//! The `rig` of a character entry (docs/rig.md, docs/protocol.md): jaw, lip motions and the
-//! ARKit-named mouth curves, as the daemon publishes them. Fixed-size and `Copy`, so that
-//! publishing does not allocate; the curves serialise as a name → value object.
+//! The rig's Foxglove form (docs/rig.md, docs/protocol.md): the `/rig/<name>` channel's
+//! schema and payload. The rig itself is [`mouthpiece_output::RigState`].
 
-use serde::ser::SerializeMap;
-use serde::{Serialize, Serializer};
+use mouthpiece_output::{RigLip, RigState, CURVE_NAMES};
 use serde_json::{json, Value};
-
-/// Curve names in the order of [`RigState::curves`] (the retarget core's order; the daemon's
-/// tests check that both lists agree).
-pub const RIG_CURVE_NAMES: [&str; 18] = [
-    "jawOpen",
-    "mouthClose",
-    "mouthFunnel",
-    "mouthPucker",
-    "mouthLeft",
-    "mouthRight",
-    "mouthSmileLeft",
-    "mouthSmileRight",
-    "mouthStretchLeft",
-    "mouthStretchRight",
-    "mouthRollUpper",
-    "mouthRollLower",
-    "mouthUpperUpLeft",
-    "mouthUpperUpRight",
-    "mouthLowerDownLeft",
-    "mouthLowerDownRight",
-    "mouthPressLeft",
-    "mouthPressRight",
-];
-
-/// The jaw: opening angle about the hinge (degrees) and slide along it (metres).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct RigJaw {
-    pub angle_deg: f32,
-    pub slide_m: f32,
-}
-
-/// One lip's rigid motion from neutral (performer mouth frame) and its residual RMS (metres).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct RigLip {
-    pub rotation: [f32; 4],
-    pub translation: [f32; 3],
-    pub residual: f32,
-}
-
-impl Default for RigLip {
-    fn default() -> Self {
-        Self {
-            rotation: [1.0, 0.0, 0.0, 0.0],
-            translation: [0.0; 3],
-            residual: 0.0,
-        }
-    }
-}
-
-/// Both lips.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct RigLips {
-    pub upper: RigLip,
-    pub lower: RigLip,
-}
-
-/// The curves, in [`RIG_CURVE_NAMES`] order, 0..1.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct RigCurves(pub [f32; 18]);
-
-impl Serialize for RigCurves {
-    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        let mut map = serializer.serialize_map(Some(self.0.len()))?;
-        for (name, v) in RIG_CURVE_NAMES.iter().zip(&self.0) {
-            map.serialize_entry(name, v)?;
-        }
-        map.end()
-    }
-}
-
-/// A character's rig in one frame.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct RigState {
-    pub jaw: RigJaw,
-    pub lips: RigLips,
-    pub curves: RigCurves,
-}
-
-impl RigState {
-    /// The value of a curve by name.
-    pub fn curve(&self, name: &str) -> Option<f32> {
-        RIG_CURVE_NAMES
-            .iter()
-            .position(|n| *n == name)
-            .map(|i| self.curves.0[i])
-    }
-}
 
 /// The properties of a Foxglove `/rig/<name>` message (its JSON Schema's `properties`; the
 /// channel adds `seq`, `t`, `capture_us`). Quaternions are `{w, x, y, z}` objects and the
@@ -123,7 +34,7 @@ pub fn foxglove_properties() -> Value {
             "required": ["rotation", "translation", "residual"]
         })
     };
-    let curves: serde_json::Map<String, Value> = RIG_CURVE_NAMES
+    let curves: serde_json::Map<String, Value> = CURVE_NAMES
         .iter()
         .map(|n| {
             (
@@ -151,7 +62,7 @@ pub fn foxglove_properties() -> Value {
             "type": "object",
             "description": "ARKit-named mouth curves, 0..1",
             "properties": curves,
-            "required": RIG_CURVE_NAMES,
+            "required": CURVE_NAMES,
             "additionalProperties": false
         }
     })
@@ -174,26 +85,4 @@ pub fn foxglove_payload(name: &str, rig: &RigState) -> Value {
         "lips": {"upper": lip(&rig.lips.upper), "lower": lip(&rig.lips.lower)},
         "curves": rig.curves,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn curves_serialise_by_name_in_order() {
-        let mut rig = RigState::default();
-        rig.curves.0[2] = 0.5;
-        rig.jaw.angle_deg = 12.0;
-        let text = serde_json::to_string(&rig).unwrap();
-        assert!(
-            text.contains(r#""curves":{"jawOpen":0.0,"mouthClose":0.0,"mouthFunnel":0.5"#),
-            "{text}"
-        );
-        assert!(
-            text.contains(r#""jaw":{"angle_deg":12.0,"slide_m":0.0}"#),
-            "{text}"
-        );
-        assert_eq!(rig.curve("mouthFunnel"), Some(0.5));
-    }
 }

@@ -145,7 +145,7 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
         let rig = frame.characters[1].rig.unwrap();
         assert_eq!(p["jaw"]["angle_deg"], json!(rig.jaw.angle_deg), "{p}");
         assert_eq!(p["jaw"]["slide_m"], json!(rig.jaw.slide_m), "{p}");
-        for (k, name) in mouthpiece_server::RIG_CURVE_NAMES.iter().enumerate() {
+        for (k, name) in mouthpiece_server::CURVE_NAMES.iter().enumerate() {
             assert_eq!(curve_names[k], *name);
             assert_eq!(p["curves"][*name], json!(rig.curves.0[k]), "{name}: {p}");
         }

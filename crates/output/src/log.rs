@@ -1,5 +1,6 @@
-//! Throttling of repeated warnings: a source that fails to open every half second must not
-//! fill the journal.
+//! How the long-running outputs report trouble: an error with its causes on one line, and
+//! a repeated warning at most once per interval (a source that fails to open every half
+//! second, a full disk under a take, a refusing OSC target must not fill the journal).
 
 use std::time::{Duration, Instant};
 
@@ -40,6 +41,18 @@ impl Throttle {
         self.last = None;
         self.suppressed = 0;
     }
+}
+
+/// `error: cause: cause`, for status messages and logs.
+pub fn error_chain(err: &dyn std::error::Error) -> String {
+    let mut text = err.to_string();
+    let mut cause = err.source();
+    while let Some(c) = cause {
+        text.push_str(": ");
+        text.push_str(&c.to_string());
+        cause = c.source();
+    }
+    text
 }
 
 #[cfg(test)]

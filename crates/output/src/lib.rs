@@ -1,0 +1,28 @@
+//! The output vocabulary: what mouthpiece produces per time step, defined once for every
+//! place that carries it (the WebSocket protocol and its Foxglove bridge, OSC/VMC, takes,
+//! exports, the retarget core's curve list).
+//!
+//! - [`curves`]: the rig's curve names (ARKit's), in the one order every output uses;
+//! - [`rig`]: a character's rig in one frame (jaw, lips, curves), fixed-size;
+//! - [`head`]: the performer's head pose and a character's head and eyes;
+//! - [`frame`]: one published frame: the performer's head and dots and every character's
+//!   points, confidences, curve, rig and head;
+//! - [`slate`]: the one rule for naming a take;
+//! - [`log`]: how the long-running outputs report trouble (error chains, throttled warnings).
+//!
+//! Plain data with serde; no I/O, no threads, no dependencies beyond serde, so the pure
+//! math at the bottom of the workspace and the servers at the top can share it.
+
+pub mod curves;
+pub mod frame;
+pub mod head;
+pub mod log;
+pub mod rig;
+pub mod slate;
+
+pub use curves::{curve_index, CURVES, CURVE_NAMES};
+pub use frame::{CharacterFrame, PerformerFrame, StreamFrame};
+pub use head::{CharacterHead, HeadPose, LookMode};
+pub use log::{error_chain, Throttle};
+pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState};
+pub use slate::{valid_slate, SLATE_RULE};

@@ -1,0 +1,91 @@
+//! A character's rig in one frame (docs/rig.md): jaw, lip motions and the ARKit-named mouth
+//! curves. Fixed-size and `Copy`, so that publishing does not allocate; the curves serialise
+//! as a name → value object in [`CURVE_NAMES`] order.
+
+use serde::ser::SerializeMap;
+use serde::{Serialize, Serializer};
+
+use crate::curves::{curve_index, CURVES, CURVE_NAMES};
+
+/// The jaw: opening angle about the hinge (degrees) and slide along it (metres).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct RigJaw {
+    pub angle_deg: f32,
+    pub slide_m: f32,
+}
+
+/// One lip's rigid motion from neutral (performer mouth frame) and its residual RMS (metres).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RigLip {
+    pub rotation: [f32; 4],
+    pub translation: [f32; 3],
+    pub residual: f32,
+}
+
+impl Default for RigLip {
+    fn default() -> Self {
+        Self {
+            rotation: [1.0, 0.0, 0.0, 0.0],
+            translation: [0.0; 3],
+            residual: 0.0,
+        }
+    }
+}
+
+/// Both lips.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct RigLips {
+    pub upper: RigLip,
+    pub lower: RigLip,
+}
+
+/// The curves, in [`CURVE_NAMES`] order, 0..1.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RigCurves(pub [f32; CURVES]);
+
+impl Serialize for RigCurves {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let mut map = serializer.serialize_map(Some(self.0.len()))?;
+        for (name, v) in CURVE_NAMES.iter().zip(&self.0) {
+            map.serialize_entry(name, v)?;
+        }
+        map.end()
+    }
+}
+
+/// A character's rig in one frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct RigState {
+    pub jaw: RigJaw,
+    pub lips: RigLips,
+    pub curves: RigCurves,
+}
+
+impl RigState {
+    /// The value of a curve by name.
+    pub fn curve(&self, name: &str) -> Option<f32> {
+        curve_index(name).map(|i| self.curves.0[i])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn curves_serialise_by_name_in_order() {
+        let mut rig = RigState::default();
+        rig.curves.0[2] = 0.5;
+        rig.jaw.angle_deg = 12.0;
+        let text = serde_json::to_string(&rig).unwrap();
+        assert!(
+            text.contains(r#""curves":{"jawOpen":0.0,"mouthClose":0.0,"mouthFunnel":0.5"#),
+            "{text}"
+        );
+        assert!(
+            text.contains(r#""jaw":{"angle_deg":12.0,"slide_m":0.0}"#),
+            "{text}"
+        );
+        assert_eq!(rig.curve("mouthFunnel"), Some(0.5));
+    }
+}
