@@ -4,7 +4,7 @@
 #
 # Usage: scripts/rig-sessions.sh OUTDIR [SET...]
 #   SET: default (the 12 sessions `evaluate` runs by default, seeds 1-3), log (the 164 others
-#   of docs/rig-accuracy-log.md, seeds 4-9 and 11-110: 6, 10 and 20 s), s121 (seeds 121-140 at
+#   of docs/lab/rig-accuracy-log.md, seeds 4-9 and 11-110: 6, 10 and 20 s), s121 (seeds 121-140 at
 #   evaluate's defaults), s141 (seeds 141-160 at the defaults). Without a SET: all of them
 #   (336 sessions, about 13 minutes on two cores with a debug build).
 # MOUTHPIECE: the binary (default target/debug/mouthpiece; build it first).

@@ -55,7 +55,7 @@ impl Default for DotLayout {
             lip_color: crate::LIP_DOT_RGB,
             forehead_color: crate::FOREHEAD_DOT_RGB,
             // A wide, tall triangle (70 × 40 mm): the head pose rests on depth and pixel
-            // differences across it, so its size sets the head pose's precision (README,
+            // differences across it, so its size sets the head pose's precision (docs/detection.md,
             // "Painting the dots").
             forehead: vec![
                 dot("F1", 35.0, -95.0),

@@ -8,7 +8,7 @@ use crate::{camera, Sensor};
 
 /// How far towards its nearer neighbour a lip dot's stretched depth patch may reach (the
 /// lip bends away towards a corner; measured with no cap: 3D RMS 0.86–1.28 mm over the 12
-/// sessions of docs/accuracy-tables.md against 0.78–1.22 mm with 0.8).
+/// sessions of docs/lab/accuracy-tables.md against 0.78–1.22 mm with 0.8).
 pub const LIP_PATCH_NEIGHBOUR_FRACTION: f64 = 0.8;
 
 /// A lip dot's depth from the stretched patch replaces its own only within this distance
