@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use mouthpiece_detect::PixelRect;
 use mouthpiece_frame::Frame;
 use mouthpiece_retarget::kabsch::kabsch;
 use mouthpiece_retarget::{NeutralPose, Vec3};
@@ -62,13 +63,13 @@ impl DotPlaces {
     }
 
     /// The overlay: each dot at its pixel when found, else where `predicted` places it,
-    /// else where it was last seen; and the search region while dots are missing.
+    /// else where it was last seen; and, while dots are missing, the rectangle the detector
+    /// searched on this frame as the tracker reports it (`searched`).
     pub fn overlay(
         &self,
         names: &[String],
         predicted: impl Fn(usize) -> Option<[f64; 2]>,
-        roi_margin_px: f64,
-        image: [u32; 2],
+        searched: Option<PixelRect>,
     ) -> Overlay {
         let mut dots = Vec::with_capacity(names.len());
         for (i, name) in names.iter().enumerate() {
@@ -93,59 +94,15 @@ impl DotPlaces {
                 });
             }
         }
-        let search = (self.frames_with_missing > 0).then(|| {
-            search_region(
-                dots.iter().map(|d| [f64::from(d.x), f64::from(d.y)]),
-                self.frames_with_missing,
-                roi_margin_px,
-                image,
-            )
-        });
+        let search = searched
+            .filter(|_| self.frames_with_missing > 0)
+            .map(|r| PixelBox {
+                x: r.x as f32,
+                y: r.y as f32,
+                width: r.width as f32,
+                height: r.height as f32,
+            });
         Overlay { dots, search }
-    }
-}
-
-/// Search region estimate: where the tracker looks while dots are missing, as it decides
-/// it (the box around the dots' predicted places, its margin doubling with each frame
-/// something stays missing, up to 16 times; the whole image once the box would cover half
-/// of it, or when no dot has a place). The tracker also searches the whole image every few
-/// frames while dots are missing; that is not drawn.
-pub fn search_region(
-    places: impl Iterator<Item = [f64; 2]>,
-    frames_with_missing: u32,
-    roi_margin_px: f64,
-    image: [u32; 2],
-) -> PixelBox {
-    let (w, h) = (f64::from(image[0]), f64::from(image[1]));
-    let full = PixelBox {
-        x: 0.0,
-        y: 0.0,
-        width: w as f32,
-        height: h as f32,
-    };
-    let mut bounds: Option<[f64; 4]> = None;
-    for [x, y] in places {
-        let b = bounds.get_or_insert([x, y, x, y]);
-        b[0] = b[0].min(x);
-        b[1] = b[1].min(y);
-        b[2] = b[2].max(x);
-        b[3] = b[3].max(y);
-    }
-    let Some([x0, y0, x1, y1]) = bounds else {
-        return full;
-    };
-    let grow = f64::from(1u32 << frames_with_missing.min(4));
-    let margin = roi_margin_px * grow;
-    let (x0, y0) = ((x0 - margin).max(0.0), (y0 - margin).max(0.0));
-    let (x1, y1) = ((x1 + margin).min(w), (y1 + margin).min(h));
-    if (x1 - x0) * (y1 - y0) >= w * h / 2.0 {
-        return full;
-    }
-    PixelBox {
-        x: x0 as f32,
-        y: y0 as f32,
-        width: (x1 - x0) as f32,
-        height: (y1 - y0) as f32,
     }
 }
 
@@ -309,7 +266,13 @@ mod tests {
             Some([120.0, 100.0]),
             Some([110.0, 50.0]),
         ]);
-        let o = places.overlay(&names, |_| None, 20.0, [640, 480]);
+        let searched = PixelRect {
+            x: 61,
+            y: 10,
+            width: 104,
+            height: 132,
+        };
+        let o = places.overlay(&names, |_| None, Some(searched));
         assert!(o.dots.iter().all(|d| d.state == DotState::Tracked));
         assert!(o.search.is_none(), "all found: no search region");
         // D2 missing: predicted by the caller; F1 missing with no prediction: last seen.
@@ -317,8 +280,7 @@ mod tests {
         let o = places.overlay(
             &names,
             |i| (i == 1).then_some([125.0, 102.0]),
-            20.0,
-            [640, 480],
+            Some(searched),
         );
         let state = |n: &str| o.dots.iter().find(|d| d.name == n).unwrap().state;
         assert_eq!(state("D1"), DotState::Tracked);
@@ -326,22 +288,64 @@ mod tests {
         assert_eq!(state("F1"), DotState::Lost);
         let f1 = o.dots.iter().find(|d| d.name == "F1").unwrap();
         assert_eq!((f1.x, f1.y), (110.0, 50.0), "where it was last seen");
+        // Exactly the rectangle the tracker reports, nothing re-derived.
         let s = o.search.unwrap();
-        // Margin 20 px doubled after one frame with a dot missing.
-        assert_eq!((s.x, s.y), (101.0 - 40.0, 50.0 - 40.0));
-        assert_eq!((s.width, s.height), (24.0 + 80.0, 52.0 + 80.0));
+        assert_eq!((s.x, s.y, s.width, s.height), (61.0, 10.0, 104.0, 132.0));
+        // A frame that was not searched draws no region.
+        assert!(places.overlay(&names, |_| None, None).search.is_none());
     }
 
+    /// The console's region is the tracker's: on a tracked session where a dot goes
+    /// missing, every frame's drawn box is the detector's searched rectangle.
     #[test]
-    fn the_search_region_grows_to_the_whole_image() {
-        let dots = [[300.0, 200.0], [340.0, 210.0]];
-        let small = search_region(dots.iter().copied(), 1, 20.0, [640, 480]);
-        let later = search_region(dots.iter().copied(), 3, 20.0, [640, 480]);
-        assert!(later.width > small.width);
-        let huge = search_region(dots.iter().copied(), 10, 20.0, [640, 480]);
-        assert_eq!((huge.width, huge.height), (640.0, 480.0));
-        let none = search_region(std::iter::empty(), 1, 20.0, [640, 480]);
-        assert_eq!((none.width, none.height), (640.0, 480.0));
+    fn the_drawn_region_is_the_one_the_tracker_searched() {
+        use mouthpiece_synth::{Synth, SynthConfig};
+        use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
+        let human =
+            mouthpiece_retarget::Character::from_toml_str(crate::characters::BUILTIN[0].1).unwrap();
+        let mut pipeline =
+            Pipeline::for_characters(PipelineConfig::default(), vec![human]).unwrap();
+        let names: Vec<String> = (1..=15).map(|i| format!("X{i}")).collect();
+        let mut places = DotPlaces::default();
+        let synth = Synth::new(SynthConfig {
+            seed: 3,
+            seconds: 3.0,
+            ..SynthConfig::default()
+        })
+        .unwrap();
+        let (mut drawn, mut restricted) = (0, 0);
+        for (i, (mut frame, _)) in synth.enumerate() {
+            // From 2 s on, every other frame paints over the mouth's left half: dots go
+            // missing and the tracker widens (and now and then drops) its region.
+            if i >= 60 && i % 2 == 0 {
+                let w = frame.color.width as usize;
+                for row in frame.color.data.chunks_mut(3 * w) {
+                    row[..3 * w / 2].fill(0);
+                }
+            }
+            pipeline.step(&frame).unwrap();
+            let tracked = pipeline.tracked();
+            places.update(&tracked.pixels);
+            let o = places.overlay(&names, |_| None, tracked.searched);
+            match (tracked.searched, o.search) {
+                (Some(r), Some(b)) => {
+                    drawn += 1;
+                    assert_eq!(
+                        (b.x, b.y, b.width, b.height),
+                        (r.x as f32, r.y as f32, r.width as f32, r.height as f32)
+                    );
+                    if r.area() < i64::from(frame.color.width * frame.color.height) {
+                        restricted += 1;
+                    }
+                }
+                (_, None) => {}
+                (None, Some(_)) => panic!("frame {i}: a region drawn that was not searched"),
+            }
+        }
+        assert!(
+            drawn > 10 && restricted > 0,
+            "{drawn} drawn, {restricted} restricted"
+        );
     }
 
     #[test]

@@ -329,12 +329,8 @@ impl Processor for LiveProcessor {
             let p = stab.head.apply(&rest);
             k.project([p.x, p.y, p.z])
         };
-        self.places.overlay(
-            &self.dot_names,
-            predicted,
-            self.config.track.roi_margin_px,
-            [frame.color.width, frame.color.height],
-        )
+        self.places
+            .overlay(&self.dot_names, predicted, self.pipeline.tracked().searched)
     }
 
     fn look_at(

@@ -223,6 +223,7 @@ impl Tracker {
                 stabilised: None,
                 status: Status::default(),
                 steps: Vec::new(),
+                searched: None,
             },
             config,
         })
@@ -370,6 +371,7 @@ impl Tracker {
             self.step_ratio,
             [frame.color.width as usize, frame.color.height as usize],
         );
+        self.out.searched = None;
         self.detector.detect_into(
             &frame.color,
             Some((sensor.depth, sensor.scale)),
@@ -377,6 +379,7 @@ impl Tracker {
             search,
             found,
         )?;
+        self.out.searched = found.searched;
         self.cands.clear();
         for (blob_index, blob) in found.blobs.iter().enumerate() {
             let z_hint = blob.depth_m.unwrap_or(DEFAULT_DEPTH_M);
