@@ -31,6 +31,9 @@ use std::sync::Arc;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 
+mod text;
+pub use text::ConfigText;
+
 /// Where a system install keeps its configuration.
 pub const SYSTEM_CONFIG_PATH: &str = "/etc/mouthpiece/mouthpiece.toml";
 
@@ -902,41 +905,34 @@ impl Config {
 
     /// Deserializes the file's text once more into `T`: a struct of the caller's that reads
     /// only the sections it owns (`[detect]`, `[track]`) and ignores the others, with the
-    /// file's own line numbers in errors. The embedded default gives `T::default()`.
+    /// file's own line numbers in errors ([`ConfigText::extract`]). The embedded default gives
+    /// `T::default()`.
     pub fn extract<T: DeserializeOwned + Default>(&self) -> Result<T, ConfigError> {
-        let Origin::File { path, text } = &self.origin else {
-            return Ok(T::default());
-        };
-        toml::from_str::<T>(text).map_err(|err| {
-            invalid(
-                text,
-                &path.display().to_string(),
-                err.span(),
-                err.message().trim_end().to_owned(),
-            )
-        })
+        match self.text() {
+            Some(text) => text.extract(),
+            None => Ok(T::default()),
+        }
     }
 
     /// File, line and column of `key` (dotted path), for errors found by later checks (a
     /// character file that does not load, a detector setting out of range).
     pub fn locate(&self, key: &str) -> Location {
-        match &self.origin {
-            Origin::Embedded => Location {
+        match self.text() {
+            Some(text) => text.locate(key),
+            None => Location {
                 file: self.origin.describe(),
                 line: 0,
                 column: 0,
                 key: Some(key.to_owned()),
             },
-            Origin::File { path, text } => {
-                let (line, column) =
-                    span_of_key(text, key).map_or((0, 0), |span| line_col(text, span.start));
-                Location {
-                    file: path.display().to_string(),
-                    line,
-                    column,
-                    key: Some(key.to_owned()),
-                }
-            }
+        }
+    }
+
+    /// The file's text, `None` for the embedded default.
+    pub fn text(&self) -> Option<ConfigText> {
+        match &self.origin {
+            Origin::Embedded => None,
+            Origin::File { path, text } => Some(ConfigText::new(path, Arc::clone(text))),
         }
     }
 
@@ -1047,7 +1043,12 @@ fn state_directory() -> Option<PathBuf> {
     (!first.is_empty()).then(|| PathBuf::from(first))
 }
 
-fn invalid(text: &str, file: &str, span: Option<Range<usize>>, message: String) -> ConfigError {
+pub(crate) fn invalid(
+    text: &str,
+    file: &str,
+    span: Option<Range<usize>>,
+    message: String,
+) -> ConfigError {
     let (line, column) = span.clone().map_or((0, 0), |s| line_col(text, s.start));
     let key = span.and_then(|s| key_path_at(text, s));
     ConfigError::Invalid {
@@ -1062,7 +1063,7 @@ fn invalid(text: &str, file: &str, span: Option<Range<usize>>, message: String) 
 }
 
 /// 1-based line and column of a byte offset.
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
+pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let offset = offset.min(text.len());
     let before = &text[..offset];
     let line = before.matches('\n').count() + 1;
@@ -1094,7 +1095,7 @@ fn key_path_at(text: &str, span: Range<usize>) -> Option<String> {
 
 /// The span of the key at a dotted path; with an array index (`osc.targets[1]`), of that
 /// element when the array is there, else of the key.
-fn span_of_key(text: &str, key: &str) -> Option<Range<usize>> {
+pub(crate) fn span_of_key(text: &str, key: &str) -> Option<Range<usize>> {
     let doc = toml_edit::ImDocument::parse(text).ok()?;
     let wanted = key.split('[').next().unwrap_or(key);
     if let Some(index) = key

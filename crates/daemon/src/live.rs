@@ -10,7 +10,7 @@ use mouthpiece_frame::Frame;
 use mouthpiece_retarget::{Character, PerformerLayout};
 use mouthpiece_server::{CharacterFrame, CharacterInfo, PerformerFrame, StreamInfo};
 use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
-use mouthpiece_track::{TrackError, TrackedFrame};
+use mouthpiece_track::TrackedFrame;
 
 use crate::error::CheckError;
 use crate::factory::Factory;
@@ -27,22 +27,14 @@ pub struct Setup {
 
 /// Loads and validates characters, `[detect]`, `[track]` and `[retarget]`.
 pub fn setup(config: &Config) -> Result<Setup, CheckError> {
-    let pipeline: PipelineConfig = config.extract()?;
+    let pipeline = match config.text() {
+        Some(text) => PipelineConfig::from_text(&text)?,
+        None => PipelineConfig::default(),
+    };
     let invalid = |key: &str, message: String| CheckError::Invalid {
         location: config.locate(key),
         message,
     };
-    for (section, result) in [
-        (
-            "detect",
-            pipeline.detect.validate().map_err(TrackError::from),
-        ),
-        ("track", pipeline.track.validate()),
-        ("retarget", pipeline.retarget.validate()),
-        ("rig", pipeline.validate()),
-    ] {
-        result.map_err(|e| invalid(section, crate::source::error_chain(&e)))?;
-    }
     let characters = crate::characters::load(config)?;
     let layout = pipeline.track.layout();
     for (i, c) in characters.iter().enumerate() {

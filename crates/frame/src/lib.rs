@@ -17,6 +17,8 @@ use std::time::{Instant, SystemTime};
 
 use serde::{Deserialize, Serialize};
 
+pub mod registration;
+
 /// Pinhole intrinsics of one camera, plus lens distortion in OpenCV's `plumb_bob` order.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Intrinsics {
@@ -89,6 +91,40 @@ impl Intrinsics {
             (x, y)
         };
         Some([self.fx * x + self.cx, self.fy * y + self.cy])
+    }
+
+    /// Removes lens distortion from a pixel: the normalised image coordinates `(x, y)` of the
+    /// ray through it (`x = X/Z`, `y = Y/Z`). Fixed-point iteration as OpenCV's
+    /// `undistortPoints` does it, run to convergence (the inverse of [`Self::project`]).
+    pub fn undistort(&self, px: [f64; 2]) -> [f64; 2] {
+        let x0 = (px[0] - self.cx) / self.fx;
+        let y0 = (px[1] - self.cy) / self.fy;
+        if !self.has_distortion() {
+            return [x0, y0];
+        }
+        let [k1, k2, p1, p2, k3] = self.distortion;
+        let (mut x, mut y) = (x0, y0);
+        for _ in 0..50 {
+            let r2 = x * x + y * y;
+            let radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
+            let dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+            let dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+            let (nx, ny) = ((x0 - dx) / radial, (y0 - dy) / radial);
+            let step = (nx - x).abs() + (ny - y).abs();
+            x = nx;
+            y = ny;
+            if step < 1e-12 {
+                break;
+            }
+        }
+        [x, y]
+    }
+
+    /// The camera-frame point seen at pixel `px` (as in the image, distortion included) at
+    /// depth `z` (metres along the optical axis).
+    pub fn deproject(&self, px: [f64; 2], z: f64) -> [f64; 3] {
+        let [x, y] = self.undistort(px);
+        [x * z, y * z, z]
     }
 
     /// Projects a camera-frame point (metres, z forward) to pixel coordinates, ignoring

@@ -1,5 +1,6 @@
-//! Pixels ↔ camera-frame points: lens distortion (OpenCV `plumb_bob`), deprojection, and
-//! registering a depth image onto the colour grid.
+//! Pixels ↔ camera-frame points for the tracker's nalgebra points: thin adapters over the
+//! one camera model in `mouthpiece_frame` (`Intrinsics::project`/`deproject`, lens
+//! distortion as OpenCV's `plumb_bob`, and `registration`).
 
 use mouthpiece_frame::{Calibration, DepthImage, Intrinsics};
 
@@ -16,33 +17,6 @@ pub fn pixel_mean(pixels: &[[f64; 2]]) -> Option<[f64; 2]> {
     })
 }
 
-/// Removes lens distortion from a pixel: the normalised image coordinates `(x, y)` of the
-/// ray through it (`x = X/Z`, `y = Y/Z`). Fixed-point iteration as OpenCV's
-/// `undistortPoints` does it, run to convergence.
-pub fn undistort_normalised(k: &Intrinsics, px: [f64; 2]) -> [f64; 2] {
-    let x0 = (px[0] - k.cx) / k.fx;
-    let y0 = (px[1] - k.cy) / k.fy;
-    if !k.has_distortion() {
-        return [x0, y0];
-    }
-    let [k1, k2, p1, p2, k3] = k.distortion;
-    let (mut x, mut y) = (x0, y0);
-    for _ in 0..50 {
-        let r2 = x * x + y * y;
-        let radial = 1.0 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
-        let dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-        let dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-        let (nx, ny) = ((x0 - dx) / radial, (y0 - dy) / radial);
-        let step = (nx - x).abs() + (ny - y).abs();
-        x = nx;
-        y = ny;
-        if step < 1e-12 {
-            break;
-        }
-    }
-    [x, y]
-}
-
 /// Projects a camera-frame point to a (distorted) pixel. `None` behind the camera.
 pub fn project(k: &Intrinsics, p: &Vec3) -> Option<[f64; 2]> {
     k.project([p.x, p.y, p.z])
@@ -51,54 +25,26 @@ pub fn project(k: &Intrinsics, p: &Vec3) -> Option<[f64; 2]> {
 /// The camera-frame point seen at pixel `px` (distorted, as in the image) at depth `z`
 /// (metres along the optical axis).
 pub fn deproject(k: &Intrinsics, px: [f64; 2], z: f64) -> Vec3 {
-    let [x, y] = undistort_normalised(k, px);
-    Vec3::new(x * z, y * z, z)
+    Vec3::from(k.deproject(px, z))
 }
 
-/// Re-samples a depth image from its own camera onto the colour camera's pixel grid: each
-/// depth pixel is deprojected, moved into the colour frame and projected; where several
-/// land on one colour pixel the nearest wins. Colour pixels nothing lands on stay 0 (the
-/// depth-at-a-dot estimate fills small gaps by its plane fit).
+/// Re-samples a depth image from its own camera onto the colour camera's pixel grid
+/// (`mouthpiece_frame::registration`), into `out`. Colour pixels nothing lands on stay 0
+/// (the depth-at-a-dot estimate fills small gaps by its plane fit).
 pub fn register_depth(depth: &DepthImage, calib: &Calibration, out: &mut DepthImage) {
-    let c = &calib.color;
-    out.width = c.width;
-    out.height = c.height;
-    out.data.clear();
-    out.data.resize(c.width as usize * c.height as usize, 0);
-    let scale = calib.depth_scale_m;
-    let d = &calib.depth;
-    // Undistorted ray directions depend only on the depth pixel: compute per pixel once.
-    for v in 0..depth.height {
-        for u in 0..depth.width {
-            let raw = depth.at(u, v);
-            if raw == 0 {
-                continue;
-            }
-            let p = deproject(d, [u as f64, v as f64], raw as f64 * scale);
-            let q = calib.depth_to_color.apply([p.x, p.y, p.z]);
-            let Some([x, y]) = project(c, &Vec3::new(q[0], q[1], q[2])) else {
-                continue;
-            };
-            let (xi, yi) = (x.round(), y.round());
-            if xi < 0.0 || yi < 0.0 || xi >= c.width as f64 || yi >= c.height as f64 {
-                continue;
-            }
-            let z = (q[2] / scale).round();
-            if !(1.0..=u16::MAX as f64).contains(&z) {
-                continue;
-            }
-            let slot = &mut out.data[yi as usize * c.width as usize + xi as usize];
-            if *slot == 0 || (z as u16) < *slot {
-                *slot = z as u16;
-            }
-        }
-    }
+    mouthpiece_frame::registration::register_depth_into(
+        depth,
+        &calib.depth,
+        &calib.color,
+        &calib.depth_to_color,
+        calib.depth_scale_m,
+        out,
+    );
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mouthpiece_frame::Extrinsics;
 
     fn distorted() -> Intrinsics {
         Intrinsics {
@@ -129,27 +75,72 @@ mod tests {
         assert!((a[0] - b[0]).abs() > 1.0);
     }
 
+    /// The one camera model against OpenCV's own (`calib3d`): random points seen through a
+    /// strongly distorted lens project to OpenCV's `projectPoints` pixels, and those pixels
+    /// undistort to OpenCV's `undistortPoints` rays.
     #[test]
-    fn registration_shifts_depth_by_the_baseline() {
-        // A flat wall at 0.8 m seen by a depth camera 25 mm to the colour camera's right.
-        let k = Intrinsics::default_vga();
-        let mut calib = Calibration::registered(k);
-        calib.depth_registered = false;
-        calib.depth_to_color = Extrinsics {
-            translation: [0.025, 0.0, 0.0],
-            ..Extrinsics::IDENTITY
+    fn the_camera_model_is_opencvs() {
+        use opencv::core::{Mat, Point2d, Point3d, TermCriteria, TermCriteria_Type, Vector};
+        let k = distorted();
+        let camera =
+            Mat::from_slice_2d(&[[k.fx, 0.0, k.cx], [0.0, k.fy, k.cy], [0.0, 0.0, 1.0]]).unwrap();
+        let dist = Mat::from_slice(&k.distortion).unwrap();
+        // A fixed pseudo-random spread over the image (a 0.55 x 0.4 field of view at
+        // 0.5–1.2 m).
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut unit = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
         };
-        let depth = DepthImage {
-            width: 640,
-            height: 480,
-            data: vec![800; 640 * 480],
-        };
-        let mut out = DepthImage::new(0, 0);
-        register_depth(&depth, &calib, &mut out);
-        // The shift is fx * b / z = 525 * 0.025 / 0.8 ≈ 16.4 px: the leftmost 16 columns of
-        // the colour image see no depth, the rest see the wall.
-        assert_eq!(out.at(10, 240), 0);
-        assert_eq!(out.at(20, 240), 800);
-        assert_eq!(out.at(639, 240), 800);
+        let points: Vec<Vec3> = (0..200)
+            .map(|_| {
+                let z = 0.5 + 0.7 * unit();
+                Vec3::new((unit() - 0.5) * 0.55 * z, (unit() - 0.5) * 0.4 * z, z)
+            })
+            .collect();
+        let object: Vector<Point3d> = points.iter().map(|p| Point3d::new(p.x, p.y, p.z)).collect();
+        let mut pixels: Vector<Point2d> = Vector::new();
+        let zero = Mat::from_slice(&[0.0f64; 3]).unwrap();
+        opencv::calib3d::project_points_def(&object, &zero, &zero, &camera, &dist, &mut pixels)
+            .unwrap();
+        let mut rays: Vector<Point2d> = Vector::new();
+        let criteria = TermCriteria::new(
+            TermCriteria_Type::COUNT as i32 + TermCriteria_Type::EPS as i32,
+            100,
+            1e-14,
+        )
+        .unwrap();
+        opencv::calib3d::undistort_points_iter(
+            &pixels,
+            &mut rays,
+            &camera,
+            &dist,
+            &Mat::default(),
+            &Mat::default(),
+            criteria,
+        )
+        .unwrap();
+        assert_eq!(pixels.len(), points.len());
+        let (mut worst_px, mut worst_ray) = (0.0f64, 0.0f64);
+        for ((p, cv_px), cv_ray) in points.iter().zip(pixels.iter()).zip(rays.iter()) {
+            let ours = project(&k, p).unwrap();
+            worst_px = worst_px.max((ours[0] - cv_px.x).abs().max((ours[1] - cv_px.y).abs()));
+            let ray = k.undistort([cv_px.x, cv_px.y]);
+            worst_ray = worst_ray.max((ray[0] - cv_ray.x).abs().max((ray[1] - cv_ray.y).abs()));
+        }
+        eprintln!(
+            "largest difference from OpenCV: {worst_px:e} px projected, {worst_ray:e} undistorted"
+        );
+        assert!(
+            worst_px < 1e-6,
+            "projection differs from OpenCV's by {worst_px} px"
+        );
+        // Both iterate towards the same fixed point; a ray of 1e-9 is 5e-7 px.
+        assert!(
+            worst_ray < 1e-9,
+            "undistortion differs from OpenCV's by {worst_ray}"
+        );
     }
 }

@@ -15,8 +15,7 @@ pub const LIP_PATCH_NEIGHBOUR_FRACTION: f64 = 0.8;
 /// (metres) of it (*the stretched patch agrees with the paint*). The two readings of one dot
 /// differ by 0.7–0.8 mm RMS (synthetic sessions, both noise models); where they differ by
 /// several millimetres the long patch has reached past the lip, into the open mouth behind
-/// a lip rolling out of it, and the paint's own patch is the better reading (seed 108,
-/// Kinect-like, strong head motion: one lower-lip dot 14 mm too deep for a frame).
+/// a lip rolling out of it, and the paint's own patch is the better reading.
 pub const LIP_PATCH_AGREEMENT_M: f64 = 0.005;
 
 /// Neighbours nearer than this (pixels) give no direction along the lip.

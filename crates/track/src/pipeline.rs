@@ -4,6 +4,7 @@
 //! [`Pipeline::step`]). Its settings come from one place, [`PipelineConfig`]: the `[detect]`,
 //! `[track]` and `[retarget]` tables of a configuration file.
 
+use mouthpiece_config::{ConfigError, ConfigText};
 use mouthpiece_detect::DetectConfig;
 use mouthpiece_frame::Frame;
 use mouthpiece_retarget::jsonl::OutputLine;
@@ -48,6 +49,24 @@ pub enum Smooth {
     /// Closed uniform cubic B-spline, `samples_per_span` samples per point.
     #[default]
     Bspline,
+}
+
+impl Smooth {
+    /// Every shape smoothing by the name the configuration file (`[retarget] smooth`) and
+    /// the command line (`--smooth`) both use.
+    pub const ALL: [(&'static str, Smooth); 6] = [
+        ("none", Smooth::None),
+        ("ma", Smooth::Ma),
+        ("ma-weighted", Smooth::MaWeighted),
+        ("ma-exp", Smooth::MaExp),
+        ("sg5", Smooth::Sg5),
+        ("bspline", Smooth::Bspline),
+    ];
+
+    /// The smoothing a name gives, `None` for an unknown name.
+    pub fn from_name(name: &str) -> Option<Smooth> {
+        Self::ALL.iter().find(|(n, _)| *n == name).map(|&(_, s)| s)
+    }
 }
 
 /// How the characters' outputs are made (`[retarget]`): the shape smoothing that makes the
@@ -147,44 +166,50 @@ impl RetargetSettings {
 }
 
 impl PipelineConfig {
-    /// Parses and validates; errors name the key (`detect.class[0].hue[1]`).
-    pub fn from_toml_str(src: &str) -> Result<Self, TrackError> {
+    /// The `[detect]`, `[track]`, `[retarget]` and `[rig]` tables of a configuration file,
+    /// read by the one configuration loader (`mouthpiece_config::ConfigText`, which the
+    /// daemon's configuration holds too) and checked: every error names the file, the line
+    /// and the key (`booth.toml:12:1: key `detect.class[0].hue[0]`: …`).
+    pub fn from_text(text: &ConfigText) -> Result<Self, ConfigError> {
         #[derive(Deserialize)]
         struct Sections {
-            detect: Option<toml::Value>,
-            track: Option<toml::Value>,
-            retarget: Option<toml::Value>,
-            rig: Option<toml::Value>,
+            #[serde(default)]
+            detect: DetectConfig,
+            #[serde(default)]
+            track: TrackConfig,
+            #[serde(default)]
+            retarget: RetargetSettings,
+            #[serde(default)]
+            rig: RigSettings,
         }
-        let bad = |key: &str, e: toml::de::Error| TrackError::Config {
-            key: key.into(),
-            message: e.message().trim().to_string(),
-        };
-        let sections: Sections = toml::from_str(src).map_err(|e| bad("(file)", e))?;
-        let detect = match sections.detect {
-            Some(v) => v.try_into().map_err(|e| bad("detect", e))?,
-            None => DetectConfig::default(),
-        };
-        let track = match sections.track {
-            Some(v) => v.try_into().map_err(|e| bad("track", e))?,
-            None => TrackConfig::default(),
-        };
-        let retarget = match sections.retarget {
-            Some(v) => v.try_into().map_err(|e| bad("retarget", e))?,
-            None => RetargetSettings::default(),
-        };
-        let rig = match sections.rig {
-            Some(v) => v.try_into().map_err(|e| bad("rig", e))?,
-            None => RigSettings::default(),
-        };
+        let sections: Sections = text.extract()?;
         let config = Self {
-            detect,
-            track,
-            retarget,
-            rig,
+            detect: sections.detect,
+            track: sections.track,
+            retarget: sections.retarget,
+            rig: sections.rig,
         };
-        config.validate()?;
+        config.validate().map_err(|e| match e {
+            TrackError::Config { key, message } => text.invalid(&key, message),
+            other => text.invalid("detect", other.to_string()),
+        })?;
         Ok(config)
+    }
+
+    /// Reads a configuration file with [`Self::from_text`]; no file: the defaults.
+    pub fn load(path: Option<&std::path::Path>) -> Result<Self, ConfigError> {
+        match path {
+            Some(path) => Self::from_text(&ConfigText::read(path)?),
+            None => Ok(Self::default()),
+        }
+    }
+
+    /// [`Self::from_text`] on text in memory (errors name it `<configuration>`).
+    pub fn from_toml_str(src: &str) -> Result<Self, ConfigError> {
+        Self::from_text(&ConfigText::new(
+            std::path::Path::new("<configuration>"),
+            src,
+        ))
     }
 
     pub fn validate(&self) -> Result<(), TrackError> {
@@ -700,5 +725,17 @@ mod tests {
                 .to_string();
             assert!(err.contains(key), "{text}: {err}");
         }
+    }
+
+    /// The command line's names are the file's: each parses as `[retarget] smooth`.
+    #[test]
+    fn smoothing_names_are_the_files() {
+        for (name, smooth) in Smooth::ALL {
+            let cfg = PipelineConfig::from_toml_str(&format!("[retarget]\nsmooth = \"{name}\"\n"))
+                .unwrap();
+            assert_eq!(cfg.retarget.smooth, smooth, "{name}");
+            assert_eq!(Smooth::from_name(name), Some(smooth));
+        }
+        assert_eq!(Smooth::from_name("gaussian"), None);
     }
 }

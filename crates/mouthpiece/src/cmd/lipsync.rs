@@ -81,7 +81,7 @@ pub struct Args {
     #[arg(long, default_value = "/usr/share/pocketsphinx/model/en-us")]
     pub model: PathBuf,
     /// Shape smoothing that makes each line's `curve`.
-    #[arg(long, value_enum, default_value = "bspline")]
+    #[arg(long, value_parser = crate::cmd::retarget::smooth_arg(), default_value = "bspline")]
     pub smooth: Smooth,
 }
 

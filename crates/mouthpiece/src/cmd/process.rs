@@ -34,7 +34,7 @@ pub struct Args {
     pub out: PathBuf,
     /// Shape smoothing that makes each line's `curve` (default: the configuration's
     /// `[retarget] smooth`, `bspline` without one).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = crate::cmd::retarget::smooth_arg())]
     pub smooth: Option<Smooth>,
     /// Threads OpenCV may use (0: its default). 1 measures one core.
     #[arg(long, default_value_t = 0)]
@@ -42,16 +42,9 @@ pub struct Args {
 }
 
 /// Loads the `[detect]`/`[track]`/`[retarget]` configuration (defaults without a file).
+/// The daemon's loader: errors name the file, line and key.
 pub fn load_config(path: Option<&Path>) -> anyhow::Result<PipelineConfig> {
-    let Some(path) = path else {
-        return Ok(PipelineConfig::default());
-    };
-    let text = mouthpiece_config::read_bounded(path, mouthpiece_config::MAX_CONFIG_FILE_BYTES)
-        .with_context(|| format!("cannot read configuration {}", path.display()))
-        .map_err(bad_input)?;
-    PipelineConfig::from_toml_str(&text)
-        .with_context(|| format!("configuration {}", path.display()))
-        .map_err(bad_input)
+    PipelineConfig::load(path).map_err(bad_input)
 }
 
 /// Loads a character file.
@@ -68,7 +61,7 @@ pub fn load_character(path: &Path) -> anyhow::Result<Character> {
 /// (`[retarget]`: moving averages over 1 neighbour, alpha 0.5, 8 B-spline samples a span).
 pub(crate) fn smoothing(smooth: Smooth) -> ShapeSmoothing {
     RetargetSettings {
-        smooth: smooth.into(),
+        smooth,
         ..RetargetSettings::default()
     }
     .smoothing()
@@ -182,7 +175,7 @@ pub fn process_recording(
     let mut config = load_config(setup.config)?;
     let character = load_character(setup.character)?;
     if let Some(smooth) = setup.smooth {
-        config.retarget.smooth = smooth.into();
+        config.retarget.smooth = smooth;
     }
     let mut pipeline = Pipeline::for_characters(config, vec![character]).map_err(bad_input)?;
     if setup.opencv_threads > 0 {

@@ -20,39 +20,19 @@ use mouthpiece_retarget::{
     Character, CharacterSettings, MissingDots, NeutralAccumulator, OneEuroParams, PerformerDots,
     PerformerLayout, RetargetConfig, Retargeter, Rig, RigSettings,
 };
-use mouthpiece_track::pipeline::{RetargetSettings, Smooth as ConfigSmooth};
+use mouthpiece_track::pipeline::RetargetSettings;
 
 use crate::exit::bad_input;
 use mouthpiece_export::PendingFile;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Smooth {
-    /// No curve (`"curve": null`).
-    None,
-    /// Plain moving average over `--ma-radius` neighbours each side.
-    Ma,
-    /// Triangular-weighted moving average.
-    MaWeighted,
-    /// Exponentially weighted moving average (`--ma-alpha` per step).
-    MaExp,
-    /// Savitzky–Golay, 5-point quadratic.
-    Sg5,
-    /// Closed uniform cubic B-spline, `--samples-per-span` samples per point.
-    Bspline,
-}
+/// The shape smoothing: one enum for the configuration's `[retarget] smooth` and `--smooth`.
+pub use mouthpiece_track::pipeline::Smooth;
 
-impl From<Smooth> for ConfigSmooth {
-    /// The command line's `--smooth` as the configuration's `[retarget] smooth`.
-    fn from(smooth: Smooth) -> Self {
-        match smooth {
-            Smooth::None => ConfigSmooth::None,
-            Smooth::Ma => ConfigSmooth::Ma,
-            Smooth::MaWeighted => ConfigSmooth::MaWeighted,
-            Smooth::MaExp => ConfigSmooth::MaExp,
-            Smooth::Sg5 => ConfigSmooth::Sg5,
-            Smooth::Bspline => ConfigSmooth::Bspline,
-        }
-    }
+/// `--smooth`: the names of [`Smooth::ALL`], listed in `--help`.
+pub fn smooth_arg() -> impl clap::builder::TypedValueParser<Value = Smooth> {
+    use clap::builder::TypedValueParser as _;
+    clap::builder::PossibleValuesParser::new(Smooth::ALL.map(|(name, _)| name))
+        .map(|name| Smooth::from_name(&name).expect("a listed name"))
 }
 
 #[derive(Debug, clap::Args)]
@@ -67,7 +47,7 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// Shape smoothing that makes each line's `curve`.
-    #[arg(long, value_enum, default_value = "bspline")]
+    #[arg(long, value_parser = smooth_arg(), default_value = "bspline")]
     pub smooth: Smooth,
     /// Moving average: neighbours on each side.
     #[arg(long, default_value_t = 1)]
@@ -159,7 +139,7 @@ impl Args {
     fn config(&self) -> anyhow::Result<RetargetConfig> {
         // The one mapping from the option to the shape smoothing: the configuration's.
         let smoothing = RetargetSettings {
-            smooth: self.smooth.into(),
+            smooth: self.smooth,
             ma_radius: self.ma_radius,
             ma_alpha: self.ma_alpha,
             samples_per_span: self.samples_per_span,

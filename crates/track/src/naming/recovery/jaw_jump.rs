@@ -40,15 +40,14 @@ pub const JAW_JUMP_PX: f64 = 12.0;
 /// frame's jaw motion (up to 13 px) and the lag of the ghosts the last frame may have named
 /// the lip on, which the prediction starts from (up to 4.5 px). It can reach past the dots'
 /// spacing where [`JAW_JUMP_PX`] cannot, because it is the median over most of the lower lip
-/// and its names must land on free paint ([`lands_on_free_blobs`]). (It was 12: seed 105,
-/// Kinect-like, strong, t = 7.70 s, the jaw snapping shut after a frame on ghosts left the
-/// lower lip 12.2–12.7 px from its predictions and unnamed for two frames.)
+/// and its names must land on free paint ([`lands_on_free_blobs`]). (At 12, a jaw snapping
+/// shut after a frame on ghosts left the lower lip just past reach and unnamed for two
+/// frames: docs/lab/detection-log.md.)
 pub const WHOLE_LIP_JUMP_PX: f64 = 16.0;
 
-/// A lower-lip dot on a blob under this share of a dot's area is taken to be on a ghost.
-/// (0.6 was measured: the character of the mild sessions 0.05–0.07 % of the width better,
-/// but seed 32, Kinect-like, strong, 10 s, took the jaw's names wrongly: its worst rig curve
-/// 0.085 → 0.203.)
+/// A lower-lip dot on a blob under this share of a dot's area is taken to be on a ghost:
+/// half a dot's paint is more than a blurred trail leaves and less than a dot half
+/// occluded shows (0.6 took the jaw's names wrongly on a fast session: the lab notes).
 pub const GHOST_AREA_SHARE: f64 = 0.5;
 
 /// The whole-lip jump is tried only when it differs from the lost dots' by more than this,
@@ -63,9 +62,8 @@ pub const BETTER_AREA_RATIO: f64 = 1.3;
 /// of the lip dots' spacing runs along the lip, not across it (named heuristic *a jump along
 /// the lip lands on free paint*): its names must land on free paint like the whole lip's.
 /// The jaw moves the lower lip across the mouth; a jump along it is the missing dots' own
-/// paint out of their depth windows and their neighbours' paint nearest instead (seed 151,
-/// Kinect-like, strong, t = 4.83 s: 8.6 px along the lip and 3.2 px across, D9 and D10 each
-/// on the next dot's paint, 26 wrong names until the slipped-names check).
+/// paint out of their depth windows and their neighbours' paint nearest instead; taken, it
+/// puts each dot on the next dot's paint until the slipped-names check catches it.
 pub const ALONG_LIP_SHARE: f64 = 0.5;
 
 /// The jaw's names with as many lip dots that land on free paint, their lower lip on at
@@ -73,12 +71,10 @@ pub const ALONG_LIP_SHARE: f64 = 0.5;
 /// share of the frame's names' misses ([`lower_lip_depth_miss`]; named heuristic *the jaw's
 /// lip keeps its depth*). A ghost is the colour of where the lip was, but the camera's depth
 /// there is whatever surface is there now: the lip's rim or the mouth behind it. Ghosts as
-/// large as the paint (a bright blur) lose by their area only at [`BETTER_AREA_RATIO`] (seed
-/// 108, Kinect-like, strong, 10 s, t = 8.17 s: the lower lip on ghosts 5–9 mm deeper than its
-/// last depths, the jaw's names on paint within 1–3 mm, 73 px² against 65; the lower lip read
-/// rolled in, 7 mm too high). Not on less paint: a lip closing past its ghosts can leave them
-/// at its last depths (seed 62, Kinect-like, strong, 10 s, t = 2.33 s: blobs of 3–5 px² at the
-/// last depths against the paint 4 mm off).
+/// large as the paint (a bright blur) lose by their area only at [`BETTER_AREA_RATIO`]; their
+/// depths miss by several millimetres where the paint's miss by one or two. Not on less
+/// paint: a lip closing past its ghosts can leave small ghosts at its last depths. (The
+/// frames that showed both: docs/lab/detection-log.md.)
 pub const KEEPS_DEPTH_RATIO: f64 = 0.5;
 
 /// This many lower-lip dots on ghosts (with as many lip candidates free) say the jaw jumped
@@ -292,9 +288,7 @@ fn runs_along_the_lip(ctx: &Context, preds: &[[f64; 2]], shift: [f64; 2]) -> boo
 /// names the whole mouth again from the steady prediction, but the jaw carries the lower lip
 /// alone: the upper lip and the corners keep the names the frame has, which may come from a
 /// better pass (stopped lips). Compared whole, a jaw that found the lower lip on its paint
-/// lost to names on ghosts because its upper lip was named worse (seed 139, Kinect-like,
-/// strong, t = 5.27 s: eight lip dots against ten, the lower lip on 40 px² of paint against
-/// 18 of ghosts, and the lower lip read rolled in, 5–6 mm too high, as the lip rolled out).
+/// can lose to names on ghosts only because its upper lip was named worse.
 /// Tried only when the frame has two or more lower-lip dots on ghosts
 /// ([`GHOSTS_FOR_A_JUMP`]: the lower lip was left behind, not lost along the lip), before the
 /// jaw's names whole, and its lower lip must land on free paint. `None` when the two would

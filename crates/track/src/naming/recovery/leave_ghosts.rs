@@ -26,10 +26,8 @@ pub const NEAR_APART_SHARE: f64 = 0.5;
 /// A neighbour named on a blob of at least this many dots' area leads no one (named
 /// heuristic *a merged blob leads no one*): its centre lies between two dots' paint (a
 /// corner merged with the dot beside it), so its miss is the merge's, not the lip's motion.
-/// Seed 142, Kinect-like, strong, t = 4.67 s: in the jaw's hypothesis D8 on a corner's
-/// merged blob of 2.8 dots' area, short of its prediction shifted by the jaw's jump, pulled
-/// D9–D12 from their paint (13–16 px) back onto their ghosts (3–4 px) one after the other,
-/// so the jaw's names were the steady ones and lost.
+/// Lent on, it pulls the neighbours it leads back from their paint onto their ghosts one
+/// after the other (the measurement: docs/lab/detection-log.md).
 pub const MERGED_LEADS_NO_ONE_DOTS: f64 = 2.0;
 
 pub(crate) struct LeaveGhosts;
