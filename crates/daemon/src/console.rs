@@ -299,8 +299,8 @@ mod tests {
     /// missing, every frame's drawn box is the detector's searched rectangle.
     #[test]
     fn the_drawn_region_is_the_one_the_tracker_searched() {
+        use mouthpiece_pipeline::{Pipeline, PipelineConfig};
         use mouthpiece_synth::{Synth, SynthConfig};
-        use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
         let human =
             mouthpiece_retarget::Character::from_toml_str(crate::characters::BUILTIN[0].1).unwrap();
         let mut pipeline =

@@ -5,7 +5,7 @@
 //!   source with [`backoff`];
 //! - [`console`]: what the booth console page needs: the preview's image and dots, health
 //!   figures, the calibration report;
-//! - [`live`]: the processor: the frame pipeline (`mouthpiece_track::pipeline`: detect +
+//! - [`live`]: the processor: the frame pipeline (`mouthpiece_pipeline`: detect +
 //!   track + retarget) for every configured character;
 //! - [`pipeline`]: the processing thread around a [`pipeline::Processor`];
 //! - [`factory`]: builds the processor and its reloads from a configuration;

@@ -1,5 +1,5 @@
 //! The real processor behind `mouthpiece run`: capture's sources and the one frame pipeline
-//! (`mouthpiece_track::pipeline::Pipeline`: detect + track + retarget) for every configured
+//! (`mouthpiece_pipeline::Pipeline`: detect + track + retarget) for every configured
 //! character, configured from the `[detect]`, `[track]` and `[retarget]` tables as
 //! `mouthpiece process` is.
 
@@ -7,9 +7,9 @@ use std::time::{Duration, Instant};
 
 use mouthpiece_config::Config;
 use mouthpiece_frame::Frame;
+use mouthpiece_pipeline::{Pipeline, PipelineConfig};
 use mouthpiece_retarget::{Character, PerformerLayout};
 use mouthpiece_server::{CharacterFrame, CharacterInfo, PerformerFrame, StreamInfo};
-use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
 use mouthpiece_track::TrackedFrame;
 
 use crate::error::CheckError;

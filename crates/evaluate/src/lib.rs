@@ -30,9 +30,9 @@ mod measures;
 pub mod rig;
 mod steps;
 
+use mouthpiece_pipeline::{Pipeline, PipelineConfig, ProcessLine};
 use mouthpiece_retarget::{Character, CharacterSettings, PerformerLayout, ShapeSmoothing};
 use mouthpiece_synth::{GroundTruth, Synth, SynthConfig};
-use mouthpiece_track::pipeline::{Pipeline, PipelineConfig, ProcessLine};
 use mouthpiece_track::TrackedFrame;
 
 pub use measures::{CharacterError, DotStats, HeadError, Naming};

@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use mouthpiece_detect::{DetectConfig, Detector, DotRole};
+use mouthpiece_pipeline::PipelineConfig;
 use mouthpiece_recording::SessionReader;
-use mouthpiece_track::pipeline::PipelineConfig;
 
 fn mouthpiece() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mouthpiece"))

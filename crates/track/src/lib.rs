@@ -20,20 +20,22 @@
 //! Everything is on the caller's thread; no queues. A frame allocates nothing once the
 //! buffers kept between frames have grown.
 
-pub mod calibration;
+// The tracker's internals stay private: callers see the `Tracker`, its frame
+// (`TrackedFrame`), its settings and the camera helpers; the one frame pipeline around it is
+// `mouthpiece-pipeline`.
+mod calibration;
 pub mod camera;
-pub mod clock;
-pub mod config;
-pub mod depth;
-pub mod forehead;
-pub mod head;
-pub mod head_filter;
-pub mod labels;
-pub mod lip_depth;
-pub mod naming;
-pub mod output;
-pub mod pipeline;
-pub mod prediction;
+mod clock;
+mod config;
+mod depth;
+mod forehead;
+mod head;
+mod head_filter;
+mod labels;
+mod lip_depth;
+mod naming;
+mod output;
+mod prediction;
 
 use std::sync::Arc;
 
@@ -283,6 +285,11 @@ impl Tracker {
             filter.reset();
         }
         self.check_performer = self.stabiliser.is_some();
+    }
+
+    /// The last frame [`Self::process`] made.
+    pub fn last(&self) -> &TrackedFrame {
+        &self.out
     }
 
     /// Tracks one frame.

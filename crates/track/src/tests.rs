@@ -608,20 +608,6 @@ fn the_head_filter_steadies_a_jittering_pitch() {
     );
 }
 
-#[test]
-fn the_example_config_lists_the_defaults() {
-    // config/mouthpiece.toml documents every [detect], [track] and [retarget] key with its
-    // default.
-    let text = include_str!("../../../config/mouthpiece.toml");
-    let config = crate::pipeline::PipelineConfig::from_toml_str(text).unwrap();
-    assert_eq!(config.detect, DetectConfig::default());
-    assert_eq!(config.track, TrackConfig::default());
-    assert_eq!(
-        config.retarget,
-        crate::pipeline::RetargetSettings::default()
-    );
-}
-
 /// A source that restarts (a replay reopened from its start: the device clock goes back) is
 /// tracked on within a second, on a session clock that keeps running forward, and the same
 /// performer keeps the neutral pose.

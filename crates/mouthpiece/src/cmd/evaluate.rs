@@ -203,7 +203,7 @@ mod tests {
             lip_dots: 8,
             ..Default::default()
         };
-        let config = mouthpiece_track::pipeline::PipelineConfig::default();
+        let config = mouthpiece_pipeline::PipelineConfig::default();
         let err = mouthpiece_evaluate::check_layout(&layout, &config)
             .map_err(to_anyhow)
             .unwrap_err();

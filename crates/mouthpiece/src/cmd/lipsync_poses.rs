@@ -20,8 +20,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use mouthpiece_lipsync::poses::Pose;
 use mouthpiece_lipsync::BasicPoses;
+use mouthpiece_pipeline::Pipeline;
 use mouthpiece_retarget::{Character, CharacterSettings, Vec3};
-use mouthpiece_track::pipeline::Pipeline;
 
 use crate::cmd::process::{load_config, Input};
 use crate::exit::bad_input;

@@ -12,9 +12,9 @@ use std::time::Instant;
 
 use anyhow::Context as _;
 use mouthpiece_frame::{Frame, FrameSource};
+use mouthpiece_pipeline::{Pipeline, PipelineConfig, RetargetSettings};
 use mouthpiece_recording::SessionReader;
 use mouthpiece_retarget::{Character, ShapeSmoothing};
-use mouthpiece_track::pipeline::{Pipeline, PipelineConfig, RetargetSettings};
 
 use crate::cmd::retarget::Smooth;
 use crate::exit::{bad_input, bad_input_if};

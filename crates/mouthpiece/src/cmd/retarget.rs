@@ -15,18 +15,18 @@ use std::io::{self, BufRead, BufReader, BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
+use mouthpiece_pipeline::RetargetSettings;
 use mouthpiece_retarget::jsonl::{InputLine, OutputLine};
 use mouthpiece_retarget::{
     Character, CharacterSettings, MissingDots, NeutralAccumulator, OneEuroParams, PerformerDots,
     PerformerLayout, RetargetConfig, Retargeter, Rig, RigSettings,
 };
-use mouthpiece_track::pipeline::RetargetSettings;
 
 use crate::exit::bad_input;
 use mouthpiece_export::PendingFile;
 
 /// The shape smoothing: one enum for the configuration's `[retarget] smooth` and `--smooth`.
-pub use mouthpiece_track::pipeline::Smooth;
+pub use mouthpiece_pipeline::Smooth;
 
 /// `--smooth`: the names of [`Smooth::ALL`], listed in `--help`.
 pub fn smooth_arg() -> impl clap::builder::TypedValueParser<Value = Smooth> {

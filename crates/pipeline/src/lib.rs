@@ -14,7 +14,7 @@ use mouthpiece_retarget::{
 };
 use serde::{Deserialize, Serialize};
 
-use crate::{Status, TrackConfig, TrackError, TrackedFrame, Tracker};
+use mouthpiece_track::{Status, TrackConfig, TrackError, TrackedFrame, Tracker};
 
 /// The detector's, the tracker's and the retarget's settings: the `[detect]`, `[track]` and
 /// `[retarget]` tables of a configuration file (other tables belong to other parts of
@@ -131,7 +131,7 @@ impl RetargetSettings {
             one_euro: self.one_euro.map(|[min_cutoff, beta]| OneEuroParams {
                 min_cutoff,
                 beta,
-                d_cutoff: crate::ONE_EURO_DERIVATIVE_CUTOFF_HZ,
+                d_cutoff: mouthpiece_track::ONE_EURO_DERIVATIVE_CUTOFF_HZ,
             }),
         }
     }
@@ -406,7 +406,7 @@ impl Pipeline {
 
     /// The last frame the tracker made (after [`Pipeline::step`]).
     pub fn tracked(&self) -> &TrackedFrame {
-        &self.tracker.out
+        self.tracker.last()
     }
 
     /// Turns `character`'s head to `point` (its model frame), or back to following the
@@ -535,7 +535,7 @@ impl Pipeline {
         {
             self.bind()?;
         }
-        if let Some(stabilised) = &self.tracker.out.stabilised {
+        if let Some(stabilised) = &self.tracker.last().stabilised {
             for bound in self.bound.iter_mut().flatten() {
                 bound.apply(stabilised);
             }
@@ -559,7 +559,7 @@ impl Pipeline {
         frame: &Frame,
     ) -> Result<(ProcessLine<'_>, &TrackedFrame), TrackError> {
         self.step(frame)?;
-        let tracked = &self.tracker.out;
+        let tracked = self.tracker.last();
         let first = self.bound.first().and_then(Option::as_ref);
         match (first, &tracked.stabilised) {
             (Some(bound), Some(stabilised)) => {
@@ -737,5 +737,16 @@ mod tests {
             assert_eq!(Smooth::from_name(name), Some(smooth));
         }
         assert_eq!(Smooth::from_name("gaussian"), None);
+    }
+
+    #[test]
+    fn the_example_config_lists_the_defaults() {
+        // config/mouthpiece.toml documents every [detect], [track] and [retarget] key with its
+        // default.
+        let text = include_str!("../../../config/mouthpiece.toml");
+        let config = PipelineConfig::from_toml_str(text).unwrap();
+        assert_eq!(config.detect, DetectConfig::default());
+        assert_eq!(config.track, TrackConfig::default());
+        assert_eq!(config.retarget, RetargetSettings::default());
     }
 }

@@ -6,7 +6,7 @@
 //! leave the results alone can be checked bit for bit.
 //!
 //! ```sh
-//! cargo build --release -p mouthpiece-track --example profile_frames
+//! cargo build --release -p mouthpiece-pipeline --example profile_frames
 //! valgrind --tool=callgrind --toggle-collect='*profiled_frames*' \
 //!     --callgrind-out-file=callgrind.640 target/release/examples/profile_frames 640 480
 //! callgrind_annotate --inclusive=yes callgrind.640 | head -60
@@ -17,9 +17,9 @@
 use std::hint::black_box;
 
 use mouthpiece_frame::Frame;
+use mouthpiece_pipeline::{Pipeline, PipelineConfig};
 use mouthpiece_retarget::{Character, CharacterSettings, ShapeSmoothing};
 use mouthpiece_synth::{Synth, SynthConfig};
-use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
 
 const WOLF: &str = include_str!("../../../config/characters/wolf.toml");
 

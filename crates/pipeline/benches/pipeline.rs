@@ -1,7 +1,7 @@
 //! Detect + track + retarget per frame, on the synthetic performer's frames (kinect noise,
 //! mild head motion), at 640x480 and 1280x720, OpenCV on one thread.
 //!
-//! `cargo bench -p mouthpiece-track --bench pipeline`. Besides criterion's report, prints the
+//! `cargo bench -p mouthpiece-pipeline --bench pipeline`. Besides criterion's report, prints the
 //! median and 99th percentile of single-frame times over the rendered session. Each size is
 //! measured twice: with the frame just written by a source thread, as the daemon hands it
 //! over, and with a frame long out of every cache (see [`Delivery`]).
@@ -11,9 +11,9 @@ use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use mouthpiece_frame::Frame;
+use mouthpiece_pipeline::{Pipeline, PipelineConfig};
 use mouthpiece_retarget::{Character, CharacterSettings, ShapeSmoothing};
 use mouthpiece_synth::{Synth, SynthConfig};
-use mouthpiece_track::pipeline::{Pipeline, PipelineConfig};
 
 const WOLF: &str = include_str!("../../../config/characters/wolf.toml");
 
