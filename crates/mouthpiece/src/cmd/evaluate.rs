@@ -70,6 +70,13 @@ pub struct Args {
     /// them (`scripts/rig-error-split.py` reads it).
     #[arg(long, value_name = "FILE")]
     pub rig_frames: Option<PathBuf>,
+    /// Image size WIDTHxHEIGHT of the rendered sessions (focal length 525 px at 640 wide,
+    /// scaled), as `synth --size`.
+    #[arg(long, default_value = "640x480", value_parser = crate::cmd::synth::parse_size)]
+    pub size: (u32, u32),
+    /// Camera to the mouth, metres, as `synth --distance`.
+    #[arg(long, default_value_t = 0.6)]
+    pub distance: f64,
 }
 
 /// A bad `--layout` is the caller's input (exit code 2); anything else is not.
@@ -138,6 +145,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         Noise::Realsense => NoiseModel::Realsense,
                     },
                     layout: layout.clone(),
+                    camera: SynthConfig::camera_for_size(args.size.0, args.size.1),
+                    distance_m: args.distance,
                     ..SynthConfig::default()
                 };
                 let mut rig = RigAccuracy::new(
