@@ -247,7 +247,12 @@ fn main() {
 fn glb_seeds() {
     use mouthpiece_bind::{gltf_io, Method, ModelUp};
     let mut bin = Vec::new();
-    for p in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]] {
+    for p in [
+        [0.0f32, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+    ] {
         for c in p {
             bin.extend_from_slice(&c.to_le_bytes());
         }
@@ -291,10 +296,9 @@ fn glb_seeds() {
     put("gltf_mesh", "square-split", &split);
 
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let rig = mouthpiece_export::MouthRig::load_character(
-        &repo.join("config/characters/human.toml"),
-    )
-    .unwrap();
+    let rig =
+        mouthpiece_export::MouthRig::load_character(&repo.join("config/characters/human.toml"))
+            .unwrap();
     let dir = std::env::temp_dir().join(format!("mouthpiece-seed-glb-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let head = mouthpiece_bind::character_head(&rig, ModelUp::Y, 0.0, 1).unwrap();

@@ -580,3 +580,86 @@ fn head_writes_a_valid_mesh_and_evaluate_prints_the_table() {
     ]);
     assert_eq!(o.status.code(), Some(2));
 }
+
+#[test]
+fn absurd_flags_and_hostile_meshes_exit_2_naming_what() {
+    let dir = tempfile::tempdir().unwrap();
+    let human = character("human");
+    let out = dir.path().join("x.glb");
+    let refused = |args: &[&str], what: &str| {
+        let o = mouthpiece(args);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(what), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} left {}", out.display());
+    };
+    // 12·R·(5R + 2) vertices: 6·10^11 at R = 100000
+    refused(
+        &[
+            "bind",
+            "head",
+            "--character",
+            s(&human),
+            "--resolution",
+            "100000",
+            "--out",
+            s(&out),
+        ],
+        "--resolution",
+    );
+    refused(&["bind", "evaluate", "--heads", "1000000000"], "--heads");
+    refused(
+        &[
+            "bind",
+            "train",
+            "--seed",
+            "1",
+            "--heads",
+            "1000000000",
+            "--out",
+            s(&out),
+        ],
+        "--heads",
+    );
+    refused(
+        &[
+            "bind",
+            "evaluate",
+            "--heads",
+            "0",
+            "--character",
+            s(&human),
+            "--snout",
+            "NaN",
+        ],
+        "--snout",
+    );
+    // a mesh whose buffer is a file outside its folder
+    let asset = dir.path().join("asset");
+    std::fs::create_dir(&asset).unwrap();
+    let mesh = asset.join("mesh.gltf");
+    std::fs::write(
+        &mesh,
+        serde_json::json!({
+            "asset": {"version": "2.0"},
+            "buffers": [{"uri": "/etc/passwd", "byteLength": 12}],
+            "meshes": [],
+        })
+        .to_string(),
+    )
+    .unwrap();
+    refused(
+        &[
+            "bind",
+            "--character",
+            s(&human),
+            "--mesh",
+            s(&mesh),
+            "--out",
+            s(&out),
+            "--method",
+            "distance",
+        ],
+        "buffer 0: URI `/etc/passwd` is an absolute path",
+    );
+}
