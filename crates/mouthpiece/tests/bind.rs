@@ -581,33 +581,45 @@ fn head_writes_a_valid_mesh_and_evaluate_prints_the_table() {
     assert_eq!(o.status.code(), Some(2));
 }
 
+/// Runs `mouthpiece args`: exit 2, `what` in the error, nothing at `out`.
+fn refused(args: &[&str], what: &str, out: &Path) {
+    let o = mouthpiece(args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+    assert!(err.contains(what), "{args:?}: {err}");
+    assert!(!out.exists(), "{args:?} left {}", out.display());
+}
+
 #[test]
-fn absurd_flags_and_hostile_meshes_exit_2_naming_what() {
+fn a_head_resolution_whose_head_is_too_large_is_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let human = character("human");
     let out = dir.path().join("x.glb");
-    let refused = |args: &[&str], what: &str| {
-        let o = mouthpiece(args);
-        let err = String::from_utf8_lossy(&o.stderr).into_owned();
-        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
-        assert!(err.contains(what), "{args:?}: {err}");
-        assert!(!out.exists(), "{args:?} left {}", out.display());
-    };
     // 12·R·(5R + 2) vertices: 6·10^11 at R = 100000
     refused(
         &[
             "bind",
             "head",
             "--character",
-            s(&human),
+            s(&character("human")),
             "--resolution",
             "100000",
             "--out",
             s(&out),
         ],
         "--resolution",
+        &out,
     );
-    refused(&["bind", "evaluate", "--heads", "1000000000"], "--heads");
+}
+
+#[test]
+fn a_billion_heads_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.bin");
+    refused(
+        &["bind", "evaluate", "--heads", "1000000000"],
+        "--heads",
+        &out,
+    );
     refused(
         &[
             "bind",
@@ -620,7 +632,13 @@ fn absurd_flags_and_hostile_meshes_exit_2_naming_what() {
             s(&out),
         ],
         "--heads",
+        &out,
     );
+}
+
+#[test]
+fn a_snout_of_nan_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
     refused(
         &[
             "bind",
@@ -628,13 +646,19 @@ fn absurd_flags_and_hostile_meshes_exit_2_naming_what() {
             "--heads",
             "0",
             "--character",
-            s(&human),
+            s(&character("human")),
             "--snout",
             "NaN",
         ],
         "--snout",
+        &dir.path().join("nothing"),
     );
-    // a mesh whose buffer is a file outside its folder
+}
+
+#[test]
+fn a_mesh_naming_a_buffer_outside_its_folder_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.glb");
     let asset = dir.path().join("asset");
     std::fs::create_dir(&asset).unwrap();
     let mesh = asset.join("mesh.gltf");
@@ -652,7 +676,7 @@ fn absurd_flags_and_hostile_meshes_exit_2_naming_what() {
         &[
             "bind",
             "--character",
-            s(&human),
+            s(&character("human")),
             "--mesh",
             s(&mesh),
             "--out",
@@ -661,5 +685,6 @@ fn absurd_flags_and_hostile_meshes_exit_2_naming_what() {
             "distance",
         ],
         "buffer 0: URI `/etc/passwd` is an absolute path",
+        &out,
     );
 }
