@@ -496,7 +496,8 @@ fn read_accessor(
                 C::U16 => u16::from_le_bytes([b[0], b[1]]) as f64,
                 _ => b[0] as f64,
             };
-            if usage == Use::Positions && !(v.abs() <= MAX_COORDINATE) {
+            // NaN fails every comparison: `is_finite` first says so plainly.
+            if usage == Use::Positions && (!v.is_finite() || v.abs() > MAX_COORDINATE) {
                 return Err(format!(
                     "element {e} holds {v}: not a finite number within ±{MAX_COORDINATE} \
                      (wrong units?)"
