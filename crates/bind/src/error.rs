@@ -17,12 +17,8 @@ pub enum BindError {
         cause: io::Error,
     },
     /// The mesh file is larger than the binder accepts.
-    #[error("{}: {size} bytes is more than the {limit} bytes a mesh may have", path.display())]
-    TooLarge {
-        path: PathBuf,
-        size: u64,
-        limit: u64,
-    },
+    #[error("{}: more than the {limit} bytes a mesh may have", path.display())]
+    TooLarge { path: PathBuf, limit: u64 },
     /// The file is not glTF/GLB, or its JSON does not parse.
     #[error("{}: not a glTF/GLB file: {problem}", path.display())]
     NotGltf { path: PathBuf, problem: String },
@@ -34,10 +30,13 @@ pub enum BindError {
     Geometry(String),
     /// A mouth point lies far from every vertex of the mesh.
     #[error(
-        "mouth point {name} is {distance:.4} from the nearest vertex, more than {limit:.4} \
-         ({fraction} of the mouth width): is the mesh in the character's model frame and units?"
+        "{}mouth point {name} is {distance:.4} from the nearest vertex, more than {limit:.4} \
+         ({fraction} of the mouth width): is the mesh in the character's model frame and units?",
+        mesh.as_ref().map_or(String::new(), |p| format!("{}: ", p.display()))
     )]
     PointFarFromMesh {
+        /// The mesh file, when the mesh came from one.
+        mesh: Option<PathBuf>,
         name: String,
         distance: f64,
         limit: f64,

@@ -22,6 +22,7 @@
 mod error;
 pub mod eval;
 pub mod gltf_io;
+mod gltf_read;
 pub mod mesh;
 pub mod network;
 pub mod procedural;
@@ -90,6 +91,11 @@ pub fn prepare(rig: &MouthRig, model_up: ModelUp, welded: &Mesh) -> Result<Prepa
     }
     welded.validate()?;
     let width = rig.mouth_width();
+    if !(width.is_finite() && width > 0.0) {
+        return Err(BindError::BadArgument(format!(
+            "the character's mouth width is {width}: its corners must lie apart along x"
+        )));
+    }
     let inverse = file_placement(rig, model_up).inverse();
     let mesh = welded.map_positions(|p| {
         let q = inverse * Point3::from(p);
@@ -104,6 +110,7 @@ pub fn prepare(rig: &MouthRig, model_up: ModelUp, welded: &Mesh) -> Result<Prepa
             .fold(f64::INFINITY, f64::min);
         if nearest > POINT_DISTANCE_LIMIT {
             return Err(BindError::PointFarFromMesh {
+                mesh: None,
                 name: rig.points()[k].name.clone(),
                 distance: nearest * width,
                 limit: POINT_DISTANCE_LIMIT * width,
@@ -157,7 +164,23 @@ pub fn bind(
     method: Method,
 ) -> Result<BindSummary, BindError> {
     let loaded = gltf_io::read_mesh(mesh_path)?;
-    let prepared = prepare(rig, model_up, &loaded.welded)?;
+    loaded.check(mesh_path)?;
+    let prepared = prepare(rig, model_up, &loaded.welded).map_err(|e| match e {
+        BindError::PointFarFromMesh {
+            name,
+            distance,
+            limit,
+            fraction,
+            ..
+        } => BindError::PointFarFromMesh {
+            mesh: Some(mesh_path.to_path_buf()),
+            name,
+            distance,
+            limit,
+            fraction,
+        },
+        e => e,
+    })?;
     let welded_weights = compute_weights(&prepared, method);
     let welded_normals = loaded.welded.normals();
     let weights = Weights {
@@ -193,6 +216,15 @@ pub fn bind(
     })
 }
 
+/// Largest `bind head --resolution`: the largest whose head the binder still accepts
+/// ([`mesh::MAX_VERTICES`]).
+pub const MAX_HEAD_RESOLUTION: usize = 128;
+
+/// Vertices of [`character_head`] at `resolution`: 12·R around each of 5·R + 2 rings.
+pub fn head_vertices(resolution: usize) -> usize {
+    12 * resolution * (5 * resolution + 2)
+}
+
 /// A procedural head around a character's mouth, in the character's model frame and units
 /// (the meshes shipped in `config/characters/`), its axes turned into glTF's for a Z-up
 /// model. `snout` 0 is a human face, 1 a long muzzle.
@@ -208,12 +240,25 @@ pub fn character_head(
             rig.points().len()
         )));
     }
-    if !(0.0..=1.0).contains(&snout) || resolution == 0 {
+    if !(0.0..=1.0).contains(&snout) {
         return Err(BindError::BadArgument(format!(
-            "snout must be in 0…1 (got {snout}) and the resolution at least 1 (got {resolution})"
+            "--snout must be in 0…1 (got {snout})"
+        )));
+    }
+    if !(1..=MAX_HEAD_RESOLUTION).contains(&resolution) {
+        return Err(BindError::BadArgument(format!(
+            "--resolution must be 1…{MAX_HEAD_RESOLUTION} (got {resolution}; {MAX_HEAD_RESOLUTION} \
+             makes a head of {} vertices, the binder takes at most {})",
+            head_vertices(MAX_HEAD_RESOLUTION),
+            mesh::MAX_VERTICES
         )));
     }
     let width = rig.mouth_width();
+    if !(width.is_finite() && width > 0.0) {
+        return Err(BindError::BadArgument(format!(
+            "the character's mouth width is {width}: its corners must lie apart along x"
+        )));
+    }
     let points = std::array::from_fn(|k| rig.points()[k].rest.map(|c| c / width));
     let head = procedural::HeadParams::around_points(points, snout, resolution).build();
     let placement = file_placement(rig, model_up);

@@ -23,48 +23,55 @@ impl Mesh {
     /// every edge shared by at most two triangles (a non-manifold edge has no well-defined
     /// surface around it, so neither heat diffusion nor graph neighbours are meaningful).
     pub fn validate(&self) -> Result<(), BindError> {
+        self.check()
+            .map_err(|(_, problem)| BindError::Geometry(problem))
+    }
+
+    /// [`validate`](Self::validate)'s checks; an error says what is wrong and, when one
+    /// triangle is at fault, which.
+    pub fn check(&self) -> Result<(), (Option<usize>, String)> {
         let n = self.positions.len();
         if self.triangles.is_empty() {
-            return Err(BindError::Geometry("the mesh has no triangles".into()));
+            return Err((None, "the mesh has no triangles".into()));
         }
         if n > MAX_VERTICES {
-            return Err(BindError::Geometry(format!(
-                "{n} vertices is more than the {MAX_VERTICES} the binder accepts"
-            )));
+            return Err((
+                None,
+                format!("{n} vertices is more than the {MAX_VERTICES} the binder accepts"),
+            ));
         }
         if let Some(i) = self
             .positions
             .iter()
             .position(|p| p.iter().any(|c| !c.is_finite()))
         {
-            return Err(BindError::Geometry(format!(
-                "vertex {i} has a non-finite coordinate"
-            )));
+            return Err((None, format!("vertex {i} has a non-finite coordinate")));
         }
         let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 2);
         for (t, tri) in self.triangles.iter().enumerate() {
             if let Some(&bad) = tri.iter().find(|&&i| i as usize >= n) {
-                return Err(BindError::Geometry(format!(
-                    "triangle {t} names vertex {bad}, but there are {n} vertices"
-                )));
+                return Err((
+                    Some(t),
+                    format!("triangle {t} names vertex {bad}, but there are {n} vertices"),
+                ));
             }
             if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-                return Err(BindError::Geometry(format!(
-                    "triangle {t} repeats a vertex ({:?})",
-                    tri
-                )));
+                return Err((Some(t), format!("triangle {t} repeats a vertex ({tri:?})")));
             }
             for k in 0..3 {
                 let (a, b) = (tri[k], tri[(k + 1) % 3]);
                 let count = edges.entry((a.min(b), a.max(b))).or_insert(0);
                 *count += 1;
                 if *count > 2 {
-                    return Err(BindError::Geometry(format!(
-                        "non-manifold: the edge between vertices {} and {} belongs to more \
-                         than two triangles (triangle {t} is the third)",
-                        a.min(b),
-                        a.max(b)
-                    )));
+                    let (a, b) = (a.min(b), a.max(b));
+                    return Err((
+                        Some(t),
+                        format!(
+                            "non-manifold: the edge between vertices {a} and {b} (at {:?} and \
+                             {:?}) belongs to more than two triangles (triangle {t} is the third)",
+                            self.positions[a as usize], self.positions[b as usize]
+                        ),
+                    ));
                 }
             }
         }

@@ -73,6 +73,24 @@ impl Widths {
     fn second(&self) -> usize {
         self.first + 2 * self.conv
     }
+
+    /// (inputs, outputs) of each linear layer, in order.
+    fn layer_shapes(&self) -> [(usize, usize); 7] {
+        [
+            (FEATURES, self.first),
+            (2 * self.first, self.conv),
+            (self.second(), self.global),
+            (2 * self.second(), self.local),
+            (2 * self.local, self.local),
+            (self.global + self.local, self.head),
+            (self.head, JOINTS),
+        ]
+    }
+
+    /// Parameters of a network of these widths, computed without building it.
+    pub fn parameter_count(&self) -> usize {
+        self.layer_shapes().iter().map(|(i, o)| i * o + o).sum()
+    }
 }
 
 /// A linear layer: `Y = X W + b`.
@@ -276,16 +294,11 @@ impl Network {
     /// A freshly initialised network (reproducible from `seed`).
     pub fn new(widths: Widths, seed: u64) -> Self {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let w = widths;
-        let layers = vec![
-            Linear::new(FEATURES, w.first, &mut rng),
-            Linear::new(2 * w.first, w.conv, &mut rng),
-            Linear::new(w.second(), w.global, &mut rng),
-            Linear::new(2 * w.second(), w.local, &mut rng),
-            Linear::new(2 * w.local, w.local, &mut rng),
-            Linear::new(w.global + w.local, w.head, &mut rng),
-            Linear::new(w.head, JOINTS, &mut rng),
-        ];
+        let layers = widths
+            .layer_shapes()
+            .iter()
+            .map(|&(i, o)| Linear::new(i, o, &mut rng))
+            .collect();
         Self { widths, layers }
     }
 
@@ -460,12 +473,13 @@ impl Network {
             local: num[3],
             head: num[4],
         };
-        let mut net = Self::new(widths, 0);
-        if net.parameter_count() != num[5] || bytes.len() - end - 1 != 4 * num[5] {
+        // Checked against the header and the file's size before any layer is allocated.
+        if widths.parameter_count() != num[5] || bytes.len() - end - 1 != 4 * num[5] {
             return Err(bad(
                 "the parameter count does not match the widths or the file size",
             ));
         }
+        let mut net = Self::new(widths, 0);
         let mut values = bytes[end + 1..]
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]));

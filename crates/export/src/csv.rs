@@ -160,12 +160,20 @@ impl CsvWriter {
     }
 }
 
-/// RFC 4180 quoting for a field that holds a comma, quote or line break.
+/// A text cell (the header's names): a leading `=`, `+`, `-`, `@`, tab or carriage return,
+/// which a spreadsheet would run as a formula, gets a `'` in front (OWASP's advice against
+/// CSV injection; the spreadsheet shows the text as written), then RFC 4180 quoting when the
+/// cell holds a comma, quote or line break.
 fn quote(field: &str) -> String {
+    let field = if field.starts_with(['=', '+', '-', '@', '\t', '\r']) {
+        format!("'{field}")
+    } else {
+        field.to_owned()
+    };
     if field.contains([',', '"', '\n', '\r']) {
         format!("\"{}\"", field.replace('"', "\"\""))
     } else {
-        field.to_owned()
+        field
     }
 }
 
@@ -227,6 +235,81 @@ mod tests {
                 rig_header()
             )
         );
+    }
+
+    #[test]
+    fn names_cannot_break_columns_or_run_as_formulas() {
+        let dir = tempfile::tempdir().unwrap();
+        let names = [
+            "=HYPERLINK(\"http://x\",\"y\")",
+            "a,b",
+            "say \"hi\"",
+            "two\nlines",
+            "@SUM(A1)",
+            "+1",
+            "-2",
+            "plain",
+        ];
+        let rig = MouthRig::new(
+            None,
+            names
+                .iter()
+                .map(|n| RigPoint {
+                    name: (*n).into(),
+                    rest: [0.0; 3],
+                })
+                .collect(),
+            nalgebra::Isometry3::identity(),
+        )
+        .unwrap();
+        let path = dir.path().join("take.csv");
+        let mut w = CsvWriter::create(&rig, &path).unwrap();
+        w.push(&TakeFrame {
+            line: 1,
+            t: 0.0,
+            points: vec![Some([-1.0, 2.0, 3.0]); names.len()],
+            curve: None,
+            head: None,
+            rig: None,
+        })
+        .unwrap();
+        w.finish().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let header = rfc4180_cells(&text);
+        assert_eq!(header[0], "t");
+        for (k, name) in names.iter().enumerate() {
+            let cell = &header[1 + 3 * k];
+            let expected = if name.starts_with(['=', '+', '-', '@']) {
+                format!("'{name}_x")
+            } else {
+                format!("{name}_x")
+            };
+            assert_eq!(cell, &expected);
+        }
+        assert_eq!(header.len(), 1 + 3 * names.len() + 20);
+        // Numbers stay numbers: only text cells get the quote mark.
+        let row = text.lines().last().unwrap();
+        assert!(row.starts_with("0,-1,2,3,-1,2,3"), "{row}");
+    }
+
+    /// The first record of an RFC 4180 text, cell by cell (quotes undone).
+    fn rfc4180_cells(text: &str) -> Vec<String> {
+        let mut cells = vec![String::new()];
+        let mut quoted = false;
+        let mut chars = text.chars().peekable();
+        while let Some(c) = chars.next() {
+            match (quoted, c) {
+                (true, '"') if chars.peek() == Some(&'"') => {
+                    chars.next();
+                    cells.last_mut().unwrap().push('"');
+                }
+                (_, '"') => quoted = !quoted,
+                (false, ',') => cells.push(String::new()),
+                (false, '\n') => break,
+                (_, c) => cells.last_mut().unwrap().push(c),
+            }
+        }
+        cells
     }
 
     #[test]

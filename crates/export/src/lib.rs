@@ -14,10 +14,12 @@
 //! - [`reduce`]: the [`Reducer`], streaming key reduction within a tolerance.
 //! - [`csv`]: the streaming [`CsvWriter`].
 //! - [`onto_rig`]: a take's animation copied onto a rigged mesh (`export --rig`).
+//! - [`asset`]: files a glTF names, read only from its own folder; bounded reads.
 //!
 //! The writers take frames from any source, so a recording turned into frames by the
 //! processing pipeline feeds them the same way as a JSONL file.
 
+pub mod asset;
 pub mod csv;
 mod error;
 pub mod gltf;

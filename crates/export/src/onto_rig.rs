@@ -95,17 +95,55 @@ fn rig_error(path: &Path, problem: impl Into<String>) -> ExportError {
     }
 }
 
+/// Largest rig (and take GLB) read by [`animate_rig`]; a bound head is far smaller.
+pub const MAX_RIG_BYTES: u64 = 256 * 1024 * 1024;
+
 /// Copies the animation of `take_glb` (a GLB from [`crate::GltfWriter`]) onto the rig
 /// `rig_glb` (a GLB from `mouthpiece bind`), writing `out`.
 pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSummary, ExportError> {
     let read = |path: &Path| {
-        std::fs::read(path).map_err(|cause| ExportError::RigRead {
-            path: path.to_path_buf(),
-            cause,
+        crate::asset::read_bounded(path, MAX_RIG_BYTES).map_err(|cause| {
+            if cause.kind() == std::io::ErrorKind::InvalidData {
+                rig_error(path, format!("the file is {cause}: not a rig"))
+            } else {
+                ExportError::RigRead {
+                    path: path.to_path_buf(),
+                    cause,
+                }
+            }
         })
     };
     let rig_bytes = read(rig_glb)?;
-    let rig = parse_glb(&rig_bytes).map_err(|p| rig_error(rig_glb, p))?;
+    let take_bytes = read(take_glb)?;
+    let rigged = animate_rig_bytes(&rig_bytes, rig_glb, &take_bytes, take_glb)?;
+    let out_err = |cause: std::io::Error| ExportError::write(out, cause);
+    let mut pending = PendingFile::create(out).map_err(out_err)?;
+    write_glb(&rigged.json, &rigged.bin, &mut pending).map_err(out_err)?;
+    pending.commit().map_err(out_err)?;
+    Ok(RigSummary {
+        channels: rigged.channels,
+    })
+}
+
+/// A rig with a take's animation, ready to be written as GLB.
+#[derive(Clone, Debug)]
+pub struct RiggedGlb {
+    pub json: Vec<u8>,
+    pub bin: Vec<u8>,
+    /// Channels copied onto the rig's joints.
+    pub channels: usize,
+}
+
+/// [`animate_rig`] on the files' bytes (`rig_glb` and `take_glb` name them in errors; the
+/// rig's folder is where its image URIs must stay). Nothing outside the two byte strings is
+/// read: the rig's one buffer must be its binary chunk.
+pub fn animate_rig_bytes(
+    rig_bytes: &[u8],
+    rig_glb: &Path,
+    take_bytes: &[u8],
+    take_glb: &Path,
+) -> Result<RiggedGlb, ExportError> {
+    let rig = parse_glb(rig_bytes).map_err(|p| rig_error(rig_glb, p))?;
     let mut root: json::Root = serde_json::from_slice(&rig.json)
         .map_err(|e| rig_error(rig_glb, format!("glTF JSON: {e}")))?;
     if root.buffers.len() != 1 || root.buffers[0].uri.is_some() {
@@ -114,17 +152,39 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
             "expected one buffer, the GLB's binary chunk",
         ));
     }
+    let folder = crate::output::parent_dir(rig_glb);
+    for (i, image) in root.images.iter().enumerate() {
+        if let Some(uri) = image.uri.as_deref().filter(|u| !u.starts_with("data:")) {
+            crate::asset::check_inside(folder, uri).map_err(|why| {
+                rig_error(
+                    rig_glb,
+                    format!("image {i}: URI `{}` {why}", crate::asset::shown(uri)),
+                )
+            })?;
+        }
+    }
     if root.skins.is_empty() {
         return Err(rig_error(
             rig_glb,
             "no skin: bind the mesh with `mouthpiece bind` first",
         ));
     }
-    let take_bytes =
-        std::fs::read(take_glb).map_err(|cause| ExportError::write(take_glb, cause))?;
-    let take = parse_glb(&take_bytes).map_err(|p| rig_error(take_glb, p))?;
+    let nodes = root.nodes.len();
+    for (k, joint) in root.skins[0].joints.iter().enumerate() {
+        if joint.value() >= nodes {
+            return Err(rig_error(
+                rig_glb,
+                format!(
+                    "skin 0: joint {k} is node {}, but the rig has {nodes} nodes",
+                    joint.value()
+                ),
+            ));
+        }
+    }
+    let take = parse_glb(take_bytes).map_err(|p| rig_error(take_glb, p))?;
     let take_root: json::Root = serde_json::from_slice(&take.json)
         .map_err(|e| rig_error(take_glb, format!("glTF JSON: {e}")))?;
+    let take_bad = |problem: &str| rig_error(take_glb, problem);
     let mut bin = rig.bin;
     let joint_by_name = |name: &str| -> Result<json::Index<json::Node>, ExportError> {
         let joints = &root.skins[0].joints;
@@ -136,11 +196,14 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
             [one] => Ok(**one),
             [] => Err(rig_error(
                 rig_glb,
-                format!("the take animates point {name}, but the rig has no joint of that name"),
+                format!(
+                    "the take animates point {}, but the rig has no joint of that name",
+                    crate::asset::shown(name)
+                ),
             )),
             _ => Err(rig_error(
                 rig_glb,
-                format!("more than one joint is named {name}"),
+                format!("more than one joint is named {}", crate::asset::shown(name)),
             )),
         }
     };
@@ -156,7 +219,10 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
     };
     let mut targets = Vec::new();
     for channel in &animation.channels {
-        let name = take_root.nodes[channel.target.node.value()]
+        let name = take_root
+            .nodes
+            .get(channel.target.node.value())
+            .ok_or_else(|| take_bad("a channel animates a node that does not exist"))?
             .name
             .clone()
             .unwrap_or_default();
@@ -169,19 +235,28 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
         if let Some(&done) = copied_accessors.get(&index.value()) {
             return Ok(done);
         }
-        let mut accessor = take_root.accessors[index.value()].clone();
+        let mut accessor = take_root
+            .accessors
+            .get(index.value())
+            .ok_or_else(|| take_bad("a sampler names an accessor that does not exist"))?
+            .clone();
         if let Some(view_index) = accessor.buffer_view {
-            let view = &take_root.buffer_views[view_index.value()];
-            let start = view.byte_offset.map_or(0, |o| o.0) as usize;
-            let end = start + view.byte_length.0 as usize;
+            let view = take_root
+                .buffer_views
+                .get(view_index.value())
+                .ok_or_else(|| take_bad("an accessor names a buffer view that does not exist"))?;
+            let start = view.byte_offset.map_or(0, |o| o.0);
+            let bytes = start
+                .checked_add(view.byte_length.0)
+                .and_then(|end| {
+                    take.bin
+                        .get(usize::try_from(start).ok()?..usize::try_from(end).ok()?)
+                })
+                .ok_or_else(|| take_bad("a buffer view runs past the binary chunk"))?;
             while !bin.len().is_multiple_of(4) {
                 bin.push(0);
             }
             let offset = bin.len();
-            let bytes = take
-                .bin
-                .get(start..end)
-                .ok_or_else(|| rig_error(take_glb, "a buffer view runs past the binary chunk"))?;
             bin.extend_from_slice(bytes);
             let mut view = view.clone();
             view.buffer = json::Index::new(0);
@@ -193,7 +268,10 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
         Ok(new)
     };
     for (channel, target) in animation.channels.iter().zip(targets) {
-        let sampler = &animation.samplers[channel.sampler.value()];
+        let sampler = animation
+            .samplers
+            .get(channel.sampler.value())
+            .ok_or_else(|| take_bad("a channel names a sampler that does not exist"))?;
         let input = copy_accessor(&mut root, &mut bin, sampler.input)?;
         let output = copy_accessor(&mut root, &mut bin, sampler.output)?;
         let index = json::Index::new(samplers_out.len() as u32);
@@ -226,12 +304,12 @@ pub fn animate_rig(rig_glb: &Path, take_glb: &Path, out: &Path) -> Result<RigSum
         bin.push(0);
     }
     root.buffers[0].byte_length = USize64(bin.len() as u64);
-    let text = serde_json::to_vec(&root).map_err(ExportError::Serialize)?;
-    let out_err = |cause: std::io::Error| ExportError::write(out, cause);
-    let mut pending = PendingFile::create(out).map_err(out_err)?;
-    write_glb(&text, &bin, &mut pending).map_err(out_err)?;
-    pending.commit().map_err(out_err)?;
-    Ok(RigSummary { channels })
+    let json = serde_json::to_vec(&root).map_err(ExportError::Serialize)?;
+    Ok(RiggedGlb {
+        json,
+        bin,
+        channels,
+    })
 }
 
 #[cfg(test)]
@@ -247,5 +325,79 @@ mod tests {
         assert_eq!(glb.json.trim_ascii_end(), b"{\"a\":1}");
         assert_eq!(&glb.bin[..5], &[1, 2, 3, 4, 5]);
         assert!(parse_glb(b"nope").unwrap_err().contains("magic"));
+    }
+
+    fn glb(doc: serde_json::Value) -> Vec<u8> {
+        let mut out = Vec::new();
+        write_glb(&serde_json::to_vec(&doc).unwrap(), &[0; 4], &mut out).unwrap();
+        out
+    }
+
+    /// A take GLB animating one node, `P1`.
+    fn take() -> Vec<u8> {
+        glb(serde_json::json!({
+            "asset": {"version": "2.0"},
+            "buffers": [{"byteLength": 4}],
+            "bufferViews": [{"buffer": 0, "byteLength": 4}],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 1, "type": "SCALAR"},
+                {"bufferView": 0, "componentType": 5126, "count": 1, "type": "SCALAR"}
+            ],
+            "nodes": [{"name": "P1"}],
+            "animations": [{
+                "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}],
+                "samplers": [{"input": 0, "output": 1}]
+            }]
+        }))
+    }
+
+    fn animate(rig: serde_json::Value) -> Result<RiggedGlb, String> {
+        animate_rig_bytes(
+            &glb(rig),
+            Path::new("rig.glb"),
+            &take(),
+            Path::new("take.glb"),
+        )
+        .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn joints_past_the_nodes_are_an_error_not_a_panic() {
+        let rig = |joints: serde_json::Value| {
+            serde_json::json!({
+                "asset": {"version": "2.0"},
+                "buffers": [{"byteLength": 4}],
+                "nodes": [{"name": "root"}, {"name": "P1"}],
+                "skins": [{"joints": joints}]
+            })
+        };
+        let done = animate(rig(serde_json::json!([0, 1]))).unwrap();
+        assert_eq!(done.channels, 1);
+        for joints in [
+            serde_json::json!([0, 7]),
+            serde_json::json!([4294967295u64]),
+        ] {
+            let err = animate(rig(joints)).unwrap_err();
+            assert!(
+                err.contains("rig.glb") && err.contains("skin 0: joint") && err.contains("2 nodes"),
+                "{err}"
+            );
+        }
+    }
+
+    #[test]
+    fn rig_images_outside_its_folder_are_refused() {
+        let err = animate(serde_json::json!({
+            "asset": {"version": "2.0"},
+            "buffers": [{"byteLength": 4}],
+            "images": [{"uri": "/etc/passwd"}],
+            "nodes": [{"name": "P1"}],
+            "skins": [{"joints": [0]}]
+        }))
+        .unwrap_err();
+        assert!(
+            err.contains("image 0") && err.contains("/etc/passwd"),
+            "{err}"
+        );
     }
 }

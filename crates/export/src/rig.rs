@@ -10,6 +10,9 @@ use mouthpiece_retarget::Character;
 
 use crate::ExportError;
 
+/// Longest character file read (a character is a few kilobytes; the daemon's limit too).
+pub const MAX_CHARACTER_BYTES: u64 = 1 << 20;
+
 /// One animated point of the character's mouth.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RigPoint {
@@ -209,11 +212,19 @@ impl MouthRig {
         }
     }
 
-    /// Reads a character file (TOML, parsed and checked by the retarget core).
+    /// Reads a character file (TOML, parsed and checked by the retarget core) of at most
+    /// [`MAX_CHARACTER_BYTES`].
     pub fn load_character(path: &Path) -> Result<Self, ExportError> {
-        let text = std::fs::read_to_string(path).map_err(|cause| ExportError::CharacterRead {
+        let read_err = |cause| ExportError::CharacterRead {
             path: path.to_path_buf(),
             cause,
+        };
+        let bytes = crate::asset::read_bounded(path, MAX_CHARACTER_BYTES).map_err(read_err)?;
+        let text = String::from_utf8(bytes).map_err(|_| {
+            read_err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                "not UTF-8 text",
+            ))
         })?;
         let character =
             Character::from_toml_str(&text).map_err(|cause| ExportError::Character {

@@ -238,4 +238,75 @@ fn main() {
     ] {
         put("lipsync_phones", name, text.as_bytes());
     }
+    glb_seeds();
+}
+
+/// `gltf_mesh`: a square as glTF JSON (data URI) and as JSON, NUL, binary chunk; a procedural
+/// head around the human's mouth (`bind head --resolution 1`) as GLB. `gltf_rig`: that head
+/// bound by `mouthpiece bind` (distance weights).
+fn glb_seeds() {
+    use mouthpiece_bind::{gltf_io, Method, ModelUp};
+    let mut bin = Vec::new();
+    for p in [
+        [0.0f32, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+    ] {
+        for c in p {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let doc = |uri: Option<String>| {
+        let mut buffer = serde_json::json!({"byteLength": 60});
+        if let Some(uri) = uri {
+            buffer["uri"] = uri.into();
+        }
+        serde_json::to_vec(&serde_json::json!({
+            "asset": {"version": "2.0"},
+            "buffers": [buffer],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": 48, "byteStride": 12},
+                {"buffer": 0, "byteOffset": 48, "byteLength": 12}
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"},
+                {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}
+            ],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+            "nodes": [{"children": [1], "translation": [0.0, 1.0, 0.0]},
+                      {"mesh": 0, "scale": [2.0, 2.0, 2.0]}],
+            "scenes": [{"nodes": [0]}],
+            "scene": 0
+        }))
+        .unwrap()
+    };
+    use base64::Engine as _;
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&bin)
+    );
+    put("gltf_mesh", "square.gltf", &doc(Some(uri)));
+    let mut split = doc(None);
+    split.push(0);
+    split.extend_from_slice(&bin);
+    put("gltf_mesh", "square-split", &split);
+
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let rig =
+        mouthpiece_export::MouthRig::load_character(&repo.join("config/characters/human.toml"))
+            .unwrap();
+    let dir = std::env::temp_dir().join(format!("mouthpiece-seed-glb-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let head = mouthpiece_bind::character_head(&rig, ModelUp::Y, 0.0, 1).unwrap();
+    let head_path = dir.join("head.glb");
+    gltf_io::write_plain_glb(&head_path, &head, "head").unwrap();
+    put("gltf_mesh", "head.glb", &std::fs::read(&head_path).unwrap());
+    let rigged = dir.join("rig.glb");
+    mouthpiece_bind::bind(&rig, &head_path, &rigged, ModelUp::Y, Method::Distance).unwrap();
+    put("gltf_rig", "rig.glb", &std::fs::read(&rigged).unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -27,6 +27,8 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("protocol_foxglove", protocol_foxglove),
     ("http_head", http_head),
     ("lipsync_phones", lipsync_phones),
+    ("gltf_mesh", gltf_mesh),
+    ("gltf_rig", gltf_rig),
 ];
 
 /// Runs the target called `name`; `false` when there is none.
@@ -214,4 +216,85 @@ pub fn lipsync_phones(data: &[u8]) {
             );
         }
     }
+}
+
+/// The JSON before the first NUL byte and the bytes after it, as one GLB file (so a fuzzer
+/// reaches the binary chunk through ordinary JSON).
+fn split_glb(data: &[u8]) -> Vec<u8> {
+    let (json, bin) = match data.iter().position(|&b| b == 0) {
+        Some(i) => (&data[..i], &data[i + 1..]),
+        None => (data, &[][..]),
+    };
+    let mut glb = Vec::new();
+    let _ = mouthpiece_export::onto_rig::write_glb(json, bin, &mut glb);
+    glb
+}
+
+/// A mesh for `mouthpiece bind`: the bytes as the file (GLB when they start with its magic,
+/// glTF JSON otherwise) and split at their first NUL into a GLB's JSON and binary chunks;
+/// what reads is checked as the binder checks it. The file's folder does not exist, so a
+/// buffer URI other than `data:` is refused.
+pub fn gltf_mesh(data: &[u8]) {
+    let path = Path::new("/nonexistent/mouthpiece-fuzz/mesh.gltf");
+    let read = |bytes: &[u8]| {
+        if let Ok(mesh) = mouthpiece_bind::gltf_io::read_mesh_bytes(bytes, path) {
+            let _ = mesh.check(path);
+            for t in 0..mesh.welded.triangles.len().min(4) {
+                let _ = mesh.triangle_source(t);
+            }
+        }
+    };
+    read(data);
+    read(&split_glb(data));
+}
+
+/// A take's animation (twelve points P1…P12, two keys) as GLB, what `export --rig` copies.
+fn take_glb() -> &'static [u8] {
+    use std::sync::OnceLock;
+    static TAKE: OnceLock<Vec<u8>> = OnceLock::new();
+    TAKE.get_or_init(|| {
+        let mut bin = Vec::new();
+        for v in [0.0f32, 1.0 / 30.0] {
+            bin.extend_from_slice(&v.to_le_bytes());
+        }
+        for k in 0..6 {
+            bin.extend_from_slice(&(k as f32 * 0.01).to_le_bytes());
+        }
+        let names: Vec<String> = (1..=12).map(|k| format!("P{k}")).collect();
+        let doc = serde_json::json!({
+            "asset": {"version": "2.0"},
+            "buffers": [{"byteLength": bin.len()}],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": 8},
+                {"buffer": 0, "byteOffset": 8, "byteLength": 24}
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 2, "type": "SCALAR",
+                 "min": [0.0], "max": [1.0 / 30.0]},
+                {"bufferView": 1, "componentType": 5126, "count": 2, "type": "VEC3"}
+            ],
+            "nodes": names.iter().map(|n| serde_json::json!({"name": n})).collect::<Vec<_>>(),
+            "animations": [{
+                "channels": (0..12).map(|k| serde_json::json!(
+                    {"sampler": 0, "target": {"node": k, "path": "translation"}}
+                )).collect::<Vec<_>>(),
+                "samplers": [{"input": 0, "output": 1}]
+            }]
+        });
+        let mut glb = Vec::new();
+        let json = serde_json::to_vec(&doc).expect("take JSON");
+        mouthpiece_export::onto_rig::write_glb(&json, &bin, &mut glb).expect("take GLB");
+        glb
+    })
+}
+
+/// A rigged mesh for `export --rig` (as `mouthpiece bind` writes it, or anything else): the
+/// bytes as the rig GLB and split at their first NUL into one, with a fixed take animating
+/// P1…P12 copied onto it.
+pub fn gltf_rig(data: &[u8]) {
+    use mouthpiece_export::onto_rig::animate_rig_bytes;
+    let rig = Path::new("/nonexistent/mouthpiece-fuzz/rig.glb");
+    let take = Path::new("/nonexistent/mouthpiece-fuzz/take.glb");
+    let _ = animate_rig_bytes(data, rig, take_glb(), take);
+    let _ = animate_rig_bytes(&split_glb(data), rig, take_glb(), take);
 }

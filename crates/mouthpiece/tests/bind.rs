@@ -580,3 +580,111 @@ fn head_writes_a_valid_mesh_and_evaluate_prints_the_table() {
     ]);
     assert_eq!(o.status.code(), Some(2));
 }
+
+/// Runs `mouthpiece args`: exit 2, `what` in the error, nothing at `out`.
+fn refused(args: &[&str], what: &str, out: &Path) {
+    let o = mouthpiece(args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+    assert!(err.contains(what), "{args:?}: {err}");
+    assert!(!out.exists(), "{args:?} left {}", out.display());
+}
+
+#[test]
+fn a_head_resolution_whose_head_is_too_large_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.glb");
+    // 12·R·(5R + 2) vertices: 6·10^11 at R = 100000
+    refused(
+        &[
+            "bind",
+            "head",
+            "--character",
+            s(&character("human")),
+            "--resolution",
+            "100000",
+            "--out",
+            s(&out),
+        ],
+        "--resolution",
+        &out,
+    );
+}
+
+#[test]
+fn a_billion_heads_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.bin");
+    refused(
+        &["bind", "evaluate", "--heads", "1000000000"],
+        "--heads",
+        &out,
+    );
+    refused(
+        &[
+            "bind",
+            "train",
+            "--seed",
+            "1",
+            "--heads",
+            "1000000000",
+            "--out",
+            s(&out),
+        ],
+        "--heads",
+        &out,
+    );
+}
+
+#[test]
+fn a_snout_of_nan_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    refused(
+        &[
+            "bind",
+            "evaluate",
+            "--heads",
+            "0",
+            "--character",
+            s(&character("human")),
+            "--snout",
+            "NaN",
+        ],
+        "--snout",
+        &dir.path().join("nothing"),
+    );
+}
+
+#[test]
+fn a_mesh_naming_a_buffer_outside_its_folder_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.glb");
+    let asset = dir.path().join("asset");
+    std::fs::create_dir(&asset).unwrap();
+    let mesh = asset.join("mesh.gltf");
+    std::fs::write(
+        &mesh,
+        serde_json::json!({
+            "asset": {"version": "2.0"},
+            "buffers": [{"uri": "/etc/passwd", "byteLength": 12}],
+            "meshes": [],
+        })
+        .to_string(),
+    )
+    .unwrap();
+    refused(
+        &[
+            "bind",
+            "--character",
+            s(&character("human")),
+            "--mesh",
+            s(&mesh),
+            "--out",
+            s(&out),
+            "--method",
+            "distance",
+        ],
+        "buffer 0: URI `/etc/passwd` is an absolute path",
+        &out,
+    );
+}

@@ -140,6 +140,22 @@ pub struct EvaluateArgs {
 /// Held-out random heads come from this seed stream; training seeds must differ.
 const HELD_OUT_SEED: u64 = 1_319_952;
 
+/// Largest network weights file read (the `paper` network is 650 kB).
+const MAX_MODEL_BYTES: u64 = 64 * 1024 * 1024;
+
+/// Most procedural heads `bind train` and `bind evaluate` build (each takes seconds and
+/// megabytes; the shipped network was trained on 16).
+pub const MAX_HEADS: usize = 1000;
+
+fn check_heads(heads: usize) -> anyhow::Result<()> {
+    if heads > MAX_HEADS {
+        return Err(bad_input(anyhow!(
+            "--heads {heads} is more than the {MAX_HEADS} procedural heads allowed"
+        )));
+    }
+    Ok(())
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.action {
         Some(Action::Head(a)) => head(a),
@@ -156,7 +172,7 @@ fn bind_error(err: BindError) -> anyhow::Error {
 fn load_network(model: Option<&Path>) -> anyhow::Result<Network> {
     match model {
         Some(path) => {
-            let bytes = std::fs::read(path)
+            let bytes = mouthpiece_export::asset::read_bounded(path, MAX_MODEL_BYTES)
                 .with_context(|| format!("reading the model {}", path.display()))
                 .map_err(bad_input)?;
             Network::from_bytes(&bytes, path).map_err(bind_error)
@@ -226,6 +242,7 @@ fn train(args: TrainArgs) -> anyhow::Result<()> {
     if !(args.rate > 0.0 && args.rate.is_finite()) {
         return Err(bad_input(anyhow!("--rate must be a positive number")));
     }
+    check_heads(args.heads)?;
     let start = Instant::now();
     let cases = training::random_cases("train", args.heads, args.seed);
     let vertices: usize = cases.iter().map(|c| c.head.mesh.len()).sum();
@@ -270,6 +287,15 @@ fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
             args.character.len(),
             args.snout.len()
         )));
+    }
+    check_heads(args.heads)?;
+    for (k, snout) in args.snout.iter().enumerate() {
+        if !(0.0..=1.0).contains(snout) {
+            return Err(bad_input(anyhow!(
+                "--snout number {} is {snout}: it must be in 0…1",
+                k + 1
+            )));
+        }
     }
     let network = load_network(args.model.as_deref())?;
     let mut characters = Vec::new();
