@@ -42,7 +42,7 @@ fn main() {
     let bindings = bindgen::Builder::default()
         .header("wrapper.h")
         .clang_args(includes.iter().map(|d| format!("-I{}", d.display())))
-        .allowlist_function("ps_.*|cmd_ln_.*|err_set_logfp|ckd_free")
+        .allowlist_function("ps_.*|cmd_ln_.*|err_set_logfp|err_set_logfile|ckd_free")
         .allowlist_type("ps_.*|cmd_ln_t|arg_t")
         .default_enum_style(bindgen::EnumVariation::NewType {
             is_bitfield: false,

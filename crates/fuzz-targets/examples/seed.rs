@@ -309,4 +309,62 @@ fn glb_seeds() {
     mouthpiece_bind::bind(&rig, &head_path, &rigged, ModelUp::Y, Method::Distance).unwrap();
     put("gltf_rig", "rig.glb", &std::fs::read(&rigged).unwrap());
     let _ = std::fs::remove_dir_all(&dir);
+    // Praat's UTF-16 TextGrid (little-endian, with its byte order mark).
+    let short = "\"ooTextFile\"\n\"TextGrid\"\n0\n0.5\n<exists>\n1\n\"IntervalTier\"\n\"phones\"\n0\n0.5\n2\n0\n0.2\n\"ʃ\"\n0.2\n0.5\n\"iy\"\n";
+    let mut utf16 = vec![0xFF, 0xFE];
+    for u in short.encode_utf16() {
+        utf16.extend(u.to_le_bytes());
+    }
+    put("lipsync_phones", "utf16.TextGrid", &utf16);
+
+    // WAVs: 16 kHz mono 16-bit, 8 kHz stereo 16-bit, 44.1 kHz mono float, 22.05 kHz 8-bit.
+    for (name, channels, rate, format, bits) in [
+        ("mono16k.wav", 1u16, 16_000u32, 1u16, 16u16),
+        ("stereo8k.wav", 2, 8_000, 1, 16),
+        ("float44k.wav", 1, 44_100, 3, 32),
+        ("u8-22k.wav", 1, 22_050, 1, 8),
+    ] {
+        let frames = 64u32;
+        let block = channels * bits / 8;
+        let mut data = Vec::new();
+        for i in 0..frames * u32::from(channels) {
+            let x = ((i as f64) * 0.7).sin();
+            match (format, bits) {
+                (3, _) => data.extend((x as f32 * 0.5).to_le_bytes()),
+                (_, 8) => data.push((128.0 + 60.0 * x) as u8),
+                _ => data.extend(((x * 8000.0) as i16).to_le_bytes()),
+            }
+        }
+        let mut v = b"RIFF".to_vec();
+        v.extend((36 + data.len() as u32).to_le_bytes());
+        v.extend(b"WAVEfmt ");
+        v.extend(16u32.to_le_bytes());
+        v.extend(format.to_le_bytes());
+        v.extend(channels.to_le_bytes());
+        v.extend(rate.to_le_bytes());
+        v.extend((rate * u32::from(block)).to_le_bytes());
+        v.extend(block.to_le_bytes());
+        v.extend(bits.to_le_bytes());
+        v.extend(b"data");
+        v.extend((data.len() as u32).to_le_bytes());
+        v.extend(&data);
+        put("wav", name, &v);
+    }
+
+    // Lip-sync tables: a class table, segment overrides, a pose file.
+    put(
+        "lipsync_tables",
+        "classes.toml",
+        b"poses = [\"closed\", \"open\"]\n[[class]]\nname = \"sil\"\nphones = [\"sil\", \"h#\"]\n[[class]]\nname = \"m\"\nphones = [\"M\", \"b1\"]\ntarget = { closed = 1.0 }\n",
+    );
+    put(
+        "lipsync_tables",
+        "segments.toml",
+        b"[[segment]]\nfrom = \"bilabial\"\nto = \"open\"\nstable.open = [[0.0, 0.0], [0.6, 0.05], [1.0, 0.1]]\nchange.open = [[0.0, 0.1], [1.0, 1.0]]\n",
+    );
+    put(
+        "lipsync_tables",
+        "poses.toml",
+        b"[neutral]\nlip = [[0.02, 0.0, 0.0], [0.0, 0.005, 0.0], [-0.02, 0.0, 0.0], [0.0, -0.006, 0.0]]\nforehead = [[0.03, 0.1, 0.0], [-0.03, 0.1, 0.0], [0.0, 0.12, 0.0]]\n[[pose]]\nname = \"open\"\nmouth = { jaw = 0.2 }\ndisplacement = [[0.0, 0.0, 0.0], [0.0, 0.001, 0.0], [0.0, 0.0, 0.0], [0.0, -0.01, 0.0]]\n[[pose]]\nname = \"a\\\"]\\n[[pose]]\"\ndisplacement = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n",
+    );
 }

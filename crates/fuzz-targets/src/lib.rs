@@ -29,6 +29,8 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("lipsync_phones", lipsync_phones),
     ("gltf_mesh", gltf_mesh),
     ("gltf_rig", gltf_rig),
+    ("wav", wav),
+    ("lipsync_tables", lipsync_tables),
 ];
 
 /// Runs the target called `name`; `false` when there is none.
@@ -196,9 +198,11 @@ pub fn lipsync_phones(data: &[u8]) {
         let segments = SegmentTable::generate(&table);
         (table, segments)
     });
-    let Ok(text) = std::str::from_utf8(data) else {
+    // As the command reads files: UTF-8, or UTF-16 with a byte order mark.
+    let Ok(text) = mouthpiece_lipsync::input::decode_text(data, "fuzz") else {
         return;
     };
+    let text = text.as_str();
     for format in [
         PhoneFormat::Timit,
         PhoneFormat::TextGrid,
@@ -297,4 +301,43 @@ pub fn gltf_rig(data: &[u8]) {
     let take = Path::new("/nonexistent/mouthpiece-fuzz/take.glb");
     let _ = animate_rig_bytes(data, rig, take_glb(), take);
     let _ = animate_rig_bytes(&split_glb(data), rig, take_glb(), take);
+/// A WAV file of `mouthpiece lipsync --audio`: read (first channel) and resampled to 16 kHz,
+/// as the command does before decoding.
+pub fn wav(data: &[u8]) {
+    let _ = mouthpiece_speech::wav::read_16k(std::io::Cursor::new(data), "fuzz.wav");
+}
+
+/// The TOML tables of `mouthpiece lipsync`, each read from the same bytes: a class table
+/// (and its generated segments), segment overrides against the shipped class table, and a
+/// basic-pose file, which must come back unchanged through its writer (the writer of
+/// `lipsync poses`: whatever names it holds, what it writes parses to the same poses).
+pub fn lipsync_tables(data: &[u8]) {
+    use mouthpiece_lipsync::{BasicPoses, ClassTable, SegmentTable};
+    use std::sync::OnceLock;
+    static SHIPPED: OnceLock<(ClassTable, SegmentTable)> = OnceLock::new();
+    let (shipped, shipped_segments) = SHIPPED.get_or_init(|| {
+        let table = ClassTable::from_toml_str(
+            include_str!("../../../config/lipsync/classes.toml"),
+            "classes.toml",
+        )
+        .expect("the shipped class table reads");
+        let segments = SegmentTable::generate(&table);
+        (table, segments)
+    });
+    let Ok(text) = mouthpiece_lipsync::input::decode_text(data, "fuzz") else {
+        return;
+    };
+    if let Ok(table) = ClassTable::from_toml_str(&text, "fuzz") {
+        let mut segments = SegmentTable::generate(&table);
+        let _ = segments.apply_overrides(&table, &text, "fuzz");
+    }
+    let mut segments = shipped_segments.clone();
+    let _ = segments.apply_overrides(shipped, &text, "fuzz");
+    if let Ok(poses) = BasicPoses::from_toml_str(&text, "fuzz") {
+        let _ = poses.order_for(shipped, "fuzz");
+        let written = poses.to_toml_string(&text);
+        let back = BasicPoses::from_toml_str(&written, "fuzz")
+            .unwrap_or_else(|e| panic!("the pose writer wrote a file that does not read: {e}"));
+        assert_eq!(back, poses, "the pose writer changed the poses");
+    }
 }

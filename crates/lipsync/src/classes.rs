@@ -16,11 +16,18 @@ use std::collections::HashMap;
 
 use serde::Deserialize;
 
+use crate::input::cut;
 use crate::phones::{normalise, PhoneSpan};
 use crate::Error;
 
 /// The name of the silence class; its targets are all 0 (the neutral mouth).
 pub const SILENCE: &str = "sil";
+
+/// Most classes a table may have: the segment table holds one segment per ordered pair
+/// (16 classes: 256 segments; 64: 4096), each a curve per key pose and stage.
+pub const MAX_CLASSES: usize = 64;
+/// Most key poses a table may weigh (every sample holds one weight per key pose).
+pub const MAX_POSES: usize = 16;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -33,7 +40,7 @@ struct File {
 #[serde(deny_unknown_fields)]
 struct ClassFile {
     name: String,
-    phones: Vec<String>,
+    phones: Vec<toml::Spanned<String>>,
     #[serde(default)]
     target: HashMap<String, f64>,
 }
@@ -58,8 +65,10 @@ pub struct ClassTable {
 }
 
 impl ClassTable {
-    /// Parses and checks a class table: unique class names, each phone in one class only, a
-    /// `sil` class with all-zero targets, targets finite in [0, 1] on known poses.
+    /// Parses and checks a class table: at most [`MAX_CLASSES`] classes and [`MAX_POSES`]
+    /// key poses, unique class names, each phone listed once (after [`normalise`]: `F1` and
+    /// `f` are the same phone; a second listing is an error naming its line), a `sil` class
+    /// with all-zero targets, targets finite in [0, 1] on known poses.
     pub fn from_toml_str(text: &str, source_name: &str) -> Result<Self, Error> {
         let file: File = toml::from_str(text).map_err(|e| Error::Toml {
             source_name: source_name.to_string(),
@@ -73,15 +82,34 @@ impl ClassTable {
         if file.poses.is_empty() {
             return Err(config("poses".into(), "at least one key pose".into()));
         }
+        if file.poses.len() > MAX_POSES {
+            return Err(config(
+                "poses".into(),
+                format!("{} key poses, at most {MAX_POSES}", file.poses.len()),
+            ));
+        }
+        if file.class.len() > MAX_CLASSES {
+            return Err(config(
+                "class".into(),
+                format!(
+                    "{} classes, at most {MAX_CLASSES} (the segment table holds one segment \
+                     per ordered pair of classes)",
+                    file.class.len()
+                ),
+            ));
+        }
         for (i, p) in file.poses.iter().enumerate() {
             if file.poses[..i].contains(p) {
-                return Err(config("poses".into(), format!("pose {p:?} listed twice")));
+                return Err(config(
+                    "poses".into(),
+                    format!("pose {:?} listed twice", cut(p)),
+                ));
             }
         }
-        let mut by_phone = HashMap::new();
-        let mut classes = Vec::with_capacity(file.class.len());
+        let mut by_phone: HashMap<String, usize> = HashMap::new();
+        let mut classes: Vec<Class> = Vec::with_capacity(file.class.len());
         for (ci, c) in file.class.into_iter().enumerate() {
-            let key = |k: &str| format!("class[{ci}] ({}).{k}", c.name);
+            let key = |k: &str| format!("class[{ci}] ({}).{k}", cut(&c.name));
             if classes.iter().any(|o: &Class| o.name == c.name) {
                 return Err(config(key("name"), "class name used twice".into()));
             }
@@ -90,26 +118,42 @@ impl ClassTable {
                 let i = file.poses.iter().position(|p| p == pose).ok_or_else(|| {
                     config(
                         key("target"),
-                        format!("unknown pose {pose:?} (poses: {:?})", file.poses),
+                        format!("unknown pose {:?} (poses: {:?})", cut(pose), file.poses),
                     )
                 })?;
                 if !(w.is_finite() && (0.0..=1.0).contains(&w)) {
                     return Err(config(
                         key("target"),
-                        format!("weight of {pose:?} must be within 0..1, got {w}"),
+                        format!("weight of {:?} must be within 0..1, got {w}", cut(pose)),
                     ));
                 }
                 target[i] = w;
             }
             let mut phones = Vec::with_capacity(c.phones.len());
-            for p in &c.phones {
-                let p = normalise(p);
+            for listed in &c.phones {
+                let p = normalise(listed.get_ref());
                 if let Some(&other) = by_phone.get(&p) {
-                    let other: &Class = &classes[other];
-                    return Err(config(
-                        key("phones"),
-                        format!("phone {p:?} is already in class {:?}", other.name),
-                    ));
+                    // The class being read is not in `classes` yet.
+                    let other = if other == ci {
+                        "this class".to_string()
+                    } else {
+                        format!("class {:?}", cut(&classes[other].name))
+                    };
+                    let line = text[..listed.span().start.min(text.len())]
+                        .bytes()
+                        .filter(|&b| b == b'\n')
+                        .count()
+                        + 1;
+                    return Err(Error::Parse {
+                        source_name: source_name.to_string(),
+                        line,
+                        what: format!(
+                            "{}: phone {:?} (read as {:?}) is already in {other}",
+                            key("phones"),
+                            cut(listed.get_ref()),
+                            cut(&p)
+                        ),
+                    });
                 }
                 by_phone.insert(p.clone(), ci);
                 phones.push(p);
@@ -235,7 +279,38 @@ target = { closed = 1.0 }
         for (text, expect) in bad {
             let err = ClassTable::from_toml_str(&text, "c.toml").unwrap_err();
             assert!(err.to_string().contains(expect), "{err} / {expect}");
-            assert!(err.to_string().starts_with("c.toml: "), "{err}");
+            assert!(err.to_string().starts_with("c.toml:"), "{err}");
         }
+    }
+
+    #[test]
+    fn a_phone_listed_twice_in_one_class_is_an_error_naming_the_line() {
+        // The second listing used to index the class being read: a panic.
+        for twice in ["\"M\", \"b\", \"m\"", "\"M\", \"b\", \"b1\""] {
+            let text = SMALL.replace("\"M\", \"b\"", twice);
+            let err = ClassTable::from_toml_str(&text, "c.toml").unwrap_err();
+            assert!(err.to_string().starts_with("c.toml:8: "), "{err}");
+            assert!(err.to_string().contains("already in this class"), "{err}");
+        }
+        // Across classes, with the line too.
+        let text = SMALL.replace("\"M\", \"b\"", "\"M\",\n  \"H#\"");
+        let err = ClassTable::from_toml_str(&text, "c.toml").unwrap_err();
+        assert!(err.to_string().starts_with("c.toml:9: "), "{err}");
+        assert!(err.to_string().contains("class \"sil\""), "{err}");
+    }
+
+    #[test]
+    fn a_table_of_thousands_of_classes_is_refused_before_its_segments() {
+        let mut text = SMALL.to_string();
+        for i in 0..8000 {
+            text.push_str(&format!(
+                "[[class]]\nname = \"c{i}\"\nphones = [\"x{i}\"]\n"
+            ));
+        }
+        let err = ClassTable::from_toml_str(&text, "c.toml").unwrap_err();
+        assert!(
+            err.to_string().contains("8002 classes, at most 64"),
+            "{err}"
+        );
     }
 }

@@ -9,6 +9,14 @@ pub enum Error {
         line: usize,
         what: String,
     },
+    /// A value at a line and column (1-based, characters) that is not acceptable.
+    #[error("{source_name}:{line}:{column}: {what}")]
+    ParseAt {
+        source_name: String,
+        line: usize,
+        column: usize,
+        what: String,
+    },
     /// A phone the class table does not know.
     #[error("{source_name}:{line}: unknown phone {phone:?} (not in the class table)")]
     UnknownPhone {

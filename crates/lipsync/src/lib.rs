@@ -22,6 +22,7 @@
 pub mod classes;
 pub mod curve;
 mod error;
+pub mod input;
 pub mod mapping;
 pub mod phones;
 pub mod poses;
@@ -41,6 +42,8 @@ pub const DEFAULT_T_CHANGE: f64 = 0.040;
 /// Allowed change-stage lengths, seconds.
 pub const T_CHANGE_RANGE: (f64, f64) = (0.030, 0.050);
 
+/// Lowest sample rate accepted, samples per second (below it a phone falls between samples).
+pub const MIN_FPS: f64 = 1.0;
 /// Highest sample rate accepted, samples per second.
 pub const MAX_FPS: f64 = 10_000.0;
 /// Most samples one call makes (about 18 hours at 60 per second; 200 MB of weights).
@@ -56,9 +59,11 @@ pub fn weights_for_phones(
     t_change: f64,
     fps: f64,
 ) -> Result<Weights, Error> {
-    if !(fps > 0.0 && fps <= MAX_FPS) {
+    if !(MIN_FPS..=MAX_FPS).contains(&fps) {
         return Err(Error::Setting {
-            what: format!("sample rate must be within (0, {MAX_FPS}] per second, got {fps}"),
+            what: format!(
+                "--fps: the sample rate must be within {MIN_FPS} to {MAX_FPS} per second, got {fps}"
+            ),
         });
     }
     let end = phones.iter().map(|p| p.end).fold(0.0, f64::max);

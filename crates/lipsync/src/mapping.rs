@@ -60,7 +60,7 @@ pub fn check_t_change(t_change: f64) -> Result<(), Error> {
     if !(t_change >= lo - 1e-12 && t_change <= hi + 1e-12) {
         return Err(Error::Setting {
             what: format!(
-                "change-stage length T must be within {} to {} ms, got {} ms",
+                "--t-change: the change-stage length T must be within {} to {} ms, got {} ms",
                 lo * 1e3,
                 hi * 1e3,
                 t_change * 1e3

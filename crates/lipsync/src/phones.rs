@@ -15,6 +15,7 @@
 
 use serde::Deserialize;
 
+use crate::input::cut;
 use crate::Error;
 
 /// One phone on the timeline.
@@ -108,7 +109,7 @@ fn number(word: &str, source_name: &str, line: usize, what: &str) -> Result<f64,
             parse_err(
                 source_name,
                 line,
-                format!("{what} {word:?} is not a number"),
+                format!("{what} {:?} is not a finite number", cut(word)),
             )
         })
 }
@@ -131,7 +132,10 @@ fn read_columns(
             return Err(parse_err(
                 source_name,
                 n,
-                format!("expected `start end phone` ({kind} label), got {line:?}"),
+                format!(
+                    "expected `start end phone` ({kind} label), got {:?}",
+                    cut(line)
+                ),
             ));
         }
         let start = number(words[0], source_name, n, "start")? / per_second;
@@ -165,7 +169,10 @@ fn read_festival(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
             return Err(parse_err(
                 source_name,
                 n,
-                format!("expected `end colour phone` (Festival label), got {line:?}"),
+                format!(
+                    "expected `end colour phone` (Festival label), got {:?}",
+                    cut(line)
+                ),
             ));
         }
         let end = number(words[0], source_name, n, "end")?;
@@ -215,7 +222,7 @@ fn read_jsonl(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error> {
     Ok(out)
 }
 
-/// A TextGrid token: a quoted string or a number, with its line.
+/// A TextGrid token: a quoted string or a number.
 #[derive(Debug, Clone, PartialEq)]
 enum Token {
     Text(String),
@@ -224,9 +231,12 @@ enum Token {
 
 /// Praat's text formats reduced to their values: quoted strings and bare numbers, in order;
 /// labels (`xmin =`, `intervals [3]:`, `<exists>`) dropped. The long and the short format give
-/// the same sequence.
-fn textgrid_tokens(text: &str) -> Result<Vec<(Token, usize)>, (usize, String)> {
+/// the same sequence. A number that is not finite (`NaN`, `inf`) is an error at its line and
+/// column.
+fn textgrid_tokens(text: &str) -> Result<Vec<(Token, usize)>, (usize, usize, String)> {
     let mut out = Vec::new();
+    // A byte order mark left at the start (the file was decoded elsewhere) is not a token.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     for (i, line) in text.lines().enumerate() {
         let n = i + 1;
         let mut chars = line.char_indices().peekable();
@@ -251,8 +261,10 @@ fn textgrid_tokens(text: &str) -> Result<Vec<(Token, usize)>, (usize, String)> {
                     }
                 }
                 if !closed {
+                    let column = line[..pos].chars().count() + 1;
                     return Err((
                         n,
+                        column,
                         "unterminated string (labels must fit on one line)".into(),
                     ));
                 }
@@ -264,6 +276,10 @@ fn textgrid_tokens(text: &str) -> Result<Vec<(Token, usize)>, (usize, String)> {
                 let end = rest.find(char::is_whitespace).unwrap_or(rest.len());
                 let word = &rest[..end];
                 if let Ok(v) = word.parse::<f64>() {
+                    if !v.is_finite() {
+                        let column = line[..pos].chars().count() + 1;
+                        return Err((n, column, format!("{:?} is not a finite number", cut(word))));
+                    }
                     out.push((Token::Number(v), n));
                 }
                 for _ in 0..word.chars().count() {
@@ -276,7 +292,12 @@ fn textgrid_tokens(text: &str) -> Result<Vec<(Token, usize)>, (usize, String)> {
 }
 
 fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error> {
-    let tokens = textgrid_tokens(text).map_err(|(n, what)| parse_err(source_name, n, what))?;
+    let tokens = textgrid_tokens(text).map_err(|(line, column, what)| Error::ParseAt {
+        source_name: source_name.to_string(),
+        line,
+        column,
+        what,
+    })?;
     let mut it = tokens.into_iter().peekable();
     let last_line = text.lines().count().max(1);
     let mut next = |what: &str| -> Result<(Token, usize), Error> {
@@ -304,7 +325,7 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
             Token::Text(s) => Err(parse_err(
                 source_name,
                 n,
-                format!("expected {what} (a number), got {s:?}"),
+                format!("expected {what} (a number), got {:?}", cut(&s)),
             )),
         }
     };
@@ -313,7 +334,10 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
         return Err(parse_err(
             source_name,
             n,
-            format!("not a Praat text file (file type {kind:?}, expected \"ooTextFile\")"),
+            format!(
+                "not a Praat text file (file type {:?}, expected \"ooTextFile\")",
+                cut(&kind)
+            ),
         ));
     }
     let (class, n) = text_of(next("object class")?, "object class")?;
@@ -321,7 +345,7 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
         return Err(parse_err(
             source_name,
             n,
-            format!("object class {class:?} is not \"TextGrid\""),
+            format!("object class {:?} is not \"TextGrid\"", cut(&class)),
         ));
     }
     num_of(next("xmin")?, "xmin")?;
@@ -373,7 +397,7 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
                 return Err(parse_err(
                     source_name,
                     tier_line,
-                    format!("unknown tier class {other:?}"),
+                    format!("unknown tier class {:?}", cut(other)),
                 ))
             }
         }
@@ -391,7 +415,11 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
         Some(i) => i,
         None if interval_tiers.len() == 1 => 0,
         None => {
-            let names: Vec<&str> = interval_tiers.iter().map(|(n, ..)| n.as_str()).collect();
+            let names: Vec<String> = interval_tiers
+                .iter()
+                .take(8)
+                .map(|(n, ..)| cut(n))
+                .collect();
             return Err(parse_err(
                 source_name,
                 1,
@@ -410,7 +438,23 @@ fn read_textgrid(text: &str, source_name: &str) -> Result<Vec<PhoneSpan>, Error>
 pub fn check(raw: Vec<PhoneSpan>, source_name: &str) -> Result<Vec<PhoneSpan>, Error> {
     let mut out: Vec<PhoneSpan> = Vec::with_capacity(raw.len() + 2);
     let mut previous: Option<(f64, usize)> = None;
-    for p in raw {
+    for mut p in raw {
+        p.phone = if p.phone.chars().count() > crate::input::QUOTE_CHARS {
+            // Only errors would quote it; no phone name is this long.
+            cut(&p.phone)
+        } else {
+            p.phone
+        };
+        if !(p.start.is_finite() && p.end.is_finite()) {
+            return Err(parse_err(
+                source_name,
+                p.line,
+                format!(
+                    "phone {:?}: times must be finite numbers, got {} to {} s",
+                    p.phone, p.start, p.end
+                ),
+            ));
+        }
         if p.start < 0.0 {
             return Err(parse_err(
                 source_name,
@@ -646,6 +690,90 @@ item []:
             assert!(err.to_string().starts_with("long:2: phone \"iy\" ends at"), "{err}");
         }
         assert!(read("0 100 sh\n100 1382400000 iy\n", PhoneFormat::Timit, "day").is_ok());
+    }
+
+    #[test]
+    fn non_finite_textgrid_times_are_refused_at_their_line_and_column() {
+        // NaN compared false everywhere: the take came out with null points and exit 0.
+        for bad in ["NaN", "nan", "inf", "-Infinity"] {
+            let text = LONG.replace("xmax = 0.3", &format!("xmax = {bad}"));
+            let err = read(&text, PhoneFormat::TextGrid, "n.TextGrid").unwrap_err();
+            assert!(
+                err.to_string()
+                    .starts_with(&format!("n.TextGrid:31:20: \"{bad}\" is not a finite")),
+                "{err}"
+            );
+            let text = SHORT.replacen("0.3\n", &format!("{bad}\n"), 1);
+            let err = read(&text, PhoneFormat::TextGrid, "s.TextGrid").unwrap_err();
+            assert!(err.to_string().starts_with("s.TextGrid:16:1: "), "{err}");
+        }
+        // Spans made elsewhere (the recogniser) are checked too.
+        let nan = PhoneSpan {
+            start: 0.0,
+            end: f64::NAN,
+            phone: "sh".into(),
+            line: 4,
+        };
+        let err = check(vec![nan], "r").unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("r:4: phone \"sh\": times must be finite"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn praat_utf16_textgrids_read() {
+        // Praat saves a TextGrid as UTF-16 with a byte order mark when a label is not ASCII.
+        let text = LONG.replace("\"she\"", "\"ʃiː\"");
+        let expect = [(0.0, 0.1, "sil"), (0.1, 0.3, "sh"), (0.3, 0.5, "iy")];
+        for big_endian in [false, true] {
+            let mut bytes = if big_endian {
+                vec![0xFE, 0xFF]
+            } else {
+                vec![0xFF, 0xFE]
+            };
+            for u in text.encode_utf16() {
+                bytes.extend(if big_endian {
+                    u.to_be_bytes()
+                } else {
+                    u.to_le_bytes()
+                });
+            }
+            let decoded = crate::input::decode_text(&bytes, "u.TextGrid").unwrap();
+            let v = read(&decoded, PhoneFormat::TextGrid, "u.TextGrid").unwrap();
+            assert_eq!(phones(&v), expect);
+        }
+    }
+
+    #[test]
+    fn errors_quote_at_most_a_line_of_input() {
+        let huge = "x".repeat(5_000_000);
+        let err = read(&format!("0 {huge}\n"), PhoneFormat::Timit, "h.phn").unwrap_err();
+        assert!(
+            err.to_string().len() < 300,
+            "{} bytes",
+            err.to_string().len()
+        );
+        let err = read(&format!("0 1{huge} sh\n"), PhoneFormat::Timit, "h.phn").unwrap_err();
+        assert!(
+            err.to_string().len() < 300,
+            "{} bytes",
+            err.to_string().len()
+        );
+        let text = LONG.replace("\"IY1\"", &format!("\"{huge}\""));
+        let err = read(&text, PhoneFormat::TextGrid, "h.TextGrid").unwrap();
+        let table = crate::ClassTable::from_toml_str(
+            "poses = [\"open\"]\n[[class]]\nname = \"sil\"\nphones = [\"sil\", \"sh\"]\n",
+            "c",
+        )
+        .unwrap();
+        let err = table.classify(&err, "h.TextGrid").unwrap_err();
+        assert!(
+            err.to_string().len() < 300,
+            "{} bytes",
+            err.to_string().len()
+        );
     }
 
     #[test]

@@ -60,6 +60,12 @@ pub struct BasicPoses {
 
 /// Largest plausible displacement of a lip dot, metres (a sanity bound on pose files).
 pub const MAX_DISPLACEMENT_M: f64 = 0.1;
+/// Most lip dots a pose file may have (every sample blends each of them).
+pub const MAX_LIP_DOTS: usize = 64;
+/// Most forehead dots a pose file may have.
+pub const MAX_FOREHEAD_DOTS: usize = 16;
+/// Most poses a pose file may have.
+pub const MAX_POSES: usize = 64;
 
 impl BasicPoses {
     /// Parses and checks a pose file: ≥ 4 lip dots (even), ≥ 3 forehead dots, every pose with
@@ -84,21 +90,39 @@ impl BasicPoses {
 
     fn check(&self) -> Result<(), (String, String)> {
         let n = self.neutral_lip.len();
-        if n < 4 || !n.is_multiple_of(2) {
+        if n < 4 || !n.is_multiple_of(2) || n > MAX_LIP_DOTS {
             return Err((
                 "neutral.lip".into(),
-                format!("needs an even number ≥ 4 of lip dots, got {n}"),
+                format!("needs an even number of lip dots from 4 to {MAX_LIP_DOTS}, got {n}"),
             ));
         }
-        if self.forehead.len() < 3 {
-            return Err(("neutral.forehead".into(), "needs at least 3 dots".into()));
+        if !(3..=MAX_FOREHEAD_DOTS).contains(&self.forehead.len()) {
+            return Err((
+                "neutral.forehead".into(),
+                format!(
+                    "needs 3 to {MAX_FOREHEAD_DOTS} dots, got {}",
+                    self.forehead.len()
+                ),
+            ));
+        }
+        if self.poses.len() > MAX_POSES {
+            return Err((
+                "pose".into(),
+                format!("{} poses, at most {MAX_POSES}", self.poses.len()),
+            ));
         }
         let finite = |v: &[[f64; 3]]| v.iter().flatten().all(|x| x.is_finite());
         if !finite(&self.neutral_lip) || !finite(&self.forehead) {
             return Err(("neutral".into(), "coordinates must be finite".into()));
         }
         for (i, p) in self.poses.iter().enumerate() {
-            let key = format!("pose[{i}] ({})", p.name);
+            let key = format!("pose[{i}] ({})", crate::input::cut(&p.name));
+            if let Some((k, v)) = p.mouth.iter().find(|(_, v)| !v.is_finite()) {
+                return Err((
+                    format!("{key}.mouth.{}", crate::input::cut(k)),
+                    format!("must be a finite number, got {v}"),
+                ));
+            }
             if self.poses[..i].iter().any(|o| o.name == p.name) {
                 return Err((key, "pose name used twice".into()));
             }
@@ -181,16 +205,24 @@ impl BasicPoses {
         }
     }
 
-    /// The file text (round-trips through [`BasicPoses::from_toml_str`]).
+    /// The file text (round-trips through [`BasicPoses::from_toml_str`]): `header` as
+    /// comment lines, then the tables. Pose names and mouth keys are written by the TOML
+    /// serialiser (quoted and escaped: a name holding quotes, newlines or `]` stays one
+    /// string); control characters in the header are replaced, a comment cannot hold them.
     pub fn to_toml_string(&self, header: &str) -> String {
         let mut s = String::new();
         for line in header.lines() {
-            let _ = writeln!(s, "# {line}");
+            let clean: String = line
+                .chars()
+                .map(|c| if c.is_control() && c != '\t' { '?' } else { c })
+                .collect();
+            let _ = writeln!(s, "# {clean}");
         }
+        let string = |v: &str| toml::Value::String(v.to_string()).to_string();
         let list = |s: &mut String, v: &[[f64; 3]]| {
             s.push_str("[\n");
             for p in v {
-                let _ = writeln!(s, "  [{:.9}, {:.9}, {:.9}],", p[0], p[1], p[2]);
+                let _ = writeln!(s, "  [{:?}, {:?}, {:?}],", p[0], p[1], p[2]);
             }
             s.push(']');
         };
@@ -200,11 +232,14 @@ impl BasicPoses {
         list(&mut s, &self.forehead);
         s.push('\n');
         for p in &self.poses {
-            let _ = write!(s, "\n[[pose]]\nname = \"{}\"\n", p.name);
+            let _ = write!(s, "\n[[pose]]\nname = {}\n", string(&p.name));
             if !p.mouth.is_empty() {
-                let fields: Vec<String> =
-                    p.mouth.iter().map(|(k, v)| format!("{k} = {v}")).collect();
-                let _ = writeln!(s, "mouth = {{ {} }}", fields.join(", "));
+                let table: toml::Table = p
+                    .mouth
+                    .iter()
+                    .map(|(k, v)| (k.clone(), toml::Value::Float(*v)))
+                    .collect();
+                let _ = writeln!(s, "mouth = {}", toml::Value::Table(table));
             }
             s.push_str("displacement = ");
             list(&mut s, &p.displacement);
@@ -264,11 +299,29 @@ mod tests {
     #[test]
     fn rejects_bad_files() {
         let text = poses().to_toml_string("");
-        let bad = text.replacen("  [0.000000000, -0.010000000, 0.000000000],\n", "", 1);
+        let bad = text.replacen("  [0.0, -0.01, 0.0],\n", "", 1);
         let err = BasicPoses::from_toml_str(&bad, "p.toml").unwrap_err();
         assert!(err.to_string().contains("needs 4 entries"), "{err}");
-        let bad = text.replace("-0.010000000", "-0.5");
+        let bad = text.replace("-0.01", "-0.5");
         let err = BasicPoses::from_toml_str(&bad, "p.toml").unwrap_err();
         assert!(err.to_string().contains("within"), "{err}");
+    }
+
+    #[test]
+    fn hostile_pose_names_round_trip_and_the_file_always_parses() {
+        // A marks name may hold anything TOML keys can: it must stay one string.
+        for name in [
+            "open\"\n[[pose]]\nname = \"x",
+            "a]\n\n[[pose]]\nname = 'evil'\ndisplacement = []",
+            "tab\there, back\\slash, \u{7f} and \r\n",
+        ] {
+            let mut p = poses();
+            p.poses[0].name = name.to_string();
+            p.poses[1].mouth.insert(format!("{name}]"), 0.5);
+            let text = p.to_toml_string(&format!("captured from {name}"));
+            let back = BasicPoses::from_toml_str(&text, "p.toml")
+                .unwrap_or_else(|e| panic!("{e:?}\n{text}"));
+            assert_eq!(back, p, "{text}");
+        }
     }
 }

@@ -123,3 +123,19 @@ fn a_timeline_of_too_many_samples_is_refused_before_sampling() {
     let w = weights_for_phones(&spans, "day.phn", &t, &segments, 0.04, 40.0).unwrap();
     assert_eq!(w.len(), 86_400 * 40 + 1);
 }
+
+#[test]
+fn montreal_forced_aligner_labels_read_with_the_shipped_table() {
+    // MFA writes `spn` (spoken noise: a word not in its dictionary), `sil` and `sp`, with
+    // ARPAbet stress digits; `spn` is the neutral mouth, as the recogniser's `+spn+`.
+    let t = table();
+    let text = "{\"start\": 0.0, \"end\": 0.1, \"phone\": \"sil\"}\n\
+                {\"start\": 0.1, \"end\": 0.4, \"phone\": \"spn\"}\n\
+                {\"start\": 0.4, \"end\": 0.5, \"phone\": \"sp\"}\n\
+                {\"start\": 0.5, \"end\": 0.6, \"phone\": \"AH0\"}\n";
+    let spans = phones::read(text, PhoneFormat::Jsonl, "mfa.jsonl").unwrap();
+    let classes = t.classify(&spans, "mfa.jsonl").unwrap();
+    assert_eq!(classes[..3], [t.silence(); 3]);
+    let segments = SegmentTable::generate(&t);
+    assert!(weights_for_phones(&spans, "mfa.jsonl", &t, &segments, 0.04, 60.0).is_ok());
+}

@@ -46,7 +46,7 @@ impl ModelPaths {
         Self::en_us(Path::new("/usr/share/pocketsphinx/model/en-us"))
     }
 
-    fn check(&self) -> Result<(), Error> {
+    pub(crate) fn check(&self) -> Result<(), Error> {
         for p in [&self.hmm, &self.dict, &self.phone_lm] {
             if !p.exists() {
                 return Err(Error::ModelMissing {
@@ -94,6 +94,24 @@ fn quiet_library_logs() {
     });
 }
 
+/// Sends the library's log to `path`, unbuffered: the last line before a crash is kept.
+fn log_unbuffered(path: &Path) -> Result<(), Error> {
+    let c = cstring(&path.display().to_string(), "log path")?;
+    // SAFETY: `c` and the mode are NUL-terminated; the stream stays open for the process's
+    // life (the library keeps it; this runs in the short-lived child of `crate::decode`).
+    unsafe {
+        let fp = libc::fopen(c.as_ptr(), c"w".as_ptr());
+        if fp.is_null() {
+            return Err(Error::Init {
+                what: format!("cannot open the log {}", path.display()),
+            });
+        }
+        libc::setvbuf(fp, std::ptr::null_mut(), libc::_IONBF, 0);
+        sys::err_set_logfp(fp.cast());
+    }
+    Ok(())
+}
+
 fn cstring(s: &str, what: &str) -> Result<CString, Error> {
     CString::new(s).map_err(|_| Error::Init {
         what: format!("{what} contains a NUL byte"),
@@ -102,9 +120,18 @@ fn cstring(s: &str, what: &str) -> Result<CString, Error> {
 
 impl Decoder {
     /// A decoder for `mode`: `allphone` (phone recognition) or alignment (grammar set later).
-    fn new(model: &ModelPaths, allphone: bool) -> Result<Self, Error> {
+    /// The library logs to `log` when given (the child process of [`crate::decode`] reads it
+    /// to say which model file it was reading when it failed), else nowhere.
+    pub(crate) fn new(
+        model: &ModelPaths,
+        allphone: bool,
+        log: Option<&Path>,
+    ) -> Result<Self, Error> {
         model.check()?;
-        quiet_library_logs();
+        match log {
+            Some(path) => log_unbuffered(path)?,
+            None => quiet_library_logs(),
+        }
         let path = |p: &Path| p.display().to_string();
         let mut args: Vec<String> = vec![
             "mouthpiece".into(),
@@ -114,8 +141,6 @@ impl Decoder {
             path(&model.dict),
             "-samprate".into(),
             "16000".into(),
-            "-logfn".into(),
-            "/dev/null".into(),
         ];
         if allphone {
             // Settings verified with the Debian command-line tool (see docs/lipsync.md).
@@ -181,12 +206,12 @@ impl Decoder {
 
     /// A phone recogniser (no transcript).
     pub fn phone_recognizer(model: &ModelPaths) -> Result<Self, Error> {
-        Self::new(model, true)
+        Self::new(model, true, None)
     }
 
     /// An aligner (give it a transcript with [`Decoder::align`]).
     pub fn aligner(model: &ModelPaths) -> Result<Self, Error> {
-        Self::new(model, false)
+        Self::new(model, false, None)
     }
 
     /// Every pronunciation of `word` in the dictionary (`word`, `word(2)`, …), as phone lists.
@@ -219,7 +244,7 @@ impl Decoder {
         Ok(out)
     }
 
-    fn add_phone_word(&mut self, phone: &str) -> Result<String, Error> {
+    fn add_phone_word(&mut self, phone: &str, audio: &str) -> Result<String, Error> {
         let word = format!("{PHONE_WORD}{}", phone.to_ascii_lowercase());
         if self.phone_words.contains(&word) {
             return Ok(word);
@@ -230,21 +255,24 @@ impl Decoder {
         let id = unsafe { sys::ps_add_word(self.ps.as_ptr(), w.as_ptr(), p.as_ptr(), 0) };
         if id < 0 {
             return Err(Error::Decode {
-                what: format!("the model refused phone {phone:?}"),
+                audio: audio.to_string(),
+                what: format!("the model refused phone {:?}", crate::cut(phone)),
             });
         }
         self.phone_words.insert(word.clone());
         Ok(word)
     }
 
-    /// Runs one utterance through the active search and returns its segments.
-    fn decode(&mut self, samples: &[i16]) -> Result<Vec<TimedPhone>, Error> {
+    /// Runs one utterance through the active search and returns its segments. `audio`
+    /// names the audio in errors.
+    fn decode(&mut self, samples: &[i16], audio: &str) -> Result<Vec<TimedPhone>, Error> {
+        let fail = |what: &str| Error::Decode {
+            audio: audio.to_string(),
+            what: what.into(),
+        };
         if samples.is_empty() {
-            return Err(Error::Decode {
-                what: "no audio".into(),
-            });
+            return Err(fail("no audio"));
         }
-        let fail = |what: &str| Error::Decode { what: what.into() };
         // SAFETY: `ps` is valid; `samples` outlives the call (the library copies the audio
         // into its feature buffers); full_utt = TRUE, no_search = FALSE.
         unsafe {
@@ -265,9 +293,9 @@ impl Decoder {
         unsafe {
             let mut score: i32 = 0;
             if sys::ps_get_hyp(self.ps.as_ptr(), &mut score).is_null() {
-                return Err(fail(
-                    "no hypothesis: the search found no path through the audio",
-                ));
+                return Err(Error::NoPath {
+                    audio: audio.to_string(),
+                });
             }
             let mut seg = sys::ps_seg_iter(self.ps.as_ptr());
             while !seg.is_null() {
@@ -285,39 +313,44 @@ impl Decoder {
             }
         }
         if out.is_empty() {
-            return Err(fail("no segments"));
+            return Err(Error::NoPath {
+                audio: audio.to_string(),
+            });
         }
         Ok(out)
     }
 
-    /// Phone recognition: every phone and filler the recogniser hears.
-    pub fn recognize_phones(&mut self, samples: &[i16]) -> Result<Vec<TimedPhone>, Error> {
-        self.decode(samples)
+    /// Phone recognition: every phone and filler the recogniser hears in `samples` (16 kHz;
+    /// `audio` names them in errors).
+    pub fn recognize_phones(
+        &mut self,
+        samples: &[i16],
+        audio: &str,
+    ) -> Result<Vec<TimedPhone>, Error> {
+        self.decode(samples, audio)
     }
 
     /// Forced alignment of 16 kHz `samples` to `transcript` (words separated by spaces;
     /// punctuation other than apostrophes ignored; case ignored). `source_name` names the
-    /// transcript in errors. Returns the transcript's phones with times, fillers (`SIL`,
-    /// `<sil>`) where the recogniser put silence.
+    /// transcript in errors, `audio` the audio. Returns the transcript's phones with times,
+    /// fillers (`SIL`, `<sil>`) where the recogniser put silence. A transcript of more than
+    /// [`crate::MAX_WORDS_PER_SECOND`] words a second of audio is refused before the grammar
+    /// is built.
     pub fn align(
         &mut self,
         samples: &[i16],
         transcript: &str,
         source_name: &str,
+        audio: &str,
     ) -> Result<Vec<TimedPhone>, Error> {
-        let words = transcript_words(transcript);
-        if words.is_empty() {
-            return Err(Error::EmptyTranscript {
-                source_name: source_name.to_string(),
-            });
-        }
+        let words = crate::isolated::checked_words(transcript, source_name, samples.len())?;
         let mut rules = Vec::with_capacity(words.len());
         for word in &words {
             let prons = self.pronunciations(word)?;
             if prons.is_empty() {
                 return Err(Error::UnknownWord {
                     source_name: source_name.to_string(),
-                    word: word.clone(),
+                    word: crate::cut(word),
                     dict: self.dict.display().to_string(),
                 });
             }
@@ -325,7 +358,7 @@ impl Decoder {
             for pron in prons {
                 let mut seq = Vec::with_capacity(pron.len());
                 for phone in pron {
-                    seq.push(self.add_phone_word(&phone)?);
+                    seq.push(self.add_phone_word(&phone, audio)?);
                 }
                 alternatives.push(format!("( {} )", seq.join(" ")));
             }
@@ -345,16 +378,18 @@ impl Decoder {
         unsafe {
             if sys::ps_set_jsgf_string(self.ps.as_ptr(), name.as_ptr(), grammar.as_ptr()) < 0 {
                 return Err(Error::Decode {
-                    what: "the transcript grammar was refused".into(),
+                    audio: audio.to_string(),
+                    what: format!("the grammar of transcript {source_name} was refused"),
                 });
             }
             if sys::ps_set_search(self.ps.as_ptr(), name.as_ptr()) < 0 {
                 return Err(Error::Decode {
+                    audio: audio.to_string(),
                     what: "cannot switch to the transcript grammar".into(),
                 });
             }
         }
-        let segs = self.decode(samples)?;
+        let segs = self.decode(samples, audio)?;
         Ok(segs
             .into_iter()
             .map(|mut s| {

@@ -12,9 +12,19 @@
 //!     silence between them, and its word segmentation is the phone segmentation.
 
 mod decoder;
+mod isolated;
 pub mod wav;
 
-pub use decoder::{Decoder, ModelPaths, TimedPhone};
+pub use decoder::{transcript_words, Decoder, ModelPaths, TimedPhone};
+pub use isolated::{decode, Task, MAX_WORDS_PER_SECOND};
+
+/// `s` cut to 80 characters (an ellipsis marks the cut): errors never echo megabytes.
+pub(crate) fn cut(s: &str) -> String {
+    match s.char_indices().nth(80) {
+        Some((i, _)) => format!("{}…", &s[..i]),
+        None => s.to_string(),
+    }
+}
 
 /// The acoustic model's sample rate.
 pub const MODEL_RATE: u32 = 16_000;
@@ -23,7 +33,7 @@ pub const MODEL_RATE: u32 = 16_000;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// The WAV file cannot be read.
-    #[error("{path}: cannot read WAV audio")]
+    #[error("{path}: cannot read WAV audio: {source}")]
     Wav {
         path: String,
         #[source]
@@ -38,6 +48,34 @@ pub enum Error {
     /// The library refused to start (bad model files, bad settings).
     #[error("PocketSphinx could not start: {what}")]
     Init { what: String },
+    /// The library crashed or exited while decoding in its child process: a damaged or
+    /// wrong model file (named when the library's log says which it was reading).
+    #[error(
+        "PocketSphinx {how} while reading model file {file}: damaged or wrong model files{detail}"
+    )]
+    Crashed {
+        file: String,
+        how: String,
+        detail: String,
+    },
+    /// A transcript with more words than the audio can hold.
+    #[error(
+        "{source_name}: the transcript has {words} words, more than {max} (at most \
+         {per_second} a second of the audio's {seconds:.1} s can be aligned)"
+    )]
+    TooManyWords {
+        source_name: String,
+        words: usize,
+        max: usize,
+        per_second: f64,
+        seconds: f64,
+    },
+    /// The search found no path through the audio.
+    #[error(
+        "{audio}: PocketSphinx found no path through the audio (is it speech, and does the \
+         transcript say what it says?)"
+    )]
+    NoPath { audio: String },
     /// The transcript has no words.
     #[error("{source_name}: the transcript is empty")]
     EmptyTranscript { source_name: String },
@@ -49,6 +87,14 @@ pub enum Error {
         dict: String,
     },
     /// Decoding failed or found nothing.
-    #[error("PocketSphinx: {what}")]
-    Decode { what: String },
+    #[error("{audio}: PocketSphinx: {what}")]
+    Decode { audio: String, what: String },
+}
+
+impl Error {
+    /// Whether the input (audio, transcript, model directory) is at fault rather than the
+    /// program or the machine.
+    pub fn is_bad_input(&self) -> bool {
+        !matches!(self, Self::Decode { .. })
+    }
 }

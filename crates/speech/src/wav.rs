@@ -10,10 +10,18 @@ use std::io::Read;
 
 use crate::{Error, MODEL_RATE};
 
-/// Longest accepted audio, seconds (a line of dialogue is seconds, a scene minutes).
-pub const MAX_SECONDS: f64 = 3600.0;
+/// Longest accepted audio, seconds (a line of dialogue is seconds, a scene minutes):
+/// alignment runs at about 40× real time, phone recognition below real time, and the first
+/// channel is held as 4 bytes a sample (460 MB for 10 minutes at 192 kHz).
+pub const MAX_SECONDS: f64 = 600.0;
+/// Accepted sample rates, Hz: telephone speech to studio masters. Below, there is no speech
+/// band to recognise (and upsampling a 1 Hz file to 16 kHz costs 16 000 outputs a sample);
+/// above, no recorder.
+pub const RATES: (u32, u32) = (8_000, 192_000);
 
-/// Reads a WAV stream (`path` names it in errors) → first channel at 16 kHz, `i16`.
+/// Reads a WAV stream (`path` names it in errors) → first channel at 16 kHz, `i16`. The
+/// header's rate and length are checked ([`RATES`], [`MAX_SECONDS`]) before any sample is
+/// read; nothing is sized by the header.
 pub fn read_16k<R: Read>(reader: R, path: &str) -> Result<Vec<i16>, Error> {
     let wav = |source| Error::Wav {
         path: path.to_string(),
@@ -22,25 +30,37 @@ pub fn read_16k<R: Read>(reader: R, path: &str) -> Result<Vec<i16>, Error> {
     let mut r = hound::WavReader::new(reader).map_err(wav)?;
     let spec = r.spec();
     let channels = spec.channels.max(1) as usize;
-    if spec.sample_rate == 0 {
+    if !(RATES.0..=RATES.1).contains(&spec.sample_rate) {
         return Err(Error::BadAudio {
             path: path.into(),
-            what: "sample rate 0".into(),
+            what: format!(
+                "sample rate {} Hz is outside {} to {} Hz",
+                spec.sample_rate, RATES.0, RATES.1
+            ),
         });
     }
-    if r.duration() as f64 / spec.sample_rate as f64 > MAX_SECONDS {
+    let seconds = r.duration() as f64 / spec.sample_rate as f64;
+    if seconds > MAX_SECONDS {
         return Err(Error::BadAudio {
             path: path.into(),
-            what: format!("longer than {MAX_SECONDS} s"),
+            what: format!(
+                "{seconds:.1} s of audio (as its header says), longer than {MAX_SECONDS} s: \
+                 split it into lines or scenes"
+            ),
         });
     }
-    let mut first: Vec<f64> = Vec::with_capacity(r.duration() as usize);
+    // Grown as samples arrive: a header may claim more than the file holds.
+    let mut first: Vec<f32> = Vec::new();
     match spec.sample_format {
         hound::SampleFormat::Float => {
             for (i, s) in r.samples::<f32>().enumerate() {
                 let s = s.map_err(wav)?;
                 if i % channels == 0 {
-                    first.push(s as f64);
+                    first.push(if s.is_finite() {
+                        s.clamp(-1.0, 1.0)
+                    } else {
+                        0.0
+                    });
                 }
             }
         }
@@ -49,7 +69,7 @@ pub fn read_16k<R: Read>(reader: R, path: &str) -> Result<Vec<i16>, Error> {
             for (i, s) in r.samples::<i32>().enumerate() {
                 let s = s.map_err(wav)?;
                 if i % channels == 0 {
-                    first.push(s as f64 * scale);
+                    first.push((s as f64 * scale) as f32);
                 }
             }
         }
@@ -61,7 +81,7 @@ pub fn read_16k<R: Read>(reader: R, path: &str) -> Result<Vec<i16>, Error> {
         });
     }
     let resampled = if spec.sample_rate == MODEL_RATE {
-        first
+        first.iter().map(|&x| f64::from(x)).collect()
     } else {
         resample(&first, spec.sample_rate as f64, MODEL_RATE as f64)
     };
@@ -72,7 +92,7 @@ pub fn read_16k<R: Read>(reader: R, path: &str) -> Result<Vec<i16>, Error> {
 }
 
 /// Windowed-sinc resampling of `x` from `from` Hz to `to` Hz.
-pub fn resample(x: &[f64], from: f64, to: f64) -> Vec<f64> {
+pub fn resample(x: &[f32], from: f64, to: f64) -> Vec<f64> {
     const ZEROS: f64 = 16.0;
     let ratio = to / from;
     let cutoff = ratio.min(1.0); // fraction of the input Nyquist frequency kept
@@ -96,7 +116,7 @@ pub fn resample(x: &[f64], from: f64, to: f64) -> Vec<f64> {
             };
             let w = 0.5 + 0.5 * (PI * d / (half as f64)).cos();
             if d.abs() < half as f64 {
-                acc += x[j as usize] * cutoff * sinc * w;
+                acc += f64::from(x[j as usize]) * cutoff * sinc * w;
             }
         }
         out.push(acc);
@@ -108,9 +128,9 @@ pub fn resample(x: &[f64], from: f64, to: f64) -> Vec<f64> {
 mod tests {
     use super::*;
 
-    fn sine(rate: f64, hz: f64, n: usize) -> Vec<f64> {
+    fn sine(rate: f64, hz: f64, n: usize) -> Vec<f32> {
         (0..n)
-            .map(|i| 0.5 * (2.0 * PI * hz * i as f64 / rate).sin())
+            .map(|i| 0.5 * (2.0 * PI * hz * i as f64 / rate).sin() as f32)
             .collect()
     }
 
@@ -122,7 +142,7 @@ mod tests {
         let err = kept[200..kept.len() - 200]
             .iter()
             .zip(&expect[200..])
-            .map(|(a, b)| (a - b).abs())
+            .map(|(a, b)| (a - f64::from(*b)).abs())
             .fold(0.0, f64::max);
         assert!(err < 0.01, "tone error {err}");
         let gone = resample(&sine(44_100.0, 12_000.0, 44_100), 44_100.0, 16_000.0);
@@ -157,5 +177,66 @@ mod tests {
         assert!((15000..17000).contains(&peak), "peak {peak}");
         let err = read_16k(std::io::Cursor::new(b"RIFF nonsense".to_vec()), "bad.wav").unwrap_err();
         assert!(err.to_string().starts_with("bad.wav: "), "{err}");
+    }
+
+    /// A WAV header: PCM, `channels`, `rate`, 16 bits, with a data chunk claiming `data_len`
+    /// bytes (followed by `body`).
+    fn header(channels: u16, rate: u32, data_len: u32, body: &[u8]) -> Vec<u8> {
+        let mut v = b"RIFF".to_vec();
+        v.extend((36 + data_len).to_le_bytes());
+        v.extend(b"WAVEfmt ");
+        v.extend(16u32.to_le_bytes());
+        v.extend(1u16.to_le_bytes());
+        v.extend(channels.to_le_bytes());
+        v.extend(rate.to_le_bytes());
+        v.extend(rate.wrapping_mul(2 * u32::from(channels)).to_le_bytes());
+        v.extend((2 * channels).to_le_bytes());
+        v.extend(16u16.to_le_bytes());
+        v.extend(b"data");
+        v.extend(data_len.to_le_bytes());
+        v.extend(body);
+        v
+    }
+
+    #[test]
+    fn headers_claiming_gigabytes_or_absurd_rates_are_refused_before_reading() {
+        // 4 GiB at 2 GHz is one second: it used to size a 17 GB buffer (abort).
+        let err = read_16k(
+            std::io::Cursor::new(header(1, 2_000_000_000, u32::MAX - 63, &[0; 64])),
+            "big.wav",
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("big.wav: sample rate 2000000000 Hz is outside"),
+            "{err}"
+        );
+        // 4 GiB at 16 kHz: 37 hours.
+        let err = read_16k(
+            std::io::Cursor::new(header(1, 16_000, u32::MAX - 63, &[0; 64])),
+            "long.wav",
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("longer than 600 s"), "{err}");
+        // An hour at 1 Hz: 57.6 million outputs of 32 taps each (a hang).
+        let err = read_16k(
+            std::io::Cursor::new(header(1, 1, 7200, &[0; 7200])),
+            "slow.wav",
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("slow.wav: sample rate 1 Hz"),
+            "{err}"
+        );
+        // Within the limits, a header claiming more than there is reads what there is or
+        // fails naming the file; nothing is sized by the claim.
+        let r = read_16k(
+            std::io::Cursor::new(header(1, 16_000, 16_000 * 2 * 500, &[0; 3200])),
+            "short.wav",
+        );
+        match r {
+            Ok(s) => assert!(s.len() <= 1600),
+            Err(e) => assert!(e.to_string().starts_with("short.wav: "), "{e}"),
+        }
     }
 }

@@ -1,0 +1,96 @@
+//! Input text as the readers see it: a file's bytes decoded (UTF-8, or UTF-16 with a byte
+//! order mark, as Praat writes TextGrids whose labels are not ASCII), and what errors may
+//! quote of it cut short.
+
+use crate::Error;
+
+/// Longest piece of input an error quotes, in characters.
+pub const QUOTE_CHARS: usize = 80;
+
+/// `s` cut to [`QUOTE_CHARS`] characters (an ellipsis marks the cut): errors never echo
+/// megabytes of input.
+pub fn cut(s: &str) -> String {
+    match s.char_indices().nth(QUOTE_CHARS) {
+        Some((i, _)) => format!("{}…", &s[..i]),
+        None => s.to_string(),
+    }
+}
+
+/// A text file's bytes → text: UTF-8 (a leading byte order mark dropped), or UTF-16 little-
+/// or big-endian when the file starts with that byte order mark. `source_name` names the
+/// file in errors.
+pub fn decode_text(bytes: &[u8], source_name: &str) -> Result<String, Error> {
+    let not_text = |what: String| Error::Parse {
+        source_name: source_name.to_string(),
+        line: 1,
+        what,
+    };
+    let utf16 = |body: &[u8], unit: fn([u8; 2]) -> u16, order: &str| {
+        if body.len() % 2 != 0 {
+            return Err(not_text(format!(
+                "UTF-16 ({order}) text with an odd number of bytes"
+            )));
+        }
+        let units = body.chunks_exact(2).map(|c| unit([c[0], c[1]]));
+        char::decode_utf16(units)
+            .enumerate()
+            .map(|(i, c)| {
+                c.map_err(|_| {
+                    not_text(format!(
+                        "not UTF-16 ({order}) text: unpaired surrogate at byte {}",
+                        2 + 2 * i
+                    ))
+                })
+            })
+            .collect()
+    };
+    match bytes {
+        [0xFF, 0xFE, body @ ..] => utf16(body, u16::from_le_bytes, "little-endian"),
+        [0xFE, 0xFF, body @ ..] => utf16(body, u16::from_be_bytes, "big-endian"),
+        _ => {
+            let body = bytes.strip_prefix(&[0xEF, 0xBB, 0xBF]).unwrap_or(bytes);
+            String::from_utf8(body.to_vec()).map_err(|e| {
+                let at = e.utf8_error().valid_up_to();
+                let line = body[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+                Error::Parse {
+                    source_name: source_name.to_string(),
+                    line,
+                    what: format!("not UTF-8 text (byte {at}), nor UTF-16 with a byte order mark"),
+                }
+            })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn utf16_with_either_byte_order_and_utf8_with_a_mark() {
+        let text = "\"ooTextFile\"\n\"ʃiː\"\n";
+        let mut le = vec![0xFF, 0xFE];
+        let mut be = vec![0xFE, 0xFF];
+        for u in text.encode_utf16() {
+            le.extend(u.to_le_bytes());
+            be.extend(u.to_be_bytes());
+        }
+        assert_eq!(decode_text(&le, "le").unwrap(), text);
+        assert_eq!(decode_text(&be, "be").unwrap(), text);
+        let mut bom = vec![0xEF, 0xBB, 0xBF];
+        bom.extend(text.as_bytes());
+        assert_eq!(decode_text(&bom, "u8").unwrap(), text);
+        let err = decode_text(b"ok\n\xff\xfe", "bad.lab").unwrap_err();
+        assert!(err.to_string().starts_with("bad.lab:2: not UTF-8"), "{err}");
+        let err = decode_text(&le[..le.len() - 1], "odd").unwrap_err();
+        assert!(err.to_string().contains("odd number of bytes"), "{err}");
+    }
+
+    #[test]
+    fn quotes_are_cut() {
+        let long = "é".repeat(1000);
+        let q = cut(&long);
+        assert_eq!(q.chars().count(), QUOTE_CHARS + 1);
+        assert_eq!(cut("short"), "short");
+    }
+}
