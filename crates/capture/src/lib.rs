@@ -10,6 +10,7 @@
 //! - [`spec`]: spec parsing.
 //! - [`convert`]: pixel format conversions (YUYV/UYVY, RGB, MJPG, Z16 units).
 //! - [`registration`]: software depth→colour registration (re-exported from `mouthpiece_frame`).
+//! - [`pace`]: replay pacing (recorded speed × `speed=`, clock jumps not waited out).
 //! - `openni`: OpenNI2 cameras and `.oni` replay and recording (feature `openni2`), on top
 //!   of the safe `mouthpiece-openni2` layer.
 //! - `oni_write`: frames to `.oni` without a device (the synthetic performer), through the
@@ -30,6 +31,7 @@
 
 pub mod convert;
 pub mod devices;
+pub mod pace;
 /// Software depth→colour registration: the one implementation, in `mouthpiece_frame`.
 pub use mouthpiece_frame::registration;
 pub mod spec;

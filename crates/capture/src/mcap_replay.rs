@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 use mouthpiece_frame::{Frame, FrameSource, SourceError, SourceInfo};
 use mouthpiece_recording::{RecordingError, SessionReader};
 
+use crate::pace::Pacer;
 use crate::spec::{ReplaySpec, SourceSpec};
 use crate::{open_error_with, CaptureConfig};
 
@@ -16,10 +17,8 @@ pub struct McapReplay {
     spec: String,
     reader: SessionReader,
     info: SourceInfo,
-    speed: Option<f64>,
-    /// (host instant, log time ns) the pacing is measured from.
-    anchor: Option<(Instant, u64)>,
-    last_log_time: u64,
+    /// `None`: unpaced.
+    pacer: Option<Pacer>,
     /// The first two frames (log time, frame), read at open time to learn the sizes and the
     /// frame rate, handed out first.
     ahead: std::collections::VecDeque<(u64, Frame)>,
@@ -90,9 +89,7 @@ impl McapReplay {
             spec,
             reader,
             info,
-            speed: replay.speed,
-            anchor: None,
-            last_log_time: first.log_time,
+            pacer: replay.speed.map(Pacer::new),
             ahead: [Some(first), second]
                 .into_iter()
                 .flatten()
@@ -105,24 +102,19 @@ impl McapReplay {
     /// Continues from `t` after the session's first frame (backwards too).
     pub fn seek(&mut self, t: Duration) -> Result<(), SourceError> {
         self.ahead.clear();
-        self.anchor = None;
+        if let Some(p) = &mut self.pacer {
+            p.reset();
+        }
         self.reader
             .seek(t)
             .map_err(|e| recording_error(&self.spec, e))
     }
 
     fn pace(&mut self, log_time: u64) {
-        let Some(speed) = self.speed else { return };
-        if log_time < self.last_log_time {
-            self.anchor = None; // looped
-        }
-        self.last_log_time = log_time;
-        let (anchor, anchor_log) = *self.anchor.get_or_insert((Instant::now(), log_time));
-        let due = anchor
-            + Duration::from_secs_f64(log_time.saturating_sub(anchor_log) as f64 / 1e9 / speed);
-        let now = Instant::now();
-        if due > now {
-            std::thread::sleep(due - now);
+        let Some(pacer) = &mut self.pacer else { return };
+        let wait = pacer.wait(Instant::now(), log_time, &self.spec);
+        if !wait.is_zero() {
+            std::thread::sleep(wait);
         }
     }
 }

@@ -67,8 +67,8 @@ struct ReplayState {
     _fixed_copy: Option<tempfile::TempDir>,
     frames: (u32, u32),
     received: (u32, u32),
-    /// Wall-clock anchor for pacing: (host instant, recording time µs) of the first frame.
-    pace_anchor: Option<(Instant, u64)>,
+    /// Pacing (`None`: unpaced).
+    pacer: Option<crate::pace::Pacer>,
     /// Frames before this recording time (µs) are read and dropped (seeking forward).
     skip_until_us: u64,
     /// Added to device timestamps so that they keep increasing across loops.
@@ -476,9 +476,9 @@ impl OpenNiSource {
                 format!("no such file: {}", path.display()),
             ));
         }
-        // Check the structure in Rust before OpenNI2 sees it: its player does not cope
-        // gracefully with garbage.
-        let records = oni_file::list_records(path, true).map_err(|e| match e {
+        // Check every record in Rust before OpenNI2 sees the file: its player crashes the
+        // process (signal 11) on some inconsistent files instead of failing.
+        let records = openni2::oni_check::validate(path, true).map_err(|e| match e {
             oni_file::OniFileError::Io { .. } => {
                 open_error_with(&spec, format!("cannot read {}", path.display()), e)
             }
@@ -577,7 +577,7 @@ impl OpenNiSource {
             _fixed_copy: fixed_copy,
             frames,
             received: (0, 0),
-            pace_anchor: None,
+            pacer: replay.speed.map(crate::pace::Pacer::new),
             skip_until_us: (replay.start_s * 1e6) as u64,
             loop_offset_us: 0,
             last_ts_us: 0,
@@ -661,7 +661,9 @@ impl OpenNiSource {
         }
         if let Kind::Replay(state) = &mut self.kind {
             state.skip_until_us = target;
-            state.pace_anchor = None;
+            if let Some(p) = &mut state.pacer {
+                p.reset();
+            }
         }
         Ok(())
     }
@@ -678,7 +680,9 @@ impl OpenNiSource {
         let (session, _, _, _) = open_session(&self.spec, &uri, true, &self.config, None)?;
         state.received = (0, 0);
         state.ended = false;
-        state.pace_anchor = None;
+        if let Some(p) = &mut state.pacer {
+            p.reset();
+        }
         self.session = Some(session);
         Ok(())
     }
@@ -860,16 +864,10 @@ impl OpenNiSource {
                 if rec_ts < state.skip_until_us {
                     continue;
                 }
-                if let Some(speed) = state.spec.speed {
-                    let (anchor, anchor_ts) =
-                        *state.pace_anchor.get_or_insert((Instant::now(), rec_ts));
-                    let due = anchor
-                        + Duration::from_secs_f64(
-                            rec_ts.saturating_sub(anchor_ts) as f64 / 1e6 / speed,
-                        );
-                    let now = Instant::now();
-                    if due > now {
-                        std::thread::sleep(due - now);
+                if let Some(pacer) = &mut state.pacer {
+                    let wait = pacer.wait(Instant::now(), rec_ts.saturating_mul(1000), &self.spec);
+                    if !wait.is_zero() {
+                        std::thread::sleep(wait);
                     }
                 }
                 let ts = rec_ts + state.loop_offset_us;

@@ -579,6 +579,18 @@ impl Default for OscConfig {
     }
 }
 
+/// `s` quoted for an error message, cut to its first 80 characters (with its length): an
+/// error never echoes a whole file's worth of one value.
+pub fn quote_excerpt(s: &str) -> String {
+    const MAX_CHARS: usize = 80;
+    if s.chars().count() <= MAX_CHARS {
+        format!("{s:?}")
+    } else {
+        let head: String = s.chars().take(MAX_CHARS).collect();
+        format!("{head:?}… ({} bytes)", s.len())
+    }
+}
+
 /// Most OSC targets in `[osc] targets` (each costs one datagram per frame).
 pub const MAX_OSC_TARGETS: usize = 16;
 
@@ -611,8 +623,10 @@ impl fmt::Display for OscTarget {
 impl TryFrom<String> for OscTarget {
     type Error = String;
     fn try_from(s: String) -> Result<Self, String> {
-        let shape =
-            || format!("expected host:port (e.g. \"127.0.0.1:39539\", \"[::1]:39539\"), got {s:?}");
+        let shown = quote_excerpt(&s);
+        let shape = || {
+            format!("expected host:port (e.g. \"127.0.0.1:39539\", \"[::1]:39539\"), got {shown}")
+        };
         let Some((host, port)) = s.rsplit_once(':') else {
             return Err(shape());
         };
@@ -621,12 +635,12 @@ impl TryFrom<String> for OscTarget {
                 let inner = inner.strip_suffix(']').ok_or_else(shape)?;
                 inner
                     .parse::<std::net::Ipv6Addr>()
-                    .map_err(|_| format!("expected an IPv6 address between [ and ], got {s:?}"))?;
+                    .map_err(|_| format!("expected an IPv6 address between [ and ], got {shown}"))?;
                 inner
             }
             None if host.contains(':') => {
                 return Err(format!(
-                "expected host:port, got {s:?} (an IPv6 address goes in brackets: \"[::1]:39539\")"
+                "expected host:port, got {shown} (an IPv6 address goes in brackets: \"[::1]:39539\")"
             ))
             }
             None => host,
@@ -644,7 +658,7 @@ impl TryFrom<String> for OscTarget {
         }
         let port = match port.parse::<u32>() {
             Ok(p) if (1..=65535).contains(&p) => p as u16,
-            _ => return Err(format!("port out of range in {s:?}: expected 1 to 65535")),
+            _ => return Err(format!("port out of range in {shown}: expected 1 to 65535")),
         };
         Ok(OscTarget {
             host: host.to_owned(),

@@ -331,3 +331,25 @@ fn an_array_element_is_located_on_its_own_line() {
     // Past the end: the key itself.
     assert_eq!(config.locate("osc.targets[7]").line, 2);
 }
+
+/// A megabyte-long OSC target or thousands of targets: errors name the key and quote at
+/// most the first 80 characters of a value.
+#[test]
+fn huge_osc_values_are_refused_without_echoing_them() {
+    for target in [
+        format!("{}:39539", "a".repeat(1_000_000)),
+        format!("127.0.0.1:{}", "9".repeat(1_000_000)),
+        "b".repeat(1_000_000),
+    ] {
+        let err = parse(&format!("[osc]\ntargets = [\"{target}\"]\n")).unwrap_err();
+        let shown = err.to_string();
+        assert_eq!(err.key(), Some("osc.targets[0]"), "{}", &shown[..200]);
+        assert!(shown.len() < 400, "the error echoes {} bytes", shown.len());
+    }
+    let many: Vec<String> = (0..5000)
+        .map(|i| format!("\"127.0.0.1:{}\"", 1000 + i))
+        .collect();
+    let err = parse(&format!("[osc]\ntargets = [{}]\n", many.join(", "))).unwrap_err();
+    assert_eq!(err.key(), Some("osc.targets"), "{err}");
+    assert!(err.to_string().contains("at most 16"), "{err}");
+}

@@ -78,7 +78,8 @@ pub fn settings(config: &Config) -> Result<OscSettings, CheckError> {
             invalid(
                 "osc.character",
                 format!(
-                    "no configured character is named {name:?} (configured: {})",
+                    "no configured character is named {} (configured: {})",
+                    mouthpiece_config::quote_excerpt(name),
                     known.join(", ")
                 ),
             )

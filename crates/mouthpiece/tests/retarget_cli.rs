@@ -826,3 +826,34 @@ fn evaluate_with_dots_unseen_keeps_every_curve_within_its_target() {
         "only {unseen} unseen dots (13 when written): the test needs a session that loses some"
     );
 }
+
+/// Smoothing sizes that would allocate terabytes or loop for hours, and a `--look-at` time
+/// no take reaches, are refused before any input is read: exit 2 naming the flag's key, no
+/// output file.
+#[test]
+fn absurd_smoothing_sizes_and_look_at_times_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let example = repo().join("tests/data/example-performer.jsonl");
+    let out = dir.path().join("out.jsonl");
+    for (args, named) in [
+        (
+            &["--smooth", "bspline", "--samples-per-span", "1000000000000"][..],
+            "samples_per_span",
+        ),
+        (
+            &["--smooth", "ma", "--ma-radius", "1000000000"][..],
+            "radius",
+        ),
+        (&["--smooth", "ma-exp", "--ma-radius", "501"][..], "radius"),
+        (&["--look-at", "0,0.1,2@1e300"][..], "--look-at"),
+        (&["--look-at", "0,0.1,2@-1e10"][..], "--look-at"),
+    ] {
+        let mut cmd = mouthpiece();
+        example_args(&mut cmd, &example, out.to_str().unwrap());
+        let o = cmd.args(args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(named), "{args:?}: {stderr}");
+        assert!(!out.exists(), "{args:?} left an output file");
+    }
+}

@@ -26,11 +26,13 @@
 //! # Layout
 //! - `runtime`: the OpenNI thread, its command loop and frame pump (all `unsafe` lives there).
 //! - [`oni_file`]: pure-Rust `.oni` file surgery (the cropping-record fix).
+//! - [`oni_check`]: pure-Rust validation of every record, before the player sees a file.
 //! - [`oni_writer`]: pure-Rust `.oni` writer (uncompressed depth + RGB888 colour), for
 //!   recordings made without a device (the synthetic performer).
 
 mod runtime;
 
+pub mod oni_check;
 pub mod oni_file;
 pub mod oni_writer;
 

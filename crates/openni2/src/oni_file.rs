@@ -22,10 +22,10 @@ use std::fs::File;
 use std::io::{self, BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-const FILE_HEADER_LEN: u64 = 24;
-const RECORD_HEADER_LEN: usize = 28;
+pub(crate) const FILE_HEADER_LEN: u64 = 24;
+pub(crate) const RECORD_HEADER_LEN: usize = 28;
 const RECORD_MAGIC: u32 = 0x0052_494E;
-const SEEK_ENTRY_LEN: usize = 20;
+pub(crate) const SEEK_ENTRY_LEN: usize = 20;
 
 /// Record types this module cares about.
 pub mod record_type {
@@ -87,22 +87,22 @@ impl RecordHeader {
     }
 }
 
-fn io_err(path: &Path) -> impl FnOnce(io::Error) -> OniFileError + '_ {
+pub(crate) fn io_err(path: &Path) -> impl FnOnce(io::Error) -> OniFileError + '_ {
     move |source| OniFileError::Io {
         path: path.to_path_buf(),
         source,
     }
 }
 
-fn u32_at(b: &[u8], at: usize) -> u32 {
+pub(crate) fn u32_at(b: &[u8], at: usize) -> u32 {
     u32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"))
 }
 
-fn u64_at(b: &[u8], at: usize) -> u64 {
+pub(crate) fn u64_at(b: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"))
 }
 
-fn is_property(kind: u32) -> bool {
+pub(crate) fn is_property(kind: u32) -> bool {
     matches!(
         kind,
         record_type::INT_PROPERTY
@@ -113,7 +113,7 @@ fn is_property(kind: u32) -> bool {
 }
 
 /// Reads a length-prefixed string field at `at` of a record's fields.
-fn string_field(rec: &[u8], at: usize) -> Option<(String, usize)> {
+pub(crate) fn string_field(rec: &[u8], at: usize) -> Option<(String, usize)> {
     let len = u32_at(rec.get(at..at + 4)?, 0) as usize;
     let bytes = rec.get(at + 4..at + 4 + len)?;
     let text = bytes.split(|&b| b == 0).next().unwrap_or_default();
@@ -480,7 +480,7 @@ pub fn repair_truncated(src: &Path, dst: &Path) -> Result<TruncationRepair, OniF
     })
 }
 
-fn read_range(
+pub(crate) fn read_range(
     reader: &mut BufReader<File>,
     path: &Path,
     offset: u64,

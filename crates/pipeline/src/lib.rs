@@ -718,6 +718,14 @@ mod tests {
             ("smooth = \"ma-exp\"\nma_alpha = 1.5", "retarget.ma_alpha"),
             ("one_euro = [0.0, 0.1]", "retarget.one_euro"),
             ("samples_per_span = 0", "retarget.samples_per_span"),
+            (
+                "samples_per_span = 1000000000000",
+                "retarget.samples_per_span",
+            ),
+            (
+                "smooth = \"ma\"\nma_radius = 1000000000",
+                "retarget.ma_radius",
+            ),
             ("smooth = \"spline\"", "retarget"),
         ] {
             let err = PipelineConfig::from_toml_str(&format!("[retarget]\n{text}\n"))

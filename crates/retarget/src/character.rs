@@ -255,10 +255,13 @@ struct RawRig {
 }
 
 impl RawRig {
-    fn jaw_pivot(&self, c: &Checker) -> Result<Option<Vec3>, Error> {
+    fn jaw_pivot(&self, c: &Checker, frame: &MouthFrame) -> Result<Option<Vec3>, Error> {
         self.jaw_pivot
             .as_ref()
-            .map(|v| c.finite("rig.jaw_pivot", v))
+            .map(|v| {
+                let p = c.finite("rig.jaw_pivot", v)?;
+                c.near_mouth("rig.jaw_pivot", v, &p, frame)
+            })
             .transpose()
     }
 
@@ -269,13 +272,25 @@ impl RawRig {
         // Each entry on its own first, so that an error names its line.
         for (name, v) in ranges.get_ref().iter() {
             crate::rig::RangeOverrides::from_named([(name, *v.get_ref())]).map_err(
-                |(name, reason)| c.err(format!("rig.ranges.{name}"), Some(v.span()), reason),
+                |(name, reason)| {
+                    c.err(
+                        format!("rig.ranges.{}", key_excerpt(&name)),
+                        Some(v.span()),
+                        reason,
+                    )
+                },
             )?;
         }
         crate::rig::RangeOverrides::from_named(
             ranges.get_ref().iter().map(|(n, v)| (n, *v.get_ref())),
         )
-        .map_err(|(name, reason)| c.err(format!("rig.ranges.{name}"), Some(ranges.span()), reason))
+        .map_err(|(name, reason)| {
+            c.err(
+                format!("rig.ranges.{}", key_excerpt(&name)),
+                Some(ranges.span()),
+                reason,
+            )
+        })
     }
 }
 
@@ -291,7 +306,45 @@ pub(crate) struct Checker<'a> {
     pub(crate) src: &'a str,
 }
 
+/// Farthest a character's head pivot, eyes or jaw hinge may sit from the mouth's centre, in
+/// mouth widths (a few in the shipped characters): further is a typo or the wrong units.
+pub const MAX_MOUTH_WIDTHS_AWAY: f64 = 50.0;
+
+/// A TOML key as shown in an error: cut to its first 80 characters.
+fn key_excerpt(key: &str) -> String {
+    const MAX_CHARS: usize = 80;
+    if key.chars().count() <= MAX_CHARS {
+        key.to_string()
+    } else {
+        let head: String = key.chars().take(MAX_CHARS).collect();
+        format!("{head}… ({} bytes)", key.len())
+    }
+}
+
 impl Checker<'_> {
+    /// `p` (model frame) within [`MAX_MOUTH_WIDTHS_AWAY`] mouth widths of the mouth's centre.
+    pub(crate) fn near_mouth(
+        &self,
+        key: &str,
+        v: &Spanned<[f64; 3]>,
+        p: &Vec3,
+        frame: &MouthFrame,
+    ) -> Result<Vec3, Error> {
+        let away = (p - frame.origin).norm() / frame.width;
+        if !(away <= MAX_MOUTH_WIDTHS_AWAY) {
+            return Err(self.err(
+                key,
+                Some(v.span()),
+                format!(
+                    "{:?} is {away:.3e} mouth widths from the mouth's centre (at most \
+                     {MAX_MOUTH_WIDTHS_AWAY}: a typo, or other units than the points?)",
+                    v.get_ref()
+                ),
+            ));
+        }
+        Ok(*p)
+    }
+
     pub(crate) fn err(
         &self,
         key: impl Into<String>,
@@ -531,7 +584,7 @@ impl RawCharacter {
         }
         if let Some(rig) = &self.rig {
             character.rig_ranges = rig.validate(&c)?;
-            character.jaw_pivot = rig.jaw_pivot(&c)?;
+            character.jaw_pivot = rig.jaw_pivot(&c, &character.frame)?;
         }
         Ok(character)
     }
@@ -1053,5 +1106,38 @@ lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
         assert_eq!(wolf.neutral[3].x, 0.0);
         assert_eq!((wolf.neutral[0].y, wolf.neutral[0].z), (0.0, 0.0));
         assert_eq!((wolf.neutral[6].y, wolf.neutral[6].z), (0.0, 0.0));
+    }
+    /// Head points and the jaw hinge far from the mouth (wrong units, a typo), ranges near
+    /// zero, and a megabyte-long range name: errors naming key and line, never the whole key.
+    #[test]
+    fn absurd_head_and_rig_values_are_refused() {
+        // The square's mouth is 2 wide, centred on the origin: 50 widths is 100.
+        for (table, key, line) in [
+            ("[rig]\njaw_pivot = [0.0, 0.0, 1e6]", "rig.jaw_pivot", 9),
+            ("[rig]\njaw_pivot = [101.0, 0.0, 0.0]", "rig.jaw_pivot", 9),
+            ("[head]\npivot = [0.0, -1e6, 0.0]", "head.pivot", 9),
+            ("[head]\neye_left = [1e5, 1.0, 0.0]", "head.eye_left", 9),
+        ] {
+            let (k, l, reason) = invalid(&format!("{SQUARE}{table}\n"));
+            assert_eq!((k.as_str(), l), (key, Some(line)), "{table}: {reason}");
+            assert!(reason.contains("mouth widths"), "{table}: {reason}");
+        }
+        assert!(Character::from_toml_str(&format!(
+            "{SQUARE}[rig]\njaw_pivot = [99.0, 0.0, 0.0]\n"
+        ))
+        .is_ok());
+        let (k, _, reason) = invalid(&format!("{SQUARE}[rig.ranges]\nmouthClose = 1e-300\n"));
+        assert_eq!(k, "rig.ranges.mouthClose", "{reason}");
+        assert!(reason.contains("1e-300"), "{reason}");
+        let long = "x".repeat(1_000_000);
+        let (k, _, reason) = invalid(&format!("{SQUARE}[rig.ranges]\n{long} = 1\n"));
+        assert!(
+            k.len() < 120 && reason.len() < 400,
+            "{} {}",
+            k.len(),
+            reason.len()
+        );
+        let (_, _, reason) = invalid(&format!("{SQUARE}[head]\nturn_time_s = 1e300\n"));
+        assert!(reason.contains("got 1e300"), "{reason}");
     }
 }

@@ -31,7 +31,9 @@ impl RawHead {
         let mut head = character.head;
         let point = |key: &str, v: &Option<Spanned<[f64; 3]>>, into: &mut crate::Vec3| {
             if let Some(v) = v {
-                *into = c.finite(&format!("head.{key}"), v)?;
+                let key = format!("head.{key}");
+                let p = c.finite(&key, v)?;
+                *into = c.near_mouth(&key, v, &p, &character.frame)?;
             }
             Ok::<(), Error>(())
         };
@@ -52,7 +54,7 @@ impl RawHead {
                 return Err(c.err(
                     format!("head.{key}"),
                     Some(v.span()),
-                    format!("must be {what}, got {x}"),
+                    format!("must be {what}, got {x:?}"),
                 ));
             }
             Ok(Some(x))

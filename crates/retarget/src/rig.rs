@@ -195,12 +195,18 @@ impl RangeOverrides {
     }
 }
 
+/// Smallest range of a curve's measure: a range near 0 turns the measure's noise into a
+/// curve jumping between 0 and 1.
+pub const MIN_RANGE: f64 = 0.001;
+/// Largest range of a curve's measure.
+pub const MAX_RANGE: f64 = 1000.0;
+
 fn range_ok(v: f64) -> bool {
-    v.is_finite() && v > 0.0 && v <= 1000.0
+    (MIN_RANGE..=MAX_RANGE).contains(&v)
 }
 
 fn range_reason(v: f64) -> String {
-    format!("must be a positive number (at most 1000), got {v}")
+    format!("must be a positive number, at least {MIN_RANGE} and at most {MAX_RANGE}, got {v:?}")
 }
 
 /// One lip's rigid motion from neutral (mouth frame).

@@ -13,6 +13,13 @@ pub const SAVITZKY_GOLAY_5: [f64; 5] = [
     -3.0 / 35.0,
 ];
 
+/// Largest moving-average radius: each curve point costs `2 · radius + 1` terms, and a
+/// radius past half the loop (at most [`crate::layout::MAX_DOT_NUMBER`] points) only wraps
+/// around it again.
+pub const MAX_MA_RADIUS: usize = crate::layout::MAX_DOT_NUMBER.div_ceil(2);
+/// Most B-spline samples per span: the curve has this many points per character point.
+pub const MAX_SAMPLES_PER_SPAN: usize = 64;
+
 /// Weights of the moving average's neighbours.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum MovingAverageKind {
@@ -76,10 +83,14 @@ impl ShapeSmoothing {
     /// Checks the parameters.
     pub fn validate(&self) -> Result<(), Error> {
         match *self {
-            ShapeSmoothing::MovingAverage { radius: 0, .. } => Err(Error::InvalidConfig {
-                key: "smooth.radius",
-                reason: "must be at least 1".into(),
-            }),
+            ShapeSmoothing::MovingAverage { radius, .. }
+                if radius == 0 || radius > MAX_MA_RADIUS =>
+            {
+                Err(Error::InvalidConfig {
+                    key: "smooth.radius",
+                    reason: format!("must be from 1 to {MAX_MA_RADIUS}, got {radius}"),
+                })
+            }
             ShapeSmoothing::MovingAverage {
                 kind: MovingAverageKind::Exponential { alpha },
                 ..
@@ -87,12 +98,16 @@ impl ShapeSmoothing {
                 key: "smooth.alpha",
                 reason: format!("must be in (0, 1], got {alpha}"),
             }),
-            ShapeSmoothing::BSpline {
-                samples_per_span: 0,
-            } => Err(Error::InvalidConfig {
-                key: "smooth.samples_per_span",
-                reason: "must be at least 1".into(),
-            }),
+            ShapeSmoothing::BSpline { samples_per_span }
+                if samples_per_span == 0 || samples_per_span > MAX_SAMPLES_PER_SPAN =>
+            {
+                Err(Error::InvalidConfig {
+                    key: "smooth.samples_per_span",
+                    reason: format!(
+                        "must be from 1 to {MAX_SAMPLES_PER_SPAN}, got {samples_per_span}"
+                    ),
+                })
+            }
             _ => Ok(()),
         }
     }

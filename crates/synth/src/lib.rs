@@ -138,11 +138,30 @@ impl SynthConfig {
 
     fn validate(&self) -> Result<(), SynthError> {
         let bad = |what: String| Err(SynthError::Config(what));
-        if !(self.fps > 0.0 && self.fps <= 1000.0) {
-            return bad(format!("fps must be in (0, 1000], got {}", self.fps));
+        // A frame rate near 0 gave an empty session that looked like success; seconds in
+        // the billions made the speech track plan syllables without end.
+        if !(MIN_FPS..=MAX_FPS).contains(&self.fps) {
+            return bad(format!(
+                "fps must be from {MIN_FPS} to {MAX_FPS}, got {}",
+                self.fps
+            ));
         }
-        if !(self.seconds >= 0.0 && self.seconds.is_finite()) {
-            return bad(format!("seconds must be ≥ 0, got {}", self.seconds));
+        if !(0.0..=MAX_SECONDS).contains(&self.seconds) {
+            return bad(format!(
+                "seconds must be from 0 to {MAX_SECONDS} (a day), got {}",
+                self.seconds
+            ));
+        }
+        if !self
+            .camera
+            .distortion
+            .iter()
+            .all(|k| k.is_finite() && k.abs() <= 10.0)
+        {
+            return bad(format!(
+                "lens distortion coefficients must be finite and within ±10, got {:?}",
+                self.camera.distortion
+            ));
         }
         if !(0.25..=3.0).contains(&self.distance_m) {
             return bad(format!(
@@ -188,6 +207,13 @@ impl SynthConfig {
         }
     }
 }
+
+/// Slowest frame rate of a synthetic session.
+pub const MIN_FPS: f64 = 1.0;
+/// Fastest frame rate of a synthetic session.
+pub const MAX_FPS: f64 = 1000.0;
+/// Longest synthetic session, seconds (a day).
+pub const MAX_SECONDS: f64 = 86_400.0;
 
 /// What can go wrong setting up the synthetic performer.
 #[derive(Debug, thiserror::Error)]

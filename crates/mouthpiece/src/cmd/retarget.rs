@@ -84,13 +84,18 @@ pub struct LookAt {
     pub from_t: f64,
 }
 
+/// Latest `--look-at` time `@T`, seconds either side of 0 (about 32 years).
+pub const MAX_LOOK_AT_T: f64 = 1e9;
+
 /// Parses `X,Y,Z` or `X,Y,Z@T`.
 pub fn parse_look_at(s: &str) -> Result<LookAt, String> {
     let (xyz, from_t) = match s.split_once('@') {
         Some((xyz, t)) => {
             let t: f64 = t.trim().parse().map_err(|e| format!("time `{t}`: {e}"))?;
-            if !t.is_finite() {
-                return Err(format!("time `{t}` is not finite"));
+            if !(t.is_finite() && t.abs() <= MAX_LOOK_AT_T) {
+                return Err(format!(
+                    "time `{t}` is not a number of seconds within ±{MAX_LOOK_AT_T:e}"
+                ));
             }
             (xyz, t)
         }
