@@ -301,6 +301,8 @@ pub fn gltf_rig(data: &[u8]) {
     let take = Path::new("/nonexistent/mouthpiece-fuzz/take.glb");
     let _ = animate_rig_bytes(data, rig, take_glb(), take);
     let _ = animate_rig_bytes(&split_glb(data), rig, take_glb(), take);
+}
+
 /// A WAV file of `mouthpiece lipsync --audio`: read (first channel) and resampled to 16 kHz,
 /// as the command does before decoding.
 pub fn wav(data: &[u8]) {
