@@ -1,0 +1,556 @@
+//! OSC output (docs/osc.md): one character's rig curves, head and eyes as VMC protocol
+//! messages over UDP, to every `[osc] targets` entry, once per processed frame.
+//!
+//! The processing thread only copies the chosen character's curves and rotations into a
+//! [`VmcFrame`] (about 130 bytes, no allocation) and offers it to a bounded queue
+//! ([`QUEUE_FRAMES`]); when the queue is full the oldest frame is dropped and counted. The
+//! `mouthpiece-osc` thread takes frames off the queue, converts the rotations to the VMC
+//! protocol's (Unity's) axes, encodes one OSC bundle (`rosc`) and sends it to each target on
+//! a non-blocking connected UDP socket. A target that refuses (nothing listens: the kernel
+//! reports the ICMP "port unreachable" as `ECONNREFUSED` on a later send) or cannot be reached
+//! is counted and logged at most once per `[logging] throttle_s`; it never blocks anything.
+//! Counters: the server's [`OscCounters`] (`/metrics`, `/healthz`, the systemd status).
+
+use std::net::{SocketAddr, UdpSocket};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, Sender, TrySendError};
+use mouthpiece_output::{RigCurves, StreamFrame, Throttle, CURVE_NAMES};
+use mouthpiece_server::{OscCounters, OscTargetCounters};
+use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion};
+use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
+
+/// Frames waiting for the sender thread; a full queue drops its oldest frame.
+pub const QUEUE_FRAMES: usize = 8;
+
+/// The VMC protocol's addresses (names of the messages).
+pub mod address {
+    /// `(int) 1`: the sender has an avatar and sends it.
+    pub const OK: &str = "/VMC/Ext/OK";
+    /// `(float)` the sender's time, seconds.
+    pub const TIME: &str = "/VMC/Ext/T";
+    /// `(string) bone, (float) px, py, pz, qx, qy, qz, qw`: a bone's local pose, Unity axes.
+    pub const BONE: &str = "/VMC/Ext/Bone/Pos";
+    /// `(string) name, (float) value`: one blend shape's value.
+    pub const BLEND_VAL: &str = "/VMC/Ext/Blend/Val";
+    /// No arguments: apply the values sent since the last one.
+    pub const BLEND_APPLY: &str = "/VMC/Ext/Blend/Apply";
+}
+
+/// One resolved target.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Target {
+    /// As configured (`host:port`): the counters' label.
+    pub label: String,
+    pub addr: SocketAddr,
+}
+
+/// `[osc]` checked and resolved (the daemon resolves it from its configuration).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OscSettings {
+    pub targets: Vec<Target>,
+    /// The character whose rig, head and eyes go out.
+    pub character: String,
+    pub head: bool,
+    pub eyes: bool,
+    /// That character's head-frame axes (left, up, forward) in its model frame, as columns.
+    pub axes: Matrix3<f64>,
+}
+
+/// What the processing thread hands the sender: one character's values in one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VmcFrame {
+    /// The stream's `t` (seconds since the daemon started).
+    pub t: f64,
+    /// The rig's curves; `None` (not calibrated, or a frame that could not be tracked): every
+    /// curve at rest, 0, as the stream shows the character at rest.
+    pub curves: Option<RigCurves>,
+    /// Head rotation, model frame, `[w, x, y, z]`.
+    pub head: [f32; 4],
+    /// Eye rotations relative to the head, `[w, x, y, z]`.
+    pub eye_left: [f32; 4],
+    pub eye_right: [f32; 4],
+}
+
+impl VmcFrame {
+    /// `character`'s values in `frame`; `None` when the frame does not carry it (a character
+    /// that could not be bound is left out of the stream).
+    pub fn from_stream(frame: &StreamFrame, character: &str) -> Option<Self> {
+        let c = frame.characters.iter().find(|c| c.name == character)?;
+        let head = c.head.unwrap_or_default();
+        Some(VmcFrame {
+            t: frame.t,
+            curves: c.rig.map(|r| r.curves),
+            head: head.rotation,
+            eye_left: head.eye_left,
+            eye_right: head.eye_right,
+        })
+    }
+}
+
+/// The rotation whose matrix is `axes` (the head frame's axes as columns, a right-handed
+/// orthonormal frame).
+pub fn axes_rotation(axes: &Matrix3<f64>) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(axes))
+}
+
+/// A rotation of the character's model frame (`[w, x, y, z]`) as a VMC bone rotation
+/// `[x, y, z, w]`: written in the character's head-frame axes (`Aᵀ R A`: left, up, forward;
+/// `a` is `A` as a quaternion, [`axes_rotation`]), then mirrored into Unity's left-handed
+/// axes (x right, y up, z forward), which keeps the rotation's angle and maps the quaternion
+/// `(w, x, y, z)` to `(w, x, −y, −z)`. `w ≥ 0`.
+pub fn unity_rotation(q_wxyz: [f32; 4], a: &UnitQuaternion<f64>) -> [f32; 4] {
+    let [w, x, y, z] = q_wxyz.map(f64::from);
+    let q = UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z));
+    let h = a.inverse() * q * a;
+    let s = if h.w < 0.0 { -1.0 } else { 1.0 };
+    [s * h.i, -s * h.j, -s * h.k, s * h.w].map(|v| v as f32)
+}
+
+/// The bundle sent each frame, built once and refilled in place: `OK`, `T`, the bones
+/// (`Head`, `LeftEye`, `RightEye` as configured), one `Blend/Val` per curve, `Blend/Apply`.
+#[derive(Debug, Clone)]
+pub struct VmcPacket {
+    packet: OscPacket,
+    /// Which bones the bundle holds, in order.
+    bones: Vec<Bone>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Bone {
+    Head,
+    LeftEye,
+    RightEye,
+}
+
+impl Bone {
+    /// Unity's `HumanBodyBones` names.
+    fn name(self) -> &'static str {
+        match self {
+            Bone::Head => "Head",
+            Bone::LeftEye => "LeftEye",
+            Bone::RightEye => "RightEye",
+        }
+    }
+}
+
+fn message(addr: &str, args: Vec<OscType>) -> OscPacket {
+    OscPacket::Message(OscMessage {
+        addr: addr.to_owned(),
+        args,
+    })
+}
+
+impl VmcPacket {
+    pub fn new(head: bool, eyes: bool) -> Self {
+        let mut bones = Vec::new();
+        if head {
+            bones.push(Bone::Head);
+        }
+        if eyes {
+            bones.extend([Bone::LeftEye, Bone::RightEye]);
+        }
+        let mut content = vec![
+            message(address::OK, vec![OscType::Int(1)]),
+            message(address::TIME, vec![OscType::Float(0.0)]),
+        ];
+        for bone in &bones {
+            let mut args = vec![OscType::String(bone.name().to_owned())];
+            args.extend([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0].map(OscType::Float));
+            content.push(message(address::BONE, args));
+        }
+        for name in CURVE_NAMES {
+            content.push(message(
+                address::BLEND_VAL,
+                vec![OscType::String(name.to_owned()), OscType::Float(0.0)],
+            ));
+        }
+        content.push(message(address::BLEND_APPLY, Vec::new()));
+        VmcPacket {
+            packet: OscPacket::Bundle(OscBundle {
+                // "Immediately" (OSC 1.0): the receiver applies the values when they arrive.
+                timetag: OscTime {
+                    seconds: 0,
+                    fractional: 1,
+                },
+                content,
+            }),
+            bones,
+        }
+    }
+
+    /// Puts `frame`'s values into the bundle (no allocation); `axes`: [`axes_rotation`] of
+    /// the character's head frame.
+    pub fn fill(&mut self, frame: &VmcFrame, axes: &UnitQuaternion<f64>) {
+        let OscPacket::Bundle(bundle) = &mut self.packet else {
+            unreachable!("built as a bundle")
+        };
+        let mut messages = bundle.content.iter_mut().map(|p| match p {
+            OscPacket::Message(m) => m,
+            OscPacket::Bundle(_) => unreachable!("built of messages"),
+        });
+        let _ok = messages.next();
+        if let Some(m) = messages.next() {
+            m.args[0] = OscType::Float(frame.t as f32);
+        }
+        for bone in &self.bones {
+            let q = match bone {
+                Bone::Head => frame.head,
+                Bone::LeftEye => frame.eye_left,
+                Bone::RightEye => frame.eye_right,
+            };
+            let r = unity_rotation(q, axes);
+            if let Some(m) = messages.next() {
+                for (arg, v) in m.args[4..8].iter_mut().zip(r) {
+                    *arg = OscType::Float(v);
+                }
+            }
+        }
+        let curves = frame.curves.unwrap_or_default();
+        for v in curves.0 {
+            if let Some(m) = messages.next() {
+                m.args[1] = OscType::Float(v);
+            }
+        }
+    }
+
+    pub fn packet(&self) -> &OscPacket {
+        &self.packet
+    }
+
+    /// Encodes the bundle into `out` (cleared first; its buffer is reused).
+    pub fn encode(&self, out: &mut Vec<u8>) {
+        out.clear();
+        // Writing into a Vec cannot fail.
+        let Ok(_) = rosc::encoder::encode_into(&self.packet, out);
+    }
+}
+
+/// Offers `item` to a bounded queue without waiting: when the queue is full its oldest item
+/// is dropped (and counted) to make room. `rx` is a receiver of the same queue.
+pub fn push_drop_oldest<T>(tx: &Sender<T>, rx: &Receiver<T>, item: T, dropped: &dyn Fn()) {
+    match tx.try_send(item) {
+        Ok(()) => {}
+        Err(TrySendError::Full(item)) => {
+            if rx.try_recv().is_ok() {
+                dropped();
+            }
+            // The sender thread may have taken one meanwhile; a queue refilled by nobody
+            // else cannot be full again, but count the loss rather than wait if it is.
+            if tx.try_send(item).is_err() {
+                dropped();
+            }
+        }
+        Err(TrySendError::Disconnected(_)) => {}
+    }
+}
+
+enum Control {
+    Configure(OscSettings),
+    Stop,
+}
+
+/// The processing thread's and the daemon's handle on the OSC output (cheap to clone). The
+/// sender thread starts with the first configuration that has a target and stops when the
+/// last handle is dropped.
+#[derive(Clone)]
+pub struct OscOutput {
+    inner: Arc<Inner>,
+}
+
+impl std::fmt::Debug for OscOutput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("OscOutput")
+            .field("active", &self.inner.active.load(Ordering::Relaxed))
+            .finish_non_exhaustive()
+    }
+}
+
+struct Inner {
+    frames: Sender<VmcFrame>,
+    /// Kept to drop the oldest frame when the queue is full, and handed to the thread.
+    frames_rx: Receiver<VmcFrame>,
+    control: Sender<Control>,
+    control_rx: Receiver<Control>,
+    /// Some target is configured: frames are worth offering.
+    active: AtomicBool,
+    /// The character whose values go out.
+    character: Mutex<String>,
+    counters: Arc<OscCounters>,
+    throttle: Duration,
+    thread: Mutex<Option<JoinHandle<()>>>,
+}
+
+impl Drop for Inner {
+    fn drop(&mut self) {
+        let _ = self.control.try_send(Control::Stop);
+        if let Some(thread) = self
+            .thread
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
+        {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl OscOutput {
+    /// An output with no target yet; `throttle`: how often a failing target is logged.
+    pub fn new(counters: Arc<OscCounters>, throttle: Duration) -> Self {
+        let (frames, frames_rx) = crossbeam_channel::bounded(QUEUE_FRAMES);
+        let (control, control_rx) = crossbeam_channel::bounded(4);
+        OscOutput {
+            inner: Arc::new(Inner {
+                frames,
+                frames_rx,
+                control,
+                control_rx,
+                active: AtomicBool::new(false),
+                character: Mutex::new(String::new()),
+                counters,
+                throttle,
+                thread: Mutex::new(None),
+            }),
+        }
+    }
+
+    /// Applies a configuration (at start and on reload): new targets, character and bones.
+    /// Targets kept from the last configuration keep their sockets and counters.
+    pub fn configure(&self, settings: OscSettings) -> std::io::Result<()> {
+        let inner = &self.inner;
+        let active = !settings.targets.is_empty();
+        {
+            let mut thread = inner.thread.lock().unwrap_or_else(|e| e.into_inner());
+            if thread.is_none() {
+                if !active {
+                    inner.counters.set_targets(Vec::new());
+                    return Ok(());
+                }
+                let frames = inner.frames_rx.clone();
+                let control = inner.control_rx.clone();
+                let counters = inner.counters.clone();
+                let throttle = inner.throttle;
+                *thread = Some(
+                    std::thread::Builder::new()
+                        .name("mouthpiece-osc".into())
+                        .spawn(move || run(frames, control, counters, throttle))?,
+                );
+            }
+        }
+        inner
+            .character
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone_from(&settings.character);
+        if inner
+            .control
+            .try_send(Control::Configure(settings))
+            .is_err()
+        {
+            return Err(std::io::Error::other(
+                "the OSC sender thread is not taking configurations",
+            ));
+        }
+        inner.active.store(active, Ordering::Release);
+        Ok(())
+    }
+
+    /// Offers the frame's values of the configured character to the sender thread. Never
+    /// blocks: a full queue loses its oldest frame (counted).
+    pub fn offer(&self, frame: &StreamFrame) {
+        let inner = &self.inner;
+        if !inner.active.load(Ordering::Acquire) {
+            return;
+        }
+        let vmc = {
+            let character = inner.character.lock().unwrap_or_else(|e| e.into_inner());
+            VmcFrame::from_stream(frame, &character)
+        };
+        if let Some(vmc) = vmc {
+            push_drop_oldest(&inner.frames, &inner.frames_rx, vmc, &|| {
+                inner.counters.dropped.fetch_add(1, Ordering::Relaxed);
+            });
+        }
+    }
+
+    /// One line for the systemd status: per target sent and errors, and the drops; `None`
+    /// when no target is configured.
+    pub fn status(&self) -> Option<String> {
+        let targets = self.inner.counters.targets();
+        if targets.is_empty() {
+            return None;
+        }
+        let each: Vec<String> = targets
+            .iter()
+            .map(|t| format!("{} {} sent {} errors", t.target, t.sent, t.errors))
+            .collect();
+        Some(format!(
+            "osc {}; {} dropped",
+            each.join(", "),
+            self.inner.counters.dropped.load(Ordering::Relaxed)
+        ))
+    }
+}
+
+/// One target on the sender thread.
+struct Link {
+    target: Target,
+    socket: Option<UdpSocket>,
+    /// When to try opening the socket again after a failure.
+    retry_at: Option<Instant>,
+    counters: Arc<OscTargetCounters>,
+    failures: Throttle,
+}
+
+/// A UDP socket connected to `addr` (so that the kernel reports a refusing target on later
+/// sends), non-blocking.
+fn open_socket(addr: SocketAddr) -> std::io::Result<UdpSocket> {
+    let local: SocketAddr = if addr.is_ipv4() {
+        (std::net::Ipv4Addr::UNSPECIFIED, 0).into()
+    } else {
+        (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
+    };
+    let socket = UdpSocket::bind(local)?;
+    socket.connect(addr)?;
+    socket.set_nonblocking(true)?;
+    Ok(socket)
+}
+
+impl Link {
+    fn new(target: Target, throttle: Duration) -> Self {
+        Link {
+            counters: Arc::new(OscTargetCounters::new(target.label.clone())),
+            target,
+            socket: None,
+            retry_at: None,
+            failures: Throttle::new(throttle),
+        }
+    }
+
+    fn failed(&mut self, what: &str, e: &std::io::Error) {
+        self.counters.errors.fetch_add(1, Ordering::Relaxed);
+        if let Some(held_back) = self.failures.allow(Instant::now()) {
+            tracing::warn!(
+                target_addr = %self.target.label,
+                held_back,
+                "OSC: {what} {}: {e}",
+                self.target.addr
+            );
+        }
+    }
+
+    fn send(&mut self, bytes: &[u8]) {
+        if self.socket.is_none() {
+            if self.retry_at.is_some_and(|at| Instant::now() < at) {
+                self.counters.errors.fetch_add(1, Ordering::Relaxed);
+                return;
+            }
+            match open_socket(self.target.addr) {
+                Ok(socket) => {
+                    self.socket = Some(socket);
+                    self.retry_at = None;
+                }
+                Err(e) => {
+                    self.retry_at = Some(Instant::now() + Duration::from_secs(1));
+                    self.failed("cannot open a socket to", &e);
+                    return;
+                }
+            }
+        }
+        let Some(socket) = &self.socket else { return };
+        match socket.send(bytes) {
+            Ok(_) => {
+                self.counters.sent.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(e) => self.failed("cannot send to", &e),
+        }
+    }
+}
+
+/// What the sender thread holds between frames.
+struct SenderState {
+    links: Vec<Link>,
+    packet: VmcPacket,
+    axes: UnitQuaternion<f64>,
+    throttle: Duration,
+}
+
+impl SenderState {
+    /// Applies a control message; `false` to stop.
+    fn control(&mut self, message: Control, counters: &OscCounters) -> bool {
+        let Control::Configure(settings) = message else {
+            return false;
+        };
+        let mut kept = std::mem::take(&mut self.links);
+        for target in settings.targets {
+            let link = match kept.iter().position(|l| l.target == target) {
+                Some(i) => kept.swap_remove(i),
+                None => Link::new(target, self.throttle),
+            };
+            self.links.push(link);
+        }
+        counters.set_targets(self.links.iter().map(|l| l.counters.clone()).collect());
+        self.packet = VmcPacket::new(settings.head, settings.eyes);
+        self.axes = axes_rotation(&settings.axes);
+        let shown: Vec<&str> = self.links.iter().map(|l| l.target.label.as_str()).collect();
+        tracing::info!(
+            character = %settings.character,
+            "OSC (VMC protocol) to [{}]",
+            shown.join(", ")
+        );
+        true
+    }
+}
+
+/// The sender thread: configurations and frames until [`Control::Stop`] or every handle is
+/// gone. A configuration waiting when a frame arrives is applied first (it was given before
+/// the frame was offered).
+fn run(
+    frames: Receiver<VmcFrame>,
+    control: Receiver<Control>,
+    counters: Arc<OscCounters>,
+    throttle: Duration,
+) {
+    let mut state = SenderState {
+        links: Vec::new(),
+        packet: VmcPacket::new(true, true),
+        axes: UnitQuaternion::identity(),
+        throttle,
+    };
+    let mut bytes = Vec::with_capacity(2048);
+    tracing::info!("OSC sender started");
+    'run: loop {
+        crossbeam_channel::select! {
+            recv(control) -> message => {
+                let Ok(message) = message else { break };
+                if !state.control(message, &counters) {
+                    break;
+                }
+            }
+            recv(frames) -> frame => {
+                let Ok(frame) = frame else { break };
+                while let Ok(message) = control.try_recv() {
+                    if !state.control(message, &counters) {
+                        break 'run;
+                    }
+                }
+                if state.links.is_empty() {
+                    continue;
+                }
+                state.packet.fill(&frame, &state.axes);
+                state.packet.encode(&mut bytes);
+                for link in &mut state.links {
+                    link.send(&bytes);
+                }
+            }
+        }
+    }
+    tracing::info!("OSC sender stopped");
+}
+
+#[cfg(test)]
+mod tests;

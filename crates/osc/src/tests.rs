@@ -1,0 +1,254 @@
+use super::*;
+use mouthpiece_output::{CharacterFrame, CharacterHead, RigState};
+
+fn frame_with(t: f64, curves: Option<[f32; 18]>, head: [f32; 4]) -> StreamFrame {
+    StreamFrame {
+        t,
+        characters: vec![
+            CharacterFrame {
+                name: "human".into(),
+                ..CharacterFrame::default()
+            },
+            CharacterFrame {
+                name: "wolf".into(),
+                rig: curves.map(|c| RigState {
+                    curves: RigCurves(c),
+                    ..RigState::default()
+                }),
+                head: Some(CharacterHead {
+                    rotation: head,
+                    ..CharacterHead::default()
+                }),
+                ..CharacterFrame::default()
+            },
+        ],
+        ..StreamFrame::default()
+    }
+}
+
+fn messages(packet: &OscPacket) -> Vec<OscMessage> {
+    match packet {
+        OscPacket::Bundle(b) => b.content.iter().flat_map(messages).collect(),
+        OscPacket::Message(m) => vec![m.clone()],
+    }
+}
+
+#[test]
+fn a_frame_encodes_as_one_vmc_bundle_that_decodes_to_the_same_values() {
+    let mut curves = [0.0f32; 18];
+    for (i, c) in curves.iter_mut().enumerate() {
+        *c = i as f32 / 17.0;
+    }
+    let half = std::f32::consts::FRAC_1_SQRT_2;
+    // A quarter turn about the model's y axis (up: the head turns to its left).
+    let frame = VmcFrame::from_stream(
+        &frame_with(2.5, Some(curves), [half, 0.0, half, 0.0]),
+        "wolf",
+    )
+    .unwrap();
+    let mut packet = VmcPacket::new(true, true);
+    packet.fill(&frame, &UnitQuaternion::identity());
+    let mut bytes = Vec::new();
+    packet.encode(&mut bytes);
+    // One datagram under the 1472 bytes of an unfragmented Ethernet UDP payload.
+    assert!(bytes.len() < 1472, "{}", bytes.len());
+    assert_eq!(&bytes[..8], b"#bundle\0");
+    let (rest, decoded) = rosc::decoder::decode_udp(&bytes).unwrap();
+    assert!(rest.is_empty());
+    let got = messages(&decoded);
+    let addrs: Vec<&str> = got.iter().map(|m| m.addr.as_str()).collect();
+    let mut expected = vec![
+        address::OK,
+        address::TIME,
+        address::BONE,
+        address::BONE,
+        address::BONE,
+    ];
+    expected.extend([address::BLEND_VAL; 18]);
+    expected.push(address::BLEND_APPLY);
+    assert_eq!(addrs, expected);
+    assert_eq!(got[1].args, [OscType::Float(2.5)]);
+    // Head: the model's turn about +y (towards its left) is a turn about Unity's −y.
+    assert_eq!(got[2].args[0], OscType::String("Head".into()));
+    let q: Vec<f32> = got[2].args[1..]
+        .iter()
+        .map(|a| a.clone().float().unwrap())
+        .collect();
+    assert_eq!(&q[..3], &[0.0, 0.0, 0.0]);
+    for (a, b) in q[3..].iter().zip([0.0, -half, 0.0, half]) {
+        assert!((a - b).abs() < 1e-6, "{q:?}");
+    }
+    assert_eq!(got[3].args[0], OscType::String("LeftEye".into()));
+    assert_eq!(got[4].args[0], OscType::String("RightEye".into()));
+    for (i, m) in got[5..23].iter().enumerate() {
+        assert_eq!(
+            m.args,
+            [
+                OscType::String(CURVE_NAMES[i].into()),
+                OscType::Float(curves[i])
+            ]
+        );
+    }
+    assert!(got[23].args.is_empty());
+}
+
+#[test]
+fn the_message_bytes_follow_osc_1_0() {
+    // A Val message as the OSC 1.0 specification lays it out: address, type tags and
+    // string padded with NULs to 4 bytes, the float big-endian.
+    let packet = message(
+        address::BLEND_VAL,
+        vec![OscType::String("jawOpen".into()), OscType::Float(0.5)],
+    );
+    let bytes = rosc::encoder::encode(&packet).unwrap();
+    let mut expected = b"/VMC/Ext/Blend/Val\0\0,sf\0jawOpen\0".to_vec();
+    expected.extend(0.5f32.to_be_bytes());
+    assert_eq!(bytes, expected);
+}
+
+#[test]
+fn without_a_rig_every_curve_is_at_rest_and_bones_can_be_left_out() {
+    let frame =
+        VmcFrame::from_stream(&frame_with(1.0, None, [1.0, 0.0, 0.0, 0.0]), "wolf").unwrap();
+    assert_eq!(frame.curves, None);
+    assert!(VmcFrame::from_stream(&frame_with(1.0, None, [1.0, 0.0, 0.0, 0.0]), "ghost").is_none());
+    let mut packet = VmcPacket::new(false, false);
+    packet.fill(&frame, &UnitQuaternion::identity());
+    let got = messages(packet.packet());
+    assert!(got.iter().all(|m| m.addr != address::BONE));
+    let vals: Vec<_> = got
+        .iter()
+        .filter(|m| m.addr == address::BLEND_VAL)
+        .collect();
+    assert_eq!(vals.len(), 18);
+    assert!(vals.iter().all(|m| m.args[1] == OscType::Float(0.0)));
+    let packet = VmcPacket::new(true, false);
+    let bones: Vec<_> = messages(packet.packet())
+        .into_iter()
+        .filter(|m| m.addr == address::BONE)
+        .collect();
+    assert_eq!(bones.len(), 1);
+}
+
+#[test]
+fn rotations_are_written_in_the_head_frame_then_in_unity_axes() {
+    // A character modelled with x forward, y left, z up: its head frame (left, up,
+    // forward) as columns in model coordinates.
+    let axes = Matrix3::new(0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+    // Its head nods down: a turn about the model's y (its left) by 20°.
+    let nod = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), 20f64.to_radians());
+    let q = [nod.w, nod.i, nod.j, nod.k].map(|v| v as f32);
+    let u = unity_rotation(q, &axes_rotation(&axes));
+    // In the head frame that is +20° about x (left); Unity's x is right: (x, -y, -z, w)
+    // of it, i.e. the same +x component.
+    let s = (10f64.to_radians().sin()) as f32;
+    let c = (10f64.to_radians().cos()) as f32;
+    for (a, b) in u.iter().zip([s, 0.0, 0.0, c]) {
+        assert!((a - b).abs() < 1e-6, "{u:?}");
+    }
+    // The angle of any rotation is kept; the result is a unit quaternion with w >= 0.
+    let any = UnitQuaternion::<f64>::from_euler_angles(0.3, -0.7, 1.1);
+    let u = unity_rotation(
+        [-any.w, -any.i, -any.j, -any.k].map(|v| v as f32),
+        &axes_rotation(&axes),
+    );
+    let norm = u.iter().map(|v| v * v).sum::<f32>().sqrt();
+    assert!((norm - 1.0).abs() < 1e-6);
+    assert!(
+        u[3] >= 0.0 && (u[3] - any.w.abs() as f32).abs() < 1e-6,
+        "{u:?}"
+    );
+}
+
+#[test]
+fn a_full_queue_drops_its_oldest_frame_and_counts_it() {
+    let (tx, rx) = crossbeam_channel::bounded(2);
+    let dropped = std::sync::atomic::AtomicU64::new(0);
+    let count = || {
+        dropped.fetch_add(1, Ordering::Relaxed);
+    };
+    for i in 0..5 {
+        push_drop_oldest(&tx, &rx, i, &count);
+    }
+    assert_eq!(dropped.load(Ordering::Relaxed), 3);
+    assert_eq!(rx.try_iter().collect::<Vec<_>>(), [3, 4]);
+}
+
+fn settings_for(targets: &[SocketAddr]) -> OscSettings {
+    OscSettings {
+        targets: targets
+            .iter()
+            .map(|a| Target {
+                label: a.to_string(),
+                addr: *a,
+            })
+            .collect(),
+        character: "wolf".into(),
+        head: true,
+        eyes: true,
+        axes: Matrix3::identity(),
+    }
+}
+
+#[test]
+fn a_refusing_target_is_counted_and_the_others_still_get_every_frame() {
+    let receiver = UdpSocket::bind("127.0.0.1:0").unwrap();
+    receiver
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    // A port nothing listens on.
+    let closed = UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let counters = Arc::new(OscCounters::default());
+    let output = OscOutput::new(counters.clone(), Duration::from_secs(60));
+    output
+        .configure(settings_for(&[closed, receiver.local_addr().unwrap()]))
+        .unwrap();
+    let mut buf = [0u8; 4096];
+    let mut received = 0;
+    for i in 0..40 {
+        let started = Instant::now();
+        output.offer(&frame_with(
+            i as f64,
+            Some([0.25; 18]),
+            [1.0, 0.0, 0.0, 0.0],
+        ));
+        assert!(started.elapsed() < Duration::from_millis(50));
+        // Paced like frames, so that the refusals come back between sends.
+        if receiver.recv(&mut buf).is_ok() {
+            received += 1;
+        }
+    }
+    assert_eq!(received, 40);
+    // The counter moves just after the send that the receiver may already have seen.
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while counters.targets()[1].sent < 40 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let figures = counters.targets();
+    assert_eq!(figures.len(), 2);
+    assert!(figures[0].errors > 0, "{figures:?}");
+    assert_eq!(figures[1].sent, 40, "{figures:?}");
+    assert_eq!(figures[1].errors, 0, "{figures:?}");
+    assert!(output.status().unwrap().contains(" sent "));
+    // A reload keeps a target's counters and drops the target no longer listed.
+    output
+        .configure(settings_for(&[receiver.local_addr().unwrap()]))
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while counters.targets().len() != 1 {
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(counters.targets()[0].sent, 40);
+    // No target: nothing offered, the thread idles.
+    output.configure(settings_for(&[])).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while !counters.targets().is_empty() {
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(output.status(), None);
+}
