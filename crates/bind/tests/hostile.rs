@@ -292,7 +292,10 @@ fn binding_errors_name_the_mesh_file_and_where() {
     doc["nodes"][0]["translation"] = json!([5.0, 5.0, 5.0]);
     let (err, path) = bind_error(&doc);
     assert!(
-        err.contains(&path) && err.contains("from the nearest vertex") && err.contains("units"),
+        err.contains(&path)
+            && err.contains("from the nearest vertex")
+            && err.contains("units")
+            && err.contains("the mesh spans 1.0000, the mouth is 0.0500 wide"),
         "{err}"
     );
 }
