@@ -31,7 +31,8 @@ pub enum BindError {
     /// A mouth point lies far from every vertex of the mesh.
     #[error(
         "{}mouth point {name} is {distance:.4} from the nearest vertex, more than {limit:.4} \
-         ({fraction} of the mouth width): is the mesh in the character's model frame and units?",
+         ({fraction} of the mouth width): is the mesh in the character's model frame and units? \
+         (the mesh spans {extent:.4}, the mouth is {width:.4} wide)",
         mesh.as_ref().map_or(String::new(), |p| format!("{}: ", p.display()))
     )]
     PointFarFromMesh {
@@ -41,6 +42,10 @@ pub enum BindError {
         distance: f64,
         limit: f64,
         fraction: f64,
+        /// The mesh's bounding box's longest side and the mouth's width (character units),
+        /// which tell a mesh in other units at a glance.
+        extent: f64,
+        width: f64,
     },
     /// The character file cannot be loaded.
     #[error(transparent)]

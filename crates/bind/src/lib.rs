@@ -115,6 +115,8 @@ pub fn prepare(rig: &MouthRig, model_up: ModelUp, welded: &Mesh) -> Result<Prepa
                 distance: nearest * width,
                 limit: POINT_DISTANCE_LIMIT * width,
                 fraction: POINT_DISTANCE_LIMIT,
+                extent: welded.extent(),
+                width,
             });
         }
     }
@@ -171,6 +173,8 @@ pub fn bind(
             distance,
             limit,
             fraction,
+            extent,
+            width,
             ..
         } => BindError::PointFarFromMesh {
             mesh: Some(mesh_path.to_path_buf()),
@@ -178,6 +182,8 @@ pub fn bind(
             distance,
             limit,
             fraction,
+            extent,
+            width,
         },
         e => e,
     })?;

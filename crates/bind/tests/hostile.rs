@@ -292,7 +292,31 @@ fn binding_errors_name_the_mesh_file_and_where() {
     doc["nodes"][0]["translation"] = json!([5.0, 5.0, 5.0]);
     let (err, path) = bind_error(&doc);
     assert!(
-        err.contains(&path) && err.contains("from the nearest vertex") && err.contains("units"),
+        err.contains(&path)
+            && err.contains("from the nearest vertex")
+            && err.contains("units")
+            && err.contains("the mesh spans 1.0000, the mouth is 0.0500 wide"),
         "{err}"
     );
+}
+
+#[test]
+fn the_size_caps_are_computed_as_built() {
+    use mouthpiece_bind::network::{Network, Widths};
+    use mouthpiece_bind::{character_head, head_vertices, mesh::MAX_VERTICES, MAX_HEAD_RESOLUTION};
+    for r in [1, 2, 3] {
+        let head = character_head(&human(), ModelUp::Y, 0.5, r).unwrap();
+        assert_eq!(head.len(), head_vertices(r));
+    }
+    assert!(head_vertices(MAX_HEAD_RESOLUTION) <= MAX_VERTICES);
+    assert!(head_vertices(MAX_HEAD_RESOLUTION + 1) > MAX_VERTICES);
+    let err = character_head(&human(), ModelUp::Y, 0.5, MAX_HEAD_RESOLUTION + 1).unwrap_err();
+    assert!(err.to_string().contains("--resolution"), "{err}");
+    // A model file's parameter count is checked from its widths before a layer is built.
+    for w in [Widths::TINY, Widths::SMALL, Widths::PAPER] {
+        assert_eq!(w.parameter_count(), Network::new(w, 1).parameter_count());
+    }
+    let header = b"mouthpiece-bind-network 1 4096 4096 4096 4096 4096 12\n\0\0\0\0";
+    let err = Network::from_bytes(header, Path::new("big.bin")).unwrap_err();
+    assert!(err.to_string().contains("big.bin"), "{err}");
 }

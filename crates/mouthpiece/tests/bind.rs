@@ -688,3 +688,36 @@ fn a_mesh_naming_a_buffer_outside_its_folder_exits_2() {
         &out,
     );
 }
+
+#[test]
+fn a_character_without_the_twelve_points_is_refused_naming_its_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let four = dir.path().join("four.toml");
+    std::fs::write(
+        &four,
+        "name = \"four\"\nunits = \"cm\"\nup = [0.0, 0.0, 1.0]\n[points]\n\
+         P1 = [7.5, 0.0, 0.0]\nP2 = [0.0, 0.0, 4.0]\nP3 = [-7.5, 0.0, 0.0]\nP4 = [0.0, 0.0, -4.0]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("x.glb");
+    for args in [
+        vec!["bind", "head", "--character", s(&four), "--out", s(&out)],
+        vec![
+            "bind",
+            "--character",
+            s(&four),
+            "--mesh",
+            s(&shipped_head("human")),
+            "--out",
+            s(&out),
+            "--method",
+            "distance",
+        ],
+    ] {
+        refused(
+            &args,
+            &format!("{}: the character has 4 mouth points", four.display()),
+            &out,
+        );
+    }
+}

@@ -181,8 +181,25 @@ fn load_network(model: Option<&Path>) -> anyhow::Result<Network> {
     }
 }
 
+/// A character that can be bound: the twelve points P1…P12 and a mouth of positive width
+/// (errors name the file).
 fn load_rig(path: &Path) -> anyhow::Result<MouthRig> {
-    MouthRig::load_character(path).map_err(|e| bad_input_if(e.is_bad_input(), e))
+    let rig = MouthRig::load_character(path).map_err(|e| bad_input_if(e.is_bad_input(), e))?;
+    if rig.points().len() != mouthpiece_bind::procedural::POINTS {
+        return Err(bad_input(anyhow!(
+            "{}: the character has {} mouth points; binding needs the 12 points P1…P12",
+            path.display(),
+            rig.points().len()
+        )));
+    }
+    let width = rig.mouth_width();
+    if !(width.is_finite() && width > 0.0) {
+        return Err(bad_input(anyhow!(
+            "{}: the mouth's width is {width}: its corners must lie apart along x",
+            path.display()
+        )));
+    }
+    Ok(rig)
 }
 
 fn bind(args: Args) -> anyhow::Result<()> {
@@ -301,12 +318,6 @@ fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
     let mut characters = Vec::new();
     for (path, &snout) in args.character.iter().zip(&args.snout) {
         let rig = load_rig(path)?;
-        if rig.points().len() != 12 {
-            return Err(bad_input(anyhow!(
-                "{}: binding needs the 12 points P1…P12",
-                path.display()
-            )));
-        }
         let w = rig.mouth_width();
         let points = std::array::from_fn(|k| rig.points()[k].rest.map(|c| c / w));
         characters.push((
