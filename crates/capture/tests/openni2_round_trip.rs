@@ -68,7 +68,12 @@ fn stream_shift(live: &[Pair], live_ts: &[u64], replayed: &[Pair]) -> String {
 fn dummy_live_oni_and_mcap_round_trips() {
     let dir = tempfile::tempdir().unwrap();
     let oni = dir.path().join("dummy.oni");
-    let config = CaptureConfig::default();
+    // The Dummy is software: on a loaded machine its thread can be starved for seconds. This
+    // test is about round trips, not unplug detection, so a stall is not taken for a loss.
+    let config = CaptureConfig {
+        stall_timeout: Duration::from_secs(60),
+        ..CaptureConfig::default()
+    };
 
     // 1. Live: at least 60 pairs with increasing timestamps, what the device agreed to.
     let mut live = open_source("openni2:Dummy", &config).unwrap();
