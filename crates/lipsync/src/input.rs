@@ -26,7 +26,7 @@ pub fn decode_text(bytes: &[u8], source_name: &str) -> Result<String, Error> {
         what,
     };
     let utf16 = |body: &[u8], unit: fn([u8; 2]) -> u16, order: &str| {
-        if body.len() % 2 != 0 {
+        if !body.len().is_multiple_of(2) {
             return Err(not_text(format!(
                 "UTF-16 ({order}) text with an odd number of bytes"
             )));

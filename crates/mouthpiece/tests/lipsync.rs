@@ -229,6 +229,169 @@ fn bad_input_exits_2_naming_file_and_line_and_writes_nothing() {
     assert!(!out.exists());
 }
 
+#[test]
+fn a_long_take_is_streamed_to_its_file_not_held_in_memory() {
+    // Ten minutes of phones at 60 fps: a 270 MB take. Held in memory (as it once was) it
+    // cannot be made under a 256 MB address-space limit; streamed it needs about 20 MB.
+    let dir = tempfile::tempdir().unwrap();
+    let phn = dir.path().join("long.phn");
+    let names = ["sh", "iy", "aa", "m", "p", "s", "ow", "l"];
+    let mut text = String::new();
+    let (mut t, mut k) = (0u64, 0usize);
+    while t < 16_000 * 600 {
+        let d = 800 + (k as u64 * 977) % 2400;
+        text.push_str(&format!("{t} {} {}\n", t + d, names[k % names.len()]));
+        t += d;
+        k += 1;
+    }
+    std::fs::write(&phn, text).unwrap();
+    let out = dir.path().join("take.jsonl");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -v 262144 && exec \"$@\"")
+        .arg("sh")
+        .arg(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(["lipsync", "--character"])
+        .arg(character("human"))
+        .arg("--phonemes")
+        .arg(&phn)
+        .arg("--out")
+        .arg(&out)
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{:?}: {err}", o.status);
+    let size = std::fs::metadata(&out).unwrap().len();
+    assert!(
+        size > 256 << 20,
+        "the take is larger than the limit: {size} bytes"
+    );
+    let lines = std::fs::read(&out)
+        .unwrap()
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count();
+    assert_eq!(lines, 36_001);
+}
+
+#[test]
+fn hostile_flags_and_files_exit_2_naming_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("take.jsonl");
+    let phn = dir.path().join("p.phn");
+    std::fs::write(&phn, "0 1600 sh\n1600 4800 iy\n").unwrap();
+    // --fps 1e-300 gave a take of one sample; NaN --t-change.
+    for (flag, value, expect) in [
+        (
+            "--fps",
+            "1e-300",
+            "--fps must be within 1 to 10000 samples per second, got 1e-300",
+        ),
+        ("--fps", "NaN", "--fps must be within"),
+        (
+            "--t-change",
+            "NaN",
+            "--t-change: the change-stage length T must be within",
+        ),
+    ] {
+        expect_bad_input(&[flag, value, "--phonemes"], &phn, expect, &out);
+    }
+    // A file that never ends is refused at its size limit, naming it.
+    let zero = dir.path().join("zero.phn");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    expect_bad_input(
+        &["--phonemes"],
+        &zero,
+        &format!("{}: phone file longer than 67108864 bytes", zero.display()),
+        &out,
+    );
+    expect_bad_input(
+        &["--phonemes", &phn.display().to_string(), "--classes"],
+        &zero,
+        &format!("{}: class table longer than 4194304 bytes", zero.display()),
+        &out,
+    );
+    // A class table listing a phone twice in one class: a panic, once.
+    let classes = dir.path().join("c.toml");
+    std::fs::write(
+        &classes,
+        std::fs::read_to_string(repo().join("config/lipsync/classes.toml"))
+            .unwrap()
+            .replace("phones = [\"f\", \"v\"", "phones = [\"f\", \"v\", \"F1\""),
+    )
+    .unwrap();
+    expect_bad_input(
+        &["--phonemes", &phn.display().to_string(), "--classes"],
+        &classes,
+        "phone \"F1\" (read as \"f\") is already in this class",
+        &out,
+    );
+    // A TextGrid with NaN times: exit 0 and a take of null points, once.
+    let grid = dir.path().join("n.TextGrid");
+    std::fs::write(
+        &grid,
+        "\"ooTextFile\"\n\"TextGrid\"\n0\n0.5\n<exists>\n1\n\"IntervalTier\"\n\"phones\"\n0\n0.5\n2\n0\nNaN\n\"sh\"\n0.2\n0.5\n\"iy\"\n",
+    )
+    .unwrap();
+    expect_bad_input(
+        &["--phonemes"],
+        &grid,
+        &format!("{}:13:1: \"NaN\" is not a finite number", grid.display()),
+        &out,
+    );
+    // A character that does not fit the poses: both files named (once: "character and
+    // basic poses").
+    let poses = dir.path().join("poses4.toml");
+    let mut text = String::from(
+        "[neutral]\nlip = [[0.02, 0.0, 0.0], [0.0, 0.005, 0.0], [-0.02, 0.0, 0.0], [0.0, -0.006, 0.0]]\nforehead = [[0.03, 0.1, 0.0], [-0.03, 0.1, 0.0], [0.0, 0.12, 0.0]]\n",
+    );
+    for name in ["closed", "open", "spread", "round", "bite"] {
+        text.push_str(&format!("[[pose]]\nname = \"{name}\"\ndisplacement = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n"));
+    }
+    std::fs::write(&poses, text).unwrap();
+    expect_bad_input(
+        &["--phonemes", &phn.display().to_string(), "--poses"],
+        &poses,
+        &format!(
+            "character {} does not fit the basic poses of {}",
+            character("human").display(),
+            poses.display()
+        ),
+        &out,
+    );
+}
+
+#[test]
+fn praat_utf16_textgrids_are_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "\"ooTextFile\"\n\"TextGrid\"\n0\n0.5\n<exists>\n1\n\"IntervalTier\"\n\"phones\"\n0\n0.5\n3\n0\n0.2\n\"spn\"\n0.2\n0.4\n\"ʃ\"\n0.4\n0.5\n\"IY1\"\n";
+    let grid = dir.path().join("u.TextGrid");
+    let mut bytes = vec![0xFE, 0xFF];
+    for u in text.replace('ʃ', "SH").encode_utf16() {
+        bytes.extend(u.to_be_bytes());
+    }
+    std::fs::write(&grid, bytes).unwrap();
+    let out = dir.path().join("take.jsonl");
+    let phones = dir.path().join("phones.jsonl");
+    run_ok(
+        mouthpiece()
+            .args(["lipsync", "--character"])
+            .arg(character("human"))
+            .arg("--phonemes")
+            .arg(&grid)
+            .arg("--phones-out")
+            .arg(&phones)
+            .arg("--out")
+            .arg(&out),
+    );
+    let read = std::fs::read_to_string(&phones).unwrap();
+    assert!(
+        read.contains("\"spn\"") && read.contains("\"sh\""),
+        "{read}"
+    );
+}
+
 /// A minimal 16-bit mono WAV writer (the test does not depend on a WAV crate).
 struct WavWriter<'a> {
     out: &'a mut std::io::Cursor<Vec<u8>>,

@@ -5,8 +5,10 @@
 //! line per sample, the format of `mouthpiece process` (so `export` reads it). Method and
 //! figures: `docs/lipsync.md`.
 //!
-//! Everything is computed before anything is written; outputs are written beside their
-//! destination and renamed into place, so bad input leaves no file.
+//! Every input is checked before anything is written; the weights are computed in memory
+//! (a few dozen bytes a sample), the take and the CSV are streamed to temporary files beside
+//! their destinations and renamed into place at the end, so bad input leaves no file and a
+//! long take costs no more memory than a short one.
 
 use std::fmt::Write as _;
 use std::io::Write;
@@ -20,7 +22,7 @@ use mouthpiece_retarget::{
     CharacterRetarget, CharacterSettings, NeutralPose, PerformerLayout, RetargetOutput,
     RigidTransform, StabilisedFrame, Vec3,
 };
-use mouthpiece_speech::{Decoder, ModelPaths, TimedPhone};
+use mouthpiece_speech::{ModelPaths, Task, TimedPhone};
 #[cfg(test)]
 use mouthpiece_synth::DotLayout;
 use mouthpiece_synth::MouthState;
@@ -28,6 +30,7 @@ use mouthpiece_synth::MouthState;
 use crate::cmd::process::{load_character, smoothing};
 use crate::cmd::retarget::Smooth;
 use crate::exit::bad_input;
+use mouthpiece_lipsync::input::cut;
 
 /// The shipped class table.
 pub const DEFAULT_CLASSES: &str = include_str!("../../../../config/lipsync/classes.toml");
@@ -92,14 +95,37 @@ pub enum Action {
     Poses(crate::cmd::lipsync_poses::PosesArgs),
 }
 
-fn read_text(path: &Path, what: &str) -> anyhow::Result<String> {
-    std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read {what} {}", path.display()))
-        .map_err(bad_input)
+/// Largest phone file read (a TIMIT file of 10 minutes is 100 KB).
+pub const MAX_PHONE_FILE_BYTES: u64 = 64 << 20;
+/// Largest class table, pose file, segment overrides or marks file read.
+pub const MAX_TABLE_FILE_BYTES: u64 = 4 << 20;
+/// Largest transcript read.
+pub const MAX_TRANSCRIPT_BYTES: u64 = 1 << 20;
+/// Largest weights CSV `synth --speech` reads (a CSV of an hour at 60 fps is 25 MB).
+pub const MAX_WEIGHTS_CSV_BYTES: u64 = 64 << 20;
+
+/// Reads a text file of at most `limit` bytes (UTF-8, or UTF-16 with a byte order mark):
+/// a longer one (a device such as `/dev/zero`, a wrong path) is an error naming the file.
+pub fn read_text(path: &Path, what: &str, limit: u64) -> anyhow::Result<String> {
+    use std::io::Read;
+    let name = path.display().to_string();
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(limit + 1).read_to_end(&mut bytes))
+        .with_context(|| format!("cannot read {what} {name}"))
+        .map_err(bad_input)?;
+    if bytes.len() as u64 > limit {
+        return Err(bad_input(anyhow::anyhow!(
+            "{name}: {what} longer than {limit} bytes"
+        )));
+    }
+    mouthpiece_lipsync::input::decode_text(&bytes, &name).map_err(bad_input)
 }
 
 /// The method's tables: classes, segments (with overrides), poses.
 pub struct Tables {
+    /// The pose file's name, for errors.
+    pub pose_name: String,
     pub classes: ClassTable,
     pub segments: SegmentTable,
     pub poses: BasicPoses,
@@ -114,7 +140,10 @@ impl Tables {
         segments: Option<&Path>,
     ) -> anyhow::Result<Self> {
         let (text, name) = match classes {
-            Some(p) => (read_text(p, "class table")?, p.display().to_string()),
+            Some(p) => (
+                read_text(p, "class table", MAX_TABLE_FILE_BYTES)?,
+                p.display().to_string(),
+            ),
             None => (
                 DEFAULT_CLASSES.to_string(),
                 "config/lipsync/classes.toml".into(),
@@ -122,7 +151,10 @@ impl Tables {
         };
         let classes = ClassTable::from_toml_str(&text, &name).map_err(bad_input)?;
         let (text, pose_name) = match poses {
-            Some(p) => (read_text(p, "pose file")?, p.display().to_string()),
+            Some(p) => (
+                read_text(p, "pose file", MAX_TABLE_FILE_BYTES)?,
+                p.display().to_string(),
+            ),
             None => (
                 DEFAULT_POSES.to_string(),
                 "config/lipsync/poses.toml".into(),
@@ -132,12 +164,13 @@ impl Tables {
         let order = poses.order_for(&classes, &pose_name).map_err(bad_input)?;
         let mut table = SegmentTable::generate(&classes);
         if let Some(p) = segments {
-            let text = read_text(p, "segment overrides")?;
+            let text = read_text(p, "segment overrides", MAX_TABLE_FILE_BYTES)?;
             table
                 .apply_overrides(&classes, &text, &p.display().to_string())
                 .map_err(bad_input)?;
         }
         Ok(Self {
+            pose_name,
             classes,
             segments: table,
             poses,
@@ -186,7 +219,7 @@ fn input_phones(args: &Args) -> anyhow::Result<(Vec<PhoneSpan>, String)> {
                 "{name}: unknown phone file type (expected .phn, .TextGrid, .lab, .segs or .jsonl)"
             ))
         })?;
-        let text = read_text(path, "phone file")?;
+        let text = read_text(path, "phone file", MAX_PHONE_FILE_BYTES)?;
         let spans = phones::read(&text, format, &name).map_err(bad_input)?;
         return Ok((spans, name));
     }
@@ -198,7 +231,10 @@ fn input_phones(args: &Args) -> anyhow::Result<(Vec<PhoneSpan>, String)> {
     let transcript = match &args.transcript {
         None => None,
         Some(t) => Some(match t.strip_prefix('@') {
-            Some(file) => (read_text(Path::new(file), "transcript")?, file.to_string()),
+            Some(file) => (
+                read_text(Path::new(file), "transcript", MAX_TRANSCRIPT_BYTES)?,
+                file.to_string(),
+            ),
             None => (t.clone(), "--transcript".to_string()),
         }),
     };
@@ -208,22 +244,16 @@ fn input_phones(args: &Args) -> anyhow::Result<(Vec<PhoneSpan>, String)> {
     let samples = mouthpiece_speech::wav::read_16k(std::io::BufReader::new(file), &name)
         .map_err(bad_input)?;
     let model = ModelPaths::en_us(&args.model);
-    let speech_err = |e: mouthpiece_speech::Error| match e {
-        mouthpiece_speech::Error::Init { .. } | mouthpiece_speech::Error::Decode { .. } => {
-            anyhow::Error::new(e)
-        }
-        other => bad_input(other),
+    let task = match &transcript {
+        Some((text, source)) => Task::Align {
+            transcript: text,
+            source_name: source,
+        },
+        None => Task::Recognise,
     };
-    let decoded = match &transcript {
-        Some((text, source)) => {
-            let mut d = Decoder::aligner(&model).map_err(speech_err)?;
-            d.align(&samples, text, source).map_err(speech_err)?
-        }
-        None => {
-            let mut d = Decoder::phone_recognizer(&model).map_err(speech_err)?;
-            d.recognize_phones(&samples).map_err(speech_err)?
-        }
-    };
+    // In a child process: a damaged model file that crashes the library is an error.
+    let decoded = mouthpiece_speech::decode(&model, &samples, &name, task)
+        .map_err(|e| crate::exit::bad_input_if(e.is_bad_input(), e))?;
     let source = format!("{name} (PocketSphinx)");
     let spans = spans_from_decoder(&decoded, &source)?;
     Ok((spans, source))
@@ -246,66 +276,98 @@ pub fn neutral_of(poses: &BasicPoses) -> anyhow::Result<NeutralPose> {
     .map_err(bad_input)
 }
 
-/// Weight curves → take lines for a character, written to `out`.
-pub fn write_take(
-    weights: &Weights,
-    tables: &Tables,
-    character: mouthpiece_retarget::Character,
-    smooth: Smooth,
-    out: &mut dyn Write,
-) -> anyhow::Result<()> {
-    let neutral = neutral_of(&tables.poses)?;
-    let settings = CharacterSettings {
-        smoothing: smoothing(smooth),
-        one_euro: None,
-    };
-    let mut line = OutputLine::for_character(&character, &settings.smoothing);
-    let mut retarget = CharacterRetarget::new(character, &neutral, settings)
-        .context("character and basic poses")
-        .map_err(bad_input)?;
-    let n = tables.poses.lip_dots();
-    let mut performer = StabilisedFrame {
-        t: 0.0,
-        lip: neutral.lip.clone(),
-        confidence: vec![1.0; n],
-        head: RigidTransform::IDENTITY,
-        head_lost: false,
-    };
-    let mut displacement = vec![[0.0; 3]; n];
-    for k in 0..weights.len() {
-        performer.t = weights.time(k);
-        // D = D⁰ + Σ wᵢ poseᵢ, in the mouth frame (blend from a zero neutral: displacement).
-        tables
-            .poses
-            .displacement(weights.sample(k), &tables.order, &mut displacement);
-        for (d, (base, off)) in performer
-            .lip
-            .iter_mut()
-            .zip(neutral.lip.iter().zip(&displacement))
-        {
-            *d = base + Vec3::new(off[0], off[1], off[2]);
-        }
-        let frame = retarget.apply(&performer);
-        line.update(
-            k as u64,
-            &RetargetOutput {
-                performer: &performer,
-                character: frame,
-            },
-        );
-        serde_json::to_writer(&mut *out, &line).context("cannot write the take")?;
-        out.write_all(b"\n").context("cannot write the take")?;
-    }
-    out.flush().context("cannot write the take")?;
-    Ok(())
+/// The retarget core bound to a character and the basic poses' neutral, ready to turn
+/// weight curves into take lines. Made before any output file is created: a character that
+/// does not fit the poses is bad input, not a half-written take.
+pub struct TakeWriter {
+    neutral: NeutralPose,
+    retarget: CharacterRetarget,
+    line: OutputLine,
 }
 
-/// The weight curves as CSV: `t,phone,class,<pose>…` (the dominant phone and its class).
-pub fn weights_csv(
+impl TakeWriter {
+    /// `character_name` names the character file in errors.
+    pub fn new(
+        tables: &Tables,
+        character: mouthpiece_retarget::Character,
+        character_name: &str,
+        smooth: Smooth,
+    ) -> anyhow::Result<Self> {
+        let neutral =
+            neutral_of(&tables.poses).with_context(|| format!("pose file {}", tables.pose_name))?;
+        let settings = CharacterSettings {
+            smoothing: smoothing(smooth),
+            one_euro: None,
+        };
+        let line = OutputLine::for_character(&character, &settings.smoothing);
+        let retarget = CharacterRetarget::new(character, &neutral, settings)
+            .with_context(|| {
+                format!(
+                    "character {character_name} does not fit the basic poses of {}",
+                    tables.pose_name
+                )
+            })
+            .map_err(bad_input)?;
+        Ok(Self {
+            neutral,
+            retarget,
+            line,
+        })
+    }
+
+    /// Writes one take line per sample of `weights` to `out`, as it goes.
+    pub fn write(
+        mut self,
+        weights: &Weights,
+        tables: &Tables,
+        out: &mut dyn Write,
+    ) -> anyhow::Result<()> {
+        let n = tables.poses.lip_dots();
+        let mut performer = StabilisedFrame {
+            t: 0.0,
+            lip: self.neutral.lip.clone(),
+            confidence: vec![1.0; n],
+            head: RigidTransform::IDENTITY,
+            head_lost: false,
+        };
+        let mut displacement = vec![[0.0; 3]; n];
+        for k in 0..weights.len() {
+            performer.t = weights.time(k);
+            // D = D⁰ + Σ wᵢ poseᵢ, in the mouth frame (blend from a zero neutral: displacement).
+            tables
+                .poses
+                .displacement(weights.sample(k), &tables.order, &mut displacement);
+            for (d, (base, off)) in performer
+                .lip
+                .iter_mut()
+                .zip(self.neutral.lip.iter().zip(&displacement))
+            {
+                *d = base + Vec3::new(off[0], off[1], off[2]);
+            }
+            let frame = self.retarget.apply(&performer);
+            self.line.update(
+                k as u64,
+                &RetargetOutput {
+                    performer: &performer,
+                    character: frame,
+                },
+            );
+            serde_json::to_writer(&mut *out, &self.line).context("cannot write the take")?;
+            out.write_all(b"\n").context("cannot write the take")?;
+        }
+        out.flush().context("cannot write the take")?;
+        Ok(())
+    }
+}
+
+/// The weight curves as CSV: `t,phone,class,<pose>…` (the dominant phone and its class),
+/// written to `out` as it goes.
+pub fn write_weights_csv(
     weights: &Weights,
     phones: &[PhoneSpan],
     tables: &Tables,
-) -> anyhow::Result<String> {
+    out: &mut dyn Write,
+) -> anyhow::Result<()> {
     let classes = tables.classes.classify(phones, "phones")?;
     let mut s = String::from("t,phone,class");
     for p in &tables.classes.poses {
@@ -325,8 +387,15 @@ pub fn weights_csv(
             let _ = write!(s, ",{w:.9}");
         }
         s.push('\n');
+        if s.len() > 1 << 16 {
+            out.write_all(s.as_bytes())
+                .context("cannot write the weights")?;
+            s.clear();
+        }
     }
-    Ok(s)
+    out.write_all(s.as_bytes())
+        .context("cannot write the weights")?;
+    Ok(())
 }
 
 /// Phones as JSONL `{start, end, phone}` (what `--phonemes` reads).
@@ -342,13 +411,10 @@ pub fn phones_jsonl(phones: &[PhoneSpan]) -> String {
     s
 }
 
-fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<mouthpiece_export::PendingFile> {
-    let mut f = mouthpiece_export::PendingFile::create(path)
+fn create_file(path: &Path) -> anyhow::Result<mouthpiece_export::PendingFile> {
+    mouthpiece_export::PendingFile::create(path)
         .with_context(|| format!("cannot create {}", path.display()))
-        .map_err(bad_input)?;
-    f.write_all(bytes)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(f)
+        .map_err(bad_input)
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -360,11 +426,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "--character and --out are required"
         )));
     };
+    // Flags first: nothing is read or decoded for a take that cannot be made.
+    let (lo, hi) = (mouthpiece_lipsync::MIN_FPS, mouthpiece_lipsync::MAX_FPS);
+    if !(lo..=hi).contains(&args.fps) {
+        return Err(bad_input(anyhow::anyhow!(
+            "--fps must be within {lo} to {hi} samples per second, got {:?}",
+            args.fps
+        )));
+    }
+    mouthpiece_lipsync::mapping::check_t_change(args.t_change).map_err(bad_input)?;
     let tables = Tables::load(
         args.classes.as_deref(),
         args.poses.as_deref(),
         args.segments.as_deref(),
     )?;
+    let character_name = character.display().to_string();
     let character = load_character(character)?;
     let (phones, source) = input_phones(&args)?;
     let weights = mouthpiece_lipsync::weights_for_phones(
@@ -376,20 +452,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.fps,
     )
     .map_err(bad_input)?;
-    // Everything is computed (in memory) before any file is created.
-    let mut take = Vec::with_capacity(weights.len() * 600);
-    write_take(&weights, &tables, character, args.smooth, &mut take)?;
-    let csv = args
-        .weights
-        .as_ref()
-        .map(|_| weights_csv(&weights, &phones, &tables))
-        .transpose()?;
-    let mut pending = vec![write_file(out, &take)?];
-    if let (Some(path), Some(csv)) = (&args.weights, csv) {
-        pending.push(write_file(path, csv.as_bytes())?);
+    let take = TakeWriter::new(&tables, character, &character_name, args.smooth)?;
+    // Streamed to temporary files beside the outputs, renamed into place at the end.
+    let mut pending = vec![create_file(out)?];
+    take.write(&weights, &tables, &mut pending[0])
+        .with_context(|| format!("cannot write {}", out.display()))?;
+    if let Some(path) = &args.weights {
+        let mut f = create_file(path)?;
+        write_weights_csv(&weights, &phones, &tables, &mut f)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        pending.push(f);
     }
     if let Some(path) = &args.phones_out {
-        pending.push(write_file(path, phones_jsonl(&phones).as_bytes())?);
+        let mut f = create_file(path)?;
+        f.write_all(phones_jsonl(&phones).as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        pending.push(f);
     }
     for f in pending {
         f.commit().context("cannot write the outputs")?;
@@ -484,7 +562,9 @@ pub fn poses_from_synth() -> anyhow::Result<BasicPoses> {
 }
 
 /// A lip-sync weights CSV (`t,…,<pose>…`) → the synthetic performer's mouth states, keyed
-/// at `t + offset`: Σ wᵢ · stateᵢ over the poses that carry a `mouth` state.
+/// at `t + offset`: Σ wᵢ · stateᵢ over the poses that carry a `mouth` state. Times must be
+/// within 0 to a day and increase; weights within 0 to 1 (what `lipsync` writes); anything
+/// else is an error naming the line and column.
 pub fn mouth_keys_from_weights(
     csv: &str,
     source_name: &str,
@@ -521,7 +601,7 @@ pub fn mouth_keys_from_weights(
     if used.is_empty() {
         return Err(bad_input(anyhow::anyhow!(
             "{source_name}:1: no column names a pose with a mouth state (poses: {:?})",
-            poses.poses.iter().map(|p| &p.name).collect::<Vec<_>>()
+            poses.poses.iter().map(|p| cut(&p.name)).collect::<Vec<_>>()
         )));
     }
     let mut keys: Vec<(f64, MouthState)> = Vec::new();
@@ -530,20 +610,22 @@ pub fn mouth_keys_from_weights(
             continue;
         }
         let cells: Vec<&str> = line.split(',').collect();
-        let num = |c: usize| -> anyhow::Result<f64> {
-            cells
-                .get(c)
-                .and_then(|s| s.trim().parse::<f64>().ok())
-                .filter(|x| x.is_finite())
+        let num = |c: usize, lo: f64, hi: f64| -> anyhow::Result<f64> {
+            let cell = cells.get(c).map_or("", |s| s.trim());
+            cell.parse::<f64>()
+                .ok()
+                .filter(|x| (lo..=hi).contains(x))
                 .ok_or_else(|| {
                     bad_input(anyhow::anyhow!(
-                        "{source_name}:{}: column {:?} is not a number",
+                        "{source_name}:{}: column {} ({:?}): {:?} is not a number within {lo} to {hi}",
                         i + 1,
-                        columns[c]
+                        c + 1,
+                        cut(columns[c]),
+                        cut(cell)
                     ))
                 })
         };
-        let t = num(0)? + offset;
+        let t = num(0, 0.0, mouthpiece_lipsync::phones::MAX_TIME)? + offset;
         if keys.last().is_some_and(|(prev, _)| t <= *prev) {
             return Err(bad_input(anyhow::anyhow!(
                 "{source_name}:{}: times must increase",
@@ -552,7 +634,7 @@ pub fn mouth_keys_from_weights(
         }
         let mut m = MouthState::default();
         for (c, state) in &used {
-            let w = num(*c)?;
+            let w = num(*c, 0.0, 1.0)?;
             m.jaw += w * state.jaw;
             m.spread += w * state.spread;
             m.round += w * state.round;
@@ -634,5 +716,23 @@ mod tests {
         let bad = csv.replace("0.5,aa", "0.5x,aa");
         let err = mouth_keys_from_weights(&bad, "w.csv", &poses, 0.0).unwrap_err();
         assert!(err.to_string().contains("w.csv:3"), "{err}");
+    }
+
+    #[test]
+    fn absurd_weights_and_times_are_refused_naming_line_and_column() {
+        // 1e308 and negative weights drove the synthetic mouth far outside its range.
+        let poses = BasicPoses::from_toml_str(DEFAULT_POSES, "poses.toml").unwrap();
+        let csv = "t,phone,class,closed,open,spread,round,bite\n0.0,sil,sil,0,0,0,0,0\n0.5,aa,open,0,1,0,0,0\n";
+        for (from, to, column) in [
+            (",0,1,0,0,0", ",0,1e308,0,0,0", "column 5 (\"open\")"),
+            (",0,1,0,0,0", ",0,1,-0.5,0,0", "column 6 (\"spread\")"),
+            ("0.5,aa", "NaN,aa", "column 1 (\"t\")"),
+            ("0.5,aa", "1e300,aa", "column 1 (\"t\")"),
+        ] {
+            let bad = csv.replace(from, to);
+            let err = mouth_keys_from_weights(&bad, "w.csv", &poses, 0.0).unwrap_err();
+            let text = err.to_string();
+            assert!(text.starts_with(&format!("w.csv:3: {column}")), "{text}");
+        }
     }
 }

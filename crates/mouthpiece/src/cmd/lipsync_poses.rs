@@ -55,9 +55,11 @@ pub fn parse_marks(text: &str, source_name: &str) -> anyhow::Result<Vec<(String,
     table
         .into_iter()
         .map(|(name, [a, b])| {
-            if !(a.is_finite() && b.is_finite() && a < b) {
+            let day = mouthpiece_lipsync::phones::MAX_TIME;
+            if !(a.is_finite() && b.is_finite() && 0.0 <= a && a < b && b <= day) {
                 return Err(bad_input(anyhow::anyhow!(
-                    "{source_name}: {name}: the range must be [start, end] with start < end, got [{a}, {b}]"
+                    "{source_name}: {}: the range must be [start, end] with 0 ≤ start < end ≤ {day}, got [{a}, {b}]",
+                    mouthpiece_lipsync::input::cut(&name)
                 )));
             }
             Ok((name, a, b))
@@ -151,9 +153,11 @@ pub fn capture(
 }
 
 pub fn run(args: PosesArgs) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&args.marks)
-        .with_context(|| format!("cannot read marks {}", args.marks.display()))
-        .map_err(bad_input)?;
+    let text = crate::cmd::lipsync::read_text(
+        &args.marks,
+        "marks",
+        crate::cmd::lipsync::MAX_TABLE_FILE_BYTES,
+    )?;
     let marks = parse_marks(&text, &args.marks.display().to_string())?;
     let poses = capture(&args.session, &marks, args.config.as_deref())?;
     let text = poses.to_toml_string(&format!(

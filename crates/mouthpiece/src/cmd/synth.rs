@@ -119,20 +119,19 @@ fn speech_keys(
     neutral_seconds: f64,
 ) -> anyhow::Result<Vec<(f64, mouthpiece_synth::MouthState)>> {
     use crate::cmd::lipsync::{mouth_keys_from_weights, DEFAULT_POSES};
-    let read = |p: &std::path::Path| {
-        std::fs::read_to_string(p)
-            .with_context(|| format!("cannot read {}", p.display()))
-            .map_err(bad_input)
-    };
+    use crate::cmd::lipsync::{read_text, MAX_TABLE_FILE_BYTES, MAX_WEIGHTS_CSV_BYTES};
     let (text, name) = match poses {
-        Some(p) => (read(p)?, p.display().to_string()),
+        Some(p) => (
+            read_text(p, "pose file", MAX_TABLE_FILE_BYTES)?,
+            p.display().to_string(),
+        ),
         None => (
             DEFAULT_POSES.to_string(),
             "config/lipsync/poses.toml".to_string(),
         ),
     };
     let poses = mouthpiece_lipsync::BasicPoses::from_toml_str(&text, &name).map_err(bad_input)?;
-    let csv = read(path)?;
+    let csv = read_text(path, "weights CSV", MAX_WEIGHTS_CSV_BYTES)?;
     let mut keys = vec![(0.0, mouthpiece_synth::MouthState::default())];
     keys.extend(mouth_keys_from_weights(
         &csv,
@@ -143,7 +142,26 @@ fn speech_keys(
     Ok(keys)
 }
 
+/// Frame rates `--fps` accepts: below one a second a session has no frames to speak of.
+pub const FPS_RANGE: (f64, f64) = (1.0, 1000.0);
+/// Longest session `--seconds` accepts (a day).
+pub const MAX_SECONDS: f64 = 86_400.0;
+
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if !(FPS_RANGE.0..=FPS_RANGE.1).contains(&args.fps) {
+        return Err(bad_input(anyhow::anyhow!(
+            "--fps must be within {} to {} frames per second, got {:?}",
+            FPS_RANGE.0,
+            FPS_RANGE.1,
+            args.fps
+        )));
+    }
+    if !(0.0..=MAX_SECONDS).contains(&args.seconds) {
+        return Err(bad_input(anyhow::anyhow!(
+            "--seconds must be within 0 to {MAX_SECONDS}, got {:?}",
+            args.seconds
+        )));
+    }
     let mut config = SynthConfig {
         seed: args.seed,
         fps: args.fps,
