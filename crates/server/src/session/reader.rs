@@ -1,0 +1,282 @@
+//! The reader: parses what the client sends (rate-limited), answers through the client's
+//! control queue, and forwards control requests to the daemon.
+
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use futures_util::stream::SplitStream;
+use futures_util::StreamExt;
+use tokio::sync::mpsc;
+use tokio_tungstenite::tungstenite::protocol::frame::coding::CloseCode;
+use tokio_tungstenite::tungstenite::{Error as WsError, Message};
+use tracing::{debug, info};
+
+use super::{error_json, Outgoing, ReaderExit, TokenBucket};
+use crate::config::Access;
+use crate::hub::{ControlCommand, ControlQueueError};
+use crate::protocol::{
+    self, ClientMessage, ErrorCode, RecordAction, RequestId, ResultMessage, ServerMessage,
+};
+use crate::server::{Shared, Ws};
+
+#[derive(Clone, Copy)]
+enum Kind {
+    Binary,
+    Other,
+}
+
+pub(super) async fn read_loop(
+    shared: Arc<Shared>,
+    stream: &mut SplitStream<Ws>,
+    out: mpsc::Sender<Outgoing>,
+    access: Access,
+    peer: SocketAddr,
+    started: Instant,
+    last_heard: Arc<AtomicU64>,
+) -> ReaderExit {
+    let limits = &shared.config.limits;
+    let metrics = &shared.hub.inner.metrics;
+    let mut bucket = TokenBucket::new(limits.max_messages_per_second);
+    let mut refused_in_a_row = 0u32;
+    // The writer stalls when the client does not read; its replies then pile up here.
+    let overflow = || {
+        Some((
+            CloseCode::Policy,
+            "too many unanswered requests: the client is not reading".to_owned(),
+        ))
+    };
+    let reply = |text: String| out.try_send(Outgoing::Text(text)).is_ok();
+    while let Some(message) = stream.next().await {
+        last_heard.store(started.elapsed().as_millis() as u64, Ordering::Relaxed);
+        let message_kind = match &message {
+            Ok(Message::Binary(_)) => Kind::Binary,
+            _ => Kind::Other,
+        };
+        // Text and binary messages and pings count against the rate limit; pongs answer ours.
+        let text = match message {
+            Ok(Message::Text(text)) => Some(text),
+            Ok(Message::Binary(_) | Message::Ping(_)) => None,
+            Ok(Message::Close(_)) => return None,
+            Ok(_) => continue,
+            Err(WsError::Capacity(e)) => {
+                metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+                info!(error = %e, "client message too big");
+                return Some((
+                    CloseCode::Size,
+                    format!("message too big (limit {} bytes)", limits.max_message_bytes),
+                ));
+            }
+            Err(WsError::ConnectionClosed | WsError::AlreadyClosed) => return None,
+            Err(WsError::Io(e)) => {
+                debug!(error = %e, "read failed");
+                return None;
+            }
+            Err(e) => {
+                metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+                info!(error = %e, "WebSocket protocol error");
+                return Some((CloseCode::Protocol, format!("protocol error: {e}")));
+            }
+        };
+        if !bucket.take() {
+            metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+            refused_in_a_row += 1;
+            if refused_in_a_row > limits.max_messages_per_second.saturating_mul(2) {
+                return Some((
+                    CloseCode::Policy,
+                    format!(
+                        "too many messages (limit {} per second)",
+                        limits.max_messages_per_second
+                    ),
+                ));
+            }
+            if !reply(error_json(
+                ErrorCode::RateLimited,
+                format!(
+                    "more than {} messages per second: ignored",
+                    limits.max_messages_per_second
+                ),
+                None,
+            )) {
+                return overflow();
+            }
+            continue;
+        }
+        refused_in_a_row = 0;
+        let Some(text) = text else {
+            // tungstenite answers pings itself.
+            if matches!(message_kind, Kind::Binary) {
+                metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+                if !reply(error_json(
+                    ErrorCode::UnsupportedBinary,
+                    "clients send JSON text messages only",
+                    None,
+                )) {
+                    return overflow();
+                }
+            }
+            continue;
+        };
+        let message = match protocol::parse_client_message(&text) {
+            Ok(m) => m,
+            Err(failure) => {
+                metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+                debug!(message = failure.message, "bad client message");
+                if !reply(error_json(failure.code, failure.message, failure.id)) {
+                    return overflow();
+                }
+                continue;
+            }
+        };
+        let ok = match message {
+            ClientMessage::Subscribe(sub) => out.try_send(Outgoing::Subscribe(sub)).is_ok(),
+            ClientMessage::Preview(request) => out.try_send(Outgoing::Preview(request)).is_ok(),
+            ClientMessage::Ping { id } => reply(protocol::to_json(&ServerMessage::Pong {
+                id,
+                server_wall_us: unix_micros_now(),
+            })),
+            ClientMessage::Calibrate { id, duration_s } => control(
+                &shared,
+                &out,
+                access,
+                peer,
+                id,
+                "calibrate",
+                ControlCommand::Calibrate {
+                    duration: duration_s.map(Duration::from_secs_f64),
+                },
+            ),
+            ClientMessage::LookAt {
+                id,
+                character,
+                point,
+            } => match crate::head::unknown_character(&shared.hub.info(), &character) {
+                Some(message) if access >= Access::Control => {
+                    metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+                    reply(error_json(ErrorCode::BadRequest, message, id))
+                }
+                _ => control(
+                    &shared,
+                    &out,
+                    access,
+                    peer,
+                    id,
+                    "look_at",
+                    ControlCommand::LookAt { character, point },
+                ),
+            },
+            ClientMessage::Record {
+                id,
+                action,
+                slate,
+                take,
+            } => control(
+                &shared,
+                &out,
+                access,
+                peer,
+                id,
+                "record",
+                match action {
+                    RecordAction::Start => ControlCommand::RecordStart { slate, take },
+                    RecordAction::Stop => ControlCommand::RecordStop,
+                },
+            ),
+        };
+        if !ok {
+            return overflow();
+        }
+    }
+    None
+}
+
+/// Forwards a control request to the daemon; the answer arrives later on `out`.
+/// Returns false when the client's queue overflowed.
+fn control(
+    shared: &Arc<Shared>,
+    out: &mpsc::Sender<Outgoing>,
+    access: Access,
+    peer: SocketAddr,
+    id: Option<RequestId>,
+    request: &'static str,
+    command: ControlCommand,
+) -> bool {
+    let error = |code, message: String| Outgoing::Text(error_json(code, message, id.clone()));
+    if access < Access::Control {
+        shared
+            .hub
+            .inner
+            .metrics
+            .bad_messages
+            .fetch_add(1, Ordering::Relaxed);
+        return out
+            .try_send(error(
+                ErrorCode::Forbidden,
+                format!("{request} needs the control token"),
+            ))
+            .is_ok();
+    }
+    info!(?command, "control request");
+    // A calibration is answered once the neutral pose is taken: wait its duration longer.
+    let longer = match &command {
+        ControlCommand::Calibrate {
+            duration: Some(duration),
+        } => *duration,
+        _ => Duration::ZERO,
+    };
+    let pending = match shared.hub.request_control(command, peer.to_string()) {
+        Ok(rx) => rx,
+        Err(ControlQueueError::Full) => {
+            return out
+                .try_send(error(
+                    ErrorCode::Busy,
+                    "the daemon has too many control requests waiting; try again".into(),
+                ))
+                .is_ok()
+        }
+        Err(ControlQueueError::NoDaemon) => {
+            return out
+                .try_send(error(
+                    ErrorCode::Unavailable,
+                    "no daemon is taking control requests".into(),
+                ))
+                .is_ok()
+        }
+    };
+    let out = out.clone();
+    let wait = shared.config.limits.control_timeout + longer;
+    tokio::spawn(async move {
+        let answer = match tokio::time::timeout(wait, pending).await {
+            Ok(Ok(Ok(detail))) => protocol::to_json(&ServerMessage::Result(ResultMessage {
+                id,
+                request,
+                detail,
+            })),
+            Ok(Ok(Err(failure))) => error_json(ErrorCode::ControlFailed, failure.message, id),
+            Ok(Err(_)) => error_json(
+                ErrorCode::Unavailable,
+                format!("the daemon dropped the {request} request"),
+                id,
+            ),
+            Err(_) => error_json(
+                ErrorCode::Timeout,
+                format!(
+                    "the daemon did not answer {request} within {} s",
+                    wait.as_secs()
+                ),
+                id,
+            ),
+        };
+        // A full queue means the client is not reading; the reader closes it on its next
+        // message, and the writer on its next stalled write.
+        let _ = out.try_send(Outgoing::Text(answer));
+    });
+    true
+}
+
+fn unix_micros_now() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as i64)
+}
