@@ -331,7 +331,7 @@ impl Checker<'_> {
         frame: &MouthFrame,
     ) -> Result<Vec3, Error> {
         let away = (p - frame.origin).norm() / frame.width;
-        if !(away <= MAX_MOUTH_WIDTHS_AWAY) {
+        if !away.is_finite() || away > MAX_MOUTH_WIDTHS_AWAY {
             return Err(self.err(
                 key,
                 Some(v.span()),
