@@ -9,6 +9,20 @@ use std::time::{Duration, Instant};
 use mouthpiece_frame::{Calibration, ColorImage, DepthImage, Frame, Intrinsics};
 use mouthpiece_recording::{ColorEncoding, SessionWriter, WriterOptions};
 
+/// A character with every `[head]` key and a `[rig]` with its ranges and jaw hinge.
+const HEAD_RIG_CHARACTER: &str = "name = \"sq\"\n[points]\nP1 = [1.0, 0.0, 0.0]\nP2 = [0.0, 1.0, 0.5]\nP3 = [-1.0, 0.0, 0.0]\nP4 = [0.0, -1.0, 0.5]\n[head]\npivot = [0.0, 0.5, -3.0]\neye_left = [0.8, 2.0, 0.5]\neye_right = [-0.8, 2.0, 0.5]\nreach_side = 0.8\nreach_up = 0.5\nreach_down = 0.7\nreach_diagonal = 0.6\nturn_time_s = 0.4\nfollow_gain = 1.5\nfollow_max_deg = 60.0\neye_max_deg = 25.0\n[rig]\njaw_pivot = [0.0, 0.4, -1.5]\n[rig.ranges]\njawOpen = 25\nmouthFunnel = 0.2\nmouthClose = 0.05\n";
+
+/// A daemon configuration with an `[osc]` table and the performer's `[rig]`.
+const OSC_CONFIG: &str = "[osc]\ntargets = [\"127.0.0.1:39539\", \"[::1]:39540\", \"avatar.local:9000\"]\ncharacter = \"wolf\"\nhead = true\neyes = false\n[rig]\nhinge_up = 0.4\nlearn_s = 3.0\n[rig.ranges]\njawOpen = 20\n[retarget]\nsmooth = \"ma-exp\"\nma_radius = 3\nma_alpha = 0.4\none_euro = [1.0, 0.007]\n";
+
+/// Retarget options, one per smoothing, and a performer's `[rig]`.
+const RETARGET_OPTIONS: [(&str, &str); 4] = [
+    ("bspline.toml", "[retarget]\nsmooth = \"bspline\"\nsamples_per_span = 8\none_euro = [1.0, 0.007]\n"),
+    ("ma.toml", "[retarget]\nsmooth = \"ma-weighted\"\nma_radius = 2\n"),
+    ("ma-exp.toml", "[retarget]\nsmooth = \"ma-exp\"\nma_radius = 4\nma_alpha = 0.3\n"),
+    ("rig.toml", "[rig]\nhinge_up = 0.5\nhinge_back = 1.6\nlearn_s = 4.0\ndepth_noise_m = 0.0012\npixel_noise_m = 0.0003\n[rig.ranges]\njawOpen = 30\nmouthSmileLeft = 0.1\n[retarget]\nsmooth = \"sg5\"\n"),
+];
+
 fn put(target: &str, name: &str, data: &[u8]) {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../fuzz/corpus")
@@ -166,6 +180,15 @@ fn main() {
         "contour.toml",
         b"name = \"c\"\nunits = \"cm\"\n[contour]\npoints_per_lip = 4\nupper = [[1, 0, 0], [0, 1, 0], [-1, 0, 0]]\nlower = [[1, 0, 0], [0, -1, 0], [-1, 0, 0]]\n",
     );
+    put(
+        "character_toml",
+        "head-rig.toml",
+        HEAD_RIG_CHARACTER.as_bytes(),
+    );
+    put("config_toml", "osc.toml", OSC_CONFIG.as_bytes());
+    for (name, text) in RETARGET_OPTIONS {
+        put("retarget_options", name, text.as_bytes());
+    }
     put(
         "retarget_jsonl",
         "lines.jsonl",

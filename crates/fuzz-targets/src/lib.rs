@@ -31,6 +31,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("gltf_rig", gltf_rig),
     ("wav", wav),
     ("lipsync_tables", lipsync_tables),
+    ("retarget_options", retarget_options),
 ];
 
 /// Runs the target called `name`; `false` when there is none.
@@ -77,10 +78,13 @@ pub fn mcap(data: &[u8]) {
     }
 }
 
-/// An `.oni` file: list its records, repair a truncated copy, add missing cropping.
+/// An `.oni` file: validate it, list its records, repair a truncated copy, add missing
+/// cropping.
 pub fn oni(data: &[u8]) {
     use openni2::oni_file;
     let path = scratch("take.oni", data);
+    let _ = openni2::oni_check::validate(&path, true);
+    let _ = openni2::oni_check::validate(&path, false);
     let _ = oni_file::list_records(&path, true);
     let _ = oni_file::list_records(&path, false);
     let repaired = path.with_extension("repaired.oni");
@@ -341,5 +345,81 @@ pub fn lipsync_tables(data: &[u8]) {
         let back = BasicPoses::from_toml_str(&written, "fuzz")
             .unwrap_or_else(|e| panic!("the pose writer wrote a file that does not read: {e}"));
         assert_eq!(back, poses, "the pose writer changed the poses");
+    }
+}
+
+/// Retarget options: the `[rig]` table (the performer's rig settings, as the daemon reads
+/// it) and the shape smoothing and One Euro options of `[retarget]` (the keys of
+/// `mouthpiece retarget`'s flags and the configuration's table). Whatever passes the checks
+/// must then run cheaply: one curve over a 64-point loop and a few filter steps, so that a
+/// size that allocates or loops without bound shows as a fuzzer timeout or memory failure.
+pub fn retarget_options(data: &[u8]) {
+    use mouthpiece_retarget::smooth::smooth_closed;
+    use mouthpiece_retarget::{
+        MovingAverageKind, OneEuroGroup, OneEuroParams, RigSettings, ShapeSmoothing,
+    };
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let Ok(table) = text.parse::<toml::Table>() else {
+        return;
+    };
+    if let Some(rig) = table.get("rig") {
+        if let Ok(settings) = rig.clone().try_into::<RigSettings>() {
+            let _ = settings.validate("rig");
+        }
+    }
+    let Some(options) = table.get("retarget").and_then(|v| v.as_table()) else {
+        return;
+    };
+    // The mapping of `mouthpiece retarget --smooth` and `[retarget] smooth` to the smoothing.
+    let size = |key: &str, default: usize| match options.get(key) {
+        Some(toml::Value::Integer(i)) => usize::try_from(*i).ok(),
+        None => Some(default),
+        _ => None,
+    };
+    let (Some(radius), Some(samples_per_span)) =
+        (size("ma_radius", 1), size("samples_per_span", 8))
+    else {
+        return;
+    };
+    let alpha = match options.get("ma_alpha") {
+        Some(toml::Value::Float(f)) => *f,
+        Some(toml::Value::Integer(i)) => *i as f64,
+        _ => 0.5,
+    };
+    let ma = |kind| ShapeSmoothing::MovingAverage { kind, radius };
+    let smoothing = match options.get("smooth").and_then(|v| v.as_str()) {
+        Some("none") => ShapeSmoothing::None,
+        Some("ma") => ma(MovingAverageKind::Plain),
+        Some("ma-weighted") => ma(MovingAverageKind::Weighted),
+        Some("ma-exp") => ma(MovingAverageKind::Exponential { alpha }),
+        Some("sg5") => ShapeSmoothing::SavitzkyGolay5,
+        _ => ShapeSmoothing::BSpline { samples_per_span },
+    };
+    if smoothing.validate().is_ok() {
+        let n = 64;
+        let points: Vec<_> = (0..n)
+            .map(|i| {
+                let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                mouthpiece_retarget::Vec3::new(a.cos(), a.sin(), 0.0)
+            })
+            .collect();
+        let mut out = Vec::new();
+        smooth_closed(&points, &smoothing, &mut out);
+    }
+    let number = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+    if let Some(pair) = options.get("one_euro").and_then(|v| v.as_array()) {
+        if let [a, b] = &pair[..] {
+            if let (Some(a), Some(b)) = (number(a), number(b)) {
+                if let Ok(params) = OneEuroParams::new(a, b) {
+                    let mut group = OneEuroGroup::new(params, 3);
+                    for i in 0..8 {
+                        let mut xs = [Some(i as f64), None, Some(-1.0)];
+                        group.filter(i as f64 / 30.0, &mut xs);
+                    }
+                }
+            }
+        }
     }
 }

@@ -827,33 +827,41 @@ fn evaluate_with_dots_unseen_keeps_every_curve_within_its_target() {
     );
 }
 
-/// Smoothing sizes that would allocate terabytes or loop for hours, and a `--look-at` time
-/// no take reaches, are refused before any input is read: exit 2 naming the flag's key, no
-/// output file.
-#[test]
-fn absurd_smoothing_sizes_and_look_at_times_exit_2() {
+/// Runs `retarget` on the example with `args` added: it must exit 2 naming `named`, before
+/// any input is read, and leave no output file.
+fn refused_before_reading(args: &[&str], named: &str) {
     let dir = tempfile::tempdir().unwrap();
     let example = repo().join("tests/data/example-performer.jsonl");
     let out = dir.path().join("out.jsonl");
-    for (args, named) in [
-        (
-            &["--smooth", "bspline", "--samples-per-span", "1000000000000"][..],
-            "samples_per_span",
-        ),
-        (
-            &["--smooth", "ma", "--ma-radius", "1000000000"][..],
-            "radius",
-        ),
-        (&["--smooth", "ma-exp", "--ma-radius", "501"][..], "radius"),
-        (&["--look-at", "0,0.1,2@1e300"][..], "--look-at"),
-        (&["--look-at", "0,0.1,2@-1e10"][..], "--look-at"),
-    ] {
-        let mut cmd = mouthpiece();
-        example_args(&mut cmd, &example, out.to_str().unwrap());
-        let o = cmd.args(args).output().unwrap();
-        let stderr = String::from_utf8_lossy(&o.stderr);
-        assert_eq!(o.status.code(), Some(2), "{args:?}: {stderr}");
-        assert!(stderr.contains(named), "{args:?}: {stderr}");
-        assert!(!out.exists(), "{args:?} left an output file");
-    }
+    let mut cmd = mouthpiece();
+    example_args(&mut cmd, &example, out.to_str().unwrap());
+    let o = cmd.args(args).output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {stderr}");
+    assert!(stderr.contains(named), "{args:?}: {stderr}");
+    assert!(!out.exists(), "{args:?} left an output file");
+}
+
+/// A B-spline of 10^12 samples a span asked for terabytes (the allocation aborted).
+#[test]
+fn absurd_samples_per_span_exit_2() {
+    refused_before_reading(
+        &["--smooth", "bspline", "--samples-per-span", "1000000000000"],
+        "samples_per_span",
+    );
+    refused_before_reading(&["--samples-per-span", "65"], "samples_per_span");
+}
+
+/// A moving average of radius 10^9 took hours a line.
+#[test]
+fn absurd_moving_average_radius_exits_2() {
+    refused_before_reading(&["--smooth", "ma", "--ma-radius", "1000000000"], "radius");
+    refused_before_reading(&["--smooth", "ma-exp", "--ma-radius", "501"], "radius");
+}
+
+/// A `--look-at` time no take reaches.
+#[test]
+fn absurd_look_at_times_exit_2() {
+    refused_before_reading(&["--look-at", "0,0.1,2@1e300"], "--look-at");
+    refused_before_reading(&["--look-at", "0,0.1,2@-1e10"], "--look-at");
 }

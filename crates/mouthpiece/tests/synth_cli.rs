@@ -115,31 +115,41 @@ fn bad_input_exits_2_and_names_it() {
     assert!(String::from_utf8_lossy(&output.stderr).contains("distance"));
 }
 
-/// A frame rate near zero (an empty session that looked like success), a length in the
-/// billions of seconds (the speech track planned syllables without end) and non-finite lens
-/// distortion exit 2 naming the value, and write nothing.
-#[test]
-fn absurd_rates_lengths_and_distortion_exit_2() {
+/// Runs `synth` with `args` (one second unless they say): it must exit 2 naming `named` and
+/// leave no file.
+fn synth_refuses(out: &str, args: &[&str], named: &str) {
     let dir = tempfile::tempdir().unwrap();
-    for (out, args, named) in [
-        ("a.mcap", &["--fps", "1e-300"][..], "fps"),
-        ("b.oni", &["--fps", "1e-300"][..], "fps"),
-        ("c.mcap", &["--fps", "0.5"][..], "fps"),
-        ("d.mcap", &["--seconds", "1e300"][..], "seconds"),
-        ("e.mcap", &["--seconds", "1e9"][..], "seconds"),
-        ("f.mcap", &["--distortion", "NaN,0,0,0,0"][..], "distortion"),
-    ] {
-        let path = dir.path().join(out);
-        let mut cmd = mouthpiece();
-        cmd.args(["synth", "--seed", "1", "--size", "64x48", "--out"])
-            .arg(&path);
-        if !args.contains(&"--seconds") {
-            cmd.args(["--seconds", "1"]);
-        }
-        let output = cmd.args(args).output().unwrap();
-        let err = String::from_utf8_lossy(&output.stderr);
-        assert_eq!(output.status.code(), Some(2), "{args:?}: {err}");
-        assert!(err.contains(named), "{args:?}: {err}");
-        assert!(!path.exists(), "{args:?} left {out}");
+    let path = dir.path().join(out);
+    let mut cmd = mouthpiece();
+    cmd.args(["synth", "--seed", "1", "--size", "64x48", "--out"])
+        .arg(&path);
+    if !args.contains(&"--seconds") {
+        cmd.args(["--seconds", "1"]);
     }
+    let output = cmd.args(args).output().unwrap();
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{args:?}: {err}");
+    assert!(err.contains(named), "{args:?}: {err}");
+    assert!(!path.exists(), "{args:?} left {out}");
+}
+
+/// A frame rate near zero wrote an empty session that looked like success.
+#[test]
+fn a_frame_rate_near_zero_exits_2() {
+    synth_refuses("a.mcap", &["--fps", "1e-300"], "fps");
+    synth_refuses("b.oni", &["--fps", "1e-300"], "fps");
+    synth_refuses("c.mcap", &["--fps", "0.5"], "fps");
+}
+
+/// A length of 10^300 s planned speech without end.
+#[test]
+fn a_length_past_a_day_exits_2() {
+    synth_refuses("d.mcap", &["--seconds", "1e300"], "seconds");
+    synth_refuses("e.mcap", &["--seconds", "1e9"], "seconds");
+}
+
+/// Non-finite lens distortion.
+#[test]
+fn non_finite_distortion_exits_2() {
+    synth_refuses("f.mcap", &["--distortion", "NaN,0,0,0,0"], "distortion");
 }

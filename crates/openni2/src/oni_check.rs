@@ -377,7 +377,7 @@ pub fn validate(path: &Path, allow_truncated: bool) -> Result<Vec<RecordHeader>,
                         format!("seek table of node {}, which was never added", rec.node_id),
                     ));
                 };
-                if rec.payload_size as usize % SEEK_ENTRY_LEN != 0 {
+                if !(rec.payload_size as usize).is_multiple_of(SEEK_ENTRY_LEN) {
                     return Err(corrupt(
                         at,
                         format!(

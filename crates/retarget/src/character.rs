@@ -331,7 +331,7 @@ impl Checker<'_> {
         frame: &MouthFrame,
     ) -> Result<Vec3, Error> {
         let away = (p - frame.origin).norm() / frame.width;
-        if !(away <= MAX_MOUTH_WIDTHS_AWAY) {
+        if !away.is_finite() || away > MAX_MOUTH_WIDTHS_AWAY {
             return Err(self.err(
                 key,
                 Some(v.span()),
@@ -1107,10 +1107,10 @@ lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
         assert_eq!((wolf.neutral[0].y, wolf.neutral[0].z), (0.0, 0.0));
         assert_eq!((wolf.neutral[6].y, wolf.neutral[6].z), (0.0, 0.0));
     }
-    /// Head points and the jaw hinge far from the mouth (wrong units, a typo), ranges near
-    /// zero, and a megabyte-long range name: errors naming key and line, never the whole key.
+    /// Head points and the jaw hinge far from the mouth (wrong units, a typo): errors naming
+    /// key and line.
     #[test]
-    fn absurd_head_and_rig_values_are_refused() {
+    fn head_and_jaw_points_far_from_the_mouth_are_refused() {
         // The square's mouth is 2 wide, centred on the origin: 50 widths is 100.
         for (table, key, line) in [
             ("[rig]\njaw_pivot = [0.0, 0.0, 1e6]", "rig.jaw_pivot", 9),
@@ -1126,9 +1126,21 @@ lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
             "{SQUARE}[rig]\njaw_pivot = [99.0, 0.0, 0.0]\n"
         ))
         .is_ok());
+        let (_, _, reason) = invalid(&format!("{SQUARE}[head]\nturn_time_s = 1e300\n"));
+        assert!(reason.contains("got 1e300"), "{reason}");
+    }
+
+    /// A range near zero turns the measure's noise into a curve jumping between 0 and 1.
+    #[test]
+    fn rig_ranges_near_zero_are_refused() {
         let (k, _, reason) = invalid(&format!("{SQUARE}[rig.ranges]\nmouthClose = 1e-300\n"));
         assert_eq!(k, "rig.ranges.mouthClose", "{reason}");
         assert!(reason.contains("1e-300"), "{reason}");
+    }
+
+    /// A megabyte-long range name is cut in the error.
+    #[test]
+    fn a_long_range_name_is_cut_in_errors() {
         let long = "x".repeat(1_000_000);
         let (k, _, reason) = invalid(&format!("{SQUARE}[rig.ranges]\n{long} = 1\n"));
         assert!(
@@ -1137,7 +1149,5 @@ lower = [[3.0, 0.0, 0.0], [-3.0, 0.0, 0.0]]
             k.len(),
             reason.len()
         );
-        let (_, _, reason) = invalid(&format!("{SQUARE}[head]\nturn_time_s = 1e300\n"));
-        assert!(reason.contains("got 1e300"), "{reason}");
     }
 }
