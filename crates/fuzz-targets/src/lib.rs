@@ -190,18 +190,7 @@ pub fn http_head(data: &[u8]) {
 /// the sample cap itself is unit-tested).
 pub fn lipsync_phones(data: &[u8]) {
     use mouthpiece_lipsync::phones::{self, PhoneFormat};
-    use mouthpiece_lipsync::{ClassTable, SegmentTable};
-    use std::sync::OnceLock;
-    static TABLES: OnceLock<(ClassTable, SegmentTable)> = OnceLock::new();
-    let (table, segments) = TABLES.get_or_init(|| {
-        let table = ClassTable::from_toml_str(
-            include_str!("../../../config/lipsync/classes.toml"),
-            "classes.toml",
-        )
-        .expect("the shipped class table reads");
-        let segments = SegmentTable::generate(&table);
-        (table, segments)
-    });
+    let (table, segments) = shipped_lipsync_tables();
     // As the command reads files: UTF-8, or UTF-16 with a byte order mark.
     let Ok(text) = mouthpiece_lipsync::input::decode_text(data, "fuzz") else {
         return;
@@ -307,6 +296,24 @@ pub fn gltf_rig(data: &[u8]) {
     let _ = animate_rig_bytes(&split_glb(data), rig, take_glb(), take);
 }
 
+/// The shipped class table and its generated segments, built once per fuzzing process.
+fn shipped_lipsync_tables() -> &'static (
+    mouthpiece_lipsync::ClassTable,
+    mouthpiece_lipsync::SegmentTable,
+) {
+    use mouthpiece_lipsync::{ClassTable, SegmentTable};
+    static TABLES: std::sync::OnceLock<(ClassTable, SegmentTable)> = std::sync::OnceLock::new();
+    TABLES.get_or_init(|| {
+        let table = ClassTable::from_toml_str(
+            include_str!("../../../config/lipsync/classes.toml"),
+            "classes.toml",
+        )
+        .expect("the shipped class table reads");
+        let segments = SegmentTable::generate(&table);
+        (table, segments)
+    })
+}
+
 /// A WAV file of `mouthpiece lipsync --audio`: read (first channel) and resampled to 16 kHz,
 /// as the command does before decoding.
 pub fn wav(data: &[u8]) {
@@ -319,17 +326,7 @@ pub fn wav(data: &[u8]) {
 /// `lipsync poses`: whatever names it holds, what it writes parses to the same poses).
 pub fn lipsync_tables(data: &[u8]) {
     use mouthpiece_lipsync::{BasicPoses, ClassTable, SegmentTable};
-    use std::sync::OnceLock;
-    static SHIPPED: OnceLock<(ClassTable, SegmentTable)> = OnceLock::new();
-    let (shipped, shipped_segments) = SHIPPED.get_or_init(|| {
-        let table = ClassTable::from_toml_str(
-            include_str!("../../../config/lipsync/classes.toml"),
-            "classes.toml",
-        )
-        .expect("the shipped class table reads");
-        let segments = SegmentTable::generate(&table);
-        (table, segments)
-    });
+    let (shipped, shipped_segments) = shipped_lipsync_tables();
     let Ok(text) = mouthpiece_lipsync::input::decode_text(data, "fuzz") else {
         return;
     };
