@@ -160,11 +160,11 @@ impl CsvWriter {
     }
 }
 
-/// A text cell (the header's names): a leading `=`, `+`, `-`, `@`, tab or carriage return,
+/// A text cell (the header's names; [`unguard`] undoes the guard): a leading `=`, `+`, `-`, `@`, tab or carriage return,
 /// which a spreadsheet would run as a formula, gets a `'` in front (OWASP's advice against
 /// CSV injection; the spreadsheet shows the text as written), then RFC 4180 quoting when the
 /// cell holds a comma, quote or line break.
-fn quote(field: &str) -> String {
+pub fn quote(field: &str) -> String {
     let field = if field.starts_with(['=', '+', '-', '@', '\t', '\r']) {
         format!("'{field}")
     } else {
@@ -174,6 +174,15 @@ fn quote(field: &str) -> String {
         format!("\"{}\"", field.replace('"', "\"\""))
     } else {
         field
+    }
+}
+
+/// A text cell as [`quote`] wrote it, once a CSV reader has taken the RFC 4180 quoting
+/// off: the `'` put before a formula character is dropped.
+pub fn unguard(cell: &str) -> &str {
+    match cell.strip_prefix('\'') {
+        Some(rest) if rest.starts_with(['=', '+', '-', '@', '\t', '\r']) => rest,
+        _ => cell,
     }
 }
 

@@ -369,9 +369,12 @@ pub fn write_weights_csv(
     out: &mut dyn Write,
 ) -> anyhow::Result<()> {
     let classes = tables.classes.classify(phones, "phones")?;
+    // Names come from the user's files: quoted per RFC 4180 and guarded against spreadsheet
+    // formulas, as the export's CSV does.
+    use mouthpiece_export::csv::quote;
     let mut s = String::from("t,phone,class");
     for p in &tables.classes.poses {
-        let _ = write!(s, ",{p}");
+        let _ = write!(s, ",{}", quote(p));
     }
     s.push('\n');
     for k in 0..weights.len() {
@@ -380,8 +383,8 @@ pub fn write_weights_csv(
             s,
             "{:.6},{},{}",
             weights.time(k),
-            phones[owner].phone,
-            tables.classes.classes[classes[owner]].name
+            quote(&phones[owner].phone),
+            quote(&tables.classes.classes[classes[owner]].name)
         );
         for w in weights.sample(k) {
             let _ = write!(s, ",{w:.9}");
@@ -571,12 +574,32 @@ pub fn mouth_keys_from_weights(
     poses: &BasicPoses,
     offset: f64,
 ) -> anyhow::Result<Vec<(f64, MouthState)>> {
-    let mut lines = csv.lines().enumerate();
-    let (_, header) = lines
-        .next()
-        .ok_or_else(|| bad_input(anyhow::anyhow!("{source_name}: empty weights file")))?;
-    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
-    if columns.first() != Some(&"t") {
+    // RFC 4180, as `write_weights_csv` writes it (names may hold commas, quotes, line breaks).
+    let mut reader = ::csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(csv.as_bytes());
+    let mut records = reader.records();
+    let cell_error = |e: ::csv::Error| {
+        let line = e.position().map_or(0, |p| p.line());
+        bad_input(anyhow::anyhow!(
+            "{source_name}:{line}: not a CSV file: {}",
+            cut(&e.to_string())
+        ))
+    };
+    let header = match records.next() {
+        Some(record) => record.map_err(cell_error)?,
+        None => {
+            return Err(bad_input(anyhow::anyhow!(
+                "{source_name}: empty weights file"
+            )))
+        }
+    };
+    let columns: Vec<String> = header
+        .iter()
+        .map(|c| mouthpiece_export::csv::unguard(c.trim()).to_owned())
+        .collect();
+    if columns.first().map(String::as_str) != Some("t") {
         return Err(bad_input(anyhow::anyhow!(
             "{source_name}:1: the first column must be `t`"
         )));
@@ -584,7 +607,7 @@ pub fn mouth_keys_from_weights(
     // (column, pose state) for every column naming a pose with a mouth state.
     let mut used = Vec::new();
     for (c, name) in columns.iter().enumerate().skip(1) {
-        if let Some(p) = poses.poses.iter().find(|p| p.name == *name) {
+        if let Some(p) = poses.poses.iter().find(|p| &p.name == name) {
             let get = |k: &str| p.mouth.get(k).copied().unwrap_or(0.0);
             used.push((
                 c,
@@ -605,13 +628,14 @@ pub fn mouth_keys_from_weights(
         )));
     }
     let mut keys: Vec<(f64, MouthState)> = Vec::new();
-    for (i, line) in lines {
-        if line.trim().is_empty() {
+    for record in records {
+        let record = record.map_err(cell_error)?;
+        let i = record.position().map_or(0, |p| p.line() as usize - 1);
+        if record.iter().all(|c| c.trim().is_empty()) {
             continue;
         }
-        let cells: Vec<&str> = line.split(',').collect();
         let num = |c: usize, lo: f64, hi: f64| -> anyhow::Result<f64> {
-            let cell = cells.get(c).map_or("", |s| s.trim());
+            let cell = record.get(c).map_or("", |s| s.trim());
             cell.parse::<f64>()
                 .ok()
                 .filter(|x| (lo..=hi).contains(x))
@@ -620,7 +644,7 @@ pub fn mouth_keys_from_weights(
                         "{source_name}:{}: column {} ({:?}): {:?} is not a number within {lo} to {hi}",
                         i + 1,
                         c + 1,
-                        cut(columns[c]),
+                        cut(&columns[c]),
                         cut(cell)
                     ))
                 })
@@ -734,5 +758,91 @@ mod tests {
             let text = err.to_string();
             assert!(text.starts_with(&format!("w.csv:3: {column}")), "{text}");
         }
+    }
+
+    /// Names come from the user's files: a pose, phone or class name holding a comma, a
+    /// quote, a line break or a spreadsheet formula neither breaks the weights CSV's columns
+    /// nor runs as a formula, and `synth --speech` reads the file back by those names.
+    #[test]
+    fn hostile_names_keep_the_weights_csv_columns() {
+        use mouthpiece_export::csv::quote;
+        let hostile = "=HYPERLINK(\"x\"), open\nwide";
+        let poses_text = DEFAULT_POSES.replace(
+            "name = \"open\"",
+            &format!("name = {}", toml::Value::String(hostile.into())),
+        );
+        let poses = BasicPoses::from_toml_str(&poses_text, "poses.toml").unwrap();
+        let names = ["closed", hostile, "spread", "round", "bite"];
+        let header: Vec<String> = names.iter().map(|n| quote(n)).collect();
+        let csv = format!(
+            "t,phone,class,{}\n0.0,sil,sil,0,0,0,0,0\n0.5,{},{},0,1,0,0,0\n",
+            header.join(","),
+            quote("a,\"a\""),
+            quote("@open")
+        );
+        // Every record has the header's eight columns; no text cell starts a formula.
+        let mut reader = ::csv::ReaderBuilder::new()
+            .has_headers(false)
+            .from_reader(csv.as_bytes());
+        for record in reader.records() {
+            let record = record.unwrap();
+            assert_eq!(record.len(), 8, "{record:?}");
+            assert!(
+                record.iter().all(|c| !c.starts_with(['=', '+', '-', '@'])),
+                "{record:?}"
+            );
+        }
+        let keys = mouth_keys_from_weights(&csv, "w.csv", &poses, 0.0).unwrap();
+        assert_eq!(keys.len(), 2);
+        // The hostile name is the open pose: its full weight opens the jaw as the shipped
+        // open pose does.
+        assert!((keys[1].1.jaw - 0.2).abs() < 1e-12, "{:?}", keys[1]);
+    }
+
+    /// The writer quotes what the user's files name: a class named like a formula with a
+    /// comma and a line break stays one cell, guarded, and the file reads back with its
+    /// header's columns.
+    #[test]
+    fn the_weights_writer_quotes_and_guards_names() {
+        let hostile = "=cmd|' /C calc'!A0, \"x\"\ny";
+        let classes = DEFAULT_CLASSES.replace(
+            "name = \"bilabial\"",
+            &format!("name = {}", toml::Value::String(hostile.into())),
+        );
+        let classes = ClassTable::from_toml_str(&classes, "classes.toml").unwrap();
+        let poses = BasicPoses::from_toml_str(DEFAULT_POSES, "poses.toml").unwrap();
+        let order = poses.order_for(&classes, "poses.toml").unwrap();
+        let tables = Tables {
+            pose_name: "poses.toml".into(),
+            segments: SegmentTable::generate(&classes),
+            classes,
+            poses,
+            order,
+        };
+        let phones = vec![PhoneSpan {
+            start: 0.0,
+            end: 0.1,
+            phone: "m".into(),
+            line: 1,
+        }];
+        let k = tables.classes.poses.len();
+        let weights = Weights {
+            fps: 10.0,
+            poses: k,
+            values: vec![0.0; k],
+            owner: vec![0],
+        };
+        let mut out = Vec::new();
+        write_weights_csv(&weights, &phones, &tables, &mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let mut reader = ::csv::ReaderBuilder::new()
+            .has_headers(false)
+            .from_reader(text.as_bytes());
+        let records: Vec<_> = reader.records().map(Result::unwrap).collect();
+        assert_eq!(records.len(), 2, "{text}");
+        assert!(records.iter().all(|r| r.len() == 3 + k), "{text}");
+        let class = &records[1][2];
+        assert_eq!(class, format!("'{hostile}"), "{text}");
+        assert_eq!(mouthpiece_export::csv::unguard(class), hostile);
     }
 }
