@@ -145,11 +145,9 @@ impl RetargetSettings {
             })
         };
         if let Some([min_cutoff, beta]) = self.one_euro {
-            if !(min_cutoff.is_finite() && min_cutoff > 0.0 && beta.is_finite() && beta >= 0.0) {
-                return bad(
-                    "one_euro",
-                    format!("[{min_cutoff}, {beta}]: expected [min_cutoff_hz > 0, beta >= 0]"),
-                );
+            // The retarget core's one rule for the filter's parameters.
+            if let Err(e) = OneEuroParams::new(min_cutoff, beta) {
+                return bad("one_euro", format!("[{min_cutoff}, {beta}]: {e}"));
             }
         }
         if let Err(e) = self.smoothing().validate() {

@@ -19,17 +19,28 @@ pub struct OneEuroParams {
 
 impl OneEuroParams {
     /// Parameters with the paper's derivative cutoff (1 Hz); checked.
+    /// Highest minimum cut-off, Hz: a kilohertz camera's Nyquist frequency is 500 Hz.
+    pub const MAX_MIN_CUTOFF_HZ: f64 = 1000.0;
+    /// Highest speed coefficient (s per unit of the signal).
+    pub const MAX_BETA: f64 = 1000.0;
+
+    /// Refuses what no camera's frame rate can use: a cut-off above
+    /// [`Self::MAX_MIN_CUTOFF_HZ`] passes every frame unfiltered, and a speed coefficient above
+    /// [`Self::MAX_BETA`] does the same at any motion.
     pub fn new(min_cutoff: f64, beta: f64) -> Result<Self, Error> {
-        if !(min_cutoff.is_finite() && min_cutoff > 0.0) {
+        if !(min_cutoff.is_finite() && min_cutoff > 0.0 && min_cutoff <= Self::MAX_MIN_CUTOFF_HZ) {
             return Err(Error::InvalidConfig {
                 key: "one_euro.min_cutoff",
-                reason: format!("must be a positive number of Hz, got {min_cutoff}"),
+                reason: format!(
+                    "must be a number of Hz above 0 and at most {}, got {min_cutoff}",
+                    Self::MAX_MIN_CUTOFF_HZ
+                ),
             });
         }
-        if !(beta.is_finite() && beta >= 0.0) {
+        if !(beta.is_finite() && (0.0..=Self::MAX_BETA).contains(&beta)) {
             return Err(Error::InvalidConfig {
                 key: "one_euro.beta",
-                reason: format!("must be finite and not negative, got {beta}"),
+                reason: format!("must be within 0 to {}, got {beta}", Self::MAX_BETA),
             });
         }
         Ok(Self {
@@ -178,6 +189,26 @@ impl OneEuroGroup {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn parameters_no_frame_rate_can_use_are_refused() {
+        assert!(OneEuroParams::new(1.0, 0.007).is_ok());
+        assert!(
+            OneEuroParams::new(OneEuroParams::MAX_MIN_CUTOFF_HZ, OneEuroParams::MAX_BETA).is_ok()
+        );
+        for (min_cutoff, beta) in [
+            (1e300, 0.0),
+            (1.0, 1e300),
+            (0.0, 0.0),
+            (1.0, -0.1),
+            (f64::NAN, 0.0),
+        ] {
+            assert!(
+                OneEuroParams::new(min_cutoff, beta).is_err(),
+                "{min_cutoff} {beta}"
+            );
+        }
+    }
     use super::*;
 
     #[test]

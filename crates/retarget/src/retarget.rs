@@ -34,12 +34,23 @@ impl Default for MissingDots {
 }
 
 impl MissingDots {
+    /// Longest hold or decay, seconds: a day, past any take.
+    pub const MAX_SECONDS: f64 = 86_400.0;
+
+    /// Whether `v` is a hold or decay time: 0 to [`Self::MAX_SECONDS`].
+    pub fn valid_seconds(v: f64) -> bool {
+        v.is_finite() && (0.0..=Self::MAX_SECONDS).contains(&v)
+    }
+
     fn validate(&self) -> Result<(), Error> {
         for (key, v) in [("missing.hold", self.hold), ("missing.decay", self.decay)] {
-            if !(v.is_finite() && v >= 0.0) {
+            if !Self::valid_seconds(v) {
                 return Err(Error::InvalidConfig {
                     key,
-                    reason: format!("must be a non-negative number of seconds, got {v}"),
+                    reason: format!(
+                        "must be a number of seconds within 0 to {}, got {v}",
+                        Self::MAX_SECONDS
+                    ),
                 });
             }
         }
@@ -415,5 +426,31 @@ impl Retargeter {
     /// The character side, to change (e.g. [`CharacterRetarget::look_at`]).
     pub fn character_mut(&mut self) -> &mut CharacterRetarget {
         &mut self.character
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hold_and_decay_are_within_a_day() {
+        let ok = MissingDots {
+            hold: MissingDots::MAX_SECONDS,
+            decay: 0.0,
+        };
+        assert!(ok.validate().is_ok());
+        for (hold, decay) in [
+            (1e300, 0.5),
+            (0.5, 1e300),
+            (-1.0, 0.5),
+            (0.5, f64::INFINITY),
+        ] {
+            let err = MissingDots { hold, decay }
+                .validate()
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains("missing."), "{err}");
+        }
     }
 }

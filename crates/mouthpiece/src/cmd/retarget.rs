@@ -123,8 +123,11 @@ pub fn parse_look_at(s: &str) -> Result<LookAt, String> {
 /// before any input is read).
 fn parse_seconds(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-        _ => Err(format!("`{s}` is not a number of seconds ≥ 0")),
+        Ok(v) if MissingDots::valid_seconds(v) => Ok(v),
+        _ => Err(format!(
+            "`{s}` is not a number of seconds within 0 to {}",
+            MissingDots::MAX_SECONDS
+        )),
     }
 }
 
