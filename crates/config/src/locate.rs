@@ -1,0 +1,147 @@
+//! Reading a configuration file with a size limit, and finding a key's line and column in
+//! its text for error messages.
+
+use super::*;
+
+/// Longest config file read (a config is a few kilobytes).
+pub const MAX_CONFIG_FILE_BYTES: u64 = 1 << 20;
+
+/// Longest token file read; a longer one (or `/dev/zero`) is refused without reading on.
+pub const MAX_TOKEN_FILE_BYTES: u64 = 4096;
+
+/// Reads a UTF-8 text file of at most `limit` bytes; a longer one (a device such as
+/// `/dev/zero`, a wrong path) is an error instead of unbounded memory.
+pub fn read_bounded(path: &Path, limit: u64) -> std::io::Result<String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path)?;
+    let mut bytes = Vec::new();
+    file.take(limit + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > limit {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("longer than {limit} bytes"),
+        ));
+    }
+    String::from_utf8(bytes)
+        .map_err(|_| std::io::Error::new(std::io::ErrorKind::InvalidData, "not UTF-8 text"))
+}
+
+/// The first of systemd's `$STATE_DIRECTORY` entries (colon-separated), if set.
+pub(crate) fn state_directory() -> Option<PathBuf> {
+    let dirs = std::env::var_os("STATE_DIRECTORY")?;
+    let first = dirs.to_str()?.split(':').next()?.to_owned();
+    (!first.is_empty()).then(|| PathBuf::from(first))
+}
+
+pub(crate) fn invalid(
+    text: &str,
+    file: &str,
+    span: Option<Range<usize>>,
+    message: String,
+) -> ConfigError {
+    let (line, column) = span.clone().map_or((0, 0), |s| line_col(text, s.start));
+    let key = span.and_then(|s| key_path_at(text, s));
+    ConfigError::Invalid {
+        location: Location {
+            file: file.to_owned(),
+            line,
+            column,
+            key,
+        },
+        message,
+    }
+}
+
+/// 1-based line and column of a byte offset.
+pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, column)
+}
+
+/// The dotted path of the deepest key whose key or value covers `span.start`.
+fn key_path_at(text: &str, span: Range<usize>) -> Option<String> {
+    let doc = toml_edit::ImDocument::parse(text).ok()?;
+    let mut best: Option<(String, usize)> = None;
+    visit_table(doc.as_table(), "", &mut |path, key_span, item_span| {
+        let covers = |s: &Option<Range<usize>>| {
+            s.as_ref()
+                .is_some_and(|s| s.start <= span.start && span.start < s.end.max(s.start + 1))
+        };
+        if covers(&key_span) || covers(&item_span) {
+            let width = item_span
+                .as_ref()
+                .or(key_span.as_ref())
+                .map_or(usize::MAX, |s| s.len());
+            if best.as_ref().is_none_or(|(_, w)| width <= *w) {
+                best = Some((path.to_owned(), width));
+            }
+        }
+    });
+    best.map(|(path, _)| path)
+}
+
+/// The span of the key at a dotted path; with an array index (`osc.targets[1]`), of that
+/// element when the array is there, else of the key.
+pub(crate) fn span_of_key(text: &str, key: &str) -> Option<Range<usize>> {
+    let doc = toml_edit::ImDocument::parse(text).ok()?;
+    let wanted = key.split('[').next().unwrap_or(key);
+    if let Some(index) = key
+        .strip_prefix(wanted)
+        .and_then(|rest| rest.strip_prefix('['))
+        .and_then(|rest| rest.strip_suffix(']'))
+        .and_then(|i| i.parse::<usize>().ok())
+    {
+        let mut segments = wanted.split('.');
+        let mut item = doc.as_table().get(segments.next()?);
+        for segment in segments {
+            item = item.and_then(|i| i.get(segment));
+        }
+        if let Some(span) = item
+            .and_then(|i| i.as_array())
+            .and_then(|a| a.get(index))
+            .and_then(|v| v.span())
+        {
+            return Some(span);
+        }
+    }
+    let mut found = None;
+    visit_table(doc.as_table(), "", &mut |path, key_span, item_span| {
+        if path == wanted && found.is_none() {
+            found = key_span.or(item_span);
+        }
+    });
+    found
+}
+
+/// Called with a key's dotted path, the key's span and its value's span.
+type KeyVisitor<'a> = dyn FnMut(&str, Option<Range<usize>>, Option<Range<usize>>) + 'a;
+
+fn visit_table(table: &toml_edit::Table, prefix: &str, f: &mut KeyVisitor<'_>) {
+    for (key, item) in table.iter() {
+        let path = if prefix.is_empty() {
+            key.to_owned()
+        } else {
+            format!("{prefix}.{key}")
+        };
+        let key_span = table.key(key).and_then(|k| k.span());
+        f(&path, key_span, item.span());
+        match item {
+            toml_edit::Item::Table(t) => visit_table(t, &path, f),
+            toml_edit::Item::Value(toml_edit::Value::InlineTable(t)) => {
+                for (k, v) in t.iter() {
+                    let sub = format!("{path}.{k}");
+                    f(&sub, t.key(k).and_then(|k| k.span()), v.span());
+                }
+            }
+            toml_edit::Item::ArrayOfTables(tables) => {
+                for t in tables.iter() {
+                    visit_table(t, &path, f);
+                }
+            }
+            _ => {}
+        }
+    }
+}
