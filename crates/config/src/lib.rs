@@ -37,10 +37,10 @@ mod text;
 mod tokens;
 
 pub(crate) use locate::{invalid, line_col, span_of_key, state_directory};
-pub(crate) use tokens::redact_token_error;
 pub use locate::{read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
 pub use sections::*;
 pub use text::ConfigText;
+pub(crate) use tokens::redact_token_error;
 pub use tokens::{Secret, TokenRef, Tokens};
 
 /// Where a system install keeps its configuration.
