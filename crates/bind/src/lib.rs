@@ -167,25 +167,11 @@ pub fn bind(
 ) -> Result<BindSummary, BindError> {
     let loaded = gltf_io::read_mesh(mesh_path)?;
     loaded.check(mesh_path)?;
-    let prepared = prepare(rig, model_up, &loaded.welded).map_err(|e| match e {
-        BindError::PointFarFromMesh {
-            name,
-            distance,
-            limit,
-            fraction,
-            extent,
-            width,
-            ..
-        } => BindError::PointFarFromMesh {
-            mesh: Some(mesh_path.to_path_buf()),
-            name,
-            distance,
-            limit,
-            fraction,
-            extent,
-            width,
-        },
-        e => e,
+    let prepared = prepare(rig, model_up, &loaded.welded).map_err(|mut e| {
+        if let BindError::PointFarFromMesh { mesh, .. } = &mut e {
+            *mesh = Some(mesh_path.to_path_buf());
+        }
+        e
     })?;
     let welded_weights = compute_weights(&prepared, method);
     let welded_normals = loaded.welded.normals();

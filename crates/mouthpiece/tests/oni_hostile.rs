@@ -12,11 +12,10 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-const NEW_DATA: u32 = 0x0A;
-const NODE_ADDED: u32 = 0x0D;
-const NODE_STATE_READY: u32 = 0x09;
-const SEEK_TABLE: u32 = 0x0E;
-const GENERAL_PROPERTY: u32 = 0x06;
+use openni2::oni_file::record_type::{
+    GENERAL_PROPERTY, NEW_DATA, NODE_ADDED, NODE_STATE_READY, SEEK_TABLE,
+};
+
 const DEPTH: u32 = 1;
 const COLOUR: u32 = 2;
 
