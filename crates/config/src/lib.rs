@@ -26,7 +26,6 @@ use std::fmt;
 use std::net::SocketAddr;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
@@ -184,20 +183,15 @@ pub enum Origin {
     /// No file: [`Config::default`].
     #[default]
     Embedded,
-    File {
-        path: PathBuf,
-        text: Arc<str>,
-    },
+    /// A file: its path and text.
+    File(ConfigText),
 }
 
 impl fmt::Debug for Origin {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Origin::Embedded => f.write_str("Embedded"),
-            Origin::File { path, .. } => f
-                .debug_struct("File")
-                .field("path", path)
-                .finish_non_exhaustive(),
+            Origin::File(text) => text.fmt(f),
         }
     }
 }
@@ -206,7 +200,7 @@ impl Origin {
     pub fn describe(&self) -> String {
         match self {
             Origin::Embedded => "<embedded default>".to_owned(),
-            Origin::File { path, .. } => path.display().to_string(),
+            Origin::File(text) => text.path().display().to_string(),
         }
     }
 }
@@ -236,10 +230,7 @@ impl Config {
                 err.message().trim_end().to_owned(),
             ))
         })?;
-        config.origin = Origin::File {
-            path: path.to_owned(),
-            text: Arc::from(text),
-        };
+        config.origin = Origin::File(ConfigText::new(path, text));
         config.validate(text, &file)?;
         let base = path.parent().map(Path::to_owned).unwrap_or_default();
         config.resolve_paths(&base, state_directory().as_deref());
@@ -480,10 +471,10 @@ impl Config {
     }
 
     /// The file's text, `None` for the embedded default.
-    pub fn text(&self) -> Option<ConfigText> {
+    pub fn text(&self) -> Option<&ConfigText> {
         match &self.origin {
             Origin::Embedded => None,
-            Origin::File { path, text } => Some(ConfigText::new(path, Arc::clone(text))),
+            Origin::File(text) => Some(text),
         }
     }
 

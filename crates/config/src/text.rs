@@ -12,11 +12,20 @@ use serde::de::DeserializeOwned;
 use crate::{invalid, line_col, read_bounded, span_of_key, ConfigError, Location};
 
 /// The text of a configuration file (read with the size bound of
-/// [`crate::MAX_CONFIG_FILE_BYTES`]) and its path.
-#[derive(Debug, Clone)]
+/// [`crate::MAX_CONFIG_FILE_BYTES`]) and its path. `Debug` leaves the text out: it may hold a
+/// token.
+#[derive(Clone, PartialEq)]
 pub struct ConfigText {
     path: PathBuf,
     text: Arc<str>,
+}
+
+impl std::fmt::Debug for ConfigText {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("File")
+            .field("path", &self.path)
+            .finish_non_exhaustive()
+    }
 }
 
 impl ConfigText {
@@ -115,6 +124,19 @@ mod tests {
         }
         let e = bad.extract::<Typed>().unwrap_err().to_string();
         assert!(e.starts_with("booth.toml:2:"), "{e}");
+    }
+
+    #[test]
+    fn debug_never_shows_the_text() {
+        let text = ConfigText::new(
+            Path::new("booth.toml"),
+            "[server]\nread_token = { value = \"s3cr3t\" }\n",
+        );
+        let shown = format!("{text:?}");
+        assert!(
+            shown.contains("booth.toml") && !shown.contains("s3cr3t"),
+            "{shown}"
+        );
     }
 
     #[test]

@@ -28,7 +28,7 @@ pub struct Setup {
 /// Loads and validates characters, `[detect]`, `[track]` and `[retarget]`.
 pub fn setup(config: &Config) -> Result<Setup, CheckError> {
     let pipeline = match config.text() {
-        Some(text) => PipelineConfig::from_text(&text)?,
+        Some(text) => PipelineConfig::from_text(text)?,
         None => PipelineConfig::default(),
     };
     let invalid = |key: &str, message: String| CheckError::Invalid {
