@@ -136,7 +136,7 @@ impl SynthConfig {
         )
     }
 
-    fn validate(&self) -> Result<(), SynthError> {
+    pub fn validate(&self) -> Result<(), SynthError> {
         let bad = |what: String| Err(SynthError::Config(what));
         // A frame rate near 0 gave an empty session that looked like success; seconds in
         // the billions made the speech track plan syllables without end.

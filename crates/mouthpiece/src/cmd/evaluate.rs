@@ -79,6 +79,20 @@ pub struct Args {
     pub distance: f64,
 }
 
+/// The sessions' camera and distance from `--size` and `--distance`, checked by the synthetic
+/// performer's own rules before any session is rendered: a bad value is the caller's input
+/// (exit code 2), named by its flags.
+fn session_view(size: (u32, u32), distance: f64) -> anyhow::Result<SynthConfig> {
+    let view = SynthConfig {
+        camera: SynthConfig::camera_for_size(size.0, size.1),
+        distance_m: distance,
+        ..SynthConfig::default()
+    };
+    view.validate()
+        .map_err(|e| bad_input(anyhow::Error::new(e).context("--size / --distance")))?;
+    Ok(view)
+}
+
 /// A bad `--layout` is the caller's input (exit code 2); anything else is not.
 fn to_anyhow(e: EvaluateError) -> anyhow::Error {
     match e {
@@ -118,6 +132,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "--seconds must be more than 2 (the neutral pose takes the first 1.5 s)"
         )));
     }
+    let view = session_view(args.size, args.distance)?;
     let mut frames_csv = match &args.rig_frames {
         Some(path) => Some(crate::cmd::evaluate_rig::FramesCsv::create(
             path,
@@ -145,8 +160,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         Noise::Realsense => NoiseModel::Realsense,
                     },
                     layout: layout.clone(),
-                    camera: SynthConfig::camera_for_size(args.size.0, args.size.1),
-                    distance_m: args.distance,
+                    camera: view.camera,
+                    distance_m: view.distance_m,
                     ..SynthConfig::default()
                 };
                 let mut rig = RigAccuracy::new(
@@ -203,6 +218,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `--size` and `--distance` out of the synthetic performer's range, or NaN, are a bad
+    /// input (exit code 2) naming the flags, before anything is rendered.
+    #[test]
+    fn sizes_and_distances_the_performer_cannot_render_are_bad_input() {
+        assert!(session_view((640, 480), 0.6).is_ok());
+        for (size, distance) in [
+            ((640, 480), 10.0),
+            ((640, 480), f64::NAN),
+            ((100_000, 10), 0.6),
+        ] {
+            let err = session_view(size, distance).unwrap_err();
+            assert!(
+                err.chain().any(|e| e.is::<crate::exit::BadInput>()),
+                "{err:#}"
+            );
+            assert!(
+                format!("{err:#}").contains("--size / --distance"),
+                "{err:#}"
+            );
+        }
+    }
 
     /// A `--layout` that does not match the configuration's dots is a bad input (exit code
     /// 2), not a panic.
