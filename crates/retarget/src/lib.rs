@@ -38,6 +38,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod batch;
 pub mod character;
 pub mod deform;
 mod error;
