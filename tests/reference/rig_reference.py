@@ -39,9 +39,9 @@ DEFAULT_RANGES = {
     "mouthStretchLeft": 0.15, "mouthStretchRight": 0.15, "mouthRollUpper": 0.10,
     "mouthRollLower": 0.16, "mouthUpperUpLeft": 0.10, "mouthUpperUpRight": 0.10,
     "mouthLowerDownLeft": 0.12, "mouthLowerDownRight": 0.12, "mouthPressLeft": 0.15,
-    "mouthPressRight": 0.15, "jawForward": 0.10, "jawLeft": 0.10, "jawRight": 0.10,
-    "mouthFrownLeft": 0.08, "mouthFrownRight": 0.08, "mouthShrugUpper": 0.08,
-    "mouthShrugLower": 0.10, "mouthDimpleLeft": 0.08, "mouthDimpleRight": 0.08,
+    "mouthPressRight": 0.15, "jawForward": 0.15, "jawLeft": 0.10, "jawRight": 0.10,
+    "mouthFrownLeft": 0.08, "mouthFrownRight": 0.08, "mouthShrugUpper": 0.10,
+    "mouthShrugLower": 0.16, "mouthDimpleLeft": 0.10, "mouthDimpleRight": 0.10,
 }
 
 # docs/rig.md: the lips' opening (mouth widths) at which the rounding is all funnel; where
@@ -251,7 +251,7 @@ class Rig:
 
         def back(c, upper_n, lower_n):
             cz = 0.5 * (delta[c, 2] + free[c][2])
-            return -(cz + delta[upper_n, 2] + free[lower_n][2]) / 3 / w
+            return (du[2] - (cz + delta[upper_n, 2] + free[lower_n][2]) / 3) / w
 
         m["mouthDimpleLeft"] = back(self.left, up[0], lo[-1])
         m["mouthDimpleRight"] = back(self.right, up[-1], lo[0])

@@ -63,15 +63,15 @@ pub const DEFAULT_RANGES: [f64; CURVES] = [
     0.12, // mouthLowerDownRight
     0.15, // mouthPressLeft
     0.15, // mouthPressRight
-    0.10, // jawForward: the lower lip's distance from the hinge grows
+    0.15, // jawForward: the lower lip's distance from the hinge grows
     0.10, // jawLeft: the slide along the hinge
     0.10, // jawRight
     0.08, // mouthFrownLeft: corner down
     0.08, // mouthFrownRight
-    0.08, // mouthShrugUpper: the upper lip up and out
-    0.10, // mouthShrugLower: the lower lip up and out against the jaw
-    0.08, // mouthDimpleLeft: corner back
-    0.08, // mouthDimpleRight
+    0.10, // mouthShrugUpper: the upper lip up and out
+    0.16, // mouthShrugLower: the lower lip up and out
+    0.10, // mouthDimpleLeft: corner back against the upper lip
+    0.10, // mouthDimpleRight
 ];
 
 /// The index of `mouthClose`, whose range is `jawOpen`'s unless it is given its own (ARKit's
@@ -1383,8 +1383,10 @@ mod tests {
             }
         });
         let out = rig.step(&frame(back)).clone();
+        // (Against the upper lip's mean depth, which its neighbour took 0.4 mm back.)
+        let want = (0.002 - 0.002 / 5.0) / w / 0.10;
         assert!(
-            (out.curve("mouthDimpleRight") - 0.002 / w / 0.08).abs() < 1e-9,
+            (out.curve("mouthDimpleRight") - want).abs() < 1e-9,
             "{out:?}"
         );
         assert!(out.curve("mouthDimpleLeft") < 1e-9, "{out:?}");
@@ -1395,7 +1397,7 @@ mod tests {
             }
         });
         let out = rig.step(&frame(out_up)).clone();
-        let want = (0.001 + DEPTH_WEIGHT * 0.002) / w / 0.08;
+        let want = (0.001 + DEPTH_WEIGHT * 0.002) / w / 0.10;
         assert!(
             (out.curve("mouthShrugUpper") - want).abs() < 1e-9,
             "{out:?}"
@@ -1408,7 +1410,7 @@ mod tests {
             }
         });
         let out = rig.step(&frame(pout)).clone();
-        let want = (0.001 + DEPTH_WEIGHT * 0.002) / w / 0.10;
+        let want = (0.001 + DEPTH_WEIGHT * 0.002) / w / 0.16;
         assert!(
             (out.curve("mouthShrugLower") - want).abs() < 1e-9,
             "{out:?}"

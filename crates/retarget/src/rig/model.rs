@@ -273,10 +273,12 @@ impl RigModel {
         v[23] = mean_over(&r.upper, |i| d(i).y + DEPTH_WEIGHT * d(i).z) / w;
         v[24] = (dl.y + DEPTH_WEIGHT * (dl.z - du.z)) / w;
         // Dimples: each corner drawn back into the cheek, with its two neighbours (the lower
-        // one without the jaw; the corner with half the jaw).
+        // one without the jaw; the corner with half the jaw), against the upper lip's mean
+        // depth: the error the head pose leaves is common to every dot, and was most of
+        // the corners' depth error.
         let corner_back = |c: usize, up: usize, low: usize| -> f64 {
             let cz = 0.5 * (d(c).z + unjaw(c).z);
-            -(cz + d(up).z + free_z(low)) / 3.0
+            du.z - (cz + d(up).z + free_z(low)) / 3.0
         };
         v[25] = corner_back(r.left, ul, ll) / w;
         v[26] = corner_back(r.right, ur, lr) / w;
