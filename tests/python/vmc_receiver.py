@@ -4,11 +4,13 @@ Receives OSC on 127.0.0.1 (an ephemeral port, written to --port-file) until --st
 exists, then checks what arrived and compares it with the WebSocket frames the test saved
 (--stream, one JSON object per line: {"t", "rig", "head"} of the character sent over OSC):
 
-- every frame is a run of messages ending in /VMC/Ext/Blend/Apply, and holds /VMC/Ext/T, the
-  Head bone (and LeftEye/RightEye with --eyes) and one /VMC/Ext/Blend/Val for each of the 18
-  curve names before its Apply;
+- every frame is a run of messages ending in /VMC/Ext/Blend/Apply (in one or more bundles),
+  and holds /VMC/Ext/T, the Head bone (and LeftEye/RightEye with --eyes) and one
+  /VMC/Ext/Blend/Val for each of the 27 curve names (ARKit's, or in PascalCase with --names
+  arkit-pascal) and of the five visemes (VRM 0.x's A I U E O with --visemes vrm0, VRM 1.0's
+  aa ih ou ee oh with vrm1, none with none) before its Apply;
 - every curve value is finite and within 0..1; every bone quaternion is a unit quaternion;
-- a frame whose time matches a WebSocket frame's `t` carries the same curve values (float32,
+- a frame whose time matches a WebSocket frame's `t` carries the same curve and viseme values (float32,
   exactly as the stream's) and the same head and eye rotations after the documented axis
   conversion (the character's head-frame axes --axes, then Unity's mirrored x), computed here
   with scipy.
@@ -34,7 +36,20 @@ CURVES = [
     "mouthSmileLeft", "mouthSmileRight", "mouthStretchLeft", "mouthStretchRight",
     "mouthRollUpper", "mouthRollLower", "mouthUpperUpLeft", "mouthUpperUpRight",
     "mouthLowerDownLeft", "mouthLowerDownRight", "mouthPressLeft", "mouthPressRight",
+    "jawForward", "jawLeft", "jawRight", "mouthFrownLeft", "mouthFrownRight",
+    "mouthShrugUpper", "mouthShrugLower", "mouthDimpleLeft", "mouthDimpleRight",
 ]
+VISEMES = ["aa", "ih", "ou", "ee", "oh"]
+VISEMES_VRM0 = ["A", "I", "U", "E", "O"]
+
+
+def sent_names(names, visemes):
+    """(sent name, "curves" or "visemes", the stream's name) for every value a frame sends."""
+    out = [(c[0].upper() + c[1:] if names == "arkit-pascal" else c, "curves", c) for c in CURVES]
+    if visemes != "none":
+        sent = VISEMES_VRM0 if visemes == "vrm0" else VISEMES
+        out += [(n, "visemes", v) for n, v in zip(sent, VISEMES)]
+    return out
 
 
 def f32(x):
@@ -57,7 +72,7 @@ def receive(port_file, stop_file):
     return messages
 
 
-def frames_of(messages, bones, problems):
+def frames_of(messages, bones, expected, problems):
     """Groups the messages into frames (each ending with Blend/Apply) and checks each."""
     frames, current = [], []
     for address, args in messages:
@@ -77,7 +92,7 @@ def frames_of(messages, bones, problems):
                 frame["bones"][v[0]] = v[1:]
             elif a != "/VMC/Ext/OK":
                 problems.append(f"unexpected address {a}")
-        if sorted(frame["curves"]) != sorted(CURVES):
+        if sorted(frame["curves"]) != sorted(expected):
             problems.append(f"Apply after curves {sorted(frame['curves'])}")
         if frame["t"] is None:
             problems.append("a frame without /VMC/Ext/T")
@@ -107,7 +122,7 @@ def unity_matrix(wxyz, axes):
     return s @ a.T @ r @ a @ s
 
 
-def compare(frames, stream, axes, bones, problems):
+def compare(frames, stream, axes, bones, expected, problems):
     by_t = sorted(stream, key=lambda s: s["t"])
     ts = np.array([s["t"] for s in by_t])
     matched = with_rig = 0
@@ -122,8 +137,8 @@ def compare(frames, stream, axes, bones, problems):
         rig = s.get("rig")
         if rig is not None:
             with_rig += 1
-        for name in CURVES:
-            want = f32(rig["curves"][name]) if rig is not None else 0.0
+        for name, group, key in expected:
+            want = f32(rig[group][key]) if rig is not None else 0.0
             got = frame["curves"].get(name)
             if got is None or abs(got - want) > 1e-6:
                 problems.append(f"t={frame['t']}: {name} {got} over OSC, {want} on the WebSocket")
@@ -152,19 +167,22 @@ def main():
     parser.add_argument("--axes", required=True, help="3x3 JSON: head-frame axes as columns")
     parser.add_argument("--eyes", action="store_true")
     parser.add_argument("--min-matched", type=int, default=30)
+    parser.add_argument("--names", choices=["arkit", "arkit-pascal"], default="arkit")
+    parser.add_argument("--visemes", choices=["vrm0", "vrm1", "none"], default="vrm0")
     args = parser.parse_args()
 
     messages = receive(args.port_file, args.stop_file)
     bones = ["Head"] + (["LeftEye", "RightEye"] if args.eyes else [])
     problems = []
-    frames = frames_of(messages, bones, problems)
+    expected = sent_names(args.names, args.visemes)
+    frames = frames_of(messages, bones, [n for n, _, _ in expected], problems)
     stream = [json.loads(line) for line in pathlib.Path(args.stream).read_text().splitlines() if line]
-    matched, with_rig = compare(frames, stream, json.loads(args.axes), bones, problems)
+    matched, with_rig = compare(frames, stream, json.loads(args.axes), bones, expected, problems)
     if matched < args.min_matched:
         problems.append(f"only {matched} OSC frames matched a WebSocket frame (want {args.min_matched})")
     if with_rig == 0:
         problems.append("no matched frame carried a rig")
-    jaw = [f["curves"].get("jawOpen", 0.0) for f in frames]
+    jaw = [f["curves"].get(expected[0][0], 0.0) for f in frames]
     print(json.dumps({
         "messages": len(messages),
         "frames": len(frames),

@@ -3,7 +3,7 @@
 
 Follows docs/rig.md, which defines every number computed here: the jaw (angle and slide
 about the hinge), each lip's rigid motion (scipy's `Rotation.align_vectors`, not the Rust SVD)
-and the 18 ARKit-named curves with their default ranges widened over the learning window, and
+and the 27 ARKit-named curves and the five VRM visemes with their default ranges widened over the learning window, and
 the dots as the rig measures them (the Gaussian conditional mean of the mouth's displacement
 given the seen dots and their noise along and across the camera's ray, under the covariance of
 the complete steps, computed here with numpy's `cov` over all of them and a solve on the seen
@@ -27,17 +27,37 @@ CURVE_NAMES = [
     "mouthSmileLeft", "mouthSmileRight", "mouthStretchLeft", "mouthStretchRight",
     "mouthRollUpper", "mouthRollLower", "mouthUpperUpLeft", "mouthUpperUpRight",
     "mouthLowerDownLeft", "mouthLowerDownRight", "mouthPressLeft", "mouthPressRight",
+    "jawForward", "jawLeft", "jawRight", "mouthFrownLeft", "mouthFrownRight",
+    "mouthShrugUpper", "mouthShrugLower", "mouthDimpleLeft", "mouthDimpleRight",
 ]
+VISEME_NAMES = ["aa", "ih", "ou", "ee", "oh"]
 
 # docs/rig.md, "The named curves": default ranges (degrees for jawOpen, mouth widths else).
 DEFAULT_RANGES = {
-    "jawOpen": 25.0, "mouthClose": 0.15, "mouthFunnel": 0.15, "mouthPucker": 0.25,
+    "jawOpen": 25.0, "mouthClose": 25.0, "mouthFunnel": 0.15, "mouthPucker": 0.15,
     "mouthLeft": 0.10, "mouthRight": 0.10, "mouthSmileLeft": 0.12, "mouthSmileRight": 0.12,
     "mouthStretchLeft": 0.15, "mouthStretchRight": 0.15, "mouthRollUpper": 0.10,
     "mouthRollLower": 0.16, "mouthUpperUpLeft": 0.10, "mouthUpperUpRight": 0.10,
     "mouthLowerDownLeft": 0.12, "mouthLowerDownRight": 0.12, "mouthPressLeft": 0.15,
-    "mouthPressRight": 0.15,
+    "mouthPressRight": 0.15, "jawForward": 0.15, "jawLeft": 0.10, "jawRight": 0.10,
+    "mouthFrownLeft": 0.08, "mouthFrownRight": 0.08, "mouthShrugUpper": 0.10,
+    "mouthShrugLower": 0.16, "mouthDimpleLeft": 0.10, "mouthDimpleRight": 0.10,
 }
+
+# docs/rig.md: the lips' opening (mouth widths) at which the rounding is all funnel; where
+# the visemes' `ih` peaks.
+OPEN_WIDTHS = 0.1
+SLIGHT_OPEN = 0.3
+
+
+def visemes(c):
+    """docs/rig.md, "Visemes": the five VRM 1.0 mouth expressions from the curves `c`."""
+    o = np.clip(c["jawOpen"] - c["mouthClose"], 0, 1)
+    rho = np.clip(c["mouthFunnel"] + c["mouthPucker"], 0, 1)
+    sigma = (c["mouthStretchLeft"] + c["mouthStretchRight"]) / 2
+    slight = np.clip(min(o / SLIGHT_OPEN, (1 - o) / (1 - SLIGHT_OPEN)), 0, 1)
+    v = [o * (1 - rho), sigma * (1 - rho) * slight, rho * (1 - o), sigma * (1 - rho) * (1 - o), rho * o]
+    return {k: float(x) for k, x in zip(VISEME_NAMES, v)}
 
 DEPTH_WEIGHT = 0.25
 
@@ -84,6 +104,9 @@ class Rig:
         self.learn_s = learn_s
         self.set = dict(ranges or {})
         self.ranges = {k: self.set.get(k, v) for k, v in DEFAULT_RANGES.items()}
+        # mouthClose's range is jawOpen's unless it is set.
+        if "mouthClose" not in self.set:
+            self.ranges["mouthClose"] = self.ranges["jawOpen"]
         self.start = None
         # Every complete step's displacement from neutral (3 per dot), for the fill.
         self.complete = []
@@ -174,7 +197,11 @@ class Rig:
         m = {}
         m["jawOpen"] = np.degrees(angle)
         jaw_drop = c0[1] - (self.pivot + rotate_x(r0, angle))[0]
-        m["mouthClose"] = (jaw_drop - (du[1] - dl[1])) / w
+        gap = du[1] - dl[1]
+        # The part of the jaw's opening the lips do not show as parting, in degrees.
+        m["mouthClose"] = (
+            np.degrees(angle) * np.clip((jaw_drop - max(gap, 0)) / jaw_drop, 0, 1)
+            if angle > 0 and jaw_drop > 0 else 0.0)
         # Horizontal scale: least squares x ≈ s·x0 over every dot (the lower lip's x without
         # the slide); each side's scale about the centre moved by the midline-weighted shift.
         x = d[:, 0].copy()
@@ -187,8 +214,10 @@ class Rig:
         left, right = x0 >= 0, x0 < 0
         s_left = (xc[left] @ x0[left]) / (x0[left] @ x0[left])
         s_right = (xc[right] @ x0[right]) / (x0[right] @ x0[right])
-        m["mouthFunnel"] = DEPTH_WEIGHT * du[2] / w + max(1 - s, 0) / 2
-        m["mouthPucker"] = 1 - s
+        rounding = DEPTH_WEIGHT * du[2] / w + max(1 - s, 0) / 2
+        opened = float(np.clip(gap / w / OPEN_WIDTHS, 0, 1))
+        m["mouthFunnel"] = rounding * opened
+        m["mouthPucker"] = rounding * (1 - opened)
         shift = (d[:, 0] - x0).mean() / w
         m["mouthLeft"], m["mouthRight"] = shift, -shift
 
@@ -213,6 +242,19 @@ class Rig:
         m["mouthUpperUpLeft"], m["mouthUpperUpRight"] = up_l / w, up_r / w
         m["mouthLowerDownLeft"], m["mouthLowerDownRight"] = -lo_l / w, -lo_r / w
         m["mouthPressLeft"], m["mouthPressRight"] = (lo_l - up_l) / w, (lo_r - up_r) / w
+        m["jawForward"] = (np.linalg.norm(r1) - np.linalg.norm(r0)) / w
+        m["jawLeft"], m["jawRight"] = slide / w, -slide / w
+        m["mouthFrownLeft"] = -m["mouthSmileLeft"]
+        m["mouthFrownRight"] = -m["mouthSmileRight"]
+        m["mouthShrugUpper"] = np.mean([delta[i, 1] + DEPTH_WEIGHT * delta[i, 2] for i in up]) / w
+        m["mouthShrugLower"] = (dl[1] + DEPTH_WEIGHT * (dl[2] - du[2])) / w
+
+        def back(c, upper_n, lower_n):
+            cz = 0.5 * (delta[c, 2] + free[c][2])
+            return (du[2] - (cz + delta[upper_n, 2] + free[lower_n][2]) / 3) / w
+
+        m["mouthDimpleLeft"] = back(self.left, up[0], lo[-1])
+        m["mouthDimpleRight"] = back(self.right, up[-1], lo[0])
         return m, angle, slide
 
     def step(self, t, d, seen=None, camera=(0.0, 0.0, 0.6)):
@@ -234,6 +276,8 @@ class Rig:
             for k, v in m.items():
                 if k not in self.set and np.isfinite(v):
                     self.ranges[k] = max(self.ranges[k], v)
+            if "mouthClose" not in self.set:
+                self.ranges["mouthClose"] = self.ranges["jawOpen"]
         curves = {}
         for k in CURVE_NAMES:
             v = m[k] / self.ranges[k]
@@ -246,4 +290,5 @@ class Rig:
             "jaw": {"angle_deg": float(np.degrees(angle)), "slide_m": float(slide)},
             "lips": lips,
             "curves": curves,
+            "visemes": visemes(curves),
         }

@@ -306,6 +306,10 @@ pub struct OscConfig {
     pub head: bool,
     /// Send the eyes as `/VMC/Ext/Bone/Pos` `LeftEye` and `RightEye`.
     pub eyes: bool,
+    /// The curves' names: `"arkit"` (`jawOpen`) or `"arkit-pascal"` (`JawOpen`).
+    pub names: mouthpiece_output::CurveNaming,
+    /// The visemes sent: `"vrm0"` (`A I U E O`), `"vrm1"` (`aa ih ou ee oh`) or `"none"`.
+    pub visemes: mouthpiece_output::VisemeNaming,
 }
 
 impl Default for OscConfig {
@@ -315,6 +319,8 @@ impl Default for OscConfig {
             character: None,
             head: true,
             eyes: true,
+            names: mouthpiece_output::CurveNaming::Arkit,
+            visemes: mouthpiece_output::VisemeNaming::Vrm0,
         }
     }
 }

@@ -288,6 +288,36 @@ fn osc_targets_are_host_and_port() {
     assert!(parse("").unwrap().summary().contains("osc off"));
 }
 
+/// `[osc] names` and `visemes`: the defaults, each value, and a bad one refused with its key
+/// and line.
+#[test]
+fn osc_names_and_visemes_are_checked() {
+    use mouthpiece_output::{CurveNaming, VisemeNaming};
+    let config = parse("").unwrap();
+    assert_eq!(
+        (config.osc.names, config.osc.visemes),
+        (CurveNaming::Arkit, VisemeNaming::Vrm0)
+    );
+    let config = parse("[osc]\nnames = \"arkit-pascal\"\nvisemes = \"vrm1\"\n").unwrap();
+    assert_eq!(
+        (config.osc.names, config.osc.visemes),
+        (CurveNaming::ArkitPascal, VisemeNaming::Vrm1)
+    );
+    assert_eq!(
+        parse("[osc]\nvisemes = \"none\"\n").unwrap().osc.visemes,
+        VisemeNaming::None
+    );
+    for (text, key) in [
+        ("[osc]\nhead = true\nvisemes = \"vrm2\"\n", "osc.visemes"),
+        ("[osc]\nhead = true\nnames = \"JawOpen\"\n", "osc.names"),
+    ] {
+        let err = parse(text).unwrap_err();
+        let shown = err.to_string();
+        assert_eq!(err.key(), Some(key), "{text}: {shown}");
+        assert!(shown.contains("test.toml:3:"), "{text}: {shown}");
+    }
+}
+
 #[test]
 fn a_bad_osc_target_names_its_line_and_key() {
     for (target, expected) in [

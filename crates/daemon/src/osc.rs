@@ -57,6 +57,8 @@ pub fn settings(config: &Config) -> Result<OscSettings, CheckError> {
         character: character.name.clone(),
         head: config.osc.head,
         eyes: config.osc.eyes,
+        names: config.osc.names,
+        visemes: config.osc.visemes,
         axes: character.frame.axes,
     })
 }

@@ -1,7 +1,7 @@
 //! The retarget core's rig (docs/rig.md) as the server publishes it.
 
 use mouthpiece_retarget::rig::{curves_from, LipMotion, RangeOverrides, Rig, RigFrame, CURVES};
-use mouthpiece_server::{RigCurves, RigJaw, RigLip, RigLips, RigState};
+use mouthpiece_server::{RigCurves, RigJaw, RigLip, RigLips, RigState, RigVisemes};
 
 fn lip(m: &LipMotion) -> RigLip {
     RigLip {
@@ -27,6 +27,9 @@ pub fn rig_state(rig: &RigFrame) -> RigState {
             lower: lip(&rig.lips.lower),
         },
         curves: RigCurves(curves),
+        visemes: RigVisemes(std::array::from_fn(|i| {
+            rig.visemes.0.get(i).map_or(0.0, |(_, v)| *v as f32)
+        })),
     }
 }
 
@@ -40,6 +43,7 @@ pub fn rig_state_for(rig: &Rig, character: &RangeOverrides) -> RigState {
         for (dst, v) in state.curves.0.iter_mut().zip(values) {
             *dst = v as f32;
         }
+        state.set_visemes();
     }
     state
 }

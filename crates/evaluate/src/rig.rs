@@ -9,9 +9,13 @@
 //!   (stabilised by the retarget core from the true dots, the same neutral frames), with the
 //!   ranges the character's output uses (its own `[rig.ranges]`, else the tracked rig's); the
 //!   worst curve is reported with its name;
-//! - *correlations*: `jawOpen` with the synthetic jaw angle, `mouthFunnel` with its rounding,
-//!   and `mouthFunnel` from the true dots with the rounding beside the rounding's standard
+//! - *correlations*: `jawOpen` with the synthetic jaw angle, the rig's rounding
+//!   (`mouthFunnel + mouthPucker`, which split it by the lips' opening) with its rounding,
+//!   and the same from the true dots with the rounding beside the rounding's standard
 //!   deviation (a performer who hardly rounds leaves the correlation to the noise).
+//!
+//! Every curve of [`CURVE_NAMES`] is compared with its definition ([`RigModel::measure`]
+//! applied to the true dots), the ones added after the first 18 included.
 
 use mouthpiece_retarget::rig::{curves_from, RigModel, RigSettings, CURVES, CURVE_NAMES};
 use mouthpiece_retarget::{Character, PerformerLayout, Retargeter};
@@ -67,8 +71,9 @@ pub struct RigMetrics {
     pub slide_sq: f64,
     pub curve_sq: [f64; CURVES],
     pub jaw_open: Correlation,
+    /// The rounding, `mouthFunnel + mouthPucker`, against the synthetic rounding.
     pub funnel: Correlation,
-    /// `mouthFunnel` from the true dots against the rounding: what the definition itself
+    /// The same from the true dots against the rounding: what the definition itself
     /// reaches on the session, without the tracker's error.
     pub funnel_true: Correlation,
 }
@@ -197,8 +202,9 @@ impl Measure for RigAccuracy {
             *sq += (x - y).powi(2);
         }
         m.jaw_open.push(a[0], mouth.jaw);
-        m.funnel.push(a[2], mouth.round);
-        m.funnel_true.push(b[2], mouth.round);
+        // The rounding: mouthFunnel and mouthPucker split it by the lips' opening.
+        m.funnel.push(a[2] + a[3], mouth.round);
+        m.funnel_true.push(b[2] + b[3], mouth.round);
         if let (Some(frames), Some(tracked)) = (&mut self.frames, &f.tracked.stabilised) {
             let xyz = |v: &[nalgebra::Vector3<f64>]| v.iter().map(|p| [p.x, p.y, p.z]).collect();
             frames.push(RigFrameRecord {

@@ -1135,7 +1135,8 @@ async fn collect_wolf(ws: &mut Client, seconds: f64, settle: f64, lines: &mut Ve
     jaw
 }
 
-/// `[osc]`: the daemon replays the demo session and sends the wolf's rig curves, head and
+/// `[osc]`: the daemon replays the demo session and sends the wolf's rig curves (PascalCase,
+/// `names = "arkit-pascal"`), visemes (VRM 1.0 names, `visemes = "vrm1"`), head and
 /// eyes as VMC protocol messages to a receiver written with python-osc
 /// (`tests/python/vmc_receiver.py`), which checks the messages and compares them with the
 /// WebSocket frames of the same times. A second target where nothing listens is counted and
@@ -1166,6 +1167,7 @@ async fn osc_sends_the_streamed_rig_to_a_python_osc_receiver_and_rig_and_osc_rel
         .arg("--stream")
         .arg(&stream_file)
         .args(["--axes", &json!(axes).to_string(), "--eyes"])
+        .args(["--names", "arkit-pascal", "--visemes", "vrm1"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -1196,7 +1198,7 @@ async fn osc_sends_the_streamed_rig_to_a_python_osc_receiver_and_rig_and_osc_rel
     let refused = format!("127.0.0.1:{closed}");
     let config = |targets: &str, jaw_range: f64| {
         format!(
-            "[osc]\ntargets = [{targets}]\ncharacter = \"wolf\"\n[rig.ranges]\njawOpen = {jaw_range}\n"
+            "[osc]\ntargets = [{targets}]\ncharacter = \"wolf\"\nnames = \"arkit-pascal\"\nvisemes = \"vrm1\"\n[rig.ranges]\njawOpen = {jaw_range}\n"
         )
     };
     let both = format!("\"{refused}\", \"{live}\"");

@@ -284,7 +284,7 @@ fn csv_has_a_header_and_the_take_exactly() {
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     // The points, then the rig's jaw and curves (empty: this take has no `rig`).
-    assert_eq!(header.len(), 1 + 3 * 12 + 2 + 18);
+    assert_eq!(header.len(), 1 + 3 * 12 + 2 + 27);
     assert_eq!(&header[..4], ["t", "P1_x", "P1_y", "P1_z"]);
     assert_eq!(header[36], "P12_z");
     assert_eq!(&header[37..40], ["jaw_angle_deg", "jaw_slide_m", "jawOpen"]);

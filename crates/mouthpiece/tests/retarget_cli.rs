@@ -143,7 +143,7 @@ fn rig_agrees(got: &Value, expected: &Value, at: &str) {
     );
     let names: Vec<_> = gc.keys().collect();
     assert_eq!(names, ec.keys().collect::<Vec<_>>(), "{at}: curve names");
-    assert_eq!(names.len(), 18, "{at}: curves");
+    assert_eq!(names.len(), 27, "{at}: curves");
     for name in names {
         close(name, &gc[name], &ec[name], 1e-9);
     }

@@ -18,13 +18,18 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
-use mouthpiece_output::{RigCurves, StreamFrame, Throttle, CURVE_NAMES};
+use mouthpiece_output::{CurveNaming, RigCurves, RigVisemes, StreamFrame, Throttle, VisemeNaming};
 use mouthpiece_server::{OscCounters, OscTargetCounters};
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion};
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
 
 /// Frames waiting for the sender thread; a full queue drops its oldest frame.
 pub const QUEUE_FRAMES: usize = 8;
+
+/// The largest datagram sent: an Ethernet frame's UDP payload unfragmented (1500 bytes less
+/// the IPv4 and UDP headers). A frame's messages that do not fit one are sent as several
+/// bundles, `Blend/Apply` in the last.
+pub const MAX_DATAGRAM: usize = 1472;
 
 /// The VMC protocol's addresses (names of the messages).
 pub mod address {
@@ -58,6 +63,10 @@ pub struct OscSettings {
     pub eyes: bool,
     /// That character's head-frame axes (left, up, forward) in its model frame, as columns.
     pub axes: Matrix3<f64>,
+    /// The curves' blend-shape names.
+    pub names: CurveNaming,
+    /// The visemes sent, and their names.
+    pub visemes: VisemeNaming,
 }
 
 /// What the processing thread hands the sender: one character's values in one frame.
@@ -68,6 +77,8 @@ pub struct VmcFrame {
     /// The rig's curves; `None` (not calibrated, or a frame that could not be tracked): every
     /// curve at rest, 0, as the stream shows the character at rest.
     pub curves: Option<RigCurves>,
+    /// The rig's visemes (at rest, 0, when there is no rig).
+    pub visemes: Option<RigVisemes>,
     /// Head rotation, model frame, `[w, x, y, z]`.
     pub head: [f32; 4],
     /// Eye rotations relative to the head, `[w, x, y, z]`.
@@ -84,6 +95,7 @@ impl VmcFrame {
         Some(VmcFrame {
             t: frame.t,
             curves: c.rig.map(|r| r.curves),
+            visemes: c.rig.map(|r| r.visemes),
             head: head.rotation,
             eye_left: head.eye_left,
             eye_right: head.eye_right,
@@ -110,13 +122,17 @@ pub fn unity_rotation(q_wxyz: [f32; 4], a: &UnitQuaternion<f64>) -> [f32; 4] {
     [s * h.i, -s * h.j, -s * h.k, s * h.w].map(|v| v as f32)
 }
 
-/// The bundle sent each frame, built once and refilled in place: `OK`, `T`, the bones
-/// (`Head`, `LeftEye`, `RightEye` as configured), one `Blend/Val` per curve, `Blend/Apply`.
+/// The bundles sent each frame, built once and refilled in place: `OK`, `T`, the bones
+/// (`Head`, `LeftEye`, `RightEye` as configured), one `Blend/Val` per curve, one per viseme
+/// (as configured), `Blend/Apply`; in as few bundles as keep each under [`MAX_DATAGRAM`]
+/// bytes, in that order.
 #[derive(Debug, Clone)]
 pub struct VmcPacket {
-    packet: OscPacket,
+    packets: Vec<OscPacket>,
     /// Which bones the bundle holds, in order.
     bones: Vec<Bone>,
+    /// Whether visemes follow the curves.
+    visemes: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -145,7 +161,7 @@ fn message(addr: &str, args: Vec<OscType>) -> OscPacket {
 }
 
 impl VmcPacket {
-    pub fn new(head: bool, eyes: bool) -> Self {
+    pub fn new(head: bool, eyes: bool, names: CurveNaming, visemes: VisemeNaming) -> Self {
         let mut bones = Vec::new();
         if head {
             bones.push(Bone::Head);
@@ -162,36 +178,64 @@ impl VmcPacket {
             args.extend([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0].map(OscType::Float));
             content.push(message(address::BONE, args));
         }
-        for name in CURVE_NAMES {
+        let viseme_names = visemes.names();
+        for name in names
+            .names()
+            .iter()
+            .chain(viseme_names.into_iter().flatten())
+        {
             content.push(message(
                 address::BLEND_VAL,
-                vec![OscType::String(name.to_owned()), OscType::Float(0.0)],
+                vec![OscType::String((*name).to_owned()), OscType::Float(0.0)],
             ));
         }
         content.push(message(address::BLEND_APPLY, Vec::new()));
-        VmcPacket {
-            packet: OscPacket::Bundle(OscBundle {
-                // "Immediately" (OSC 1.0): the receiver applies the values when they arrive.
+        // "Immediately" (OSC 1.0): the receiver applies the values when they arrive.
+        let bundle = |content| {
+            OscPacket::Bundle(OscBundle {
                 timetag: OscTime {
                     seconds: 0,
                     fractional: 1,
                 },
                 content,
-            }),
+            })
+        };
+        // Each message costs its bytes and a 4-byte size in a bundle; a bundle's header
+        // ("#bundle", the time tag) is 16.
+        let mut packets = Vec::new();
+        let mut current = Vec::new();
+        let mut size = 16;
+        for m in content {
+            let cost = 4 + rosc::encoder::encode(&m).map_or(0, |b| b.len());
+            if size + cost > MAX_DATAGRAM && !current.is_empty() {
+                packets.push(bundle(std::mem::take(&mut current)));
+                size = 16;
+            }
+            size += cost;
+            current.push(m);
+        }
+        packets.push(bundle(current));
+        VmcPacket {
+            packets,
             bones,
+            visemes: viseme_names.is_some(),
         }
     }
 
     /// Puts `frame`'s values into the bundle (no allocation); `axes`: [`axes_rotation`] of
     /// the character's head frame.
     pub fn fill(&mut self, frame: &VmcFrame, axes: &UnitQuaternion<f64>) {
-        let OscPacket::Bundle(bundle) = &mut self.packet else {
-            unreachable!("built as a bundle")
-        };
-        let mut messages = bundle.content.iter_mut().map(|p| match p {
-            OscPacket::Message(m) => m,
-            OscPacket::Bundle(_) => unreachable!("built of messages"),
-        });
+        let mut messages = self
+            .packets
+            .iter_mut()
+            .flat_map(|p| match p {
+                OscPacket::Bundle(b) => b.content.iter_mut(),
+                OscPacket::Message(_) => unreachable!("built as bundles"),
+            })
+            .map(|p| match p {
+                OscPacket::Message(m) => m,
+                OscPacket::Bundle(_) => unreachable!("built of messages"),
+            });
         let _ok = messages.next();
         if let Some(m) = messages.next() {
             m.args[0] = OscType::Float(frame.t as f32);
@@ -210,22 +254,25 @@ impl VmcPacket {
             }
         }
         let curves = frame.curves.unwrap_or_default();
-        for v in curves.0 {
+        let visemes = frame.visemes.unwrap_or_default();
+        let visemes = if self.visemes { &visemes.0[..] } else { &[] };
+        for v in curves.0.iter().chain(visemes) {
             if let Some(m) = messages.next() {
-                m.args[1] = OscType::Float(v);
+                m.args[1] = OscType::Float(*v);
             }
         }
     }
 
-    pub fn packet(&self) -> &OscPacket {
-        &self.packet
+    /// The bundles, in the order they are sent.
+    pub fn packets(&self) -> &[OscPacket] {
+        &self.packets
     }
 
-    /// Encodes the bundle into `out` (cleared first; its buffer is reused).
-    pub fn encode(&self, out: &mut Vec<u8>) {
+    /// Encodes bundle `i` into `out` (cleared first; its buffer is reused).
+    pub fn encode(&self, i: usize, out: &mut Vec<u8>) {
         out.clear();
         // Writing into a Vec cannot fail.
-        let Ok(_) = rosc::encoder::encode_into(&self.packet, out);
+        let Ok(_) = rosc::encoder::encode_into(&self.packets[i], out);
     }
 }
 
@@ -494,7 +541,12 @@ impl SenderState {
             self.links.push(link);
         }
         counters.set_targets(self.links.iter().map(|l| l.counters.clone()).collect());
-        self.packet = VmcPacket::new(settings.head, settings.eyes);
+        self.packet = VmcPacket::new(
+            settings.head,
+            settings.eyes,
+            settings.names,
+            settings.visemes,
+        );
         self.axes = axes_rotation(&settings.axes);
         let shown: Vec<&str> = self.links.iter().map(|l| l.target.label.as_str()).collect();
         tracing::info!(
@@ -517,7 +569,7 @@ fn run(
 ) {
     let mut state = SenderState {
         links: Vec::new(),
-        packet: VmcPacket::new(true, true),
+        packet: VmcPacket::new(true, true, CurveNaming::Arkit, VisemeNaming::Vrm0),
         axes: UnitQuaternion::identity(),
         throttle,
     };
@@ -542,9 +594,11 @@ fn run(
                     continue;
                 }
                 state.packet.fill(&frame, &state.axes);
-                state.packet.encode(&mut bytes);
-                for link in &mut state.links {
-                    link.send(&bytes);
+                for i in 0..state.packet.packets().len() {
+                    state.packet.encode(i, &mut bytes);
+                    for link in &mut state.links {
+                        link.send(&bytes);
+                    }
                 }
             }
         }

@@ -1,7 +1,9 @@
 use super::*;
-use mouthpiece_output::{CharacterFrame, CharacterHead, RigState};
+use mouthpiece_output::{
+    CharacterFrame, CharacterHead, RigState, CURVES, CURVE_NAMES, PASCAL_NAMES, VISEMES,
+};
 
-fn frame_with(t: f64, curves: Option<[f32; 18]>, head: [f32; 4]) -> StreamFrame {
+fn frame_with(t: f64, curves: Option<[f32; CURVES]>, head: [f32; 4]) -> StreamFrame {
     StreamFrame {
         t,
         characters: vec![
@@ -11,9 +13,13 @@ fn frame_with(t: f64, curves: Option<[f32; 18]>, head: [f32; 4]) -> StreamFrame 
             },
             CharacterFrame {
                 name: "wolf".into(),
-                rig: curves.map(|c| RigState {
-                    curves: RigCurves(c),
-                    ..RigState::default()
+                rig: curves.map(|c| {
+                    let mut rig = RigState {
+                        curves: RigCurves(c),
+                        ..RigState::default()
+                    };
+                    rig.set_visemes();
+                    rig
                 }),
                 head: Some(CharacterHead {
                     rotation: head,
@@ -33,11 +39,27 @@ fn messages(packet: &OscPacket) -> Vec<OscMessage> {
     }
 }
 
+/// Every bundle of a packet, encoded and decoded, and the messages in order.
+fn sent_messages(packet: &VmcPacket) -> Vec<OscMessage> {
+    let mut got = Vec::new();
+    let mut bytes = Vec::new();
+    for i in 0..packet.packets().len() {
+        packet.encode(i, &mut bytes);
+        // Each a datagram under the 1472 bytes of an unfragmented Ethernet UDP payload.
+        assert!(bytes.len() <= MAX_DATAGRAM, "{}", bytes.len());
+        assert_eq!(&bytes[..8], b"#bundle\0");
+        let (rest, decoded) = rosc::decoder::decode_udp(&bytes).unwrap();
+        assert!(rest.is_empty());
+        got.extend(messages(&decoded));
+    }
+    got
+}
+
 #[test]
-fn a_frame_encodes_as_one_vmc_bundle_that_decodes_to_the_same_values() {
-    let mut curves = [0.0f32; 18];
+fn a_frame_encodes_as_vmc_bundles_that_decode_to_the_same_values() {
+    let mut curves = [0.0f32; CURVES];
     for (i, c) in curves.iter_mut().enumerate() {
-        *c = i as f32 / 17.0;
+        *c = i as f32 / (CURVES - 1) as f32;
     }
     let half = std::f32::consts::FRAC_1_SQRT_2;
     // A quarter turn about the model's y axis (up: the head turns to its left).
@@ -46,16 +68,9 @@ fn a_frame_encodes_as_one_vmc_bundle_that_decodes_to_the_same_values() {
         "wolf",
     )
     .unwrap();
-    let mut packet = VmcPacket::new(true, true);
+    let mut packet = VmcPacket::new(true, true, CurveNaming::Arkit, VisemeNaming::None);
     packet.fill(&frame, &UnitQuaternion::identity());
-    let mut bytes = Vec::new();
-    packet.encode(&mut bytes);
-    // One datagram under the 1472 bytes of an unfragmented Ethernet UDP payload.
-    assert!(bytes.len() < 1472, "{}", bytes.len());
-    assert_eq!(&bytes[..8], b"#bundle\0");
-    let (rest, decoded) = rosc::decoder::decode_udp(&bytes).unwrap();
-    assert!(rest.is_empty());
-    let got = messages(&decoded);
+    let got = sent_messages(&packet);
     let addrs: Vec<&str> = got.iter().map(|m| m.addr.as_str()).collect();
     let mut expected = vec![
         address::OK,
@@ -64,7 +79,7 @@ fn a_frame_encodes_as_one_vmc_bundle_that_decodes_to_the_same_values() {
         address::BONE,
         address::BONE,
     ];
-    expected.extend([address::BLEND_VAL; 18]);
+    expected.extend([address::BLEND_VAL; CURVES]);
     expected.push(address::BLEND_APPLY);
     assert_eq!(addrs, expected);
     assert_eq!(got[1].args, [OscType::Float(2.5)]);
@@ -80,7 +95,7 @@ fn a_frame_encodes_as_one_vmc_bundle_that_decodes_to_the_same_values() {
     }
     assert_eq!(got[3].args[0], OscType::String("LeftEye".into()));
     assert_eq!(got[4].args[0], OscType::String("RightEye".into()));
-    for (i, m) in got[5..23].iter().enumerate() {
+    for (i, m) in got[5..5 + CURVES].iter().enumerate() {
         assert_eq!(
             m.args,
             [
@@ -89,7 +104,47 @@ fn a_frame_encodes_as_one_vmc_bundle_that_decodes_to_the_same_values() {
             ]
         );
     }
-    assert!(got[23].args.is_empty());
+    assert!(got[5 + CURVES].args.is_empty());
+}
+
+/// `names = "arkit-pascal"` names the curves in PascalCase; `visemes` adds the rig's visemes
+/// after the curves by VRM 0.x's or VRM 1.0's names, or none.
+#[test]
+fn curve_names_and_visemes_follow_the_settings() {
+    let mut curves = [0.0f32; CURVES];
+    curves[0] = 0.8; // jawOpen: an open, unrounded mouth: aa
+    let frame = VmcFrame::from_stream(&frame_with(1.0, Some(curves), [1.0, 0.0, 0.0, 0.0]), "wolf")
+        .unwrap();
+    let vals = |names, visemes| {
+        let mut packet = VmcPacket::new(true, true, names, visemes);
+        packet.fill(&frame, &UnitQuaternion::identity());
+        let got = sent_messages(&packet);
+        assert_eq!(got.last().unwrap().addr, address::BLEND_APPLY);
+        got.into_iter()
+            .filter(|m| m.addr == address::BLEND_VAL)
+            .map(|m| {
+                (
+                    m.args[0].clone().string().unwrap(),
+                    m.args[1].clone().float().unwrap(),
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    let pascal = vals(CurveNaming::ArkitPascal, VisemeNaming::None);
+    let names: Vec<&str> = pascal.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, PASCAL_NAMES);
+    assert_eq!(pascal[0], ("JawOpen".to_string(), 0.8));
+    for (visemes, want) in [
+        (VisemeNaming::Vrm0, ["A", "I", "U", "E", "O"]),
+        (VisemeNaming::Vrm1, ["aa", "ih", "ou", "ee", "oh"]),
+    ] {
+        let got = vals(CurveNaming::Arkit, visemes);
+        assert_eq!(got.len(), CURVES + VISEMES);
+        let names: Vec<&str> = got[CURVES..].iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, want);
+        assert_eq!(got[CURVES].1, 0.8, "aa: {got:?}");
+        assert!(got[CURVES + 1..].iter().all(|(_, v)| *v == 0.0), "{got:?}");
+    }
 }
 
 #[test]
@@ -112,18 +167,18 @@ fn without_a_rig_every_curve_is_at_rest_and_bones_can_be_left_out() {
         VmcFrame::from_stream(&frame_with(1.0, None, [1.0, 0.0, 0.0, 0.0]), "wolf").unwrap();
     assert_eq!(frame.curves, None);
     assert!(VmcFrame::from_stream(&frame_with(1.0, None, [1.0, 0.0, 0.0, 0.0]), "ghost").is_none());
-    let mut packet = VmcPacket::new(false, false);
+    let mut packet = VmcPacket::new(false, false, CurveNaming::Arkit, VisemeNaming::Vrm1);
     packet.fill(&frame, &UnitQuaternion::identity());
-    let got = messages(packet.packet());
+    let got = sent_messages(&packet);
     assert!(got.iter().all(|m| m.addr != address::BONE));
     let vals: Vec<_> = got
         .iter()
         .filter(|m| m.addr == address::BLEND_VAL)
         .collect();
-    assert_eq!(vals.len(), 18);
+    assert_eq!(vals.len(), CURVES + VISEMES);
     assert!(vals.iter().all(|m| m.args[1] == OscType::Float(0.0)));
-    let packet = VmcPacket::new(true, false);
-    let bones: Vec<_> = messages(packet.packet())
+    let packet = VmcPacket::new(true, false, CurveNaming::Arkit, VisemeNaming::None);
+    let bones: Vec<_> = sent_messages(&packet)
         .into_iter()
         .filter(|m| m.addr == address::BONE)
         .collect();
@@ -187,6 +242,8 @@ fn settings_for(targets: &[SocketAddr]) -> OscSettings {
         head: true,
         eyes: true,
         axes: Matrix3::identity(),
+        names: CurveNaming::Arkit,
+        visemes: VisemeNaming::Vrm0,
     }
 }
 
@@ -208,29 +265,36 @@ fn a_refusing_target_is_counted_and_the_others_still_get_every_frame() {
         .unwrap();
     let mut buf = [0u8; 4096];
     let mut received = 0;
+    // Datagrams per frame.
+    let per_frame = VmcPacket::new(true, true, CurveNaming::Arkit, VisemeNaming::Vrm0)
+        .packets()
+        .len() as u64;
+    let sent = 40 * per_frame;
     for i in 0..40 {
         let started = Instant::now();
         output.offer(&frame_with(
             i as f64,
-            Some([0.25; 18]),
+            Some([0.25; CURVES]),
             [1.0, 0.0, 0.0, 0.0],
         ));
         assert!(started.elapsed() < Duration::from_millis(50));
         // Paced like frames, so that the refusals come back between sends.
-        if receiver.recv(&mut buf).is_ok() {
-            received += 1;
+        for _ in 0..per_frame {
+            if receiver.recv(&mut buf).is_ok() {
+                received += 1;
+            }
         }
     }
-    assert_eq!(received, 40);
+    assert_eq!(received, sent);
     // The counter moves just after the send that the receiver may already have seen.
     let deadline = Instant::now() + Duration::from_secs(5);
-    while counters.targets()[1].sent < 40 && Instant::now() < deadline {
+    while counters.targets()[1].sent < sent && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(5));
     }
     let figures = counters.targets();
     assert_eq!(figures.len(), 2);
     assert!(figures[0].errors > 0, "{figures:?}");
-    assert_eq!(figures[1].sent, 40, "{figures:?}");
+    assert_eq!(figures[1].sent, sent, "{figures:?}");
     assert_eq!(figures[1].errors, 0, "{figures:?}");
     assert!(output.status().unwrap().contains(" sent "));
     // A reload keeps a target's counters and drops the target no longer listed.
@@ -242,7 +306,7 @@ fn a_refusing_target_is_counted_and_the_others_still_get_every_frame() {
         assert!(Instant::now() < deadline);
         std::thread::sleep(Duration::from_millis(10));
     }
-    assert_eq!(counters.targets()[0].sent, 40);
+    assert_eq!(counters.targets()[0].sent, sent);
     // No target: nothing offered, the thread idles.
     output.configure(settings_for(&[])).unwrap();
     let deadline = Instant::now() + Duration::from_secs(5);

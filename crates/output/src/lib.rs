@@ -20,9 +20,12 @@ pub mod log;
 pub mod rig;
 pub mod slate;
 
-pub use curves::{curve_index, CURVES, CURVE_NAMES};
+pub use curves::{
+    curve_index, pascal_name, visemes_from, CurveNaming, VisemeNaming, CURVES, CURVE_NAMES,
+    PASCAL_NAMES, VISEMES, VISEME_NAMES, VISEME_NAMES_VRM0,
+};
 pub use frame::{CharacterFrame, PerformerFrame, StreamFrame};
 pub use head::{CharacterHead, HeadPose, LookMode};
 pub use log::{error_chain, Throttle};
-pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState};
+pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RigVisemes};
 pub use slate::{valid_slate, SLATE_RULE};

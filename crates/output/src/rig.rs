@@ -5,7 +5,7 @@
 use serde::ser::SerializeMap;
 use serde::{Serialize, Serializer};
 
-use crate::curves::{curve_index, CURVES, CURVE_NAMES};
+use crate::curves::{curve_index, visemes_from, CURVES, CURVE_NAMES, VISEMES, VISEME_NAMES};
 
 /// The jaw: opening angle about the hinge (degrees) and slide along it (metres).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
@@ -53,18 +53,41 @@ impl Serialize for RigCurves {
     }
 }
 
+/// The VRM 1.0 mouth expressions, in [`VISEME_NAMES`] order, 0..1
+/// ([`crate::curves::visemes_from`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RigVisemes(pub [f32; VISEMES]);
+
+impl Serialize for RigVisemes {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let mut map = serializer.serialize_map(Some(self.0.len()))?;
+        for (name, v) in VISEME_NAMES.iter().zip(&self.0) {
+            map.serialize_entry(name, v)?;
+        }
+        map.end()
+    }
+}
+
 /// A character's rig in one frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct RigState {
     pub jaw: RigJaw,
     pub lips: RigLips,
     pub curves: RigCurves,
+    /// From the curves ([`RigState::set_visemes`]).
+    pub visemes: RigVisemes,
 }
 
 impl RigState {
     /// The value of a curve by name.
     pub fn curve(&self, name: &str) -> Option<f32> {
         curve_index(name).map(|i| self.curves.0[i])
+    }
+
+    /// Sets the visemes from the curves.
+    pub fn set_visemes(&mut self) {
+        let curves = self.curves.0.map(f64::from);
+        self.visemes = RigVisemes(visemes_from(&curves).map(|v| v as f32));
     }
 }
 
@@ -87,5 +110,11 @@ mod tests {
             "{text}"
         );
         assert_eq!(rig.curve("mouthFunnel"), Some(0.5));
+        rig.set_visemes();
+        let text = serde_json::to_string(&rig).unwrap();
+        assert!(
+            text.contains(r#""visemes":{"aa":0.0,"ih":0.0,"ou":0.5,"ee":0.0,"oh":0.0}"#),
+            "{text}"
+        );
     }
 }

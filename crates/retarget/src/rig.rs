@@ -35,7 +35,10 @@ use crate::{Error, MouthFrame, Named, NeutralPose, Vec3};
 
 /// The curve names, in wire order (ARKit's blend-shape names; left and right are the
 /// performer's): the output vocabulary's one list.
-pub use mouthpiece_output::curves::{curve_index, CURVES, CURVE_NAMES};
+pub use mouthpiece_output::curves::{
+    curve_index, pascal_name, visemes_from, CURVES, CURVE_NAMES, PASCAL_NAMES, VISEMES,
+    VISEME_NAMES, VISEME_NAMES_VRM0,
+};
 
 mod model;
 pub use model::*;
@@ -43,9 +46,9 @@ pub use model::*;
 /// Default range of each curve's measure: degrees for `jawOpen`, mouth widths for the rest.
 pub const DEFAULT_RANGES: [f64; CURVES] = [
     25.0, // jawOpen: degrees of jaw rotation
-    0.15, // mouthClose: lower-lip rise against the jaw
-    0.15, // mouthFunnel: lips pushed out and drawn in
-    0.25, // mouthPucker: lips drawn in (horizontal scale 1 - s)
+    25.0, // mouthClose: degrees of the jaw's opening the sealed lips hide (jawOpen's range)
+    0.15, // mouthFunnel: the rounding with the lips open
+    0.15, // mouthPucker: the rounding with the lips closed
     0.10, // mouthLeft
     0.10, // mouthRight
     0.12, // mouthSmileLeft: corner up
@@ -60,7 +63,20 @@ pub const DEFAULT_RANGES: [f64; CURVES] = [
     0.12, // mouthLowerDownRight
     0.15, // mouthPressLeft
     0.15, // mouthPressRight
+    0.15, // jawForward: the lower lip's distance from the hinge grows
+    0.10, // jawLeft: the slide along the hinge
+    0.10, // jawRight
+    0.08, // mouthFrownLeft: corner down
+    0.08, // mouthFrownRight
+    0.10, // mouthShrugUpper: the upper lip up and out
+    0.16, // mouthShrugLower: the lower lip up and out
+    0.10, // mouthDimpleLeft: corner back against the upper lip
+    0.10, // mouthDimpleRight
 ];
+
+/// The index of `mouthClose`, whose range is `jawOpen`'s unless it is given its own (ARKit's
+/// pairing: equal `jawOpen` and `mouthClose` mean sealed lips).
+const CLOSE: usize = 1;
 
 /// The weight of depth (z) against the lateral axes (x, y) where a measure combines them:
 /// inverse-variance weighting. A depth camera's depth noise on a lip dot is about twice its
@@ -257,6 +273,14 @@ pub struct RigFrame {
     pub lips: LipsState,
     /// Curve name → value in 0..1, in [`CURVE_NAMES`] order.
     pub curves: Named<f64>,
+    /// VRM 1.0 mouth expression → value in 0..1, in [`VISEME_NAMES`] order, from the curves
+    /// ([`visemes_from`]).
+    #[serde(default = "default_visemes")]
+    pub visemes: Named<f64>,
+}
+
+fn default_visemes() -> Named<f64> {
+    Named(VISEME_NAMES.iter().map(|n| (n.to_string(), 0.0)).collect())
 }
 
 impl Default for RigFrame {
@@ -265,7 +289,26 @@ impl Default for RigFrame {
             jaw: JawState::default(),
             lips: LipsState::default(),
             curves: Named(CURVE_NAMES.iter().map(|n| (n.to_string(), 0.0)).collect()),
+            visemes: default_visemes(),
         }
+    }
+}
+
+/// Sets `out`'s visemes from the curves `values` (no allocation once it has them).
+fn set_visemes(values: &[f64; CURVES], out: &mut Named<f64>) {
+    if out.0.len() != VISEMES {
+        *out = default_visemes();
+    }
+    for ((name, dst), (v, want)) in out
+        .0
+        .iter_mut()
+        .zip(visemes_from(values).into_iter().zip(VISEME_NAMES))
+    {
+        if name != want {
+            name.clear();
+            name.push_str(want);
+        }
+        *dst = v;
     }
 }
 
@@ -322,6 +365,9 @@ impl Rig {
             if let Some(v) = settings.configured(i) {
                 *r = v;
             }
+        }
+        if settings.configured(CLOSE).is_none() {
+            ranges[CLOSE] = ranges[0];
         }
         let n = neutral.lip.len();
         Ok(Self {
@@ -390,6 +436,9 @@ impl Rig {
                 *dst = r;
             }
         }
+        if character.0[CLOSE].is_none() && self.settings.configured(CLOSE).is_none() {
+            out[CLOSE] = out[0];
+        }
         out
     }
 
@@ -401,10 +450,12 @@ impl Rig {
         out.lips = self.out.lips;
         if character.is_empty() {
             out.curves.clone_from(&self.out.curves);
+            out.visemes.clone_from(&self.out.visemes);
             return;
         }
         let mut values = [0.0; CURVES];
         curves_from(&self.measures, &self.ranges_for(character), &mut values);
+        set_visemes(&values, &mut out.visemes);
         if out.curves.0.len() != CURVES {
             out.curves = RigFrame::default().curves;
         }
@@ -459,6 +510,9 @@ impl Rig {
                     *range = range.max(v);
                 }
             }
+            if self.settings.configured(CLOSE).is_none() {
+                self.ranges[CLOSE] = self.ranges[0];
+            }
         } else {
             self.learn_until.get_or_insert(frame.t);
         }
@@ -466,6 +520,7 @@ impl Rig {
         for ((_, dst), v) in self.out.curves.0.iter_mut().zip(&self.values) {
             *dst = *v;
         }
+        set_visemes(&self.values, &mut self.out.visemes);
         self.out.jaw = JawState {
             angle_deg: m.jaw_angle.to_degrees(),
             slide_m: m.jaw_slide,
@@ -681,7 +736,7 @@ mod tests {
         let out = rig.step(&held).clone();
         // What the whole mouth shows (the range was learned: these frames all have t = 0).
         assert!(
-            (out.curve("mouthPucker") - 0.2 / rig.ranges()[3]).abs() < 0.01,
+            (out.curve("mouthPucker") - 0.1 / rig.ranges()[3]).abs() < 0.005,
             "{}",
             out.curve("mouthPucker")
         );
@@ -689,7 +744,7 @@ mod tests {
         assert!((measured - drawn(0.8)[0]).norm() < 2e-4, "{measured:?}");
         // Measured as held, the pucker reads a quarter less: the corner 5 mm out.
         let as_held = rig.model().measure(&held.lip);
-        assert!(as_held.values[3] < 0.16, "{:?}", as_held.values[3]);
+        assert!(as_held.values[3] < 0.08, "{:?}", as_held.values[3]);
     }
 
     /// A turned head's depth noise, which lies along the camera's ray and so partly sideways
@@ -839,22 +894,21 @@ mod tests {
             .map(|p| Vec3::new(0.9 * p.x, p.y, p.z))
             .collect();
         let out = rig.step(&frame(drawn)).clone();
+        // Drawn in with the lips closed: a pucker, no funnel.
         assert!(
-            (out.curve("mouthPucker") - 0.1 / 0.25).abs() < 1e-9,
+            (out.curve("mouthPucker") - 0.05 / 0.15).abs() < 1e-9,
             "{out:?}"
         );
-        assert!((out.curve("mouthFunnel") - 0.05 / 0.15).abs() < 1e-9);
+        assert_eq!(out.curve("mouthFunnel"), 0.0);
         let pushed: Vec<Vec3> = n
             .lip
             .iter()
             .map(|p| p + Vec3::new(0.0, 0.0, 0.003))
             .collect();
         let out = rig.step(&frame(pushed)).clone();
-        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.003 / w / 0.15).abs() < 1e-9);
-        assert!(
-            out.curve("mouthPucker").abs() < 1e-12,
-            "a push alone is no pucker: the pucker is the narrowing"
-        );
+        // Pushed out with the lips closed: the rounding is a pucker too.
+        assert!((out.curve("mouthPucker") - DEPTH_WEIGHT * 0.003 / w / 0.15).abs() < 1e-9);
+        assert_eq!(out.curve("mouthFunnel"), 0.0);
         assert!(
             out.jaw.angle_deg.abs() < 1e-9,
             "a push is not a jaw: {:?}",
@@ -974,7 +1028,8 @@ mod tests {
             .map(|p| p + Vec3::new(0.0, 0.0, 0.004))
             .collect();
         let out = rig.step(&frame(pushed)).clone();
-        assert!((out.curve("mouthFunnel") - DEPTH_WEIGHT * 0.004 / w / 0.15).abs() < 1e-9);
+        // (The lips closed: the rounding is mouthPucker.)
+        assert!((out.curve("mouthPucker") - DEPTH_WEIGHT * 0.004 / w / 0.15).abs() < 1e-9);
     }
 
     /// One weight per axis: in the funnel a corner's inward motion counts millimetre for
@@ -992,11 +1047,12 @@ mod tests {
             .collect();
         let corner_in = (n.lip[0].x - drawn[0].x) / w;
         assert!((corner_in - 0.05).abs() < 1e-12, "{corner_in}");
+        // (The lips closed: the rounding, funnel + pucker, is all pucker.)
         let v = model.measure(&drawn).values;
         assert!(
-            (v[2] - corner_in).abs() < 1e-12,
+            (v[2] + v[3] - corner_in).abs() < 1e-12,
             "the corners' inward motion in mouth widths: {}",
-            v[2]
+            v[3]
         );
         // (Counted at half weight, as before the rule, it would read 0.025.)
         // A motion forward counts a quarter: every dot 2 mm out reads a quarter of 2 mm.
@@ -1004,7 +1060,8 @@ mod tests {
         for p in &mut both {
             p.z += 0.002;
         }
-        let v_fwd = model.measure(&both).values[2];
+        let v = model.measure(&both).values;
+        let v_fwd = v[2] + v[3];
         assert!((v_fwd - DEPTH_WEIGHT * 0.002 / w).abs() < 1e-12, "{v_fwd}");
         assert!((funnel_measure(0.0, 0.9) - 0.05).abs() < 1e-15);
         assert!((funnel_measure(0.04, 1.0) - DEPTH_WEIGHT * 0.04).abs() < 1e-15);
@@ -1025,9 +1082,9 @@ mod tests {
             .collect();
         let v = model.measure(&spread_pushed).values;
         assert!(
-            (v[2] - DEPTH_WEIGHT * 0.004 / w).abs() < 1e-12,
+            (v[2] + v[3] - DEPTH_WEIGHT * 0.004 / w).abs() < 1e-12,
             "the push alone: {} (subtracting the spread it would be {})",
-            v[2],
+            v[2] + v[3],
             DEPTH_WEIGHT * 0.004 / w - 0.05
         );
         assert!(v[8] > 0.04 && v[9] > 0.04, "a stretch: {:?}", &v[8..10]);
@@ -1107,11 +1164,12 @@ mod tests {
             0.3,
             "the character's over the default"
         );
-        assert_eq!(r[i("mouthClose")], DEFAULT_RANGES[i("mouthClose")]);
+        assert_eq!(r[i("mouthClose")], 40.0, "jawOpen's");
         let mut out = RigFrame::default();
         rig.output_for(&own, &mut out);
         assert!((out.curve("jawOpen") - 10.0 / 40.0).abs() < 1e-9, "{out:?}");
-        assert!((out.curve("mouthPucker") - 0.1 / 0.5).abs() < 1e-9);
+        // (The jaw is open, so the lips' rounding is a funnel.)
+        assert!((out.curve("mouthFunnel") - 0.05 / 0.15).abs() < 1e-9);
         assert_eq!(out.jaw, rig.output().jaw);
         assert_eq!(out.lips, rig.output().lips);
         // Without ranges of its own, the character gets the performer's output.
@@ -1163,5 +1221,211 @@ mod tests {
         }
         let s = RigSettings::from_toml_str("depth_noise_m = 0.0007").unwrap();
         assert_eq!((s.depth_noise_m, s.pixel_noise_m), (0.0007, 0.0003));
+    }
+
+    /// The neutral mouth with the lower lip carried by the jaw (`deg` open) and the upper lip
+    /// moved by `upper`.
+    fn jaw_and_upper(rig: &Rig, n: &NeutralPose, deg: f64, upper: Vec3) -> Vec<Vec3> {
+        let jaw = rig.model().jaw_transform(deg.to_radians(), 0.0);
+        let mut lip = n.lip.clone();
+        for p in &mut lip[1..6] {
+            *p += upper;
+        }
+        for p in &mut lip[7..] {
+            *p = jaw.apply(p);
+        }
+        lip
+    }
+
+    /// ARKit's mouthClose: lips sealed while the jaw is open. A jaw dropped with the lips kept
+    /// together (the upper lip following the lower down) reads jawOpen and mouthClose alike;
+    /// lips pressed with the jaw shut read no mouthClose.
+    #[test]
+    fn mouth_close_is_a_sealed_jaw_drop_and_not_a_press() {
+        let n = neutral();
+        let mut rig = rig();
+        // The drop 15° of jaw gives the lower-lip centroid.
+        let open = jaw_and_upper(&rig, &n, 15.0, Vec3::zeros());
+        let drop = (7..12).map(|i| n.lip[i].y - open[i].y).sum::<f64>() / 5.0;
+        let sealed = jaw_and_upper(&rig, &n, 15.0, Vec3::new(0.0, -drop, 0.0));
+        let out = rig.step(&frame(sealed)).clone();
+        assert!((out.jaw.angle_deg - 15.0).abs() < 1e-9, "{:?}", out.jaw);
+        let (jaw, close) = (out.curve("jawOpen"), out.curve("mouthClose"));
+        assert!((jaw - 0.6).abs() < 1e-9, "{jaw}");
+        assert!(
+            (close - jaw).abs() < 1e-9,
+            "sealed: mouthClose {close}, jawOpen {jaw}"
+        );
+        // Half the drop shown as parting: half the opening is sealed.
+        let half = jaw_and_upper(&rig, &n, 15.0, Vec3::new(0.0, -0.5 * drop, 0.0));
+        let out = rig.step(&frame(half)).clone();
+        assert!((out.curve("mouthClose") - 0.3).abs() < 1e-9, "{out:?}");
+        // Pressed, the jaw shut: the upper lip down 2 mm, the lower up 2 mm.
+        let mut pressed = n.lip.clone();
+        for p in &mut pressed[1..6] {
+            p.y -= 0.002;
+        }
+        for p in &mut pressed[7..] {
+            p.y += 0.002;
+        }
+        let out = rig.step(&frame(pressed)).clone();
+        assert_eq!(out.curve("mouthClose"), 0.0, "{out:?}");
+        assert!(out.curve("mouthPressLeft") > 0.1, "{out:?}");
+        assert_eq!(close_measure(-3.0, 0.001, 0.0), 0.0);
+        assert_eq!(close_measure(10.0, 0.004, 0.006), 0.0);
+    }
+
+    /// mouthClose's range is jawOpen's unless it has its own.
+    #[test]
+    fn mouth_close_takes_jaw_opens_range() {
+        let n = neutral();
+        let settings = RigSettings {
+            ranges: Named(vec![("jawOpen".into(), 40.0)]),
+            ..RigSettings::default()
+        };
+        let rig = Rig::new(&n, settings).unwrap();
+        assert_eq!(rig.ranges()[1], 40.0);
+        let own = RangeOverrides::from_named([("jawOpen", 20.0)]).unwrap();
+        assert_eq!(rig.ranges_for(&own)[1], 20.0);
+        let own = RangeOverrides::from_named([("jawOpen", 20.0), ("mouthClose", 9.0)]).unwrap();
+        assert_eq!(rig.ranges_for(&own)[1], 9.0);
+    }
+
+    /// The same rounding (lips pushed 3 mm forward, drawn in to 0.8 of their width) reads
+    /// mouthFunnel with the lips apart and mouthPucker with them closed.
+    #[test]
+    fn funnel_and_pucker_are_told_apart_by_the_lips_opening() {
+        let n = neutral();
+        let w = n.mouth_width();
+        let mut rig = rig();
+        let round: Vec<Vec3> = n
+            .lip
+            .iter()
+            .map(|p| Vec3::new(0.8 * p.x, p.y, p.z + 0.003))
+            .collect();
+        let rounding = DEPTH_WEIGHT * 0.003 / w + 0.1;
+        let out = rig.step(&frame(round.clone())).clone();
+        assert_eq!(out.curve("mouthFunnel"), 0.0, "closed: {out:?}");
+        assert!((out.curve("mouthPucker") - rounding / 0.15).abs() < 1e-9);
+        // The jaw open 12° under the same lips: the lips parted (by more than OPEN_WIDTHS).
+        let jaw = rig.model().jaw_transform(12f64.to_radians(), 0.0);
+        let mut open = round.clone();
+        for p in &mut open[7..] {
+            *p = jaw.apply(p);
+        }
+        let out = rig.step(&frame(open)).clone();
+        assert!(
+            (out.curve("mouthFunnel") - rounding / 0.15).abs() < 1e-9,
+            "{out:?}"
+        );
+        assert_eq!(out.curve("mouthPucker"), 0.0, "open: {out:?}");
+        // Half open: the rounding shared half and half.
+        assert_eq!(open_fraction(0.5 * OPEN_WIDTHS), 0.5);
+        assert_eq!(open_fraction(-0.01), 0.0);
+        assert_eq!(open_fraction(f64::NAN), 0.0);
+    }
+
+    /// The curves added from the same dots: the jaw's slide and thrust, the corners down and
+    /// back, the lips turned out; and the visemes of an open mouth.
+    #[test]
+    fn the_jaw_slide_thrust_frown_shrug_and_dimple_read_their_motions() {
+        let n = neutral();
+        let w = n.mouth_width();
+        let mut rig = rig();
+        let moved = |f: &dyn Fn(usize, &mut Vec3)| -> Vec<Vec3> {
+            let mut lip = n.lip.clone();
+            for (i, p) in lip.iter_mut().enumerate() {
+                f(i, p);
+            }
+            lip
+        };
+        // The jaw slid 3 mm to the performer's left.
+        let jaw = rig.model().jaw_transform(0.0, 0.003);
+        let slid = moved(&|i, p| {
+            if i > 6 {
+                *p = jaw.apply(p)
+            }
+        });
+        let out = rig.step(&frame(slid)).clone();
+        assert!(
+            (out.curve("jawLeft") - 0.003 / w / 0.10).abs() < 1e-9,
+            "{out:?}"
+        );
+        assert!(out.curve("jawRight") < 1e-9, "{out:?}");
+        // The lower lip 2 mm forward: a thrust, not an opening.
+        let thrust = moved(&|i, p| {
+            if i > 6 {
+                p.z += 0.002
+            }
+        });
+        let out = rig.step(&frame(thrust)).clone();
+        assert!(out.curve("jawForward") > 0.3, "{out:?}");
+        assert!(out.curve("jawOpen") < 1e-9, "{out:?}");
+        // The left corner and its neighbours 2 mm down: a frown on the left only.
+        let down = moved(&|i, p| {
+            if [0, 1, 11].contains(&i) {
+                p.y -= 0.002
+            }
+        });
+        let out = rig.step(&frame(down)).clone();
+        // (The lower neighbour's drop turns the jaw a little, which takes a little off it.)
+        let frown = out.curve("mouthFrownLeft");
+        assert!(
+            frown > 0.9 * 0.002 / w / 0.08 && frown < 0.002 / w / 0.08,
+            "{out:?}"
+        );
+        assert!(out.curve("mouthFrownRight") < 1e-9, "{out:?}");
+        assert!(out.curve("mouthSmileLeft") < 1e-9, "{out:?}");
+        // The right corner and its neighbours 2 mm back: a dimple on the right only.
+        let back = moved(&|i, p| {
+            if [5, 6, 7].contains(&i) {
+                p.z -= 0.002
+            }
+        });
+        let out = rig.step(&frame(back)).clone();
+        // (Against the upper lip's mean depth, which its neighbour took 0.4 mm back.)
+        let want = (0.002 - 0.002 / 5.0) / w / 0.10;
+        assert!(
+            (out.curve("mouthDimpleRight") - want).abs() < 1e-9,
+            "{out:?}"
+        );
+        assert!(out.curve("mouthDimpleLeft") < 1e-9, "{out:?}");
+        // The upper lip 1 mm up and 2 mm out: a shrug of the upper lip, not a roll.
+        let out_up = moved(&|i, p| {
+            if (1..6).contains(&i) {
+                *p += Vec3::new(0.0, 0.001, 0.002)
+            }
+        });
+        let out = rig.step(&frame(out_up)).clone();
+        let want = (0.001 + DEPTH_WEIGHT * 0.002) / w / 0.10;
+        assert!(
+            (out.curve("mouthShrugUpper") - want).abs() < 1e-9,
+            "{out:?}"
+        );
+        assert!(out.curve("mouthRollUpper") < 1e-9, "{out:?}");
+        // The lower lip 1 mm up and 2 mm out against the jaw.
+        let pout = moved(&|i, p| {
+            if i > 6 {
+                *p += Vec3::new(0.0, 0.001, 0.002)
+            }
+        });
+        let out = rig.step(&frame(pout)).clone();
+        let want = (0.001 + DEPTH_WEIGHT * 0.002) / w / 0.16;
+        assert!(
+            (out.curve("mouthShrugLower") - want).abs() < 1e-9,
+            "{out:?}"
+        );
+        assert!(
+            out.curve("jawForward") > 0.1,
+            "(a pout reads as a thrust too)"
+        );
+        assert!(out.curve("jawOpen") < 1e-9, "{out:?}");
+        // An open unrounded mouth is the viseme aa, which the frame carries.
+        let open = jaw_and_upper(&rig, &n, 20.0, Vec3::zeros());
+        let out = rig.step(&frame(open)).clone();
+        let aa = out.visemes.get("aa").copied().unwrap();
+        assert!((aa - 0.8).abs() < 1e-9, "{out:?}");
+        let names: Vec<&str> = out.visemes.0.iter().map(|(k, _)| &k[..]).collect();
+        assert_eq!(names, VISEME_NAMES);
     }
 }

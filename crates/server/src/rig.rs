@@ -1,7 +1,7 @@
 //! The rig's Foxglove form (docs/rig.md, docs/protocol.md): the `/rig/<name>` channel's
 //! schema and payload. The rig itself is [`mouthpiece_output::RigState`].
 
-use mouthpiece_output::{RigLip, RigState, CURVE_NAMES};
+use mouthpiece_output::{RigLip, RigState, CURVE_NAMES, VISEME_NAMES};
 use serde_json::{json, Value};
 
 /// The properties of a Foxglove `/rig/<name>` message (its JSON Schema's `properties`; the
@@ -43,6 +43,15 @@ pub fn foxglove_properties() -> Value {
             )
         })
         .collect();
+    let visemes: serde_json::Map<String, Value> = VISEME_NAMES
+        .iter()
+        .map(|n| {
+            (
+                (*n).to_owned(),
+                json!({"type": "number", "minimum": 0, "maximum": 1}),
+            )
+        })
+        .collect();
     json!({
         "name": {"type": "string", "description": "the character"},
         "jaw": {
@@ -64,6 +73,13 @@ pub fn foxglove_properties() -> Value {
             "properties": curves,
             "required": CURVE_NAMES,
             "additionalProperties": false
+        },
+        "visemes": {
+            "type": "object",
+            "description": "VRM 1.0 mouth expressions from the curves, 0..1",
+            "properties": visemes,
+            "required": VISEME_NAMES,
+            "additionalProperties": false
         }
     })
 }
@@ -84,5 +100,6 @@ pub fn foxglove_payload(name: &str, rig: &RigState) -> Value {
         "jaw": rig.jaw,
         "lips": {"upper": lip(&rig.lips.upper), "lower": lip(&rig.lips.lower)},
         "curves": rig.curves,
+        "visemes": rig.visemes,
     })
 }

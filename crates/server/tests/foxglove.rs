@@ -135,7 +135,7 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
     let curve_names = rig_schema["properties"]["curves"]["required"]
         .as_array()
         .unwrap();
-    assert_eq!(curve_names.len(), 18, "{rig_schema}");
+    assert_eq!(curve_names.len(), 27, "{rig_schema}");
     let mut rigs = 0;
     for p in payloads.iter().filter(|p| p["schema"] == *rig_schema) {
         let p = &p["payload"];

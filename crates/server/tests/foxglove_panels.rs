@@ -145,7 +145,7 @@ async fn foxglove_studio_panels_get_image_annotations_scene_and_transforms() {
         assert!(n >= 2, "{topic}: {n} messages in 3 s");
         let sample = &summary["samples"][&topic];
         assert_eq!(sample["name"], name, "{sample}");
-        assert_eq!(sample["curves"].as_object().unwrap().len(), 18, "{sample}");
+        assert_eq!(sample["curves"].as_object().unwrap().len(), 27, "{sample}");
         assert!(sample["jaw"]["angle_deg"].is_number(), "{sample}");
     }
     // Same rate limit as the preview's default (10 images a second).

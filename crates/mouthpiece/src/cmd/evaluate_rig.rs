@@ -7,7 +7,7 @@ use mouthpiece_retarget::rig::{CURVES, CURVE_NAMES};
 pub fn print_header() {
     println!();
     println!(
-        "| seed | noise | head motion | frames | jaw RMS (°) | slide RMS (mm) | worst curve | its RMS | jawOpen r (jaw) | mouthFunnel r (round) | mouthFunnel r, true dots | round SD |"
+        "| seed | noise | head motion | frames | jaw RMS (°) | slide RMS (mm) | worst curve | its RMS | jawOpen r (jaw) | rounding r (mouthFunnel + mouthPucker, round) | rounding r, true dots | round SD |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
 }

@@ -190,8 +190,11 @@ impl RigModel {
         let jaw_drop = -((r0y * c - r0z * s + hy) - c0.y);
         let mut v = [0.0; CURVES];
         v[0] = angle.to_degrees();
-        // mouthClose: the lower lip rises against the jaw (lips stay shut while it drops).
-        v[1] = (jaw_drop - (du.y - dl.y)) / w;
+        // The growth of the gap between the lip centroids: the lips parting.
+        let gap = du.y - dl.y;
+        // mouthClose: the part of the jaw's opening the lips do not show as parting (lips
+        // sealed while the jaw is open), in degrees of the jaw like jawOpen.
+        v[1] = close_measure(angle.to_degrees(), jaw_drop, gap);
         // Horizontal scale of the whole mouth (least squares over every dot, the lower lip
         // without the slide), and of each side about the mouth's own centre.
         let x_of = |i: usize| lip[i].x - if r.lower.contains(&i) { slide } else { 0.0 };
@@ -210,11 +213,13 @@ impl RigModel {
             }
         }
         let sx = sx_all / self.sxx;
-        // mouthFunnel: lips pushed out and drawn in (the upper lip's push: the lower lip's
-        // depends on the jaw's estimate).
-        v[2] = funnel_measure(du.z / w, sx);
-        // mouthPucker: drawn in horizontally: 1 − the horizontal scale.
-        v[3] = 1.0 - sx;
+        // The rounding, lips pushed out and drawn in (the upper lip's push: the lower lip's
+        // depends on the jaw's estimate), split by the lips' opening: mouthFunnel rounded and
+        // open, mouthPucker rounded and closed.
+        let rounding = funnel_measure(du.z / w, sx);
+        let open = open_fraction(gap / w);
+        v[2] = rounding * open;
+        v[3] = rounding * (1.0 - open);
         // mouthLeft / Right: the whole mouth shifted sideways (mean over every dot).
         let shift = lip.iter().zip(n0).map(|(p, q)| p.x - q.x).sum::<f64>() / lip.len() as f64 / w;
         v[4] = shift;
@@ -252,6 +257,31 @@ impl RigModel {
         // Press: the lips squeezed together on a side (upper down, lower up, without the jaw).
         v[16] = (lo_l - up_l) / w;
         v[17] = (lo_r - up_r) / w;
+        // jawForward: the lower-lip centroid's distance from the hinge grows (the jaw thrust
+        // forward; the upper lip's forward motion taken off, as for the angle).
+        v[18] = ((py * py + pz * pz).sqrt() - (r0y * r0y + r0z * r0z).sqrt()) / w;
+        // jawLeft / Right: the slide along the hinge.
+        v[19] = slide / w;
+        v[20] = -slide / w;
+        // mouthFrownLeft / Right: the corners down (the smile's measure, the other way).
+        v[21] = -ly / w;
+        v[22] = -ry / w;
+        // Shrugs: each lip up and out. The upper lip's own motion (the roll's the other way);
+        // the lower lip's as it is, against the upper lip's push: without the jaw it would
+        // be nothing, since the jaw's estimate takes the lower lip's mean motion as a turn
+        // (a closing) or a thrust of the jaw.
+        v[23] = mean_over(&r.upper, |i| d(i).y + DEPTH_WEIGHT * d(i).z) / w;
+        v[24] = (dl.y + DEPTH_WEIGHT * (dl.z - du.z)) / w;
+        // Dimples: each corner drawn back into the cheek, with its two neighbours (the lower
+        // one without the jaw; the corner with half the jaw), against the upper lip's mean
+        // depth: the error the head pose leaves is common to every dot, and was most of
+        // the corners' depth error.
+        let corner_back = |c: usize, up: usize, low: usize| -> f64 {
+            let cz = 0.5 * (d(c).z + unjaw(c).z);
+            du.z - (cz + d(up).z + free_z(low)) / 3.0
+        };
+        v[25] = corner_back(r.left, ul, ll) / w;
+        v[26] = corner_back(r.right, ur, lr) / w;
         Measures {
             values: v,
             jaw_angle: angle,
@@ -273,6 +303,41 @@ impl RigModel {
 ///   it cancelled the lips' push in a rounded vowel said with the corners apart.
 pub fn funnel_measure(forward: f64, scale: f64) -> f64 {
     DEPTH_WEIGHT * forward + 0.5 * (1.0 - scale).max(0.0)
+}
+
+/// The lips' opening, in mouth widths of growth of the gap between the lip centroids, at
+/// which the rounding counts wholly as `mouthFunnel` (open) and no longer as `mouthPucker`
+/// (closed): 0.1, 5.5 mm for a 55 mm mouth.
+pub const OPEN_WIDTHS: f64 = 0.1;
+
+/// The share of the rounding that is open (`mouthFunnel`; the rest is `mouthPucker`), from
+/// the growth of the gap between the lip centroids (`gap`, mouth widths): `clamp(gap /
+/// OPEN_WIDTHS, 0, 1)`; 0 when it is not a number.
+pub fn open_fraction(gap: f64) -> f64 {
+    let f = gap / OPEN_WIDTHS;
+    if f.is_finite() {
+        f.clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// The `mouthClose` measure, degrees: the part of the jaw's opening (`angle_deg`, which drops
+/// the lower-lip centroid by `drop`, metres) that the lips do not show as parting (`gap`, the
+/// growth of the gap between the lip centroids, metres): `angle_deg · clamp((drop −
+/// max(gap, 0)) / drop, 0, 1)`, 0 when the jaw is not open. In degrees like `jawOpen` and with
+/// its range, so that equal `jawOpen` and `mouthClose` mean sealed lips (ARKit's pairing);
+/// lips pressed with the jaw shut read no `mouthClose`.
+pub fn close_measure(angle_deg: f64, drop: f64, gap: f64) -> f64 {
+    if !(angle_deg > 0.0 && drop > 0.0) {
+        return 0.0;
+    }
+    let sealed = (drop - gap.max(0.0)) / drop;
+    if sealed.is_finite() {
+        angle_deg * sealed.clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
 }
 
 /// The mouth centre's sideways shift: the mean of `dx` over the dots weighted by `weight`
