@@ -236,6 +236,8 @@ pub struct HelloMessage<'a> {
     pub access: &'static str,
     /// The rig's curve names, in the order of `rig.curves` and of the binary rig block.
     pub rig_curves: &'static [&'static str],
+    /// The rig's VRM viseme names, in the order of `rig.visemes` and of the binary rig block.
+    pub rig_visemes: &'static [&'static str],
 }
 
 /// Server name and version in `hello`.
@@ -440,10 +442,10 @@ mod flag {
 /// the turn's progress.
 pub const BINARY_HEAD_LEN: usize = 4 + 13 * 4;
 
-/// Bytes of a character's rig block: presence and curve count, jaw (2 floats), each lip
-/// (rotation, translation, residual: 8 floats) and one float per curve.
-pub const fn binary_rig_len(curves: usize) -> usize {
-    4 + (2 + 8 + 8 + curves) * 4
+/// Bytes of a character's rig block: presence, curve and viseme counts, jaw (2 floats), each
+/// lip (rotation, translation, residual: 8 floats), one float per curve and per viseme.
+pub const fn binary_rig_len(curves: usize, visemes: usize) -> usize {
+    8 + (2 + 8 + 8 + curves + visemes) * 4
 }
 
 /// Encodes the binary form of `frame` (layout in `docs/protocol.md`), appending to `out`.
@@ -556,9 +558,11 @@ fn push_rig(out: &mut Vec<u8>, rig: Option<&mouthpiece_output::RigState>) {
     let start = out.len();
     let default = mouthpiece_output::RigState::default();
     let r = rig.unwrap_or(&default);
-    let curves = &r.curves.0;
+    let (curves, visemes) = (&r.curves.0, &r.visemes.0);
     out.extend_from_slice(&u16::from(rig.is_some()).to_le_bytes());
     out.extend_from_slice(&(curves.len() as u16).to_le_bytes());
+    out.extend_from_slice(&(visemes.len() as u16).to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
     let lip = |l: &mouthpiece_output::RigLip| {
         let mut v = [0f32; 8];
         v[..4].copy_from_slice(&l.rotation);
@@ -570,11 +574,15 @@ fn push_rig(out: &mut Vec<u8>, rig: Option<&mouthpiece_output::RigState>) {
         .into_iter()
         .chain(lip(&r.lips.upper))
         .chain(lip(&r.lips.lower))
-        .chain(curves.iter().copied());
+        .chain(curves.iter().copied())
+        .chain(visemes.iter().copied());
     for v in floats {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    debug_assert_eq!(out.len() - start, binary_rig_len(curves.len()));
+    debug_assert_eq!(
+        out.len() - start,
+        binary_rig_len(curves.len(), visemes.len())
+    );
 }
 
 fn push_points(out: &mut Vec<u8>, points: &[[f32; 3]]) {

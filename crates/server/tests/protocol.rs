@@ -118,6 +118,7 @@ fn check_binary_frame(
     expected: &mouthpiece_server::StreamFrame,
     with_rig: bool,
     rig_curves: &[serde_json::Value],
+    rig_visemes: &[serde_json::Value],
 ) {
     let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]);
     let u64_at = |o: usize| u64::from_le_bytes(bytes[o..o + 8].try_into().unwrap());
@@ -171,9 +172,9 @@ fn check_binary_frame(
         if with_rig {
             let rig = c.rig.as_ref().expect("the synthetic frame has a rig");
             assert_eq!(u16_at(o), 1, "rig present");
-            let r = u16_at(o + 2) as usize;
-            assert_eq!(r, rig_curves.len());
-            o += 4;
+            assert_eq!(u16_at(o + 2) as usize, rig_curves.len());
+            assert_eq!(u16_at(o + 4) as usize, rig_visemes.len());
+            o += 8;
             assert_eq!(f32_at(o), rig.jaw.angle_deg);
             assert_eq!(f32_at(o + 4), rig.jaw.slide_m);
             o += 8;
@@ -186,6 +187,10 @@ fn check_binary_frame(
             for name in rig_curves {
                 let name = name.as_str().unwrap();
                 assert_eq!(f32_at(o), rig.curve(name).unwrap(), "{name}");
+                o += 4;
+            }
+            for (i, name) in rig_visemes.iter().enumerate() {
+                assert_eq!(f32_at(o), rig.visemes.0[i], "{name}");
                 o += 4;
             }
         }
@@ -205,6 +210,8 @@ async fn binary_frames_follow_the_documented_layout() {
     let hello = next_of_type(&mut ws, "hello").await;
     let rig_curves = hello["rig_curves"].as_array().unwrap().clone();
     assert_eq!(rig_curves[0], "jawOpen");
+    let rig_visemes = hello["rig_visemes"].as_array().unwrap().clone();
+    assert_eq!(rig_visemes, ["aa", "ih", "ou", "ee", "oh"]);
     let mut expected = mouthpiece_server::StreamFrame::default();
     mouthpiece_server::loadgen::synthetic_frame(7, 60.0, &mut expected);
     for with_rig in [false, true] {
@@ -220,7 +227,7 @@ async fn binary_frames_follow_the_documented_layout() {
         next_of_type(&mut ws, "result").await;
         server.hub.publish(&expected);
         let bytes = next_binary(&mut ws).await;
-        check_binary_frame(&bytes, &expected, with_rig, &rig_curves);
+        check_binary_frame(&bytes, &expected, with_rig, &rig_curves, &rig_visemes);
     }
     server.stop().await;
 }
