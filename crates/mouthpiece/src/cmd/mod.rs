@@ -8,6 +8,7 @@ pub mod evaluate_rig;
 pub mod export;
 pub mod lipsync;
 pub mod lipsync_poses;
+pub mod play;
 pub mod process;
 pub mod record;
 pub mod retarget;
