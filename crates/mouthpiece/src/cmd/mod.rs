@@ -10,6 +10,7 @@ pub mod lipsync;
 pub mod lipsync_poses;
 pub mod process;
 pub mod record;
+pub mod recorded_heads;
 pub mod retarget;
 pub mod run;
 pub mod synth;
