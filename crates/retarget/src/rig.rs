@@ -257,6 +257,11 @@ pub struct RigFrame {
     pub lips: LipsState,
     /// Curve name → value in 0..1, in [`CURVE_NAMES`] order.
     pub curves: Named<f64>,
+    /// The performer's neutral mouth width (corner to corner), metres: what the export scales
+    /// the slide and the lip translations by to the character's size (docs/export.md).
+    /// Absent in takes made before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub performer_width_m: Option<f64>,
 }
 
 impl Default for RigFrame {
@@ -265,6 +270,7 @@ impl Default for RigFrame {
             jaw: JawState::default(),
             lips: LipsState::default(),
             curves: Named(CURVE_NAMES.iter().map(|n| (n.to_string(), 0.0)).collect()),
+            performer_width_m: None,
         }
     }
 }
@@ -342,7 +348,10 @@ impl Rig {
                 jaw_slide: 0.0,
             },
             values: [0.0; CURVES],
-            out: RigFrame::default(),
+            out: RigFrame {
+                performer_width_m: Some(neutral.mouth_width()),
+                ..RigFrame::default()
+            },
             settings,
         })
     }
@@ -399,6 +408,7 @@ impl Rig {
     pub fn output_for(&self, character: &RangeOverrides, out: &mut RigFrame) {
         out.jaw = self.out.jaw;
         out.lips = self.out.lips;
+        out.performer_width_m = self.out.performer_width_m;
         if character.is_empty() {
             out.curves.clone_from(&self.out.curves);
             return;
