@@ -524,6 +524,49 @@ mod tests {
         assert!(e.contains("line 1: not a take line"), "{e}");
     }
 
+    /// The performer's mouth width is read when the line has it (takes before it have none)
+    /// and refused naming the line when it is no mouth width; absurd lip motions too.
+    #[test]
+    fn the_performers_width_and_the_lips_are_checked() {
+        assert_eq!(
+            read_all(&rig_line("0", 1.0)).unwrap()[0]
+                .rig
+                .unwrap()
+                .performer_width_m,
+            None
+        );
+        let with = |w: &str| {
+            rig_line("0", 1.0).replace(
+                "\"curves\"",
+                &format!("\"performer_width_m\": {w}, \"curves\""),
+            )
+        };
+        let rig = read_all(&with("0.052")).unwrap()[0].rig.unwrap();
+        assert_eq!(rig.performer_width_m, Some(0.052));
+        for bad in ["0", "-0.05", "1e300", "0.001"] {
+            let e = error_of(&with(bad));
+            assert!(
+                e.contains("line 1: rig.performer_width_m") && e.contains("0.005 to 0.5"),
+                "{bad}: {e}"
+            );
+        }
+        let e = error_of(&with("\"wide\""));
+        assert!(e.contains("line 1: not a take line"), "{e}");
+        let upper = r#""upper": {"rotation": [1, 0, 0, 0], "translation": [0, 0, 0]"#;
+        let far = rig_line("0", 1.0).replace(
+            upper,
+            r#""upper": {"rotation": [1, 0, 0, 0], "translation": [0, 1e300, 0]"#,
+        );
+        let e = error_of(&far);
+        assert!(e.contains("line 1: rig.lips.upper.translation"), "{e}");
+        let skew = rig_line("0", 1.0).replace(
+            upper,
+            r#""upper": {"rotation": [2, 0, 0, 0], "translation": [0, 0, 0]"#,
+        );
+        let e = error_of(&skew);
+        assert!(e.contains("line 1: rig.lips.upper.rotation"), "{e}");
+    }
+
     #[test]
     fn given_names_fix_the_order() {
         let text = line("0", r#"{"P2": [2, 0, 0], "P1": [1, 0, 0]}"#);
