@@ -45,6 +45,7 @@ mod error;
 pub mod frame;
 pub mod head;
 mod head_file;
+mod head_route;
 pub mod jsonl;
 pub mod kabsch;
 pub mod layout;

@@ -11,6 +11,7 @@ pub mod lipsync_poses;
 pub mod play;
 pub mod process;
 pub mod record;
+pub mod recorded_heads;
 pub mod retarget;
 pub mod run;
 pub mod synth;
