@@ -3,8 +3,10 @@
 //! applied to the ground-truth dots.
 //!
 //! Per session, over the frames after calibration from the evaluation's `--skip` on:
-//! - *jaw RMS*: the rig's jaw angle against the synthetic jaw's rotation (degrees);
-//! - *slide RMS*: the rig's jaw slide against the synthetic jaw's, which does not slide (mm);
+//! - *jaw RMS*: the rig's jaw angle against the synthetic jaw's rotation about its own hinge
+//!   (wherever the session put it: `SynthConfig::jaw`), in degrees;
+//! - *slide RMS*: the rig's jaw slide against the synthetic jaw's sideways slide (0 unless the
+//!   session slides it), in mm;
 //! - *curve RMS*: each curve against the same curve computed from the ground-truth dots
 //!   (stabilised by the retarget core from the true dots, the same neutral frames), with the
 //!   ranges the character's output uses (its own `[rig.ranges]`, else the tracked rig's); the
@@ -192,7 +194,7 @@ impl Measure for RigAccuracy {
         let m = &mut self.metrics;
         m.frames += 1;
         m.jaw_sq += (ours.jaw_angle - mouth.jaw).to_degrees().powi(2);
-        m.slide_sq += ours.jaw_slide.powi(2);
+        m.slide_sq += (ours.jaw_slide - mouth.slide).powi(2);
         for ((sq, x), y) in m.curve_sq.iter_mut().zip(a).zip(b) {
             *sq += (x - y).powi(2);
         }
