@@ -3,8 +3,10 @@
 //! applied to the ground-truth dots.
 //!
 //! Per session, over the frames after calibration from the evaluation's `--skip` on:
-//! - *jaw RMS*: the rig's jaw angle against the synthetic jaw's rotation (degrees);
-//! - *slide RMS*: the rig's jaw slide against the synthetic jaw's, which does not slide (mm);
+//! - *jaw RMS*: the rig's jaw angle against the synthetic jaw's rotation about its own hinge
+//!   (wherever the session put it: `SynthConfig::jaw`), in degrees;
+//! - *slide RMS*: the rig's jaw slide against the synthetic jaw's sideways slide (0 unless the
+//!   session slides it), in mm;
 //! - *curve RMS*: each curve against the same curve computed from the ground-truth dots
 //!   (stabilised by the retarget core from the true dots, the same neutral frames), with the
 //!   ranges the character's output uses (its own `[rig.ranges]`, else the tracked rig's); the
@@ -88,12 +90,61 @@ impl RigMetrics {
     pub fn curve_rms(&self, i: usize) -> f64 {
         (self.curve_sq[i] / self.frames.max(1) as f64).sqrt()
     }
+    /// The figures the targets ([`RigTargets`]) are on, in a line.
+    pub fn summary(&self) -> String {
+        let (worst, rms) = self.worst_curve();
+        format!(
+            "{} frames: jaw RMS {:.2}°, slide RMS {:.2} mm, worst curve {worst} {rms:.3}, jawOpen r {:.3}",
+            self.frames,
+            self.jaw_rms_deg(),
+            self.slide_rms_mm(),
+            self.jaw_open.value()
+        )
+    }
+
     /// The worst curve: (name, RMS).
     pub fn worst_curve(&self) -> (&'static str, f64) {
         (0..CURVES)
             .map(|i| (CURVE_NAMES[i], self.curve_rms(i)))
             .max_by(|a, b| a.1.total_cmp(&b.1))
             .expect("curves")
+    }
+}
+
+/// The rig's accuracy targets (docs/rig.md): the jaw within 1.5° RMS of the synthetic jaw's
+/// rotation about its own hinge, its slide within 1 mm RMS of the synthetic slide, every curve
+/// within 0.05 RMS of its definition applied to the true dots, and `jawOpen` correlated with
+/// the synthetic jaw at r ≥ 0.95.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigTargets {
+    pub jaw_deg: f64,
+    pub slide_mm: f64,
+    pub curve_rms: f64,
+    pub jaw_open_r: f64,
+}
+
+impl RigTargets {
+    pub const TARGETS: RigTargets = RigTargets {
+        jaw_deg: 1.5,
+        slide_mm: 1.0,
+        curve_rms: 0.05,
+        jaw_open_r: 0.95,
+    };
+
+    /// Every figure of `m` against these targets; the error lists the session's figures.
+    pub fn check(&self, m: &RigMetrics) -> Result<(), String> {
+        let (_, rms) = m.worst_curve();
+        // NaN figures fail (every comparison with NaN is false).
+        let ok = m.frames > 0
+            && m.jaw_rms_deg() <= self.jaw_deg
+            && m.slide_rms_mm() <= self.slide_mm
+            && rms <= self.curve_rms
+            && m.jaw_open.value() >= self.jaw_open_r;
+        if ok {
+            Ok(())
+        } else {
+            Err(format!("{}; targets {self:?}", m.summary()))
+        }
     }
 }
 
@@ -197,7 +248,7 @@ impl Measure for RigAccuracy {
         let m = &mut self.metrics;
         m.frames += 1;
         m.jaw_sq += (ours.jaw_angle - mouth.jaw).to_degrees().powi(2);
-        m.slide_sq += ours.jaw_slide.powi(2);
+        m.slide_sq += (ours.jaw_slide - mouth.slide).powi(2);
         for ((sq, x), y) in m.curve_sq.iter_mut().zip(a).zip(b) {
             *sq += (x - y).powi(2);
         }

@@ -153,3 +153,20 @@ fn a_length_past_a_day_exits_2() {
 fn non_finite_distortion_exits_2() {
     synth_refuses("f.mcap", &["--distortion", "NaN,0,0,0,0"], "distortion");
 }
+
+/// A hinge moved past ±50 % or a jaw slide out of 0–5 mm is refused at the door, naming the
+/// flag.
+#[test]
+fn a_hinge_or_a_jaw_slide_out_of_range_exits_2() {
+    synth_refuses("g.mcap", &["--hinge", "back=+80%"], "--hinge");
+    synth_refuses("h.mcap", &["--hinge", "sideways=5%"], "--hinge");
+    synth_refuses("i.mcap", &["--jaw-slide", "NaN"], "--jaw-slide");
+    synth_refuses("j.mcap", &["--jaw-slide", "12"], "--jaw-slide");
+    let output = mouthpiece()
+        .args(["evaluate", "--seeds", "1", "--hinge", "down=-70%"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{err}");
+    assert!(err.contains("--hinge"), "{err}");
+}

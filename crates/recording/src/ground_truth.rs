@@ -77,8 +77,8 @@ pub struct GroundTruth {
 /// articulation parameters; all zero is the neutral pose).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct MouthTruth {
-    /// Jaw rotation about the hinge axis, radians (opening > 0). The synthetic jaw does not
-    /// slide: its slide is 0.
+    /// Jaw rotation about the hinge axis (the synthetic head's, wherever the session put it),
+    /// radians (opening > 0).
     pub jaw: f64,
     /// Lip spreading (corners outward), 0..1.
     pub spread: f64,
@@ -88,6 +88,17 @@ pub struct MouthTruth {
     pub raise: f64,
     /// Lower lip rolled in under the upper lip, 0..1.
     pub roll_in: f64,
+    /// The jaw's slide along the hinge axis, metres (> 0 towards the performer's left);
+    /// absent, 0: a jaw that does not slide (the default synthetic jaw).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub slide: f64,
+    /// The jaw's forward glide, metres (> 0 out of the face); absent, 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub glide: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl GroundTruth {
@@ -121,11 +132,12 @@ impl GroundTruth {
     },
     "mouth": {
       "type": "object",
-      "description": "the synthetic mouth state: jaw (radians, about the hinge; the synthetic jaw does not slide), spread, round, raise, roll_in (0..1)",
+      "description": "the synthetic mouth state: jaw (radians, about the hinge), spread, round, raise, roll_in (0..1); slide (metres along the hinge axis, > 0 the performer's left) and glide (metres forward), absent when 0",
       "required": ["jaw", "spread", "round", "raise", "roll_in"],
       "properties": {
         "jaw": {"type": "number"}, "spread": {"type": "number"}, "round": {"type": "number"},
-        "raise": {"type": "number"}, "roll_in": {"type": "number"}
+        "raise": {"type": "number"}, "roll_in": {"type": "number"},
+        "slide": {"type": "number"}, "glide": {"type": "number"}
       }
     }
   }

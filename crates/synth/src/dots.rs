@@ -44,3 +44,59 @@ mod tests {
         assert_eq!(forehead, forehead_open);
     }
 }
+
+#[cfg(test)]
+mod jaw_tests {
+    use crate::head::{self, JawPose};
+    use crate::layout::DotLayout;
+    use crate::motion::MouthState;
+    use crate::JawOptions;
+
+    /// `--hinge` turns the jaw about the moved hinge, `--jaw-slide` carries the lower lip
+    /// sideways and forward and leaves the upper lip.
+    #[test]
+    fn the_jaw_turns_about_the_moved_hinge_and_slides_the_lower_lip() {
+        let zc = head::seam_zc();
+        let dots: Vec<head::Attrs> = head::lip_dot_material(DotLayout::default().lip_dots, zc)
+            .into_iter()
+            .map(|(a, v)| head::attrs_at(a, v, zc))
+            .collect();
+        let open = MouthState {
+            jaw: 0.2,
+            ..MouthState::default()
+        };
+        let (upper, lower) = (&dots[3], &dots[9]);
+        let rest = head::deform(lower, &MouthState::default());
+        let moved = |jaw: &JawPose| head::deform_with(lower, &open, jaw);
+        let dist = |p: [f64; 3], h: [f64; 2]| (p[1] - h[0]).hypot(p[2] - h[1]);
+        let opts = JawOptions {
+            hinge_back: 0.25,
+            hinge_down: -0.25,
+            ..JawOptions::default()
+        };
+        assert_eq!(opts.hinge(), [-0.03125, 0.1]);
+        let far = JawPose {
+            hinge: opts.hinge(),
+            ..JawPose::default()
+        };
+        let step = |p: [f64; 3]| (p[1] - rest[1]).hypot(p[2] - rest[2]);
+        let (d0, d1) = (step(moved(&JawPose::default())), step(moved(&far)));
+        // A chord of the same angle: in proportion to the distance from the hinge.
+        let ratio = dist(rest, far.hinge) / dist(rest, head::HINGE);
+        assert!(
+            (d1 / d0 - ratio).abs() < 1e-9 && ratio > 1.2,
+            "{d0} {d1} {ratio}"
+        );
+        assert_eq!(moved(&JawPose::default()), head::deform(lower, &open));
+        let slid = JawPose {
+            slide: [0.002, 0.003],
+            ..JawPose::default()
+        };
+        let (a, b) = (moved(&JawPose::default()), moved(&slid));
+        assert!((b[0] - a[0] - 0.002).abs() < 1e-12 && (a[2] - b[2] - 0.003).abs() < 1e-12);
+        assert_eq!(
+            head::deform_with(upper, &open, &slid),
+            head::deform(upper, &open)
+        );
+    }
+}

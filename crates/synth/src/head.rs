@@ -21,8 +21,9 @@ const VC: f64 = -0.06;
 const VH: f64 = 0.14;
 /// Half the gap between the two material rows at the lip seam.
 pub const SEAM_EPS: f64 = 0.0002;
-/// Jaw hinge (temporomandibular axis), parallel to x, at this (y, z).
-const HINGE: [f64; 2] = [-0.025, 0.08];
+/// Jaw hinge (temporomandibular axis), parallel to x, at this (y, z): 25 mm above and 80 mm
+/// behind the mouth centre. [`JawPose`] can place it elsewhere.
+pub const HINGE: [f64; 2] = [-0.025, 0.08];
 /// Head rotation pivot (H frame): roughly the centre of the head.
 pub const PIVOT: [f64; 3] = [0.0, -0.04, 0.09];
 
@@ -189,8 +190,34 @@ pub fn attrs_at(a: f64, v: f64, zc: f64) -> Attrs {
     }
 }
 
-/// Where a material point is for a mouth state (H frame).
+/// Where the jaw hinges and how far it has slid, for one frame (H frame, metres).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JawPose {
+    /// The hinge axis (parallel to x) at this (y, z).
+    pub hinge: [f64; 2],
+    /// The jaw's slide after its turn: sideways (x, > 0 towards the performer's left) and
+    /// forward (out of the face, > 0; the H frame's −z).
+    pub slide: [f64; 2],
+}
+
+impl Default for JawPose {
+    fn default() -> Self {
+        Self {
+            hinge: HINGE,
+            slide: [0.0; 2],
+        }
+    }
+}
+
+/// Where a material point is for a mouth state (H frame), the jaw on the default hinge and not
+/// sliding.
 pub fn deform(at: &Attrs, m: &MouthState) -> [f64; 3] {
+    deform_with(at, m, &JawPose::default())
+}
+
+/// [`deform`] with the jaw turning about `jaw.hinge` and then sliding by `jaw.slide` (each
+/// point carried by its jaw weight).
+pub fn deform_with(at: &Attrs, m: &MouthState, jaw: &JawPose) -> [f64; 3] {
     let open = smoothstep(0.0, 0.05, m.jaw);
     let mut p = [
         at.p0[0] + at.groove[0] * open,
@@ -198,7 +225,7 @@ pub fn deform(at: &Attrs, m: &MouthState) -> [f64; 3] {
         at.p0[2] + at.groove[2] * open,
     ];
     if at.part == Part::Teeth {
-        return rotate_jaw(p, m.jaw * at.w_jaw);
+        return move_jaw(p, m.jaw, at.w_jaw, jaw);
     }
     let l = at.w_lip;
     if l > 1e-6 {
@@ -218,17 +245,28 @@ pub fn deform(at: &Attrs, m: &MouthState) -> [f64; 3] {
         p[1] += 0.003 * m.roll_in * upper;
         p[2] -= 0.002 * m.roll_in * upper;
     }
-    rotate_jaw(p, m.jaw * at.w_jaw)
+    move_jaw(p, m.jaw, at.w_jaw, jaw)
 }
 
-fn rotate_jaw(p: [f64; 3], angle: f64) -> [f64; 3] {
+/// The jaw's motion of a point of jaw weight `w`: turned by `w · angle` about the hinge, then
+/// slid by `w · slide`.
+fn move_jaw(p: [f64; 3], angle: f64, w: f64, jaw: &JawPose) -> [f64; 3] {
+    let mut q = rotate_jaw(p, angle * w, jaw.hinge);
+    if jaw.slide != [0.0; 2] {
+        q[0] += w * jaw.slide[0];
+        q[2] -= w * jaw.slide[1];
+    }
+    q
+}
+
+fn rotate_jaw(p: [f64; 3], angle: f64, hinge: [f64; 2]) -> [f64; 3] {
     if angle == 0.0 {
         return p;
     }
     let (s, c) = angle.sin_cos();
-    let dy = p[1] - HINGE[0];
-    let dz = p[2] - HINGE[1];
-    [p[0], HINGE[0] + dy * c - dz * s, HINGE[1] + dy * s + dz * c]
+    let dy = p[1] - hinge[0];
+    let dz = p[2] - hinge[1];
+    [p[0], hinge[0] + dy * c - dz * s, hinge[1] + dy * s + dz * c]
 }
 
 /// A rectangular patch of the mesh: `cols × rows` vertices from `start`, columns across

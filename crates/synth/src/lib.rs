@@ -35,6 +35,7 @@ use mouthpiece_frame::{Calibration, Extrinsics, Frame, Intrinsics};
 pub use mouthpiece_recording::{GroundTruth, HeadPose, MouthTruth};
 
 pub use dots::dot_positions;
+pub use head::HINGE;
 pub use layout::{DotLayout, ForeheadDot};
 pub use motion::{HeadState, MouthState};
 
@@ -101,6 +102,67 @@ pub struct SynthConfig {
     /// Still, closed, relaxed mouth at the start (the neutral pose), seconds.
     pub neutral_seconds: f64,
     pub layout: DotLayout,
+    /// Where the jaw hinges and how it slides (default: the head's own hinge, no slide).
+    pub jaw: JawOptions,
+}
+
+/// The synthetic jaw's hinge and slide (`--hinge`, `--jaw-slide`; docs/synth.md). The default,
+/// all zero, is the head's own hinge ([`HINGE`]: 25 mm above and 80 mm behind the mouth
+/// centre) and a jaw that only turns.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct JawOptions {
+    /// The hinge moved back (> 0, further behind the mouth; < 0 forward), as a fraction of its
+    /// default distance behind the mouth centre: 0.25 puts it 100 mm behind.
+    pub hinge_back: f64,
+    /// The hinge moved down (> 0; < 0 up), as a fraction of its default height above the mouth
+    /// centre: 0.25 puts it 18.75 mm above.
+    pub hinge_down: f64,
+    /// Slide amplitude, metres: sideways within ± it (a smooth seeded motion), and forward by
+    /// it at the widest speech opening (0.24 rad; none below 0.06 rad).
+    pub slide_m: f64,
+}
+
+/// Largest move of the hinge, as a fraction of its default distance along each axis.
+pub const MAX_HINGE_MOVE: f64 = 0.5;
+/// Largest jaw slide amplitude, metres.
+pub const MAX_JAW_SLIDE_M: f64 = 0.005;
+
+impl JawOptions {
+    /// The hinge moves are within ±[`MAX_HINGE_MOVE`]; the error names the axis (`back`,
+    /// `down`).
+    pub fn validate_hinge(&self) -> Result<(), String> {
+        for (axis, v) in [("back", self.hinge_back), ("down", self.hinge_down)] {
+            if !(v.is_finite() && v.abs() <= MAX_HINGE_MOVE) {
+                return Err(format!(
+                    "the hinge's move {axis} must be within ±{} %, got {} %",
+                    100.0 * MAX_HINGE_MOVE,
+                    100.0 * v
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The slide amplitude is from 0 to [`MAX_JAW_SLIDE_M`].
+    pub fn validate_slide(&self) -> Result<(), String> {
+        let v = self.slide_m;
+        if !(v.is_finite() && (0.0..=MAX_JAW_SLIDE_M).contains(&v)) {
+            return Err(format!(
+                "the jaw's slide must be from 0 to {} mm, got {} mm",
+                1e3 * MAX_JAW_SLIDE_M,
+                1e3 * v
+            ));
+        }
+        Ok(())
+    }
+
+    /// The hinge axis's (y, z) in the head frame (y down, z into the head; metres).
+    pub fn hinge(&self) -> [f64; 2] {
+        [
+            HINGE[0] * (1.0 - self.hinge_down),
+            HINGE[1] * (1.0 + self.hinge_back),
+        ]
+    }
 }
 
 impl Default for SynthConfig {
@@ -117,6 +179,7 @@ impl Default for SynthConfig {
             colour_effects: true,
             neutral_seconds: 1.5,
             layout: DotLayout::default(),
+            jaw: JawOptions::default(),
         }
     }
 }
@@ -190,6 +253,8 @@ impl SynthConfig {
                 return bad("depth camera intrinsics out of range".into());
             }
         }
+        self.jaw.validate_hinge().map_err(SynthError::Config)?;
+        self.jaw.validate_slide().map_err(SynthError::Config)?;
         self.layout.validate().map_err(SynthError::Config)
     }
 
@@ -243,6 +308,7 @@ pub struct Synth {
     renderer: render::Renderer,
     speech: motion::SpeechTrack,
     head: motion::HeadTrack,
+    slide: motion::SlideTrack,
     next_index: u64,
     frame_count: u64,
 }
@@ -253,6 +319,8 @@ impl Synth {
         let frame_count = (config.seconds * config.fps).round() as u64;
         let speech = motion::SpeechTrack::new(config.seed, config.neutral_seconds, config.seconds);
         let head = motion::HeadTrack::new(config.seed, config.head_motion, config.neutral_seconds);
+        let slide =
+            motion::SlideTrack::new(config.seed, config.jaw.slide_m, config.neutral_seconds);
         let renderer = render::Renderer::new(&config);
         tracing::info!(
             seed = config.seed,
@@ -267,6 +335,7 @@ impl Synth {
             renderer,
             speech,
             head,
+            slide,
             next_index: 0,
             frame_count,
         })
@@ -291,6 +360,14 @@ impl Synth {
         (self.speech.at(t), self.head.at(t))
     }
 
+    /// The jaw's hinge and slide at time `t` for the mouth `mouth` shows then.
+    fn jaw_at(&self, t: f64, mouth: &MouthState) -> head::JawPose {
+        head::JawPose {
+            hinge: self.config.jaw.hinge(),
+            slide: self.slide.at(t, mouth.jaw),
+        }
+    }
+
     /// Drives the mouth from keyed states instead of the seed's speech (a lip-sync take);
     /// keys must be in time order. Between keys the mouth eases as it does between the seed's.
     pub fn set_speech(&mut self, keys: Vec<(f64, MouthState)>) {
@@ -306,7 +383,8 @@ impl Synth {
         self.next_index += 1;
         let t = i as f64 / self.config.fps;
         let (mouth, head) = self.state_at(t);
-        let out = self.renderer.render(i, t, &mouth, &head);
+        let jaw = self.jaw_at(t, &mouth);
+        let out = self.renderer.render(i, t, &mouth, &head, &jaw);
         let frame = Frame {
             seq: i,
             device_ts_us: (t * 1e6).round() as u64,

@@ -196,6 +196,58 @@ impl HeadTrack {
     }
 }
 
+/// The jaw's slide (`--jaw-slide`): sideways, a smooth seeded motion within ±`amplitude`
+/// (sums of sines, as the head's, faded in after the neutral lead-in); forward, `amplitude`
+/// times how wide the mouth opens (none below 0.06 rad, all of it at 0.24 rad, the widest
+/// speech opening): the condyles glide forward on wide openings.
+#[derive(Debug, Clone)]
+pub struct SlideTrack {
+    amplitude: f64,
+    neutral_s: f64,
+    /// (period s, phase) of the sideways motion's three sines.
+    waves: [(f64, f64); 3],
+}
+
+impl SlideTrack {
+    pub fn new(seed: u64, amplitude: f64, neutral_s: f64) -> Self {
+        // A stream of its own: the speech and the head are the same with or without a slide.
+        let mut rng = Rng::new(seed ^ 0x511d_e000);
+        let mut waves = [(1.0, 0.0); 3];
+        for (k, w) in waves.iter_mut().enumerate() {
+            let base = [2.3, 1.1, 0.6][k];
+            *w = (
+                base * rng.range(0.8, 1.25),
+                rng.range(0.0, std::f64::consts::TAU),
+            );
+        }
+        Self {
+            amplitude,
+            neutral_s,
+            waves,
+        }
+    }
+
+    /// Sideways and forward slide (metres) at time `t` with the jaw open by `jaw` radians.
+    pub fn at(&self, t: f64, jaw: f64) -> [f64; 2] {
+        if self.amplitude == 0.0 {
+            return [0.0; 2];
+        }
+        let fade = smoothstep(self.neutral_s, self.neutral_s + 1.0, t);
+        let side: f64 = self
+            .waves
+            .iter()
+            .zip([0.6, 0.3, 0.1])
+            .map(|((period, phase), a)| {
+                a * (std::f64::consts::TAU * (t - self.neutral_s) / period + phase).sin()
+            })
+            .sum();
+        [
+            self.amplitude * fade * side,
+            self.amplitude * smoothstep(0.06, 0.24, jaw),
+        ]
+    }
+}
+
 pub(crate) fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
     let s = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
     s * s * (3.0 - 2.0 * s)
@@ -235,6 +287,26 @@ mod tests {
             jaw.iter().filter(|&&j| j == 0.0).count() > 10,
             "pauses return to rest"
         );
+    }
+
+    #[test]
+    fn the_jaw_slides_within_its_amplitude_and_glides_forward_on_wide_openings() {
+        assert_eq!(SlideTrack::new(4, 0.0, 1.5).at(3.0, 0.2), [0.0; 2]);
+        let slide = SlideTrack::new(4, 0.003, 1.5);
+        assert_eq!(
+            slide.at(1.0, 0.0),
+            [0.0; 2],
+            "still during the neutral lead-in"
+        );
+        let mut max_side: f64 = 0.0;
+        for i in 0..600 {
+            let [side, fwd] = slide.at(1.5 + i as f64 / 30.0, 0.0);
+            assert!(side.abs() <= 0.003 + 1e-12 && fwd == 0.0);
+            max_side = max_side.max(side.abs());
+        }
+        assert!(max_side > 0.0015, "it slides sideways ({max_side})");
+        assert_eq!(slide.at(5.0, 0.05)[1], 0.0, "no glide on a small opening");
+        assert!((slide.at(5.0, 0.24)[1] - 0.003).abs() < 1e-12);
     }
 
     #[test]

@@ -257,6 +257,7 @@ impl Renderer {
         t: f64,
         mouth: &MouthState,
         head_state: &HeadState,
+        jaw: &head::JawPose,
     ) -> RenderOutput {
         let rot = head_rotation(head_state);
         let base = [0.0, 0.0, self.distance];
@@ -285,8 +286,12 @@ impl Renderer {
 
         // Mesh.
         self.pos.clear();
-        self.pos
-            .extend(self.geo.attrs.iter().map(|a| head::deform(a, mouth)));
+        self.pos.extend(
+            self.geo
+                .attrs
+                .iter()
+                .map(|a| head::deform_with(a, mouth, jaw)),
+        );
         let mut normals = std::mem::take(&mut self.normals);
         self.geo.normals(&self.pos, &mut normals);
         self.normals = normals;
@@ -326,7 +331,7 @@ impl Renderer {
         let mut lip_px = Vec::with_capacity(self.dots.len());
         for dot in &self.dots {
             let r2 = (dot.radius_m * dot.radius_m) as f32;
-            let centre = to_camera(head::deform(&dot.attrs, mouth));
+            let centre = to_camera(head::deform_with(&dot.attrs, mouth, jaw));
             points.insert(dot.name.clone(), centre);
             let px = self.color_view.project(centre);
             let mut seen = false;
@@ -424,6 +429,8 @@ impl Renderer {
                 round: mouth.round,
                 raise: mouth.raise,
                 roll_in: mouth.roll_in,
+                slide: jaw.slide[0],
+                glide: jaw.slide[1],
             }),
         };
         RenderOutput {

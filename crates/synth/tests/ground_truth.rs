@@ -4,7 +4,7 @@
 
 use mouthpiece_frame::{Frame, Intrinsics};
 use mouthpiece_synth::{
-    GroundTruth, HeadMotion, NoiseModel, Synth, SynthConfig, DOT_MIN_SATURATION_CV,
+    GroundTruth, HeadMotion, JawOptions, NoiseModel, Synth, SynthConfig, DOT_MIN_SATURATION_CV,
     FOREHEAD_DOT_HUE_RANGE_CV, LIP_DOT_HUE_RANGE_CV,
 };
 
@@ -319,4 +319,57 @@ fn separate_depth_camera_sees_the_dots_at_their_depth() {
     }
     // Dots seen by the colour camera may be hidden from the depth camera 25 mm away.
     assert!(good as f64 > 0.9 * total as f64, "{good} of {total}");
+}
+
+/// `SynthConfig::jaw` reaches the rendered session: with the hinge moved back the lower lip
+/// of an open mouth is elsewhere and the upper lip is not; a sliding jaw's ground truth says
+/// how far it slid, and its lower lip is that far to the side.
+#[test]
+fn the_sessions_jaw_hinges_and_slides_as_configured() {
+    let run = |jaw: JawOptions| -> Vec<GroundTruth> {
+        let config = SynthConfig {
+            seed: 3,
+            seconds: 3.0,
+            camera: SynthConfig::camera_for_size(160, 120),
+            head_motion: HeadMotion::None,
+            noise: NoiseModel::None,
+            colour_effects: false,
+            jaw,
+            ..SynthConfig::default()
+        };
+        Synth::new(config).unwrap().map(|(_, gt)| gt).collect()
+    };
+    let plain = run(JawOptions::default());
+    let hinged = run(JawOptions {
+        hinge_back: 0.25,
+        ..JawOptions::default()
+    });
+    let slid = run(JawOptions {
+        slide_m: 0.003,
+        ..JawOptions::default()
+    });
+    let open = (0..plain.len())
+        .max_by(|&a, &b| {
+            let jaw = |i: usize| plain[i].mouth.unwrap().jaw;
+            jaw(a).total_cmp(&jaw(b))
+        })
+        .unwrap();
+    let (p, h, s) = (&plain[open], &hinged[open], &slid[open]);
+    assert!(p.mouth.unwrap().jaw > 0.1, "{:?}", p.mouth);
+    assert_eq!(p.mouth, h.mouth, "the same speech");
+    let d = |a: &GroundTruth, b: &GroundTruth, dot: &str| {
+        let (x, y) = (a.point(dot).unwrap(), b.point(dot).unwrap());
+        [x[0] - y[0], x[1] - y[1], x[2] - y[2]]
+    };
+    assert_eq!(
+        d(h, p, "D4"),
+        [0.0; 3],
+        "the upper lip does not move with the jaw"
+    );
+    let lower = d(h, p, "D10");
+    assert!(lower[1] > 0.001, "further from the hinge, lower: {lower:?}");
+    let m = s.mouth.unwrap();
+    assert!(m.slide.abs() > 1e-4 && m.glide > 0.0, "{m:?}");
+    assert!((d(s, p, "D10")[0] - m.slide).abs() < 1e-12);
+    assert!(plain.iter().all(|g| g.mouth.unwrap().slide == 0.0));
 }

@@ -77,6 +77,10 @@ pub struct Args {
     /// Camera to the mouth, metres, as `synth --distance`.
     #[arg(long, default_value_t = 0.6)]
     pub distance: f64,
+    /// The synthetic jaw's hinge and slide, as `synth --hinge` and `--jaw-slide`: the rig's
+    /// jaw is measured against the synthetic jaw's own rotation and slide.
+    #[command(flatten)]
+    pub jaw: crate::cmd::synth::JawArgs,
 }
 
 /// The sessions' camera and distance from `--size` and `--distance`, checked by the synthetic
@@ -162,6 +166,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     layout: layout.clone(),
                     camera: view.camera,
                     distance_m: view.distance_m,
+                    jaw: args.jaw.options(),
                     ..SynthConfig::default()
                 };
                 let mut rig = RigAccuracy::new(

@@ -82,6 +82,87 @@ pub struct Args {
     /// The basic poses whose mouth states `--speech` blends (default: the shipped ones).
     #[arg(long, requires = "speech")]
     pub poses: Option<PathBuf>,
+    #[command(flatten)]
+    pub jaw: JawArgs,
+}
+
+/// The synthetic jaw's hinge and slide (`mouthpiece synth` and `mouthpiece evaluate`).
+#[derive(Debug, Clone, Copy, Default, clap::Args)]
+pub struct JawArgs {
+    /// Move the synthetic jaw's hinge: `back=P%,down=Q%` (either or both), percentages of
+    /// its default distance behind (80 mm) and above (25 mm) the mouth centre, each within
+    /// ±50 % (negative: forward, up).
+    #[arg(long, value_name = "back=P%,down=Q%", value_parser = parse_hinge)]
+    pub hinge: Option<(f64, f64)>,
+    /// Slide the synthetic jaw: sideways within ±MM (a smooth seeded motion) and forward by
+    /// MM on the widest openings; 0 to 5.
+    #[arg(long, value_name = "MM", value_parser = parse_jaw_slide)]
+    pub jaw_slide: Option<f64>,
+}
+
+impl JawArgs {
+    /// The synthetic performer's jaw options (checked when the flags were parsed).
+    pub fn options(&self) -> mouthpiece_synth::JawOptions {
+        let (back, down) = self.hinge.unwrap_or((0.0, 0.0));
+        mouthpiece_synth::JawOptions {
+            hinge_back: back,
+            hinge_down: down,
+            slide_m: self.jaw_slide.unwrap_or(0.0) / 1e3,
+        }
+    }
+}
+
+/// `--hinge back=P%,down=Q%` → (back, down) as fractions, within the synthetic performer's
+/// range.
+pub(crate) fn parse_hinge(s: &str) -> Result<(f64, f64), String> {
+    let short: String = s.chars().take(80).collect();
+    let (mut back, mut down) = (None, None);
+    for part in s.split(',') {
+        let (key, value) = part
+            .split_once('=')
+            .ok_or_else(|| format!("expected back=P%,down=Q%, got {short:?}"))?;
+        let slot = match key.trim() {
+            "back" => &mut back,
+            "down" => &mut down,
+            _ => {
+                return Err(format!(
+                    "unknown direction {:?} (back or down) in {short:?}",
+                    key.trim().chars().take(20).collect::<String>()
+                ))
+            }
+        };
+        let pct: f64 = value
+            .trim()
+            .strip_suffix('%')
+            .and_then(|v| v.trim().parse().ok())
+            .ok_or_else(|| format!("expected a percentage such as +25% in {short:?}"))?;
+        if slot.replace(pct / 100.0).is_some() {
+            return Err(format!("{} given twice in {short:?}", key.trim()));
+        }
+    }
+    let jaw = mouthpiece_synth::JawOptions {
+        hinge_back: back.unwrap_or(0.0),
+        hinge_down: down.unwrap_or(0.0),
+        ..Default::default()
+    };
+    jaw.validate_hinge()?;
+    Ok((jaw.hinge_back, jaw.hinge_down))
+}
+
+/// `--jaw-slide MM`, within the synthetic performer's range.
+pub(crate) fn parse_jaw_slide(s: &str) -> Result<f64, String> {
+    let mm: f64 = s.trim().parse().map_err(|_| {
+        format!(
+            "expected millimetres, got {:?}",
+            s.chars().take(80).collect::<String>()
+        )
+    })?;
+    mouthpiece_synth::JawOptions {
+        slide_m: mm / 1e3,
+        ..Default::default()
+    }
+    .validate_slide()?;
+    Ok(mm)
 }
 
 pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -179,6 +260,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             NoiseArg::Realsense => NoiseModel::Realsense,
         },
         colour_effects: !args.no_colour_effects,
+        jaw: args.jaw.options(),
         ..SynthConfig::default()
     };
     if let Some(d) = args.distortion {
@@ -254,4 +336,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     debug_assert_eq!(frames, total);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hinge_moves_parse_as_fractions_and_bad_ones_say_why() {
+        assert_eq!(parse_hinge("back=+25%,down=-25%"), Ok((0.25, -0.25)));
+        assert_eq!(parse_hinge("down=10%"), Ok((0.0, 0.1)));
+        assert_eq!(parse_hinge(" back = -50 % "), Ok((-0.5, 0.0)));
+        for (bad, says) in [
+            ("back=+60%", "within ±50 %"),
+            ("down=NaN%", "within ±50 %"),
+            ("back=25", "percentage"),
+            ("up=25%", "unknown direction"),
+            ("back=1%,back=2%", "twice"),
+            ("back", "expected back=P%"),
+        ] {
+            let e = parse_hinge(bad).unwrap_err();
+            assert!(e.contains(says), "{bad}: {e}");
+        }
+        assert_eq!(parse_jaw_slide("2.5"), Ok(2.5));
+        for bad in ["-1", "6", "inf", "NaN", "two"] {
+            assert!(parse_jaw_slide(bad).is_err(), "{bad}");
+        }
+    }
 }
