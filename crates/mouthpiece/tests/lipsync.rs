@@ -561,3 +561,152 @@ fn synth_driven_by_weights_and_poses_captured_back_match_the_shipped_poses() {
         );
     }
 }
+
+/// Sends `take` with `mouthpiece play` to the python-osc VMC receiver
+/// (`tests/python/vmc_receiver.py`, independent of the Rust encoder), which checks every frame
+/// against the take's own lines: the rig's curves and visemes (float32 exact) and the head and
+/// eye bones after the documented axis conversion. Returns the receiver's summary.
+fn play_to_a_vmc_receiver(take: &Path, character_name: &str, work: &Path) -> Value {
+    use std::process::Stdio;
+    use std::time::{Duration, Instant};
+    let python = std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let (port_file, stop_file, stream_file) = (
+        work.join("port"),
+        work.join("stop"),
+        work.join("stream.jsonl"),
+    );
+    let _ = std::fs::remove_file(&port_file);
+    let _ = std::fs::remove_file(&stop_file);
+    // What the receiver compares with: each line's time, rig and character head.
+    let lines = read_take(take);
+    let stream: Vec<String> = lines
+        .iter()
+        .map(|l| {
+            serde_json::json!({"t": l["t"], "rig": l["rig"], "head": l["character_head"]})
+                .to_string()
+        })
+        .collect();
+    std::fs::write(&stream_file, stream.join("\n") + "\n").unwrap();
+    let character_file = character(character_name);
+    let parsed = mouthpiece_retarget::Character::from_toml_str(
+        &std::fs::read_to_string(&character_file).unwrap(),
+    )
+    .unwrap();
+    let axes: Vec<Vec<f64>> = (0..3)
+        .map(|r| (0..3).map(|c| parsed.frame.axes[(r, c)]).collect())
+        .collect();
+    // At 1× the take, a kernel socket buffer of datagrams is plenty even for a slow receiver;
+    // half the frames must match (all that arrive must be exact).
+    let min_matched = lines.len() / 2;
+    let mut receiver = Command::new(python)
+        .arg(repo().join("tests/python/vmc_receiver.py"))
+        .arg("--port-file")
+        .arg(&port_file)
+        .arg("--stop-file")
+        .arg(&stop_file)
+        .arg("--stream")
+        .arg(&stream_file)
+        .args(["--axes", &serde_json::json!(axes).to_string(), "--eyes"])
+        .args(["--names", "arkit-pascal", "--visemes", "vrm1"])
+        .args(["--min-matched", &min_matched.to_string()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("running Python (set MOUTHPIECE_PYTHON)");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let port: u16 = loop {
+        if let Ok(text) = std::fs::read_to_string(&port_file) {
+            break text.trim().parse().unwrap();
+        }
+        if receiver.try_wait().unwrap().is_some() || Instant::now() > deadline {
+            let _ = receiver.kill();
+            let out = receiver.wait_with_output().unwrap();
+            panic!(
+                "the python-osc receiver did not start: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let played = mouthpiece()
+        .arg("play")
+        .arg(take)
+        .arg("--character")
+        .arg(&character_file)
+        .args(["--osc", &format!("127.0.0.1:{port}")])
+        .args(["--names", "arkit-pascal", "--visemes", "vrm1"])
+        .output()
+        .unwrap();
+    std::fs::write(&stop_file, b"").unwrap();
+    let out = receiver.wait_with_output().unwrap();
+    assert!(
+        played.status.success(),
+        "play: {}",
+        String::from_utf8_lossy(&played.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "the receiver's checks failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(stdout.lines().next().unwrap_or("")).unwrap()
+}
+
+/// A speech-driven take and a camera take drive a VRM avatar over the VMC protocol alike:
+/// `mouthpiece play` sends each take's rig curves, VRM 1.0 visemes, head and eyes, and the
+/// mouth opens in both.
+#[test]
+fn a_speech_take_and_a_camera_take_both_play_over_vmc() {
+    let dir = tempfile::tempdir().unwrap();
+    let phn = dir.path().join("sa1.phn");
+    std::fs::write(&phn, SA1_PHN).unwrap();
+    let speech = dir.path().join("speech.jsonl");
+    run_ok(
+        mouthpiece()
+            .args(["lipsync", "--character"])
+            .arg(character("wolf"))
+            .arg("--phonemes")
+            .arg(&phn)
+            .arg("--out")
+            .arg(&speech),
+    );
+    let camera = dir.path().join("camera.jsonl");
+    run_ok(
+        mouthpiece()
+            .arg("process")
+            .arg(repo().join("recordings/demo.mcap"))
+            .arg("--character")
+            .arg(character("wolf"))
+            .arg("--out")
+            .arg(&camera),
+    );
+    for take in [&speech, &camera] {
+        let summary = play_to_a_vmc_receiver(take, "wolf", dir.path());
+        assert!(summary["matched_with_rig"].as_u64() > Some(0), "{summary}");
+        assert!(
+            summary["max_jaw_open"].as_f64() > Some(0.2),
+            "{}: {summary}",
+            take.display()
+        );
+    }
+    // Bad flags are bad input, named.
+    for (flag, value) in [
+        ("--speed", "0"),
+        ("--osc", "nowhere"),
+        ("--names", "JawOpen"),
+    ] {
+        let mut cmd = mouthpiece();
+        cmd.arg("play")
+            .arg(&speech)
+            .arg("--character")
+            .arg(character("wolf"));
+        if flag != "--osc" {
+            cmd.args(["--osc", "127.0.0.1:9"]);
+        }
+        let out = cmd.args([flag, value]).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag} {value}: {stderr}");
+        assert!(stderr.contains(flag), "{flag} {value}: {stderr}");
+    }
+}
