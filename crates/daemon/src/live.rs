@@ -206,8 +206,8 @@ impl Processor for LiveProcessor {
             return;
         };
         let stream = &mut out.stream;
-        stream.head.rotation = stab.head.quaternion_wxyz();
-        stream.head.translation = [
+        stream.head.pose.rotation = stab.head.quaternion_wxyz();
+        stream.head.pose.translation = [
             stab.head.translation.x,
             stab.head.translation.y,
             stab.head.translation.z,

@@ -558,7 +558,7 @@ fn derive(
             .zip(out.performer_camera.iter().copied())
             .collect(),
         stabilised,
-        head: stream.head.clone(),
+        head: stream.head,
         characters: stream
             .characters
             .iter()

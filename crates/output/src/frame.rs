@@ -100,7 +100,7 @@ impl Clone for StreamFrame {
             t: self.t,
             capture_us: self.capture_us,
             wall_us: self.wall_us,
-            head: self.head.clone(),
+            head: self.head,
             characters: self.characters.clone(),
             performer: self.performer.clone(),
             processing: self.processing,
@@ -110,7 +110,7 @@ impl Clone for StreamFrame {
         self.t = other.t;
         self.capture_us = other.capture_us;
         self.wall_us = other.wall_us;
-        self.head.clone_from(&other.head);
+        self.head = other.head;
         // Vec::clone_from calls the elements' clone_from for the common prefix.
         self.characters.clone_from(&other.characters);
         clone_option_from(&mut self.performer, &other.performer);

@@ -3,25 +3,72 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Head pose of one frame (docs/method.md §10): current = R · neutral + t, camera frame.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct HeadPose {
+/// A rigid motion: `current = R · neutral + t`, camera frame (docs/method.md §10). The
+/// performer's head pose in every output, file and ground truth is this.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RigidPose {
     /// Unit quaternion `[w, x, y, z]`.
     pub rotation: [f64; 4],
     /// Translation, metres.
     pub translation: [f64; 3],
-    /// Fewer than three forehead dots were seen: the pose is the last good one.
-    pub lost: bool,
 }
 
-impl Default for HeadPose {
+impl Default for RigidPose {
     fn default() -> Self {
-        Self {
-            rotation: [1.0, 0.0, 0.0, 0.0],
-            translation: [0.0; 3],
-            lost: false,
-        }
+        Self::IDENTITY
     }
+}
+
+impl RigidPose {
+    pub const IDENTITY: RigidPose = RigidPose {
+        rotation: [1.0, 0.0, 0.0, 0.0],
+        translation: [0.0; 3],
+    };
+
+    /// Applies the pose to a point of the neutral head.
+    pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
+        let m = self.rotation_matrix();
+        let t = self.translation;
+        [
+            m[0][0] * p[0] + m[0][1] * p[1] + m[0][2] * p[2] + t[0],
+            m[1][0] * p[0] + m[1][1] * p[1] + m[1][2] * p[2] + t[1],
+            m[2][0] * p[0] + m[2][1] * p[1] + m[2][2] * p[2] + t[2],
+        ]
+    }
+
+    /// Row-major rotation matrix of the (normalised) quaternion.
+    pub fn rotation_matrix(&self) -> [[f64; 3]; 3] {
+        let [w, x, y, z] = self.rotation;
+        let n = (w * w + x * x + y * y + z * z).sqrt();
+        let (w, x, y, z) = (w / n, x / n, y / n, z / n);
+        [
+            [
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y - w * z),
+                2.0 * (x * z + w * y),
+            ],
+            [
+                2.0 * (x * y + w * z),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z - w * x),
+            ],
+            [
+                2.0 * (x * z - w * y),
+                2.0 * (y * z + w * x),
+                1.0 - 2.0 * (x * x + y * y),
+            ],
+        ]
+    }
+}
+
+/// The performer's head pose in one published frame: the rigid motion, and whether it is a
+/// held one. Serialises flat: `{"rotation", "translation", "lost"}`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct HeadPose {
+    #[serde(flatten)]
+    pub pose: RigidPose,
+    /// Fewer than three forehead dots were seen: the pose is the last good one.
+    pub lost: bool,
 }
 
 /// What drives a character's head.

@@ -25,7 +25,7 @@ pub use curves::{
     PASCAL_NAMES, VISEMES, VISEME_NAMES, VISEME_NAMES_VRM0,
 };
 pub use frame::{CharacterFrame, PerformerFrame, StreamFrame};
-pub use head::{CharacterHead, HeadPose, LookMode};
+pub use head::{CharacterHead, HeadPose, LookMode, RigidPose};
 pub use log::{error_chain, Throttle};
 pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RigVisemes};
 pub use slate::{valid_slate, SLATE_RULE};

@@ -5,56 +5,8 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 /// The rigid motion carrying the neutral head onto the current one:
-/// `current = R · neutral + t`, camera frame, metres (docs/method.md §10).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct HeadPose {
-    /// Unit quaternion `[w, x, y, z]`.
-    pub rotation: [f64; 4],
-    /// Metres.
-    pub translation: [f64; 3],
-}
-
-impl HeadPose {
-    pub const IDENTITY: HeadPose = HeadPose {
-        rotation: [1.0, 0.0, 0.0, 0.0],
-        translation: [0.0; 3],
-    };
-
-    /// Applies the pose to a point of the neutral head.
-    pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
-        let m = self.rotation_matrix();
-        let t = self.translation;
-        [
-            m[0][0] * p[0] + m[0][1] * p[1] + m[0][2] * p[2] + t[0],
-            m[1][0] * p[0] + m[1][1] * p[1] + m[1][2] * p[2] + t[1],
-            m[2][0] * p[0] + m[2][1] * p[1] + m[2][2] * p[2] + t[2],
-        ]
-    }
-
-    /// Row-major rotation matrix of the (normalised) quaternion.
-    pub fn rotation_matrix(&self) -> [[f64; 3]; 3] {
-        let [w, x, y, z] = self.rotation;
-        let n = (w * w + x * x + y * y + z * z).sqrt();
-        let (w, x, y, z) = (w / n, x / n, y / n, z / n);
-        [
-            [
-                1.0 - 2.0 * (y * y + z * z),
-                2.0 * (x * y - w * z),
-                2.0 * (x * z + w * y),
-            ],
-            [
-                2.0 * (x * y + w * z),
-                1.0 - 2.0 * (x * x + z * z),
-                2.0 * (y * z - w * x),
-            ],
-            [
-                2.0 * (x * z - w * y),
-                2.0 * (y * z + w * x),
-                1.0 - 2.0 * (x * x + y * y),
-            ],
-        ]
-    }
-}
+/// `current = R · neutral + t`, camera frame, metres: the one rigid pose of every output.
+pub type HeadPose = mouthpiece_output::RigidPose;
 
 /// One frame's exact truth: every dot's centre (hidden dots too), whether it is visible, and
 /// the head pose. JSON exactly as `/groundtruth/points` carries it:

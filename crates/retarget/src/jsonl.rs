@@ -104,14 +104,9 @@ impl InputLine {
     }
 }
 
-/// Head pose on the wire (docs/method.md §10): `current = R · neutral + t`, camera frame.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct HeadPose {
-    /// Unit quaternion `[w, x, y, z]`, `w ≥ 0`.
-    pub rotation: [f64; 4],
-    /// Translation, metres.
-    pub translation: [f64; 3],
-}
+/// Head pose on the wire (docs/method.md §10): `current = R · neutral + t`, camera frame;
+/// the rotation with `w ≥ 0`. The one rigid pose of every output.
+pub type HeadPose = mouthpiece_output::RigidPose;
 
 /// The smoothed mouth outline of one step.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -67,7 +67,7 @@ pub use named::Named;
 pub use neutral::{NeutralAccumulator, NeutralPose};
 pub use one_euro::{OneEuro, OneEuroGroup, OneEuroParams};
 pub use retarget::{
-    CharacterFrame, CharacterRetarget, CharacterSettings, MissingDots, RetargetConfig,
+    CharacterRetarget, CharacterSettings, CharacterStep, MissingDots, RetargetConfig,
     RetargetOutput, Retargeter, StabilisedFrame, Stabiliser,
 };
 pub use rig::{Rig, RigFrame, RigModel, RigSettings};

@@ -224,9 +224,10 @@ pub struct CharacterSettings {
     pub one_euro: Option<OneEuroParams>,
 }
 
-/// One time step of a character.
+/// One time step of a character as the retarget core computes it (double precision, its own
+/// head frame); published as `mouthpiece_output::CharacterFrame`.
 #[derive(Debug, Clone, PartialEq)]
-pub struct CharacterFrame {
+pub struct CharacterStep {
     /// Timestamp, seconds.
     pub t: f64,
     /// `Pᵐ` in the character's mouth frame and units, in point order (One Euro filtered when
@@ -254,7 +255,7 @@ pub struct CharacterRetarget {
     /// The performer's neutral mouth frame axes (camera frame): the head rotation is carried
     /// into them, where it means the same to the character.
     performer_axes: nalgebra::Matrix3<f64>,
-    out: CharacterFrame,
+    out: CharacterStep,
 }
 
 impl CharacterRetarget {
@@ -288,7 +289,7 @@ impl CharacterRetarget {
         };
         tracing::info!(character = %character.name, points = n, "character bound to neutral pose");
         Ok(Self {
-            out: CharacterFrame {
+            out: CharacterStep {
                 t: 0.0,
                 points: character.neutral.clone(),
                 confidence: vec![0.0; n],
@@ -333,13 +334,13 @@ impl CharacterRetarget {
 
     /// The last [`CharacterRetarget::apply`]'s result (the neutral pose, confidence 0,
     /// before the first).
-    pub fn output(&self) -> &CharacterFrame {
+    pub fn output(&self) -> &CharacterStep {
         &self.out
     }
 
     /// `Pᵐ = P⁰ + (Dᵐ − D⁰) ⊙ M` for every point, then the optional One Euro filter and the
     /// curve.
-    pub fn apply(&mut self, performer: &StabilisedFrame) -> &CharacterFrame {
+    pub fn apply(&mut self, performer: &StabilisedFrame) -> &CharacterStep {
         let out = &mut self.out;
         out.t = performer.t;
         for (n, &d) in self.character.driver.iter().enumerate() {
@@ -386,7 +387,7 @@ pub struct RetargetOutput<'a> {
     /// The performer after head-motion removal (with head pose).
     pub performer: &'a StabilisedFrame,
     /// The character's points.
-    pub character: &'a CharacterFrame,
+    pub character: &'a CharacterStep,
 }
 
 impl Retargeter {

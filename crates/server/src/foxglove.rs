@@ -229,10 +229,10 @@ fn payload(
         }
         ChannelKind::Image | ChannelKind::Annotations => return None,
         ChannelKind::Head => {
-            let [w, x, y, z] = f.head.rotation;
+            let [w, x, y, z] = f.head.pose.rotation;
             json!({
                 "rotation": {"w": w, "x": x, "y": y, "z": z},
-                "translation": {"x": f.head.translation[0], "y": f.head.translation[1], "z": f.head.translation[2]},
+                "translation": {"x": f.head.pose.translation[0], "y": f.head.pose.translation[1], "z": f.head.pose.translation[2]},
                 "lost": f.head.lost,
             })
         }

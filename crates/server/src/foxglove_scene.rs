@@ -264,8 +264,8 @@ pub fn frame_transforms(frame: &PublishedFrame, info: &StreamInfo, timestamp_ns:
         &ts,
         "camera",
         "head",
-        head.translation,
-        head.rotation,
+        head.pose.translation,
+        head.pose.rotation,
     )];
     let mouth = info.mouth_frame.clone().unwrap_or(FramePose {
         rotation: IDENTITY_QUATERNION,

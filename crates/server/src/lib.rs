@@ -98,7 +98,7 @@ pub use hub::{
 /// The output vocabulary the hub publishes, defined once in `mouthpiece-output`.
 pub use mouthpiece_output::{
     CharacterFrame, CharacterHead, HeadPose, LookMode, PerformerFrame, RigCurves, RigJaw, RigLip,
-    RigLips, RigState, RigVisemes, StreamFrame, CURVE_NAMES,
+    RigLips, RigState, RigVisemes, RigidPose, StreamFrame, CURVE_NAMES,
 };
 pub use osc::{OscCounters, OscTargetCounters, OscTargetFigures};
 pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};

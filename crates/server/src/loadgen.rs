@@ -19,6 +19,7 @@ use tokio_tungstenite::tungstenite::Message;
 use crate::hub::{
     CharacterFrame, CharacterInfo, HeadPose, Hub, PerformerFrame, StreamFrame, StreamInfo,
 };
+use crate::RigidPose;
 
 /// Microseconds since the Unix epoch, now.
 pub fn unix_micros() -> i64 {
@@ -139,13 +140,15 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
     frame.capture_us = (t * 1e6) as u64;
     frame.wall_us = Some(unix_micros());
     frame.head = HeadPose {
-        rotation: [
-            f64::from((yaw / 2.0).cos()),
-            0.0,
-            f64::from((yaw / 2.0).sin()),
-            0.0,
-        ],
-        translation: [0.01 * f64::from(yaw), 0.0, 0.6],
+        pose: RigidPose {
+            rotation: [
+                f64::from((yaw / 2.0).cos()),
+                0.0,
+                f64::from((yaw / 2.0).sin()),
+                0.0,
+            ],
+            translation: [0.01 * f64::from(yaw), 0.0, 0.6],
+        },
         lost: false,
     };
     let confidence = vec![1.0; POINTS];

@@ -497,7 +497,13 @@ pub fn encode_binary_frame(
     out.extend_from_slice(&[tc.hours, tc.minutes, tc.seconds, tc.frames]);
     out.extend_from_slice(&(characters.len() as u16).to_le_bytes());
     out.extend_from_slice(&0u16.to_le_bytes());
-    for v in f.head.rotation.iter().chain(f.head.translation.iter()) {
+    for v in f
+        .head
+        .pose
+        .rotation
+        .iter()
+        .chain(f.head.pose.translation.iter())
+    {
         out.extend_from_slice(&(*v as f32).to_le_bytes());
     }
     debug_assert_eq!(out.len() % 4, 0);

@@ -138,8 +138,8 @@ fn check_binary_frame(
     assert_eq!(u64_at(24), expected.capture_us);
     assert_eq!(u64_at(32) as i64, expected.wall_us.unwrap());
     assert_eq!(u16_at(44), 2);
-    assert!((f32_at(48) as f64 - expected.head.rotation[0]).abs() < 1e-6);
-    assert!((f32_at(48 + 24) as f64 - expected.head.translation[2]).abs() < 1e-6);
+    assert!((f32_at(48) as f64 - expected.head.pose.rotation[0]).abs() < 1e-6);
+    assert!((f32_at(48 + 24) as f64 - expected.head.pose.translation[2]).abs() < 1e-6);
     let mut o = 76;
     for (index, c) in expected.characters.iter().enumerate() {
         assert_eq!(u16_at(o) as usize, index);

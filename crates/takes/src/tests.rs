@@ -124,11 +124,7 @@ fn derived(seq: u64) -> Box<Derived> {
         timecode: format!("03:04:05:{:02}", seq % 30),
         performer: vec![("D1".into(), Some([0.01, 0.02, 0.6])), ("F1".into(), None)],
         stabilised: vec![("D1".into(), [0.025, 0.0, 0.0], 1.0)],
-        head: HeadPose {
-            rotation: [1.0, 0.0, 0.0, 0.0],
-            translation: [0.0; 3],
-            lost: false,
-        },
+        head: HeadPose::default(),
         characters: vec![CharacterRecord {
             name: "wolf".into(),
             points: vec![("P1".into(), [0.07, 0.0, 0.0])],
