@@ -24,6 +24,9 @@
 //! Per lip dot missing, **miss** ([`MISS`]): a fixed log-likelihood, the price of a dot the
 //! names leave out. It is what makes more names win, when the names cost no more than it.
 //!
+//! A proposal from another lip motion than the steady one also carries that motion's prior
+//! ([`OTHER_MOTION_PRIOR`]) against the steady names.
+//!
 //! Each per-dot term is bounded below ([`OUTLIER_FLOOR`]): a candidate that fits a dot badly
 //! on one count is an outlier of that count, not an impossibility (a robust likelihood).
 
@@ -60,6 +63,12 @@ pub const SHAPE_LOG_SIGMA: f64 = 0.405;
 /// Spread of a dot's distance from its steady prediction, in dot spacings: a jaw jumping
 /// within a frame moves the lower lip about one spacing past it.
 pub const MOTION_SIGMA_SPACINGS: f64 = 1.0;
+
+/// The prior log-odds of a lip motion other than steady (stopped dead, the width or the jaw
+/// jumping within a frame) against the steady one, nats: those are rarer than constant
+/// velocity, so their names must fit better by this much to replace the steady ones (less
+/// than a dot's worth: a dot more still wins).
+pub const OTHER_MOTION_PRIOR: f64 = -2.0;
 
 /// The least any one term gives one dot, nats: a fit that bad is an outlier of that count.
 pub const OUTLIER_FLOOR: f64 = -6.0;
