@@ -401,8 +401,9 @@ mod tests {
     }
 
     /// As above with every dot seen and named: the whole lower lip on ghosts of 0.7 of its
-    /// paint, nothing missing, no ghost small enough to count. The whole lip's jump is
-    /// looked for all the same.
+    /// paint, 3 mm deeper than the lip (the surface behind the ghost), nothing missing, no
+    /// ghost small enough to count. The whole lip's jump is looked for all the same, and its
+    /// names on the paint score better by area and depth together.
     #[test]
     fn a_fully_named_lower_lip_on_large_ghosts_moves_to_its_paint() {
         let mut scene = Scene::calibrated();
@@ -411,7 +412,7 @@ mod tests {
         let mut cands = scene.candidates_at(&truth);
         let face = neutral_face();
         for i in 7..12 {
-            scene.push(&mut cands, rest[i], face[i].z, DotRole::Lip, 0.7);
+            scene.push(&mut cands, rest[i], face[i].z + 0.003, DotRole::Lip, 0.7);
         }
         let run = scene.run_as_hypothesis(&JawJump, &rest, &mut cands);
         let first: Vec<_> = (7..12).map(|i| run.first.get(i)).collect();
