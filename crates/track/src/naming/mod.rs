@@ -6,7 +6,8 @@
 //! 1. the forehead by constant pixel velocity, the head motion from it;
 //! 2. the lips by prediction under a motion hypothesis (steady velocity first), the
 //!    in-pass recovery steps, then the checks ([`checks::order_and_neighbours`]);
-//! 3. the hypothesis steps: other lip motions tried, taken when they name more;
+//! 3. the hypothesis steps: other lip motions propose names, and one score
+//!    ([`score::score`]) keeps the best;
 //! 4. the corner check: names slipped around the mouth are named afresh from geometry, or
 //!    the lips go missing for the frame;
 //! 5. the steps on the chosen names (geometry filling in, merged blobs split, faint corners).
@@ -16,6 +17,7 @@
 
 pub mod checks;
 pub mod recovery;
+pub mod score;
 
 use mouthpiece_detect::{Blob, DotRole};
 use mouthpiece_retarget::kabsch::kabsch;
@@ -253,6 +255,8 @@ pub(crate) struct Pass {
     pub(crate) gates: Small<labels::Prediction>,
     /// How many dots the steady hypothesis named (after its checks).
     pub(crate) steady_named: usize,
+    /// The steady hypothesis's names (after its checks; empty until it has run).
+    pub(crate) steady: Small<Option<usize>>,
 }
 
 /// Buffers kept between frames (a frame allocates nothing once they have grown), and the
@@ -348,6 +352,7 @@ pub(crate) fn name_frame(ctx: &Context, cands: &mut Candidates, scratch: &mut Sc
     let (mut pass, mut names) =
         checked_pass(ctx, &forehead, head, LipMotion::Steady, cands, scratch);
     pass.steady_named = names.count();
+    pass.steady = names.as_slice().iter().copied().collect();
     recovery::run_stage(Stage::Hypotheses, ctx, &pass, &mut names, cands, scratch);
     if !checks::corners_are_extremes(ctx, names.as_slice(), &cands.list) {
         // Names slipped by one or more places around the mouth (a slip keeps the order):
@@ -424,6 +429,7 @@ pub(crate) fn checked_pass(
         preds,
         gates,
         steady_named: 0,
+        steady: Small::new(),
     };
     recovery::run_stage(Stage::InPass, ctx, &pass, &mut names, cands, scratch);
     names.apply(

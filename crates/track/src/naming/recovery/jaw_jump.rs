@@ -3,60 +3,59 @@
 //! exposure), some of its dots on the ghosts, others missing. When lip dots are missing with
 //! candidates left, or two or more lower-lip dots sit on blobs under half a dot's area with
 //! lip candidates left, the median offset from those dots' predictions to the nearest free
-//! lip candidate (within [`JAW_JUMP_PX`] and their depth windows) is the jaw's jump; the
+//! lip candidate (within [`JAW_JUMP_SPACINGS`] and their depth windows) is the jaw's jump; the
 //! frame is named again with the lower lip between the corners predicted that much further.
-//! Those names are taken if they name more lip dots, or as many on
-//! [`BETTER_AREA_RATIO`] times the blob area (one fewer when two or more lower-lip dots were
-//! on ghosts: a corner merged with its neighbour may fail the checks under the new names,
-//! and missing beats five names on ghosts), and the corners are still the extremes.
+//! Those names are proposed and taken when they score better
+//! ([`super::take_if_better`]): a lower lip on ghosts loses by the paint term (ghosts are a
+//! share of the paint) and the depth term (a ghost's depth is whatever surface is behind
+//! it), so names with one dot fewer and the rest on paint can win.
 //!
 //! Ghosts can be too large to tell by their area (a fast jaw smears the paint too), with
 //! every dot named on its own ghost and no miss anywhere. So on every frame the jump is also
 //! measured from the whole lower lip ([`whole_lip_shift`], reaching further:
-//! [`WHOLE_LIP_JUMP_PX`]) and tried by the same rule, its names taken only if they land on
-//! free paint ([`lands_on_free_blobs`]); so are the missing dots' when their jump runs along
-//! the lip rather than across it ([`ALONG_LIP_SHARE`]). Names that must land on free paint
-//! also win with as many lip dots on at least as much paint when their lower lip keeps its
-//! depth far better ([`KEEPS_DEPTH_RATIO`]). The jaw carries the lower lip alone: when the
-//! frame left it on ghosts, the jaw's lower lip is first tried with the frame's upper lip
-//! ([`with_the_upper_lip_of`]).
+//! [`WHOLE_LIP_JUMP_SPACINGS`]) and proposed the same way, its names only if they land on free
+//! paint ([`lands_on_free_blobs`]); so are the missing dots' when their jump runs along the
+//! lip rather than across it ([`ALONG_LIP_SHARE`]). The jaw carries the lower lip alone:
+//! when the frame left it on ghosts, the jaw's lower lip is also proposed with the frame's
+//! upper lip ([`with_the_upper_lip_of`]).
 
 use mouthpiece_detect::DotRole;
 use mouthpiece_retarget::RigidTransform;
 
-use super::{lips_missing_with_candidates_left, Candidates, Context, NameSet, Pass, Scratch, Step};
+use super::{
+    lips_missing_with_candidates_left, take_if_better, Candidates, Context, NameSet, Pass, Scratch,
+    Step,
+};
 use crate::labels::{Candidate, Small};
-use crate::naming::checked_pass;
-use crate::naming::checks::{self, blob_and_paint_area, depth_window};
+use crate::naming::checks::{blob_and_paint_area, depth_window};
+use crate::naming::{checked_pass, score};
 use crate::prediction::{lip_predictions, CornerLine, LipMotion};
 
 /// Farthest a lower-lip dot that is missing or on a ghost is looked for beyond its
-/// prediction when the jaw jumps, pixels (the synthetic jaw moves the lower lip up to 13 px
-/// between frames). Not further: the lower-lip dots are about 10 px apart at 0.6 m, and one
-/// hidden dot's nearest free blob would be its neighbour's paint.
-pub const JAW_JUMP_PX: f64 = 12.0;
+/// prediction when the jaw jumps, in dot spacings ([`score::spacing_px`] at the dot's last
+/// depth; 12 px for the synthetic performer at 0.6 m and 640x480, where its jaw moves the
+/// lower lip up to 13 px between frames). Not further: the lower-lip dots lie a little more
+/// than a spacing apart, and one hidden dot's nearest free blob would be its neighbour's
+/// paint.
+pub const JAW_JUMP_SPACINGS: f64 = 1.3;
 
-/// Farthest the *whole-lip jump* looks beyond each lower-lip dot's prediction, pixels: a
-/// frame's jaw motion (up to 13 px) and the lag of the ghosts the last frame may have named
-/// the lip on, which the prediction starts from (up to 4.5 px). It can reach past the dots'
-/// spacing where [`JAW_JUMP_PX`] cannot, because it is the median over most of the lower lip
-/// and its names must land on free paint ([`lands_on_free_blobs`]). (At 12, a jaw snapping
-/// shut after a frame on ghosts left the lower lip just past reach and unnamed for two
-/// frames: docs/lab/detection-log.md.)
-pub const WHOLE_LIP_JUMP_PX: f64 = 16.0;
+/// Farthest the *whole-lip jump* looks beyond each lower-lip dot's prediction, in dot
+/// spacings (16 px at 0.6 m and 640x480): a frame's jaw motion (up to 1.4 spacings) and the
+/// lag of the ghosts the last frame may have named the lip on, which the prediction starts
+/// from (up to half a spacing). It can reach past the dots' spacing where
+/// [`JAW_JUMP_SPACINGS`] cannot, because it is the median over most of the lower lip and its
+/// names must land on free paint ([`lands_on_free_blobs`]).
+pub const WHOLE_LIP_JUMP_SPACINGS: f64 = 1.73;
 
 /// A lower-lip dot on a blob under this share of a dot's area is taken to be on a ghost:
 /// half a dot's paint is more than a blurred trail leaves and less than a dot half
 /// occluded shows (0.6 took the jaw's names wrongly on a fast session: the lab notes).
 pub const GHOST_AREA_SHARE: f64 = 0.5;
 
-/// The whole-lip jump is tried only when it differs from the lost dots' by more than this,
-/// pixels (otherwise it names the frame the same way).
-pub const SAME_SHIFT_PX: f64 = 1.0;
-
-/// The jaw's names with as many lip dots win when their lower lip's blobs cover this many
-/// times the area.
-pub const BETTER_AREA_RATIO: f64 = 1.3;
+/// The whole-lip jump is tried only when it differs from the lost dots' by more than this
+/// share of a dot spacing (otherwise it names the frame the same way; 1 px at 0.6 m and
+/// 640x480).
+pub const SAME_SHIFT_SPACINGS: f64 = 0.11;
 
 /// A jump whose component along the line through the predicted corners exceeds this share
 /// of the lip dots' spacing runs along the lip, not across it (named heuristic *a jump along
@@ -66,20 +65,9 @@ pub const BETTER_AREA_RATIO: f64 = 1.3;
 /// puts each dot on the next dot's paint until the slipped-names check catches it.
 pub const ALONG_LIP_SHARE: f64 = 0.5;
 
-/// The jaw's names with as many lip dots that land on free paint, their lower lip on at
-/// least as much paint, also win when its depths miss the dots' last depths by less than this
-/// share of the frame's names' misses ([`lower_lip_depth_miss`]; named heuristic *the jaw's
-/// lip keeps its depth*). A ghost is the colour of where the lip was, but the camera's depth
-/// there is whatever surface is there now: the lip's rim or the mouth behind it. Ghosts as
-/// large as the paint (a bright blur) lose by their area only at [`BETTER_AREA_RATIO`]; their
-/// depths miss by several millimetres where the paint's miss by one or two. Not on less
-/// paint: a lip closing past its ghosts can leave small ghosts at its last depths. (The
-/// frames that showed both: docs/lab/detection-log.md.)
-pub const KEEPS_DEPTH_RATIO: f64 = 0.5;
-
 /// This many lower-lip dots on ghosts (with as many lip candidates free) say the jaw jumped
-/// even with every lip dot named, and allow the jaw's names one dot fewer: one dot on a
-/// small blob is a faint dot, two are the lower lip left behind.
+/// even with every lip dot named: one dot on a small blob is a faint dot, two are the lower
+/// lip left behind.
 pub const GHOSTS_FOR_A_JUMP: usize = 2;
 
 pub(crate) struct JawJump;
@@ -97,86 +85,88 @@ impl Step for JawJump {
         cands: &mut Candidates,
         scratch: &mut Scratch,
     ) -> bool {
-        let layout = ctx.layout;
-        let n = layout.lip_dots;
-        let list = &cands.list;
-        let ghosts = lower_lip_on_ghosts(ctx, names.as_slice(), cands);
-        let on_ghosts = ghosts.iter().filter(|g| **g).count();
-        let free_lips = (0..list.len())
-            .filter(|c| list[*c].role != DotRole::Forehead && !names.taken()[*c])
-            .count();
-        let lower_area = |names: &NameSet, cands: &Candidates| -> f64 {
-            names.as_slice()[layout.right_corner() + 1..n]
-                .iter()
-                .flatten()
-                .map(|&c| ctx.blobs[cands.blob[c]].area as f64)
-                .sum()
-        };
-        let lost = lips_missing_with_candidates_left(ctx, pass, names, cands)
-            || (on_ghosts >= GHOSTS_FOR_A_JUMP && free_lips >= GHOSTS_FOR_A_JUMP);
-        // Two estimates of the jump: from the dots that are missing or on ghosts, and from
-        // the whole lower lip (its dots may sit on ghosts too large to tell by their area,
-        // with every dot named).
-        let from_lost = lost
-            .then(|| jaw_shift(ctx, names.as_slice(), &ghosts, list, &pass.head))
+        // The jump is measured from the best names so far and, when they differ, from the
+        // steady hypothesis's: another hypothesis's names may hide the lower lip's misses.
+        let frame = names.clone();
+        let mut taken = propose_from(ctx, pass, &frame, names, cands, scratch);
+        if pass.steady.len() == frame.as_slice().len() && pass.steady[..] != *frame.as_slice() {
+            let steady = NameSet::of(pass.steady.iter().copied(), cands.len());
+            taken |= propose_from(ctx, pass, &steady, names, cands, scratch);
+        }
+        taken
+    }
+}
+
+/// The jaw's proposals with the jump measured from the names `frame` (their lower lip
+/// missing or on ghosts), each taken into `names` when it scores better. True when one was.
+fn propose_from(
+    ctx: &Context,
+    pass: &Pass,
+    frame: &NameSet,
+    names: &mut NameSet,
+    cands: &mut Candidates,
+    scratch: &mut Scratch,
+) -> bool {
+    let layout = ctx.layout;
+    let n = layout.lip_dots;
+    let list = &cands.list;
+    let ghosts = lower_lip_on_ghosts(ctx, frame.as_slice(), cands);
+    let on_ghosts = ghosts.iter().filter(|g| **g).count();
+    let free_lips = (0..list.len())
+        .filter(|c| list[*c].role != DotRole::Forehead && !frame.taken()[*c])
+        .count();
+    let lost = lips_missing_with_candidates_left(ctx, pass, frame, cands)
+        || (on_ghosts >= GHOSTS_FOR_A_JUMP && free_lips >= GHOSTS_FOR_A_JUMP);
+    // Two estimates of the jump: from the dots that are missing or on ghosts, and from
+    // the whole lower lip (its dots may sit on ghosts too large to tell by their area,
+    // with every dot named).
+    let from_lost = lost
+        .then(|| jaw_shift(ctx, frame.as_slice(), &ghosts, list, &pass.head))
+        .flatten();
+    let same = SAME_SHIFT_SPACINGS * lower_lip_spacing_px(ctx, &pass.preds);
+    let from_lip = whole_lip_shift(ctx, frame.as_slice(), list, &pass.head)
+        .filter(|s| from_lost.is_none_or(|f| (s[0] - f[0]).hypot(s[1] - f[1]) > same));
+    // Landing on free paint is judged against `frame`; each proposal that may stand is
+    // taken when it scores better than the best so far.
+    let mut taken = false;
+    let estimates = [(from_lost, false), (from_lip, true)];
+    for (shift, whole_lip) in estimates.into_iter().filter_map(|(s, w)| Some((s?, w))) {
+        let must_land = whole_lip || runs_along_the_lip(ctx, &pass.preds, shift);
+        let (_, jumped) = checked_pass(
+            ctx,
+            &pass.forehead,
+            pass.head,
+            LipMotion::JawJumped(shift),
+            cands,
+            scratch,
+        );
+        // When the frame left the lower lip on its ghosts, also the jaw's lower lip with
+        // the frame's upper lip (landing on free paint), besides the jaw's names whole.
+        let lower_lip_only = (on_ghosts >= GHOSTS_FOR_A_JUMP)
+            .then(|| with_the_upper_lip_of(names, &jumped, layout.right_corner(), n))
             .flatten();
-        let from_lip = whole_lip_shift(ctx, names.as_slice(), list, &pass.head)
-            .filter(|s| from_lost.is_none_or(|f| (s[0] - f[0]).hypot(s[1] - f[1]) > SAME_SHIFT_PX));
-        let slack = usize::from(on_ghosts >= GHOSTS_FOR_A_JUMP);
-        // The frame's names do not change until one try is taken.
-        let (before, area_names) = (names.lips_named(n), lower_area(names, cands));
-        let estimates = [(from_lost, false), (from_lip, true)];
-        for (shift, whole_lip) in estimates.into_iter().filter_map(|(s, w)| Some((s?, w))) {
-            let must_land = whole_lip || runs_along_the_lip(ctx, &pass.preds, shift);
-            let (_, jumped) = checked_pass(
-                ctx,
-                &pass.forehead,
-                pass.head,
-                LipMotion::JawJumped(shift),
-                cands,
-                scratch,
-            );
-            // When the frame left the lower lip on its ghosts, first the jaw's lower lip with
-            // the frame's upper lip (landing on free paint), then the jaw's names whole.
-            let lower_lip_only = (on_ghosts >= GHOSTS_FOR_A_JUMP)
-                .then(|| with_the_upper_lip_of(names, &jumped, layout.right_corner(), n))
-                .flatten();
-            let tries = [(lower_lip_only, true), (Some(jumped), must_land)];
-            for (jumped, must_land) in tries.into_iter().filter_map(|(j, m)| Some((j?, m))) {
-                let after = jumped.lips_named(n);
-                let as_many = after + slack >= before;
-                let area_jumped = lower_area(&jumped, cands);
-                let depth_miss = |set: &NameSet| {
-                    lower_lip_depth_miss(ctx, set.as_slice(), &cands.list, &pass.head)
-                };
-                let better = after > before
-                    || (as_many && area_jumped > BETTER_AREA_RATIO * area_names)
-                    || (must_land
-                        && as_many
-                        && area_jumped >= area_names
-                        && depth_miss(&jumped) < KEEPS_DEPTH_RATIO * depth_miss(names));
-                if better
-                    && (!must_land || lands_on_free_blobs(names.as_slice(), jumped.as_slice()))
-                    && checks::corners_are_extremes(ctx, jumped.as_slice(), &cands.list)
-                {
-                    tracing::debug!(
-                        before,
-                        jumped = after,
-                        ?shift,
-                        "the jaw jumped: lower lip named from its shifted places"
-                    );
-                    *names = jumped;
-                    return true;
-                }
+        let tries = [(lower_lip_only, true), (Some(jumped), must_land)];
+        for (jumped, must_land) in tries.into_iter().filter_map(|(j, m)| Some((j?, m))) {
+            if must_land && !lands_on_free_blobs(frame.as_slice(), jumped.as_slice()) {
+                continue;
+            }
+            if let Some((before, after)) = take_if_better(ctx, pass, names, jumped, cands) {
+                tracing::debug!(
+                    before,
+                    after,
+                    ?shift,
+                    "the jaw jumped: lower lip named from its shifted places (score, nats)"
+                );
+                taken = true;
             }
         }
-        false
     }
+    taken
 }
 
 /// How far the lower lip jumped beyond its prediction, in pixels: the median offset from
 /// the prediction of each lower-lip dot that is missing or on a ghost (`ghosts`) to the
-/// nearest free lip candidate within [`JAW_JUMP_PX`] and its depth window. `None` when no
+/// nearest free lip candidate within [`JAW_JUMP_SPACINGS`] and its depth window. `None` when no
 /// such candidate lies near one.
 fn jaw_shift(
     ctx: &Context,
@@ -185,12 +175,13 @@ fn jaw_shift(
     cands: &[Candidate],
     head: &RigidTransform,
 ) -> Option<[f64; 2]> {
-    let offsets = jump_offsets(ctx, names, ghosts, cands, head, JAW_JUMP_PX);
+    let offsets = jump_offsets(ctx, names, ghosts, cands, head, JAW_JUMP_SPACINGS);
     (!offsets.is_empty()).then(|| median_offset(offsets))
 }
 
 /// For each lower-lip dot between the corners that is missing or flagged in `lost`: the
-/// offset from its prediction to the nearest free lip candidate within `reach_px` and its
+/// offset from its prediction to the nearest free lip candidate within `reach` dot spacings
+/// (at the dot's last depth) and its
 /// depth window, if there is one.
 fn jump_offsets(
     ctx: &Context,
@@ -198,7 +189,7 @@ fn jump_offsets(
     lost: &[bool],
     cands: &[Candidate],
     head: &RigidTransform,
-    reach_px: f64,
+    reach: f64,
 ) -> Small<[f64; 2]> {
     let n = ctx.layout.lip_dots;
     let preds = lip_predictions(ctx, head, LipMotion::Steady);
@@ -212,6 +203,7 @@ fn jump_offsets(
             continue;
         }
         let window = depth_window(&ctx.tracks[i], head, ctx.config.lip_depth_gate_m);
+        let reach_px = reach * score::spacing_px(ctx, &preds, ctx.tracks[i].depth);
         let nearest = cands
             .iter()
             .enumerate()
@@ -223,6 +215,14 @@ fn jump_offsets(
         offsets.extend(nearest);
     }
     offsets
+}
+
+/// The dot spacing in pixels at the lower lip's mean last depth (`preds`: the lips'
+/// predictions, for the spacing before the neutral pose).
+fn lower_lip_spacing_px(ctx: &Context, preds: &[[f64; 2]]) -> f64 {
+    let lower = &ctx.tracks[ctx.layout.right_corner() + 1..ctx.layout.lip_dots];
+    let z = lower.iter().map(|t| t.depth).sum::<f64>() / lower.len().max(1) as f64;
+    score::spacing_px(ctx, preds, z)
 }
 
 /// The median of each coordinate of `offsets` (not empty).
@@ -240,7 +240,7 @@ fn median_offset(offsets: Small<[f64; 2]>) -> [f64; 2] {
 /// How far the whole lower lip jumped beyond its prediction, in pixels (named heuristic
 /// *whole-lip jump*): the median, over the lower-lip dots between the corners, of the offset
 /// from each dot's prediction to the nearest free lip candidate within
-/// [`WHOLE_LIP_JUMP_PX`] and its depth window, named or not. A jaw that jumps leaves every lower-lip dot's ghost
+/// [`WHOLE_LIP_JUMP_SPACINGS`] and its depth window, named or not. A jaw that jumps leaves every lower-lip dot's ghost
 /// where the lip was, and a dot named on its ghost shows no miss; its paint is then a free
 /// blob just beyond. `None` unless most of the lower lip (more than half its dots) has such
 /// a candidate: the lip moves as one.
@@ -252,27 +252,8 @@ fn whole_lip_shift(
 ) -> Option<[f64; 2]> {
     let all_lost: Small<bool> = smallvec::smallvec![true; ctx.layout.lip_dots];
     let lower = ctx.layout.lip_dots - ctx.layout.right_corner() - 1;
-    let offsets = jump_offsets(ctx, names, &all_lost, cands, head, WHOLE_LIP_JUMP_PX);
+    let offsets = jump_offsets(ctx, names, &all_lost, cands, head, WHOLE_LIP_JUMP_SPACINGS);
     (offsets.len() > lower / 2).then(|| median_offset(offsets))
-}
-
-/// The sum, over the lower-lip dots between the corners named in `names`, of how far each
-/// candidate's depth lies outside its dot's depth window with no gate (its last depth and
-/// its last place carried by the head's motion), metres.
-fn lower_lip_depth_miss(
-    ctx: &Context,
-    names: &[Option<usize>],
-    cands: &[Candidate],
-    head: &RigidTransform,
-) -> f64 {
-    (ctx.layout.right_corner() + 1..ctx.layout.lip_dots)
-        .filter_map(|i| {
-            let c = names[i]?;
-            let [lo, hi] = depth_window(&ctx.tracks[i], head, 0.0);
-            let z = cands[c].point.z;
-            Some((lo - z).max(z - hi).max(0.0))
-        })
-        .sum()
 }
 
 /// Whether `shift` (pixels) runs along the lip: its component along the line through the
@@ -420,8 +401,9 @@ mod tests {
     }
 
     /// As above with every dot seen and named: the whole lower lip on ghosts of 0.7 of its
-    /// paint, nothing missing, no ghost small enough to count. The whole lip's jump is
-    /// looked for all the same.
+    /// paint, 3 mm deeper than the lip (the surface behind the ghost), nothing missing, no
+    /// ghost small enough to count. The whole lip's jump is looked for all the same, and its
+    /// names on the paint score better by area and depth together.
     #[test]
     fn a_fully_named_lower_lip_on_large_ghosts_moves_to_its_paint() {
         let mut scene = Scene::calibrated();
@@ -430,7 +412,7 @@ mod tests {
         let mut cands = scene.candidates_at(&truth);
         let face = neutral_face();
         for i in 7..12 {
-            scene.push(&mut cands, rest[i], face[i].z, DotRole::Lip, 0.7);
+            scene.push(&mut cands, rest[i], face[i].z + 0.003, DotRole::Lip, 0.7);
         }
         let run = scene.run_as_hypothesis(&JawJump, &rest, &mut cands);
         let first: Vec<_> = (7..12).map(|i| run.first.get(i)).collect();

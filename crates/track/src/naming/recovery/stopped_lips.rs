@@ -2,10 +2,10 @@
 //! smile) overshoot a constant-velocity prediction, by up to 6 px when they close onto each
 //! other. With lip dots missing and candidates left, the frame is named again with each lip
 //! dot predicted where it was last (zero velocity, the same head motion); those names are
-//! taken when they name more lip dots and the corners are still the extremes.
+//! proposed, and taken when they score better ([`super::take_if_better`]).
 
 use super::{
-    lips_missing_with_candidates_left, take_if_more_named, Candidates, Context, NameSet, Pass,
+    lips_missing_with_candidates_left, take_if_better_under, Candidates, Context, NameSet, Pass,
     Scratch, Step,
 };
 use crate::prediction::LipMotion;
@@ -28,12 +28,12 @@ impl Step for StoppedLips {
         if !lips_missing_with_candidates_left(ctx, pass, names, cands) {
             return false;
         }
-        let taken = take_if_more_named(ctx, pass, names, cands, scratch, LipMotion::Stopped);
+        let taken = take_if_better_under(ctx, pass, names, cands, scratch, LipMotion::Stopped);
         if let Some((steady, stopped)) = taken {
             tracing::debug!(
                 steady,
                 stopped,
-                "lips stopped: named from their last places"
+                "lips stopped: named from their last places (score, nats)"
             );
         }
         taken.is_some()

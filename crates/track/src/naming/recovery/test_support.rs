@@ -229,6 +229,7 @@ impl Scene {
             preds,
             gates,
             steady_named: 0,
+            steady: Small::new(),
         }
     }
 
@@ -263,6 +264,7 @@ impl Scene {
         let mut pass = self.pass(preds, cands);
         let first = self.first_pass(&pass, cands);
         pass.steady_named = first.count();
+        pass.steady = first.as_slice().iter().copied().collect();
         let mut names = first.clone();
         let fired = step.run(
             &self.ctx(),

@@ -7,13 +7,13 @@
 //!
 //! With lip dots missing and candidates left, each side's stretch along the corner line is
 //! measured ([`sides_on_paint`]) and, when one side changed, the frame is named again with the
-//! predictions stretched by it. Those names are taken when they name more lip dots and the
-//! corners are still the extremes (the rule of the other hypotheses).
+//! predictions stretched by it. Those names are proposed, and taken when they score better
+//! ([`super::take_if_better`], the rule of every hypothesis).
 
 use mouthpiece_detect::DotRole;
 
 use super::{
-    lips_missing_with_candidates_left, take_if_more_named, Candidates, Context, NameSet, Pass,
+    lips_missing_with_candidates_left, take_if_better_under, Candidates, Context, NameSet, Pass,
     Scratch, Step,
 };
 use crate::labels::{Candidate, Small};
@@ -56,7 +56,7 @@ impl Step for WidthJump {
             return false;
         };
         let motion = LipMotion::SidesStretched(stretch);
-        let taken = take_if_more_named(ctx, pass, names, cands, scratch, motion);
+        let taken = take_if_better_under(ctx, pass, names, cands, scratch, motion);
         match taken {
             Some((steady, stretched)) => tracing::debug!(
                 steady,
