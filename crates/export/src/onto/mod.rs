@@ -1,0 +1,216 @@
+//! A take's curves as morph-target weight animation on the user's own avatar
+//! (`mouthpiece export --onto AVATAR`).
+//!
+//! The avatar (glTF or GLB) is read as hostile input and kept as it is ([`read`]); its
+//! meshes' morph targets are matched by name to the take's curves ([`names`]); one
+//! animation with a `weights` channel per node whose mesh has a matching target is appended,
+//! its data after the GLB's binary chunk or, for `.gltf`, in a new embedded buffer
+//! ([`write`]). Nothing else in the document changes.
+
+pub mod names;
+pub mod read;
+pub mod write;
+
+use std::fmt;
+use std::path::Path;
+
+pub use names::CurveTable;
+pub use read::{Avatar, AvatarMesh, MAX_AVATAR_BYTES};
+pub use write::OntoSummary;
+
+use crate::asset::shown;
+use crate::ExportError;
+
+pub(crate) fn avatar_error(path: &Path, problem: impl Into<String>) -> ExportError {
+    ExportError::Avatar {
+        path: path.to_path_buf(),
+        problem: problem.into(),
+    }
+}
+
+/// Where one morph target's weight comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Source {
+    /// The take's curve of this index.
+    Curve(usize),
+    /// No curve: the mesh's default weight, held.
+    Default(f32),
+}
+
+/// One mesh to animate.
+#[derive(Clone, Debug)]
+pub struct MeshPlan {
+    pub mesh: usize,
+    /// One per morph target, in the mesh's order.
+    pub sources: Vec<Source>,
+}
+
+/// What drives what: the meshes to animate and the report of the match.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    pub meshes: Vec<MeshPlan>,
+    pub report: MatchReport,
+}
+
+/// What matched and what did not, printed after an `--onto` export.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MatchReport {
+    pub meshes: Vec<MeshReport>,
+    /// The take's curves that no target of the avatar matched.
+    pub curves_without_target: Vec<String>,
+}
+
+/// One mesh with named morph targets.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshReport {
+    /// `meshes[3] (`Face`)`.
+    pub mesh: String,
+    /// The nodes showing it (each gets a channel when anything matched).
+    pub nodes: Vec<String>,
+    /// (target name, curve name) pairs.
+    pub matched: Vec<(String, String)>,
+    /// Targets that no curve drives.
+    pub without_curve: Vec<String>,
+}
+
+/// Most names a report line lists before `… and N more`.
+const LISTED: usize = 40;
+
+fn list(names: impl ExactSizeIterator<Item = String>) -> String {
+    let total = names.len();
+    let mut shown_names: Vec<String> = names.take(LISTED).collect();
+    if total > LISTED {
+        shown_names.push(format!("… and {} more", total - LISTED));
+    }
+    shown_names.join(", ")
+}
+
+impl fmt::Display for MatchReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for mesh in &self.meshes {
+            let targets = mesh.matched.len() + mesh.without_curve.len();
+            let nodes = if mesh.nodes.is_empty() {
+                "no node shows it: not animated".to_owned()
+            } else {
+                mesh.nodes.join(", ")
+            };
+            writeln!(
+                f,
+                "{}: {} of {targets} morph targets matched ({nodes})",
+                mesh.mesh,
+                mesh.matched.len()
+            )?;
+            if !mesh.matched.is_empty() {
+                let pairs = mesh.matched.iter().map(|(target, curve)| {
+                    if target == curve {
+                        shown(target)
+                    } else {
+                        format!("{} ← {curve}", shown(target))
+                    }
+                });
+                writeln!(f, "  matched: {}", list(pairs))?;
+            }
+            if !mesh.without_curve.is_empty() {
+                let names = mesh.without_curve.iter().map(|n| shown(n));
+                writeln!(f, "  no curve for: {}", list(names))?;
+            }
+        }
+        if self.curves_without_target.is_empty() {
+            writeln!(f, "every curve of the take has a target")
+        } else {
+            writeln!(
+                f,
+                "curves with no target: {}",
+                list(self.curves_without_target.iter().cloned())
+            )
+        }
+    }
+}
+
+impl Avatar {
+    /// Matches the avatar's morph targets to the take's curves. No target matching any curve
+    /// is an error naming the file and some of its targets.
+    pub fn plan(&self, table: &CurveTable) -> Result<Plan, ExportError> {
+        let mut report = MatchReport::default();
+        let mut meshes = Vec::new();
+        let mut used = vec![false; table.names().len()];
+        for (m, mesh) in self.meshes.iter().enumerate() {
+            if mesh.target_names.is_empty() {
+                continue;
+            }
+            let mut row = MeshReport {
+                mesh: mesh.label.clone(),
+                nodes: mesh.nodes.iter().map(|(_, name)| name.clone()).collect(),
+                ..Default::default()
+            };
+            let mut sources = Vec::new();
+            for (name, &default) in mesh.target_names.iter().zip(&mesh.default_weights) {
+                match table.lookup(name) {
+                    Some(c) => {
+                        row.matched.push((name.clone(), table.names()[c].clone()));
+                        if !mesh.nodes.is_empty() {
+                            used[c] = true;
+                        }
+                        sources.push(Source::Curve(c));
+                    }
+                    None => {
+                        row.without_curve.push(name.clone());
+                        sources.push(Source::Default(default));
+                    }
+                }
+            }
+            if !row.matched.is_empty() && !mesh.nodes.is_empty() {
+                meshes.push(MeshPlan { mesh: m, sources });
+            }
+            report.meshes.push(row);
+        }
+        report.curves_without_target = table
+            .names()
+            .iter()
+            .zip(&used)
+            .filter(|(_, used)| !**used)
+            .map(|(n, _)| n.clone())
+            .collect();
+        if meshes.is_empty() {
+            return Err(self.no_match(&report));
+        }
+        Ok(Plan { meshes, report })
+    }
+
+    fn no_match(&self, report: &MatchReport) -> ExportError {
+        let names: Vec<&String> = self
+            .meshes
+            .iter()
+            .flat_map(|m| &m.target_names)
+            .collect();
+        let unnamed = self
+            .meshes
+            .iter()
+            .filter(|m| m.targets > 0 && m.target_names.is_empty())
+            .count();
+        let problem = if names.is_empty() {
+            format!(
+                "no mesh has named morph targets (mesh.extras.targetNames){}",
+                if unnamed > 0 {
+                    format!("; {unnamed} mesh(es) have morph targets without names")
+                } else {
+                    String::new()
+                }
+            )
+        } else if report.meshes.iter().any(|m| !m.matched.is_empty()) {
+            "the meshes whose morph targets match the take's curves are shown by no node".into()
+        } else {
+            const FEW: usize = 8;
+            let few: Vec<String> = names.iter().take(FEW).map(|n| format!("`{}`", shown(n))).collect();
+            format!(
+                "no morph target matches a curve of the take (ARKit names such as `jawOpen`, \
+                 case ignored; VRM visemes `aa ih ou ee oh`/`A I U E O` when the take has \
+                 them); its {} target(s) include {}{}",
+                names.len(),
+                few.join(", "),
+                if names.len() > FEW { ", …" } else { "" }
+            )
+        };
+        avatar_error(&self.path, problem)
+    }
+}
