@@ -64,14 +64,24 @@ fn assert_clean(path: &Path) {
 
 fn blender(args: &[&str]) -> String {
     let out = Command::new("blender")
-        .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
+        .args([
+            "-b",
+            "--factory-startup",
+            "--python-exit-code",
+            "1",
+            "--python",
+        ])
         .arg(repo().join("tests/blender/onto_avatar.py"))
         .arg("--")
         .args(args)
         .output()
         .expect("blender (Debian package `blender`, installed by scripts/test)");
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(out.status.success(), "blender {args:?} failed:\n{stdout}\n{}", stderr(&out));
+    assert!(
+        out.status.success(),
+        "blender {args:?} failed:\n{stdout}\n{}",
+        stderr(&out)
+    );
     stdout
 }
 
@@ -241,7 +251,9 @@ fn assert_shape_keys(
     for &at in probes {
         let keys = &samples["shape_keys"][format!("{at:?}")]["Face"];
         for &(name, k) in matched {
-            let got = keys[name].as_f64().unwrap_or_else(|| panic!("no {name} at {at}: {keys}"));
+            let got = keys[name]
+                .as_f64()
+                .unwrap_or_else(|| panic!("no {name} at {at}: {keys}"));
             let want = expected(times, k, at);
             assert!(
                 (got - want).abs() <= 1e-4,
@@ -250,7 +262,10 @@ fn assert_shape_keys(
         }
         for &(name, value) in held {
             let got = keys[name].as_f64().unwrap();
-            assert!((got - value).abs() <= 1e-6, "{name} at t = {at}: {got}, not {value}");
+            assert!(
+                (got - value).abs() <= 1e-6,
+                "{name} at t = {at}: {got}, not {value}"
+            );
         }
     }
 }
@@ -264,7 +279,13 @@ fn onto_glb_animates_the_arkit_named_shape_keys_and_keeps_the_rest() {
     make_avatar(
         &avatar,
         "GLB",
-        &["JawOpen", "mouthsmileleft", "mouthFunnel", "eyeBlinkLeft=0.25", "A"],
+        &[
+            "JawOpen",
+            "mouthsmileleft",
+            "mouthFunnel",
+            "eyeBlinkLeft=0.25",
+            "A",
+        ],
     );
     assert_clean(&avatar);
     let take = dir.path().join("take.jsonl");
@@ -336,9 +357,15 @@ fn onto_glb_animates_the_arkit_named_shape_keys_and_keeps_the_rest() {
     );
     // The untouched parts: objects, material, and the Spinner's own animation.
     assert_eq!(samples["objects"], serde_json::json!(["Face", "Spinner"]));
-    assert!(samples["materials"].as_array().unwrap().contains(&"Skin".into()));
+    assert!(samples["materials"]
+        .as_array()
+        .unwrap()
+        .contains(&"Skin".into()));
     assert!(
-        samples["tracks"]["Spinner"].as_array().unwrap().contains(&"Spin".into()),
+        samples["tracks"]["Spinner"]
+            .as_array()
+            .unwrap()
+            .contains(&"Spin".into()),
         "{}",
         samples["tracks"]
     );
@@ -350,7 +377,10 @@ fn onto_glb_animates_the_arkit_named_shape_keys_and_keeps_the_rest() {
         .unwrap_or_else(|| panic!("no Spin action: {}", samples["actions"]));
     assert_eq!(spin.1, &serde_json::json!(["rotation_quaternion"]));
     for at in probes {
-        assert_eq!(samples["shape_keys"][format!("{at:?}")]["Spinner"]["Bulge"], 0.0);
+        assert_eq!(
+            samples["shape_keys"][format!("{at:?}")]["Spinner"]["Bulge"],
+            0.0
+        );
     }
 }
 
@@ -360,7 +390,11 @@ fn onto_gltf_keeps_its_bin_and_embeds_the_animation_in_a_new_buffer() {
     let folder = dir.path().join("avatar");
     std::fs::create_dir(&folder).unwrap();
     let avatar = folder.join("avatar.gltf");
-    make_avatar(&avatar, "GLTF_SEPARATE", &["JAWOPEN", "mouthPucker", "Smile"]);
+    make_avatar(
+        &avatar,
+        "GLTF_SEPARATE",
+        &["JAWOPEN", "mouthPucker", "Smile"],
+    );
     let take = dir.path().join("take.jsonl");
     let times = write_take(&take, 20);
     let export = |out: &Path| {
@@ -407,7 +441,10 @@ fn onto_gltf_keeps_its_bin_and_embeds_the_animation_in_a_new_buffer() {
         let run = export(&out);
         let err = stderr(&run);
         assert_eq!(run.status.code(), Some(2), "{err}");
-        assert!(err.contains(avatar.to_str().unwrap()) && err.contains(says), "{err}");
+        assert!(
+            err.contains(avatar.to_str().unwrap()) && err.contains(says),
+            "{err}"
+        );
         assert!(!out.exists());
     }
 }
@@ -466,12 +503,18 @@ fn onto_a_malformed_avatar_is_exit_2_naming_the_file_and_element() {
             gltf("").replace(r#""byteLength": 48}]"#, r#""byteLength": 4800}]"#),
             Some("bufferViews[0]"),
         ),
-        (gltf("").replace(r#""count": 4"#, r#""count": 40"#), Some("accessors[0]")),
+        (
+            gltf("").replace(r#""count": 4"#, r#""count": 40"#),
+            Some("accessors[0]"),
+        ),
         (
             gltf("").replace(r#"["jawOpen"]"#, r#"["jawOpen", "mouthClose"]"#),
             Some("meshes[0].extras.targetNames"),
         ),
-        (gltf("").replace(r#""mesh": 0"#, r#""mesh": 7"#), Some("nodes[0].mesh")),
+        (
+            gltf("").replace(r#""mesh": 0"#, r#""mesh": 7"#),
+            Some("nodes[0].mesh"),
+        ),
         (
             gltf(r#", "images": [{"uri": "../../../etc/passwd"}]"#),
             Some("images[0]"),

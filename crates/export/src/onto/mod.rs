@@ -178,11 +178,7 @@ impl Avatar {
     }
 
     fn no_match(&self, report: &MatchReport) -> ExportError {
-        let names: Vec<&String> = self
-            .meshes
-            .iter()
-            .flat_map(|m| &m.target_names)
-            .collect();
+        let names: Vec<&String> = self.meshes.iter().flat_map(|m| &m.target_names).collect();
         let unnamed = self
             .meshes
             .iter()
@@ -201,7 +197,11 @@ impl Avatar {
             "the meshes whose morph targets match the take's curves are shown by no node".into()
         } else {
             const FEW: usize = 8;
-            let few: Vec<String> = names.iter().take(FEW).map(|n| format!("`{}`", shown(n))).collect();
+            let few: Vec<String> = names
+                .iter()
+                .take(FEW)
+                .map(|n| format!("`{}`", shown(n)))
+                .collect();
             format!(
                 "no morph target matches a curve of the take (ARKit names such as `jawOpen`, \
                  case ignored; VRM visemes `aa ih ou ee oh`/`A I U E O` when the take has \

@@ -72,7 +72,11 @@ impl Avatar {
             (bytes.to_vec(), None)
         };
         let doc: Value = serde_json::from_slice(&json_bytes).map_err(|e| {
-            let what = if glb { "GLB JSON chunk" } else { "not glTF JSON" };
+            let what = if glb {
+                "GLB JSON chunk"
+            } else {
+                "not glTF JSON"
+            };
             format!("{what}: {e}")
         })?;
         if !doc.is_object() {
@@ -102,8 +106,12 @@ impl Avatar {
             let Some(mesh) = node.get("mesh") else {
                 continue;
             };
-            let m = index(mesh, meshes.len())
-                .ok_or_else(|| format!("nodes[{n}].mesh is {mesh}, the file has {} meshes", meshes.len()))?;
+            let m = index(mesh, meshes.len()).ok_or_else(|| {
+                format!(
+                    "nodes[{n}].mesh is {mesh}, the file has {} meshes",
+                    meshes.len()
+                )
+            })?;
             let name = node.get("name").and_then(Value::as_str).map_or_else(
                 || format!("node {n}"),
                 |s| format!("node {n} (`{}`)", shown(s)),
@@ -141,10 +149,12 @@ fn index(v: &Value, len: usize) -> Option<usize> {
 fn uint(item: &Value, key: &str, at: &str) -> Result<Option<u64>, String> {
     match item.get(key) {
         None => Ok(None),
-        Some(v) => v
-            .as_u64()
-            .map(Some)
-            .ok_or_else(|| format!("{at}.{key} is {}, not a non-negative integer", shown(&v.to_string()))),
+        Some(v) => v.as_u64().map(Some).ok_or_else(|| {
+            format!(
+                "{at}.{key} is {}, not a non-negative integer",
+                shown(&v.to_string())
+            )
+        }),
     }
 }
 
@@ -182,10 +192,17 @@ fn check_buffers(
                     .map_err(|e| format!("{at}: {}: {e}", file.display()))?
                     .len()
             }
-            Some(other) => return Err(format!("{at}.uri is {}, not a string", shown(&other.to_string()))),
+            Some(other) => {
+                return Err(format!(
+                    "{at}.uri is {}, not a string",
+                    shown(&other.to_string())
+                ))
+            }
         };
         if have < length {
-            return Err(format!("{at} has {have} bytes, its byteLength says {length}"));
+            return Err(format!(
+                "{at} has {have} bytes, its byteLength says {length}"
+            ));
         }
         total = total.saturating_add(length);
         if total > MAX_AVATAR_BYTES {
@@ -209,7 +226,10 @@ fn check_views(doc: &Value, buffers: &[u64]) -> Result<Vec<(u64, Option<u64>)>, 
             .ok_or_else(|| format!("{at}.buffer is not one of the {} buffers", buffers.len()))?;
         let offset = uint(view, "byteOffset", &at)?.unwrap_or(0);
         let length = uint(view, "byteLength", &at)?.ok_or(format!("{at} has no byteLength"))?;
-        if offset.checked_add(length).is_none_or(|end| end > buffers[buffer]) {
+        if offset
+            .checked_add(length)
+            .is_none_or(|end| end > buffers[buffer])
+        {
             return Err(format!(
                 "{at} (bytes {offset} + {length}) runs past the end of buffer {buffer} ({} bytes)",
                 buffers[buffer]
@@ -247,26 +267,81 @@ fn check_accessors(doc: &Value, views: &[(u64, Option<u64>)]) -> Result<Vec<u64>
         let count = uint(accessor, "count", &at)?
             .filter(|&c| c >= 1)
             .ok_or(format!("{at}.count is missing or 0"))?;
+        let element = component * components;
         if let Some(view) = accessor.get("bufferView") {
-            let v = index(view, views.len())
-                .ok_or_else(|| format!("{at}.bufferView is not one of the {} buffer views", views.len()))?;
-            let (length, stride) = views[v];
-            let element = component * components;
-            let offset = uint(accessor, "byteOffset", &at)?.unwrap_or(0);
-            let end = (count - 1)
-                .checked_mul(stride.unwrap_or(element))
-                .and_then(|b| b.checked_add(element))
-                .and_then(|b| b.checked_add(offset));
-            if end.is_none_or(|end| end > length) {
-                return Err(format!(
-                    "{at}: {count} elements of {element} bytes from byte {offset} run past the \
-                     end of buffer view {v} ({length} bytes)"
-                ));
+            check_span(views, view, accessor, count, element, None, &at)?;
+        }
+        if let Some(sparse) = accessor.get("sparse") {
+            let at = format!("{at}.sparse");
+            let n = uint(sparse, "count", &at)?
+                .filter(|&n| (1..=count).contains(&n))
+                .ok_or(format!(
+                    "{at}.count is missing, 0 or more than the accessor's {count}"
+                ))?;
+            let indices = sparse
+                .get("indices")
+                .ok_or(format!("{at} has no indices"))?;
+            let index_size = match uint(indices, "componentType", &at)? {
+                Some(5121) => 1,
+                Some(5123) => 2,
+                Some(5125) => 4,
+                _ => return Err(format!("{at}.indices.componentType is not an index type")),
+            };
+            let values = sparse.get("values").ok_or(format!("{at} has no values"))?;
+            for (part, item, size) in [
+                ("indices", indices, index_size),
+                ("values", values, element),
+            ] {
+                let view = item
+                    .get("bufferView")
+                    .ok_or(format!("{at}.{part} has no bufferView"))?;
+                check_span(
+                    views,
+                    view,
+                    item,
+                    n,
+                    size,
+                    Some(size),
+                    &format!("{at}.{part}"),
+                )?;
             }
         }
         out.push(count);
     }
     Ok(out)
+}
+
+/// Checks that `count` elements of `element` bytes (`stride` apart: `fixed`, else the
+/// view's `byteStride`, else tightly packed) from `item.byteOffset` lie inside buffer view
+/// `view`.
+fn check_span(
+    views: &[(u64, Option<u64>)],
+    view: &Value,
+    item: &Value,
+    count: u64,
+    element: u64,
+    fixed: Option<u64>,
+    at: &str,
+) -> Result<(), String> {
+    let v = index(view, views.len()).ok_or_else(|| {
+        format!(
+            "{at}.bufferView is not one of the {} buffer views",
+            views.len()
+        )
+    })?;
+    let (length, stride) = views[v];
+    let offset = uint(item, "byteOffset", at)?.unwrap_or(0);
+    let end = (count - 1)
+        .checked_mul(fixed.or(stride).unwrap_or(element))
+        .and_then(|b| b.checked_add(element))
+        .and_then(|b| b.checked_add(offset));
+    if end.is_none_or(|end| end > length) {
+        return Err(format!(
+            "{at}: {count} elements of {element} bytes from byte {offset} run past the end of \
+             buffer view {v} ({length} bytes)"
+        ));
+    }
+    Ok(())
 }
 
 /// The meshes' morph targets: the same number on every primitive, naming accessors that
@@ -284,11 +359,13 @@ fn read_meshes(doc: &Value, accessors: Vec<u64>) -> Result<Vec<AvatarMesh>, Stri
         };
         let mut targets = None;
         for (p, primitive) in primitives.iter().enumerate() {
-            let list = array(primitive, "targets")
-                .map_err(|e| format!("{label}.primitives[{p}]: {e}"))?;
+            let list =
+                array(primitive, "targets").map_err(|e| format!("{label}.primitives[{p}]: {e}"))?;
             for (k, target) in list.iter().enumerate() {
                 let Some(attributes) = target.as_object() else {
-                    return Err(format!("{label}.primitives[{p}].targets[{k}] is not an object"));
+                    return Err(format!(
+                        "{label}.primitives[{p}].targets[{k}] is not an object"
+                    ));
                 };
                 for (attribute, accessor) in attributes {
                     if index(accessor, accessors.len()).is_none() {
@@ -338,7 +415,9 @@ fn read_meshes(doc: &Value, accessors: Vec<u64>) -> Result<Vec<AvatarMesh>, Stri
                 .iter()
                 .map(|v| v.as_f64().filter(|x| x.is_finite()).map(|x| x as f32))
                 .collect::<Option<Vec<f32>>>()
-                .ok_or_else(|| format!("{label}.weights holds something that is not a finite number"))?,
+                .ok_or_else(|| {
+                    format!("{label}.weights holds something that is not a finite number")
+                })?,
             Some(_) => {
                 return Err(format!(
                     "{label}.weights is not an array of {targets} numbers (one per morph target)"
@@ -354,4 +433,129 @@ fn read_meshes(doc: &Value, accessors: Vec<u64>) -> Result<Vec<AvatarMesh>, Stri
         });
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    /// A one-mesh document with a 4-vertex position accessor as its one morph target.
+    fn doc() -> Value {
+        json!({
+            "asset": {"version": "2.0"},
+            "buffers": [{"byteLength": 48, "uri": format!(
+                "data:application/octet-stream;base64,{}", "A".repeat(64))}],
+            "bufferViews": [{"buffer": 0, "byteLength": 48}],
+            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"}],
+            "meshes": [{
+                "name": "Face",
+                "primitives": [{"attributes": {"POSITION": 0}, "targets": [{"POSITION": 0}]}],
+                "extras": {"targetNames": ["jawOpen"]},
+                "weights": [0.5]
+            }],
+            "nodes": [{"mesh": 0, "name": "Face"}]
+        })
+    }
+
+    fn read(doc: &Value) -> Result<Avatar, String> {
+        Avatar::from_bytes(&serde_json::to_vec(doc).unwrap(), Path::new("avatar.gltf"))
+    }
+
+    #[test]
+    fn a_sound_document_reads_with_names_weights_and_nodes() {
+        let avatar = read(&doc()).unwrap();
+        assert!(!avatar.glb && !avatar.external_files);
+        let mesh = &avatar.meshes[0];
+        assert_eq!(mesh.label, "meshes[0] (`Face`)");
+        assert_eq!(mesh.target_names, ["jawOpen"]);
+        assert_eq!(mesh.default_weights, [0.5]);
+        assert_eq!(mesh.nodes, [(0, "node 0 (`Face`)".to_owned())]);
+    }
+
+    #[test]
+    fn each_broken_element_is_named() {
+        let cases: [(&str, Value, &str); 9] = [
+            (
+                "/bufferViews/0/byteOffset",
+                json!(4),
+                "bufferViews[0] (bytes 4 + 48)",
+            ),
+            ("/bufferViews/0/buffer", json!(1), "bufferViews[0].buffer"),
+            (
+                "/accessors/0/byteOffset",
+                json!(4),
+                "accessors[0]: 4 elements",
+            ),
+            ("/accessors/0/count", json!(0), "accessors[0].count"),
+            (
+                "/meshes/0/weights",
+                json!([0.5, 1]),
+                "meshes[0] (`Face`).weights",
+            ),
+            (
+                "/meshes/0/primitives/0/targets/0/POSITION",
+                json!(3),
+                "targets[0].POSITION",
+            ),
+            (
+                "/meshes/0/extras/targetNames",
+                json!([7]),
+                "targetNames holds a non-string",
+            ),
+            ("/nodes/0/mesh", json!(-1), "nodes[0].mesh"),
+            (
+                "/buffers/0/byteLength",
+                json!(49),
+                "buffers[0] has 48 bytes",
+            ),
+        ];
+        for (pointer, value, says) in cases {
+            let mut doc = doc();
+            let (parent, key) = pointer.rsplit_once('/').unwrap();
+            match doc.pointer_mut(parent).unwrap() {
+                Value::Object(map) => {
+                    map.insert(key.to_owned(), value);
+                }
+                other => other[key.parse::<usize>().unwrap()] = value,
+            }
+            let err = read(&doc).unwrap_err();
+            assert!(err.contains(says), "{pointer}: {err}");
+        }
+    }
+
+    #[test]
+    fn sparse_accessors_are_checked_against_their_views() {
+        let mut doc = doc();
+        doc["bufferViews"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!({"buffer": 0, "byteLength": 8}));
+        doc["accessors"][0]["sparse"] = json!({
+            "count": 2,
+            "indices": {"bufferView": 1, "componentType": 5121},
+            "values": {"bufferView": 0, "byteOffset": 24}
+        });
+        read(&doc).unwrap();
+        doc["accessors"][0]["sparse"]["values"]["byteOffset"] = json!(28);
+        let err = read(&doc).unwrap_err();
+        assert!(
+            err.contains("accessors[0].sparse.values: 2 elements"),
+            "{err}"
+        );
+        doc["accessors"][0]["sparse"]["count"] = json!(5);
+        let err = read(&doc).unwrap_err();
+        assert!(err.contains("accessors[0].sparse.count"), "{err}");
+    }
+
+    #[test]
+    fn primitives_must_agree_on_their_targets() {
+        let mut doc = doc();
+        doc["meshes"][0]["primitives"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!({"attributes": {"POSITION": 0}}));
+        let err = read(&doc).unwrap_err();
+        assert!(err.contains("primitive 1 has 0 morph targets"), "{err}");
+    }
 }

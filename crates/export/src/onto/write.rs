@@ -54,7 +54,11 @@ impl Avatar {
             )));
         }
         let frames = times.len();
-        assert_eq!(values.len(), frames * curves, "one value per curve and frame");
+        assert_eq!(
+            values.len(),
+            frames * curves,
+            "one value per curve and frame"
+        );
         // Meshes with the same sources share one sampler output.
         let mut outputs: Vec<&[Source]> = Vec::new();
         let mut mesh_output = Vec::new();
@@ -118,10 +122,17 @@ impl Avatar {
                 "data:application/octet-stream;base64,{}",
                 base64::engine::general_purpose::STANDARD.encode(&data)
             );
-            push(&mut self.doc, "buffers", json!({ "byteLength": data.len(), "uri": uri }));
+            push(
+                &mut self.doc,
+                "buffers",
+                json!({ "byteLength": data.len(), "uri": uri }),
+            );
             (buffers, 0)
         };
-        let add_accessor = |doc: &mut Value, offset: usize, count: usize, bounds: Option<(f32, f32)>| {
+        let add_accessor = |doc: &mut Value,
+                            offset: usize,
+                            count: usize,
+                            bounds: Option<(f32, f32)>| {
             let view = push(
                 doc,
                 "bufferViews",
