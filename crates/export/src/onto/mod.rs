@@ -214,3 +214,106 @@ impl Avatar {
         avatar_error(&self.path, problem)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::{json, Value};
+
+    /// Mesh 0 (`Face`, targets `JAWOPEN`, `blink` default 0.25) shown by two nodes, mesh 1
+    /// (target `jawOpen`) by none.
+    fn avatar() -> Avatar {
+        let b64 = "A".repeat(64);
+        let doc = json!({
+            "asset": {"version": "2.0"},
+            "buffers": [{"byteLength": 48, "uri": format!("data:application/octet-stream;base64,{b64}")}],
+            "bufferViews": [{"buffer": 0, "byteLength": 48}],
+            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"}],
+            "meshes": [
+                {"name": "Face", "extras": {"targetNames": ["JAWOPEN", "blink"]}, "weights": [0, 0.25],
+                 "primitives": [{"attributes": {"POSITION": 0}, "targets": [{"POSITION": 0}, {"POSITION": 0}]}]},
+                {"extras": {"targetNames": ["jawOpen"]},
+                 "primitives": [{"attributes": {"POSITION": 0}, "targets": [{"POSITION": 0}]}]}
+            ],
+            "nodes": [{"mesh": 0, "name": "A"}, {"mesh": 0, "name": "B"}],
+            "extras": {"kept": [1, 2]}
+        });
+        Avatar::from_bytes(&serde_json::to_vec(&doc).unwrap(), Path::new("avatar.gltf")).unwrap()
+    }
+
+    #[test]
+    fn every_node_of_a_matched_mesh_gets_a_channel_with_all_its_targets() {
+        let avatar = avatar();
+        let table = CurveTable::new(&["jawOpen", "mouthClose"]);
+        let plan = avatar.plan(&table).unwrap();
+        assert_eq!(plan.meshes.len(), 1);
+        assert_eq!(
+            plan.meshes[0].sources,
+            [Source::Curve(0), Source::Default(0.25)]
+        );
+        let report = plan.report.to_string();
+        assert!(
+            report.contains(
+                "meshes[1]: 1 of 1 morph targets matched (no node shows it: not animated)"
+            ),
+            "{report}"
+        );
+        assert!(
+            report.contains("matched: JAWOPEN ← jawOpen\n  no curve for: blink"),
+            "{report}"
+        );
+        assert!(
+            report.contains("curves with no target: mouthClose"),
+            "{report}"
+        );
+
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out.gltf");
+        let summary = avatar
+            .write_onto(&plan, &[0.0, 0.5], &[0.25, 0.0, 1.0, 0.0], 2, &out, false)
+            .unwrap();
+        assert_eq!(summary.channels, 2);
+        let doc: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+        assert_eq!(doc["extras"], json!({"kept": [1, 2]}));
+        let animation = &doc["animations"][0];
+        assert_eq!(animation["samplers"].as_array().unwrap().len(), 1);
+        assert_eq!(
+            animation["channels"][1]["target"],
+            json!({"node": 1, "path": "weights"})
+        );
+        let output =
+            &doc["accessors"][animation["samplers"][0]["output"].as_u64().unwrap() as usize];
+        assert_eq!(output["count"], 4);
+        use base64::Engine as _;
+        let uri = doc["buffers"][1]["uri"].as_str().unwrap();
+        let data = base64::engine::general_purpose::STANDARD
+            .decode(uri.split_once(",").unwrap().1)
+            .unwrap();
+        let floats: Vec<f32> = data
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+        assert_eq!(floats, [0.0, 0.5, 0.25, 0.25, 1.0, 0.25]);
+    }
+
+    #[test]
+    fn no_match_names_the_targets_and_the_output_must_keep_the_format() {
+        let avatar = avatar();
+        let err = avatar.plan(&CurveTable::new(&["mouthClose"])).unwrap_err();
+        let text = err.to_string();
+        assert!(err.is_bad_input());
+        assert!(
+            text.contains("avatar avatar.gltf: no morph target matches")
+                && text.contains("`JAWOPEN`, `blink`, `jawOpen`"),
+            "{text}"
+        );
+        let plan = avatar.plan(&CurveTable::new(&["jawOpen"])).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out.glb");
+        let err = avatar
+            .write_onto(&plan, &[0.0], &[0.5], 1, &out, true)
+            .unwrap_err();
+        assert!(err.to_string().contains("--out NAME.gltf"), "{err}");
+        assert!(!out.exists());
+    }
+}
