@@ -105,7 +105,7 @@ impl Avatar {
         let glb_chunk = self.glb && buffers > 0 && self.doc["buffers"][0].get("uri").is_none();
         let (buffer, base) = if glb_chunk {
             let bin = self.bin.get_or_insert_with(Vec::new);
-            while bin.len() % 4 != 0 {
+            while !bin.len().is_multiple_of(4) {
                 bin.push(0);
             }
             let base = bin.len();
