@@ -87,6 +87,10 @@ impl Avatar {
             Some(v) => return Err(format!("asset.version is `{}`, not glTF 2.x", shown(v))),
             None => return Err("asset.version is missing: not a glTF 2.0 document".into()),
         }
+        // The arrays the animation is appended to must be arrays (or absent).
+        for key in ["accessors", "bufferViews", "buffers", "animations"] {
+            array(&doc, key)?;
+        }
         let folder = crate::output::parent_dir(path);
         let mut external_files = false;
         let buffer_lengths = check_buffers(&doc, bin.as_deref(), folder, &mut external_files)?;
@@ -475,7 +479,7 @@ mod tests {
 
     #[test]
     fn each_broken_element_is_named() {
-        let cases: [(&str, Value, &str); 9] = [
+        let cases: [(&str, Value, &str); 10] = [
             (
                 "/bufferViews/0/byteOffset",
                 json!(4),
