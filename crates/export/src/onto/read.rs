@@ -513,6 +513,7 @@ mod tests {
                 json!(49),
                 "buffers[0] has 48 bytes",
             ),
+            ("/animations", json!(5), "`animations` is not an array"),
         ];
         for (pointer, value, says) in cases {
             let mut doc = doc();
