@@ -58,6 +58,8 @@ pub struct MatchReport {
     pub meshes: Vec<MeshReport>,
     /// The take's curves that no target of the avatar matched.
     pub curves_without_target: Vec<String>,
+    /// Meshes with morph targets but no `extras.targetNames` (nothing to match them by).
+    pub unnamed: Vec<String>,
 }
 
 /// One mesh with named morph targets.
@@ -115,6 +117,13 @@ impl fmt::Display for MatchReport {
                 writeln!(f, "  no curve for: {}", list(names))?;
             }
         }
+        if !self.unnamed.is_empty() {
+            writeln!(
+                f,
+                "morph targets without names (no extras.targetNames), not animated: {}",
+                list(self.unnamed.iter().cloned())
+            )?;
+        }
         if self.curves_without_target.is_empty() {
             writeln!(f, "every curve of the take has a target")
         } else {
@@ -136,6 +145,9 @@ impl Avatar {
         let mut used = vec![false; table.names().len()];
         for (m, mesh) in self.meshes.iter().enumerate() {
             if mesh.target_names.is_empty() {
+                if mesh.targets > 0 {
+                    report.unnamed.push(mesh.label.clone());
+                }
                 continue;
             }
             let mut row = MeshReport {
@@ -233,7 +245,8 @@ mod tests {
                 {"name": "Face", "extras": {"targetNames": ["JAWOPEN", "blink"]}, "weights": [0, 0.25],
                  "primitives": [{"attributes": {"POSITION": 0}, "targets": [{"POSITION": 0}, {"POSITION": 0}]}]},
                 {"extras": {"targetNames": ["jawOpen"]},
-                 "primitives": [{"attributes": {"POSITION": 0}, "targets": [{"POSITION": 0}]}]}
+                 "primitives": [{"attributes": {"POSITION": 0}, "targets": [{"POSITION": 0}]}]},
+                {"name": "Body", "primitives": [{"attributes": {"POSITION": 0}, "targets": [{"POSITION": 0}]}]}
             ],
             "nodes": [{"mesh": 0, "name": "A"}, {"mesh": 0, "name": "B"}],
             "extras": {"kept": [1, 2]}
@@ -264,6 +277,12 @@ mod tests {
         );
         assert!(
             report.contains("curves with no target: mouthClose"),
+            "{report}"
+        );
+        assert!(
+            report.contains(
+                "without names (no extras.targetNames), not animated: meshes[2] (`Body`)\n"
+            ),
             "{report}"
         );
 
