@@ -82,6 +82,16 @@ pub enum ExportError {
         #[source]
         cause: io::Error,
     },
+    /// An avatar (`export --onto`) that is malformed or has nothing the take can drive.
+    #[error("avatar {}: {problem}", path.display())]
+    Avatar { path: PathBuf, problem: String },
+    /// The avatar file cannot be read.
+    #[error("reading the avatar {}", path.display())]
+    AvatarRead {
+        path: PathBuf,
+        #[source]
+        cause: io::Error,
+    },
     /// Serialising the glTF JSON failed (does not happen for well-formed documents).
     #[error("serialising the glTF document")]
     Serialize(#[source] serde_json::Error),
@@ -104,6 +114,8 @@ impl ExportError {
                 | Self::TooLargeForGlb { .. }
                 | Self::Rig { .. }
                 | Self::RigRead { .. }
+                | Self::Avatar { .. }
+                | Self::AvatarRead { .. }
         ) || matches!(self, Self::Read { cause, .. } if cause.kind() == io::ErrorKind::InvalidData)
     }
 

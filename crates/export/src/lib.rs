@@ -14,6 +14,7 @@
 //! - [`reduce`]: the [`Reducer`], streaming key reduction within a tolerance.
 //! - [`csv`]: the streaming [`CsvWriter`].
 //! - [`onto_rig`]: a take's animation copied onto a rigged mesh (`export --rig`).
+//! - [`onto`]: a take's curves as morph-target weights on the user's avatar (`export --onto`).
 //! - [`asset`]: files a glTF names, read only from its own folder; bounded reads.
 //!
 //! The writers take frames from any source, so a recording turned into frames by the
@@ -23,6 +24,7 @@ pub mod asset;
 pub mod csv;
 mod error;
 pub mod gltf;
+pub mod onto;
 pub mod onto_rig;
 mod output;
 pub mod reduce;

@@ -262,6 +262,7 @@ fn main() {
         put("lipsync_phones", name, text.as_bytes());
     }
     glb_seeds();
+    onto_seeds();
 }
 
 /// `gltf_mesh`: a square as glTF JSON (data URI) and as JSON, NUL, binary chunk; a procedural
@@ -390,4 +391,71 @@ fn glb_seeds() {
         "poses.toml",
         b"[neutral]\nlip = [[0.02, 0.0, 0.0], [0.0, 0.005, 0.0], [-0.02, 0.0, 0.0], [0.0, -0.006, 0.0]]\nforehead = [[0.03, 0.1, 0.0], [-0.03, 0.1, 0.0], [0.0, 0.12, 0.0]]\n[[pose]]\nname = \"open\"\nmouth = { jaw = 0.2 }\ndisplacement = [[0.0, 0.0, 0.0], [0.0, 0.001, 0.0], [0.0, 0.0, 0.0], [0.0, -0.01, 0.0]]\n[[pose]]\nname = \"a\\\"]\\n[[pose]]\"\ndisplacement = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n",
     );
+}
+
+/// `gltf_onto`: an avatar square with two morph targets (`JawOpen`, matched, and
+/// `eyeBlinkLeft`, not), a material and an animation of its own, as glTF JSON (data URI), as
+/// JSON, NUL, binary chunk, and as GLB.
+fn onto_seeds() {
+    let mut bin = Vec::new();
+    let floats = [
+        0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0, // positions
+        0.0, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, // JawOpen
+        0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0, // eyeBlinkLeft
+        0.0, 1.0, // animation times
+        0.0, 0.0, 0.0, 0.0, 0.5, 0.0, // translations
+    ];
+    for f in floats {
+        bin.extend_from_slice(&f.to_le_bytes());
+    }
+    let doc = |uri: Option<String>| {
+        let mut buffer = serde_json::json!({"byteLength": bin.len()});
+        if let Some(uri) = uri {
+            buffer["uri"] = uri.into();
+        }
+        serde_json::to_vec(&serde_json::json!({
+            "asset": {"version": "2.0", "generator": "seed"},
+            "buffers": [buffer],
+            "bufferViews": [
+                {"buffer": 0, "byteOffset": 0, "byteLength": 144},
+                {"buffer": 0, "byteOffset": 144, "byteLength": 32}
+            ],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                 "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+                {"bufferView": 0, "byteOffset": 48, "componentType": 5126, "count": 4, "type": "VEC3"},
+                {"bufferView": 0, "byteOffset": 96, "componentType": 5126, "count": 4, "type": "VEC3"},
+                {"bufferView": 1, "componentType": 5126, "count": 2, "type": "SCALAR",
+                 "min": [0.0], "max": [1.0]},
+                {"bufferView": 1, "byteOffset": 8, "componentType": 5126, "count": 2, "type": "VEC3"}
+            ],
+            "materials": [{"name": "Skin"}],
+            "meshes": [{
+                "name": "Face",
+                "primitives": [{"attributes": {"POSITION": 0}, "material": 0,
+                                "targets": [{"POSITION": 1}, {"POSITION": 2}]}],
+                "weights": [0.0, 0.25],
+                "extras": {"targetNames": ["JawOpen", "eyeBlinkLeft"]}
+            }],
+            "nodes": [{"mesh": 0, "name": "Face"}, {"name": "Other"}],
+            "scenes": [{"nodes": [0, 1]}],
+            "scene": 0,
+            "animations": [{"name": "Other", "samplers": [{"input": 3, "output": 4}],
+                            "channels": [{"sampler": 0, "target": {"node": 1, "path": "translation"}}]}]
+        }))
+        .unwrap()
+    };
+    use base64::Engine as _;
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&bin)
+    );
+    put("gltf_onto", "avatar.gltf", &doc(Some(uri)));
+    let mut split = doc(None);
+    split.push(0);
+    split.extend_from_slice(&bin);
+    put("gltf_onto", "avatar-split", &split);
+    let mut glb = Vec::new();
+    mouthpiece_export::onto_rig::write_glb(&doc(None), &bin, &mut glb).unwrap();
+    put("gltf_onto", "avatar.glb", &glb);
 }

@@ -32,6 +32,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("wav", wav),
     ("lipsync_tables", lipsync_tables),
     ("retarget_options", retarget_options),
+    ("gltf_onto", gltf_onto),
 ];
 
 /// Runs the target called `name`; `false` when there is none.
@@ -294,6 +295,34 @@ pub fn gltf_rig(data: &[u8]) {
     let take = Path::new("/nonexistent/mouthpiece-fuzz/take.glb");
     let _ = animate_rig_bytes(data, rig, take_glb(), take);
     let _ = animate_rig_bytes(&split_glb(data), rig, take_glb(), take);
+}
+
+/// An avatar for `export --onto`: the bytes as the file (GLB when they start with its magic,
+/// glTF JSON otherwise) and split at their first NUL into a GLB's JSON and binary chunks;
+/// read, matched to the take's curves and, when a target matches, written with a two-frame
+/// animation into the scratch directory. The file's folder does not exist, so a buffer URI
+/// other than `data:` is refused.
+pub fn gltf_onto(data: &[u8]) {
+    use mouthpiece_export::onto::{Avatar, CurveTable};
+    use mouthpiece_retarget::rig::{CURVES, CURVE_NAMES};
+    let table = CurveTable::new(&CURVE_NAMES);
+    let path = Path::new("/nonexistent/mouthpiece-fuzz/avatar.gltf");
+    let values: Vec<f32> = (0..2 * CURVES)
+        .map(|k| k as f32 / (2 * CURVES) as f32)
+        .collect();
+    for bytes in [data.to_vec(), split_glb(data)] {
+        let Ok(avatar) = Avatar::from_bytes(&bytes, path) else {
+            continue;
+        };
+        let Ok(plan) = avatar.plan(&table) else {
+            continue;
+        };
+        let _ = plan.report.to_string();
+        let glb = avatar.glb;
+        let out = scratch("onto-out", b"");
+        let _ = avatar.write_onto(&plan, &[0.0, 0.5], &values, CURVES, &out, glb);
+        let _ = std::fs::remove_file(&out);
+    }
 }
 
 /// The shipped class table and its generated segments, built once per fuzzing process.

@@ -59,6 +59,11 @@ pub struct Args {
     /// onto bare point nodes: the output is the rig with the take's animation on its joints.
     #[arg(long, value_name = "RIGGED_GLB")]
     pub rig: Option<PathBuf>,
+    /// Write the take's curves onto this avatar (glTF/GLB) as morph-target weight animation:
+    /// targets named like the curves (ARKit names, case ignored) follow the take; everything
+    /// else in the file is kept. The output has the avatar's format (.glb or .gltf).
+    #[arg(long, value_name = "AVATAR")]
+    pub onto: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -118,6 +123,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Err(bad_input(anyhow!(
             "--rig writes a GLB: give --out NAME.glb"
         )));
+    }
+    if let Some(avatar) = &args.onto {
+        if format == Format::Csv {
+            return Err(bad_input(anyhow!(
+                "--onto writes the avatar with the animation: give --out NAME.glb or NAME.gltf"
+            )));
+        }
+        for (given, flag) in [
+            (args.rig.is_some(), "--rig"),
+            (args.curve, "--curve"),
+            (args.reduce.is_some(), "--reduce"),
+            (args.embed, "--embed"),
+            (args.no_markers, "--no-markers"),
+        ] {
+            if given {
+                return Err(bad_input(anyhow!(
+                    "{flag} does not apply with --onto (only the morph-target weights are written)"
+                )));
+            }
+        }
+        return export_onto(&args, avatar, format == Format::Glb);
     }
     if args.embed && format != Format::Gltf {
         return Err(bad_input(anyhow!("--embed applies to --format gltf only")));
@@ -255,6 +281,52 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+/// `--onto`: the avatar is read and matched first (a bad avatar fails before the take is
+/// read), then the take's curves are collected (4 bytes per curve and frame) and appended to
+/// the avatar as one weight animation.
+fn export_onto(args: &Args, avatar_path: &Path, glb_out: bool) -> anyhow::Result<()> {
+    use mouthpiece_export::onto::{Avatar, CurveTable};
+    use mouthpiece_retarget::rig::{CURVES, CURVE_NAMES};
+    let avatar = Avatar::read(avatar_path).map_err(export_error)?;
+    let table = CurveTable::new(&CURVE_NAMES);
+    let plan = avatar.plan(&table).map_err(export_error)?;
+    let character = args.character.as_deref().map(load_character).transpose()?;
+    let input = open_take(args)?;
+    let progress = progress_bar(input.len);
+    let mut reader = match &character {
+        Some(rig) => TakeReader::with_points(input.reader, input.name, rig.names()),
+        None => TakeReader::new(input.reader, input.name),
+    };
+    let mut times = Vec::new();
+    let mut values = Vec::new();
+    while let Some(frame) = reader.next_frame().map_err(export_error)? {
+        progress.set_position(reader.bytes_read());
+        times.push(frame.t as f32);
+        let curves = frame.rig.map_or([0.0; CURVES], |r| r.curves);
+        values.extend(curves.iter().map(|&c| c as f32));
+    }
+    if times.is_empty() {
+        return Err(bad_input(ExportError::EmptyTake {
+            source_name: reader.source_name().to_owned(),
+        }));
+    }
+    progress.set_message("writing");
+    let summary = avatar
+        .write_onto(&plan, &times, &values, CURVES, &args.out, glb_out)
+        .map_err(export_error)?;
+    progress.finish_and_clear();
+    eprint!("{}", plan.report);
+    eprintln!(
+        "wrote {}: {} frames, {} weights channel(s) on {}, {} bytes of animation added",
+        args.out.display(),
+        summary.frames,
+        summary.channels,
+        avatar_path.display(),
+        summary.bytes
+    );
     Ok(())
 }
 
