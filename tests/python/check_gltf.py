@@ -132,9 +132,9 @@ def main():
         assert eyes == ["eye_L", "eye_R"], eyes
     mouth = doc["nodes"][mouth_index]
     assert mouth["name"] == "mouth", mouth.get("name")
-    rig_node_names = ("curve", "jaw", "blendshapes")
+    rig_node_names = ("curve", "jaw", "blendshapes", "lip_upper", "lip_lower")
     children = [doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] not in rig_node_names]
-    rig_nodes = {doc["nodes"][i]["name"]: doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] in ("jaw", "blendshapes")}
+    rig_nodes = {doc["nodes"][i]["name"]: doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] in rig_node_names[1:]}
     names = [c["name"] for c in children]
     curve_groups = [doc["nodes"][i] for i in mouth["children"] if doc["nodes"][i]["name"] == "curve"]
 
@@ -162,8 +162,8 @@ def main():
             assert v.shape[0] == len(t) * targets, (v.shape, len(t), targets)
             weights = (t, v.reshape(len(t), targets), mesh)
             continue
-        if node_name == "jaw":
-            rotations["jaw " + ch["target"]["path"]] = (t, v)
+        if node_name in ("jaw", "lip_upper", "lip_lower"):
+            rotations[node_name + " " + ch["target"]["path"]] = (t, v)
             continue
         if ch["target"]["path"] == "rotation":
             assert node_name in ("head", "eye_L", "eye_R"), node_name
@@ -231,7 +231,7 @@ def main():
     rig = {"rig_frames": sum(r is not None for r in rig_frames)}
     if weights is not None or rig["rig_frames"]:
         assert rig["rig_frames"] > 0, "rig nodes for a take without rig"
-        assert set(rig_nodes) == {"jaw", "blendshapes"}, list(rig_nodes)
+        assert set(rig_nodes) == {"jaw", "blendshapes", "lip_upper", "lip_lower"}, list(rig_nodes)
         t, w, mesh = weights
         curve_names = list(next(r for r in rig_frames if r is not None)["curves"].keys())
         assert mesh["extras"]["targetNames"] == curve_names, mesh["extras"]
@@ -259,9 +259,33 @@ def main():
         scale = 1.0
         if args.character:
             scale = UNITS.get(tomllib.load(open(args.character, "rb")).get("units", "m"), 1.0)
-        slides = np.array([r["jaw"]["slide_m"] if r else 0.0 for r in rig_frames]) / scale
+        # The slide and the lips' translations in the character's units: its mouth width (the
+        # x extent of the points' rest positions, its units) over the performer's
+        # (`performer_width_m`); without that, the performer's metres in the character's units.
+        char_width = float(np.ptp([c["translation"][0] for c in children]))
+
+        def per_metre(r):
+            if r and r.get("performer_width_m") and char_width > 0:
+                return char_width / r["performer_width_m"]
+            return 1.0 / scale
+
+        factors = np.array([per_metre(r) for r in rig_frames])
+        slides = np.array([r["jaw"]["slide_m"] if r else 0.0 for r in rig_frames]) * factors
         want_t = rest[None, :] + np.stack([slides, 0 * slides, 0 * slides], axis=1)
         rig["max_jaw_slide_error"] = float(np.abs(tv - want_t).max())
+        lip_error = 0.0
+        for lip in ("upper", "lower"):
+            lt, lv = rotations[f"lip_{lip} translation"]
+            qt, qv = rotations[f"lip_{lip} rotation"]
+            assert np.array_equal(lt, times) and np.array_equal(qt, times)
+            want_lt = np.array([r["lips"][lip]["translation"] if r else [0.0] * 3 for r in rig_frames]) * factors[:, None]
+            lip_error = max(lip_error, float(np.abs(lv - want_lt).max()))
+            wxyz = np.array([r["lips"][lip]["rotation"] if r else [1.0, 0, 0, 0] for r in rig_frames])
+            want_q = np.concatenate([wxyz[:, 1:], wxyz[:, :1]], axis=1)
+            err = np.minimum(np.abs(qv - want_q).max(axis=1), np.abs(qv + want_q).max(axis=1))
+            lip_error = max(lip_error, float(err.max()))
+        rig["max_lip_error"] = lip_error
+        rig["lip_scale"] = float(factors[-1])
         rig["jaw_rest"] = rest.tolist()
         rig["max_jaw_angle_deg"] = float(np.abs(angles).max())
 

@@ -350,23 +350,30 @@ impl Config {
                 ));
             }
         }
-        if self.osc.targets.len() > MAX_OSC_TARGETS {
+        let all = self.osc.all_targets();
+        if all.len() > MAX_OSC_TARGETS {
             return Err(fail(
                 "osc.targets",
                 format!(
-                    "expected at most {MAX_OSC_TARGETS} targets, got {}",
-                    self.osc.targets.len()
+                    "expected at most {MAX_OSC_TARGETS} targets (with [osc.characters]), got {}",
+                    all.len()
                 ),
             ));
         }
+        // One destination gets one character: VMC receivers take one avatar.
         let mut targets: Vec<OscTarget> = Vec::new();
-        for (i, text) in self.osc.targets.iter().enumerate() {
-            let key = format!("osc.targets[{i}]");
-            let target = text.parse::<OscTarget>().map_err(|e| fail(&key, e))?;
+        for (key, text, _) in &all {
+            let target = text.parse::<OscTarget>().map_err(|e| fail(key, e))?;
             if targets.contains(&target) {
-                return Err(fail(&key, format!("{target} is listed twice")));
+                return Err(fail(key, format!("{target} is listed twice")));
             }
             targets.push(target);
+        }
+        if let Some(name) = self.osc.characters.keys().find(|n| n.is_empty()) {
+            return Err(fail(
+                "osc.characters",
+                format!("expected a character's name, got {name:?}"),
+            ));
         }
         if self.osc.character.as_deref() == Some("") {
             return Err(fail(
@@ -490,10 +497,18 @@ impl Config {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
-        let osc = if self.osc.targets.is_empty() {
+        let all = self.osc.all_targets();
+        let osc = if all.is_empty() {
             "off".to_owned()
         } else {
-            self.osc.targets.join(", ")
+            let each: Vec<String> = all
+                .iter()
+                .map(|(_, t, c)| match c {
+                    Some(c) => format!("{t} ({c})"),
+                    None => (*t).to_owned(),
+                })
+                .collect();
+            each.join(", ")
         };
         format!(
             "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, tokens: read {}, control {}",

@@ -310,6 +310,9 @@ pub struct OscConfig {
     pub names: mouthpiece_output::CurveNaming,
     /// The visemes sent: `"vrm0"` (`A I U E O`), `"vrm1"` (`aa ih ou ee oh`) or `"none"`.
     pub visemes: mouthpiece_output::VisemeNaming,
+    /// `[osc.characters]`: more characters, each with its own targets (`name = ["host:port"]`),
+    /// besides `character`'s `targets`.
+    pub characters: std::collections::BTreeMap<String, Vec<String>>,
 }
 
 impl Default for OscConfig {
@@ -321,6 +324,7 @@ impl Default for OscConfig {
             eyes: true,
             names: mouthpiece_output::CurveNaming::Arkit,
             visemes: mouthpiece_output::VisemeNaming::Vrm0,
+            characters: std::collections::BTreeMap::new(),
         }
     }
 }
@@ -337,13 +341,35 @@ pub fn quote_excerpt(s: &str) -> String {
     }
 }
 
-/// Most OSC targets in `[osc] targets` (each costs one datagram per frame).
+/// Most OSC targets in `[osc] targets` and `[osc.characters]` together (each costs one or two
+/// datagrams per frame).
 pub const MAX_OSC_TARGETS: usize = 16;
 
 impl OscConfig {
     /// The targets, parsed (a loaded config's targets all parse).
     pub fn parsed_targets(&self) -> Result<Vec<OscTarget>, String> {
         self.targets.iter().map(|t| t.parse()).collect()
+    }
+
+    /// Every target as its key in the file and its text, with the character it is for
+    /// (`None`: `character`, the first configured by default): `targets` first, then
+    /// `[osc.characters]` by name.
+    pub fn all_targets(&self) -> Vec<(String, &str, Option<&str>)> {
+        let plain = self
+            .targets
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (format!("osc.targets[{i}]"), t.as_str(), None));
+        let named = self.characters.iter().flat_map(|(name, targets)| {
+            targets.iter().enumerate().map(move |(i, t)| {
+                (
+                    format!("osc.characters.{name}[{i}]"),
+                    t.as_str(),
+                    Some(name.as_str()),
+                )
+            })
+        });
+        plain.chain(named).collect()
     }
 }
 

@@ -352,6 +352,46 @@ fn a_bad_osc_target_names_its_line_and_key() {
     assert_eq!(err.key(), Some("osc.port"), "{err}");
 }
 
+/// `[osc.characters]`: more characters, each with its own targets; a bad one or a destination
+/// listed for two characters names its key and line.
+#[test]
+fn osc_characters_have_their_own_targets() {
+    let config = parse(
+        "[osc]\ntargets = [\"127.0.0.1:39539\"]\n[osc.characters]\nhuman = [\"127.0.0.1:39540\"]\n",
+    )
+    .unwrap();
+    let all = config.osc.all_targets();
+    assert_eq!(
+        all,
+        [
+            ("osc.targets[0]".to_owned(), "127.0.0.1:39539", None),
+            (
+                "osc.characters.human[0]".to_owned(),
+                "127.0.0.1:39540",
+                Some("human")
+            ),
+        ]
+    );
+    assert!(
+        config
+            .summary()
+            .contains("osc 127.0.0.1:39539, 127.0.0.1:39540 (human)"),
+        "{}",
+        config.summary()
+    );
+    let err = parse(
+        "[osc]\ntargets = [\"127.0.0.1:1\"]\n[osc.characters]\nhuman = [\n \"127.0.0.1:1\"]\n",
+    )
+    .unwrap_err();
+    assert_eq!(err.key(), Some("osc.characters.human[0]"), "{err}");
+    assert!(err.to_string().contains("test.toml:5:"), "{err}");
+    assert!(err.to_string().contains("listed twice"), "{err}");
+    let err = parse("[osc.characters]\nhuman = [\"127.0.0.1\"]\n").unwrap_err();
+    assert_eq!(err.key(), Some("osc.characters.human[0]"), "{err}");
+    let err = parse("[osc.characters]\nhuman = \"127.0.0.1:1\"\n").unwrap_err();
+    assert!(err.to_string().contains("osc.characters"), "{err}");
+}
+
 #[test]
 fn an_array_element_is_located_on_its_own_line() {
     let config = parse("[osc]\ntargets = [\n  \"127.0.0.1:1\",\n  \"127.0.0.1:2\",\n]\n").unwrap();

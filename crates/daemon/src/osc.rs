@@ -1,10 +1,12 @@
 //! The daemon's side of the OSC/VMC output (`mouthpiece-osc`): `[osc]` checked against the
-//! configured characters and its targets resolved, at start and on every reload.
+//! configured characters and its targets resolved, at start and on every reload. `targets` get
+//! `character` (the first configured by default); `[osc.characters]` names more characters,
+//! each with its own targets.
 
 use std::net::{SocketAddr, ToSocketAddrs};
 
 use mouthpiece_config::Config;
-pub use mouthpiece_osc::{OscOutput, OscSettings, Target, VmcFrame};
+pub use mouthpiece_osc::{OscCharacter, OscOutput, OscSettings, Target, VmcFrame};
 
 use crate::error::CheckError;
 
@@ -17,25 +19,51 @@ pub fn settings(config: &Config) -> Result<OscSettings, CheckError> {
         message,
     };
     let characters = crate::characters::load(config)?;
-    let character = match &config.osc.character {
-        Some(name) => characters.iter().find(|c| &c.name == name).ok_or_else(|| {
+    let find = |name: &str, key: &str| {
+        characters.iter().find(|c| c.name == name).ok_or_else(|| {
             let known: Vec<&str> = characters.iter().map(|c| c.name.as_str()).collect();
             invalid(
-                "osc.character",
+                key,
                 format!(
                     "no configured character is named {} (configured: {})",
                     mouthpiece_config::quote_excerpt(name),
                     known.join(", ")
                 ),
             )
-        })?,
+        })
+    };
+    let default = match &config.osc.character {
+        Some(name) => find(name, "osc.character")?,
         None => characters
             .first()
             .ok_or_else(|| invalid("characters.files", "no character configured".into()))?,
     };
+    let mut sent: Vec<OscCharacter> = Vec::new();
     let mut targets = Vec::new();
-    for (i, text) in config.osc.targets.iter().enumerate() {
-        let key = format!("osc.targets[{i}]");
+    for (key, text, character) in config.osc.all_targets() {
+        let character = match character {
+            Some(name) => find(name, &key)?,
+            None => default,
+        };
+        let index = match sent.iter().position(|c| c.name == character.name) {
+            Some(i) => i,
+            None if sent.len() < mouthpiece_osc::MAX_CHARACTERS => {
+                sent.push(OscCharacter {
+                    name: character.name.clone(),
+                    axes: character.frame.axes,
+                });
+                sent.len() - 1
+            }
+            None => {
+                return Err(invalid(
+                    &key,
+                    format!(
+                        "at most {} characters go out over OSC",
+                        mouthpiece_osc::MAX_CHARACTERS
+                    ),
+                ))
+            }
+        };
         let target: mouthpiece_config::OscTarget = text.parse().map_err(|e| invalid(&key, e))?;
         let addrs: Vec<SocketAddr> = (target.host.as_str(), target.port)
             .to_socket_addrs()
@@ -48,17 +76,17 @@ pub fn settings(config: &Config) -> Result<OscSettings, CheckError> {
             .copied()
             .ok_or_else(|| invalid(&key, format!("{} resolves to no address", target.host)))?;
         targets.push(Target {
-            label: text.clone(),
+            label: text.to_owned(),
             addr,
+            character: index,
         });
     }
     Ok(OscSettings {
         targets,
-        character: character.name.clone(),
+        characters: sent,
         head: config.osc.head,
         eyes: config.osc.eyes,
         names: config.osc.names,
         visemes: config.osc.visemes,
-        axes: character.frame.axes,
     })
 }

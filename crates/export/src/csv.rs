@@ -37,13 +37,35 @@ pub struct CsvWriter {
     head: bool,
     /// What error messages call the take (its file name; "take" until set).
     source_name: String,
+    /// The character's mouth width (its units) and metres per unit, for the slide and the
+    /// lips' translations ([`crate::RigKeys::to_character`]).
+    width: f64,
+    metres_per_unit: Option<f64>,
 }
 
 /// The head columns' prefixes, in order (docs/head.md).
 pub const HEAD_COLUMNS: [&str; 3] = ["head", "eye_L", "eye_R"];
 
-/// The rig's jaw columns (docs/rig.md), followed by one column per curve name.
-pub const RIG_COLUMNS: [&str; 2] = ["jaw_angle_deg", "jaw_slide_m"];
+/// The rig's jaw and lip columns (docs/rig.md, docs/export.md), followed by one column per
+/// curve name. The slide and the lips' translations are in the character's units.
+pub const RIG_COLUMNS: [&str; 16] = [
+    "jaw_angle_deg",
+    "jaw_slide",
+    "lip_upper_qw",
+    "lip_upper_qx",
+    "lip_upper_qy",
+    "lip_upper_qz",
+    "lip_upper_x",
+    "lip_upper_y",
+    "lip_upper_z",
+    "lip_lower_qw",
+    "lip_lower_qx",
+    "lip_lower_qy",
+    "lip_lower_qz",
+    "lip_lower_x",
+    "lip_lower_y",
+    "lip_lower_z",
+];
 
 impl CsvWriter {
     /// Starts `path` (written under a temporary name until [`finish`](Self::finish)).
@@ -66,6 +88,8 @@ impl CsvWriter {
             header: Some(header),
             head: false,
             source_name: "take".into(),
+            width: rig.mouth_width(),
+            metres_per_unit: rig.metres_per_unit(),
         })
     }
 
@@ -125,7 +149,13 @@ impl CsvWriter {
         }
         match &frame.rig {
             Some(rig) => {
-                let _ = write!(self.row, ",{},{}", rig.jaw_angle_deg, rig.jaw_slide_m);
+                let k = rig.to_character(self.width, self.metres_per_unit);
+                let _ = write!(self.row, ",{},{}", rig.jaw_angle_deg, rig.jaw_slide_m * k);
+                for lip in &rig.lips {
+                    let [w, x, y, z] = lip.rotation;
+                    let [tx, ty, tz] = lip.translation_m.map(|c| c * k);
+                    let _ = write!(self.row, ",{w},{x},{y},{z},{tx},{ty},{tz}");
+                }
                 for v in &rig.curves {
                     let _ = write!(self.row, ",{v}");
                 }
@@ -187,7 +217,7 @@ pub fn unguard(cell: &str) -> &str {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::RigPoint;
 
@@ -234,7 +264,7 @@ mod tests {
         assert_eq!(summary.rows, 2);
         let text = std::fs::read_to_string(&path).unwrap();
         // A take without a rig: its columns are there, empty.
-        let empty_rig = ",".repeat(20);
+        let empty_rig = ",".repeat(RIG_COLUMNS.len() + CURVES);
         assert_eq!(
             text,
             format!(
@@ -295,7 +325,10 @@ mod tests {
             };
             assert_eq!(cell, &expected);
         }
-        assert_eq!(header.len(), 1 + 3 * names.len() + 20);
+        assert_eq!(
+            header.len(),
+            1 + 3 * names.len() + RIG_COLUMNS.len() + CURVES
+        );
         // Numbers stay numbers: only text cells get the quote mark.
         let row = text.lines().last().unwrap();
         assert!(row.starts_with("0,-1,2,3,-1,2,3"), "{row}");
@@ -351,7 +384,7 @@ mod tests {
                 "t,P1_x,P1_y,P1_z,head_qw,head_qx,head_qy,head_qz,eye_L_qw,eye_L_qx,eye_L_qy,eye_L_qz,eye_R_qw,eye_R_qx,eye_R_qy,eye_R_qz,{}\n\
                  1,1,2,3,0.5,0.5,0.5,0.5,1,0,0,0,0,1,0,0{}\n",
                 rig_header(),
-                ",".repeat(20)
+                ",".repeat(RIG_COLUMNS.len() + CURVES)
             )
         );
     }
@@ -369,7 +402,7 @@ mod tests {
     }
 
     fn rig_header() -> String {
-        let mut columns = vec!["jaw_angle_deg", "jaw_slide_m"];
+        let mut columns = RIG_COLUMNS.to_vec();
         columns.extend(CURVE_NAMES);
         columns.join(",")
     }
@@ -405,10 +438,92 @@ mod tests {
             rig_header().split(',').collect::<Vec<_>>()[..]
         );
         assert!(rows[1][4..].iter().all(|c| c.is_empty()), "{:?}", rows[1]);
+        // A take without the performer's width: the slide in metres (the rig's units).
         assert_eq!(rows[2][4..6], ["14.25", "-0.0015"]);
-        for (k, cell) in rows[2][6..].iter().enumerate() {
+        assert_eq!(
+            rows[2][6..20],
+            ["1", "0", "0", "0", "0", "0", "0"].repeat(2)
+        );
+        for (k, cell) in rows[2][20..].iter().enumerate() {
             assert_eq!(cell.parse::<f64>().unwrap(), k as f64 / 32.0);
         }
-        assert!(rows.iter().all(|r| r.len() == 1 + 3 + 20));
+        assert!(rows.iter().all(|r| r.len() == 1 + 3 + 16 + 18));
+    }
+
+    /// A rig whose mouth (corner to corner along x) is `width` wide, in metres.
+    pub(crate) fn rig_of_width(width: f64) -> MouthRig {
+        let corner = |name: &str, x: f64| RigPoint {
+            name: name.into(),
+            rest: [x, 0.0, 0.0],
+        };
+        MouthRig::new(
+            None,
+            vec![corner("P1", width / 2.0), corner("P2", -width / 2.0)],
+            nalgebra::Isometry3::identity(),
+        )
+        .unwrap()
+    }
+
+    /// A frame of a take whose performer has a 5 cm mouth, the jaw slid 1.5 mm and the lips
+    /// moved.
+    pub(crate) fn performer_frame() -> TakeFrame {
+        let mut keys = crate::RigKeys::REST;
+        keys.jaw_slide_m = -0.0015;
+        keys.lips[0].translation_m = [0.001, 0.002, -0.0005];
+        keys.lips[1].translation_m = [-0.0025, -0.004, 0.003];
+        keys.lips[1].rotation = [0.6, 0.8, 0.0, 0.0];
+        keys.performer_width_m = Some(0.05);
+        TakeFrame {
+            line: 1,
+            t: 0.0,
+            points: vec![Some([0.0; 3]); 2],
+            curve: None,
+            head: None,
+            rig: Some(keys),
+        }
+    }
+
+    /// The slide and the lips' translations are in the character's units, scaled by its
+    /// mouth width over the performer's: a character twice the performer's width gets twice
+    /// the slide; rotations are not scaled.
+    #[test]
+    fn the_slide_and_the_lips_are_scaled_to_the_characters_mouth() {
+        let dir = tempfile::tempdir().unwrap();
+        let row = |width: f64| {
+            let path = dir.path().join(format!("{width}.csv"));
+            let mut w = CsvWriter::create(&rig_of_width(width), &path).unwrap();
+            w.push(&performer_frame()).unwrap();
+            w.finish().unwrap();
+            let text = std::fs::read_to_string(&path).unwrap();
+            let rows: Vec<Vec<String>> = text
+                .lines()
+                .map(|l| l.split(',').map(String::from).collect())
+                .collect();
+            let cell = |name: &str| {
+                let k = rows[0].iter().position(|c| c == name).unwrap();
+                rows[1][k].parse::<f64>().unwrap()
+            };
+            [
+                "jaw_slide",
+                "lip_upper_x",
+                "lip_upper_y",
+                "lip_upper_z",
+                "lip_lower_x",
+                "lip_lower_y",
+                "lip_lower_z",
+                "lip_lower_qw",
+                "lip_lower_qx",
+            ]
+            .map(cell)
+        };
+        let same = row(0.05);
+        let twice = row(0.1);
+        let want = [-0.0015, 0.001, 0.002, -0.0005, -0.0025, -0.004, 0.003];
+        for k in 0..7 {
+            assert!((same[k] - want[k]).abs() < 1e-15, "{same:?}");
+            assert!((twice[k] - 2.0 * want[k]).abs() < 1e-15, "{twice:?}");
+        }
+        assert_eq!(same[7..], [0.6, 0.8]);
+        assert_eq!(twice[7..], [0.6, 0.8]);
     }
 }

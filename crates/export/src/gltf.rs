@@ -153,13 +153,21 @@ enum Kind {
     JawTranslation,
     /// The morph-target weights, one per curve.
     Weights,
+    /// A lip's rotation (its rigid motion from neutral).
+    LipRotation,
+    /// A lip's translation, in the character's units.
+    LipTranslation,
 }
 
 impl Kind {
     fn is_rig(self) -> bool {
         matches!(
             self,
-            Kind::JawRotation | Kind::JawTranslation | Kind::Weights
+            Kind::JawRotation
+                | Kind::JawTranslation
+                | Kind::Weights
+                | Kind::LipRotation
+                | Kind::LipTranslation
         )
     }
 }
@@ -450,6 +458,10 @@ impl GltfWriter {
                 (Kind::JawRotation, 4),
                 (Kind::JawTranslation, 3),
                 (Kind::Weights, CURVES),
+                (Kind::LipRotation, 4),
+                (Kind::LipTranslation, 3),
+                (Kind::LipRotation, 4),
+                (Kind::LipTranslation, 3),
             ] {
                 self.channels
                     .push(Channel::unreduced(&self.spool_dir, kind, width)?);
@@ -462,14 +474,23 @@ impl GltfWriter {
         let rig = frame.rig.unwrap_or(RigKeys::REST);
         let pivot = jaw_pivot(&self.rig);
         let half = 0.5 * rig.jaw_angle_deg.to_radians();
-        let slide = rig.jaw_slide_m / self.rig.metres_per_unit().unwrap_or(1.0);
+        // The slide and the lips' translations in the character's units (its mouth width over
+        // the performer's, as the points).
+        let k = rig.to_character(self.rig.mouth_width(), self.rig.metres_per_unit());
+        let slide = rig.jaw_slide_m * k;
         let translation = [pivot[0] + slide, pivot[1], pivot[2]];
-        if !translation.iter().all(|c| (*c as f32).is_finite()) {
+        let lips = rig.lips.map(|l| l.translation_m.map(|c| c * k));
+        if !translation
+            .iter()
+            .chain(lips.iter().flatten())
+            .all(|c| (*c as f32).is_finite())
+        {
             return Err(ExportError::BadLine {
                 source_name: self.source_name.clone(),
                 line: frame.line,
                 problem: format!(
-                    "rig.jaw.slide_m = {} is out of the range of glTF's 32-bit floats",
+                    "rig.jaw.slide_m = {} or a lip's translation is out of the range of glTF's \
+                     32-bit floats in the character's units",
                     rig.jaw_slide_m
                 ),
             });
@@ -485,7 +506,17 @@ impl GltfWriter {
         weights.samples += 1;
         weights
             .write_record(frame.t as f32, &rig.curves.map(|w| w as f32))
-            .map_err(err)
+            .map_err(err)?;
+        for (i, (lip, t)) in rig.lips.iter().zip(lips).enumerate() {
+            let [w, x, y, z] = lip.rotation;
+            self.channels[start + 3 + 2 * i]
+                .sample_rotation(frame.t, [x, y, z, w])
+                .map_err(err)?;
+            let channel = &mut self.channels[start + 4 + 2 * i];
+            channel.samples += 1;
+            channel.write_key((frame.t, t)).map_err(err)?;
+        }
+        Ok(())
     }
 
     /// The head's and eyes' rotation keys: the head node's rotation is the model-axes
@@ -624,6 +655,87 @@ impl GltfWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The first key of the `path` channel (`translation` or `rotation`) of node `name`, in
+    /// a `.gltf` with its `.bin` beside it.
+    fn first_key(dir: &Path, gltf: &serde_json::Value, name: &str, path: &str) -> Vec<f32> {
+        let node = gltf["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .position(|n| n["name"] == name)
+            .unwrap();
+        let animation = &gltf["animations"][0];
+        let channel = animation["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["target"]["node"] == node && c["target"]["path"] == path)
+            .unwrap();
+        let sampler = &animation["samplers"][channel["sampler"].as_u64().unwrap() as usize];
+        let accessor = &gltf["accessors"][sampler["output"].as_u64().unwrap() as usize];
+        let view = &gltf["bufferViews"][accessor["bufferView"].as_u64().unwrap() as usize];
+        let offset = (view["byteOffset"].as_u64().unwrap_or(0)
+            + accessor["byteOffset"].as_u64().unwrap_or(0)) as usize;
+        let bin = std::fs::read(dir.join(gltf["buffers"][0]["uri"].as_str().unwrap())).unwrap();
+        let width = if path == "rotation" { 4 } else { 3 };
+        (0..width)
+            .map(|k| {
+                f32::from_le_bytes(bin[offset + 4 * k..offset + 4 * k + 4].try_into().unwrap())
+            })
+            .collect()
+    }
+
+    /// In glTF too the jaw's slide and the lips' translations are in the character's units,
+    /// scaled by its mouth width over the performer's: a character twice the performer's
+    /// width gets twice the slide and twice the lips' motion; the lips' rotations as taken.
+    #[test]
+    fn the_slide_and_the_lips_are_scaled_to_the_characters_mouth() {
+        let dir = tempfile::tempdir().unwrap();
+        let keys = |width: f64| {
+            let rig = crate::csv::tests::rig_of_width(width);
+            let pivot = document::jaw_pivot(&rig);
+            let options = GltfOptions {
+                layout: GltfLayout::SeparateBin,
+                ..GltfOptions::default()
+            };
+            let mut w = GltfWriter::new(rig, options, dir.path()).unwrap();
+            w.push(&crate::csv::tests::performer_frame()).unwrap();
+            let out = dir.path().join(format!("{width}.gltf"));
+            w.finish(&out).unwrap();
+            let gltf: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+            let jaw = first_key(dir.path(), &gltf, "jaw", "translation");
+            let slide = f64::from(jaw[0]) - pivot[0];
+            let upper = first_key(dir.path(), &gltf, "lip_upper", "translation");
+            let lower = first_key(dir.path(), &gltf, "lip_lower", "translation");
+            let rotation = first_key(dir.path(), &gltf, "lip_lower", "rotation");
+            (slide, upper, lower, rotation)
+        };
+        let (slide, upper, lower, rotation) = keys(0.05);
+        let (slide2, upper2, lower2, rotation2) = keys(0.1);
+        assert!((slide - -0.0015).abs() < 1e-8, "{slide}");
+        assert!((slide2 - -0.003).abs() < 1e-8, "{slide2}");
+        let want = [0.001, 0.002, -0.0005, -0.0025, -0.004, 0.003];
+        for (k, (a, b)) in upper
+            .iter()
+            .chain(&lower)
+            .zip(upper2.iter().chain(&lower2))
+            .enumerate()
+        {
+            assert!(
+                (f64::from(*a) - want[k]).abs() < 1e-9,
+                "{upper:?} {lower:?}"
+            );
+            assert!(
+                (f64::from(*b) - 2.0 * want[k]).abs() < 1e-9,
+                "{upper2:?} {lower2:?}"
+            );
+        }
+        // glTF's [x, y, z, w].
+        assert_eq!(rotation, [0.8, 0.0, 0.0, 0.6]);
+        assert_eq!(rotation2, rotation);
+    }
 
     #[test]
     fn uri_escape_keeps_safe_names() {

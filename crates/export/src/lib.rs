@@ -36,4 +36,4 @@ pub use onto_rig::{animate_rig, RigSummary};
 pub use output::PendingFile;
 pub use reduce::Reducer;
 pub use rig::{MouthRig, RigHead, RigPoint};
-pub use take::{HeadKeys, RigKeys, TakeFrame, TakeReader};
+pub use take::{HeadKeys, LipKeys, RigKeys, TakeFrame, TakeReader};

@@ -41,6 +41,43 @@ pub struct RigKeys {
     pub jaw_slide_m: f64,
     /// The curves in [`CURVE_NAMES`] order, 0..1.
     pub curves: [f64; CURVES],
+    /// The upper and the lower lip's rigid motion from neutral (mouth frame): rotation
+    /// `[w, x, y, z]` and translation, metres (the performer's).
+    pub lips: [LipKeys; 2],
+    /// The performer's neutral mouth width, metres (`rig.performer_width_m`); `None` in takes
+    /// made before it.
+    pub performer_width_m: Option<f64>,
+}
+
+/// One lip's rigid motion from neutral (docs/rig.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LipKeys {
+    pub rotation: [f64; 4],
+    pub translation_m: [f64; 3],
+}
+
+impl LipKeys {
+    /// No motion.
+    pub const REST: LipKeys = LipKeys {
+        rotation: [1.0, 0.0, 0.0, 0.0],
+        translation_m: [0.0; 3],
+    };
+}
+
+/// Narrowest and widest performer mouth a take may state, metres.
+pub const PERFORMER_WIDTH_M: (f64, f64) = (0.005, 0.5);
+
+impl RigKeys {
+    /// Character units per performer metre for the slide and the lip translations: the
+    /// character's mouth width (`width`, its units) over the performer's, as the mouth points
+    /// are scaled; in a take without the performer's width, the performer's metres in the
+    /// character's units (`metres_per_unit`), unscaled, as before.
+    pub fn to_character(&self, width: f64, metres_per_unit: Option<f64>) -> f64 {
+        match self.performer_width_m {
+            Some(w) if width > 0.0 => width / w,
+            _ => 1.0 / metres_per_unit.unwrap_or(1.0),
+        }
+    }
 }
 
 impl RigKeys {
@@ -49,6 +86,8 @@ impl RigKeys {
         jaw_angle_deg: 0.0,
         jaw_slide_m: 0.0,
         curves: [0.0; CURVES],
+        lips: [LipKeys::REST; 2],
+        performer_width_m: None,
     };
 }
 
@@ -271,10 +310,47 @@ impl<R: BufRead> TakeReader<R> {
             }
             *dst = v;
         }
+        let mut lips = [LipKeys::REST; 2];
+        for (dst, (name, lip)) in lips
+            .iter_mut()
+            .zip([("upper", &rig.lips.upper), ("lower", &rig.lips.lower)])
+        {
+            if !lip
+                .translation
+                .iter()
+                .all(|c| c.is_finite() && c.abs() <= 1.0)
+            {
+                return Err(self.bad(format!(
+                    "rig.lips.{name}.translation = {:?} is not finite metres within ±1",
+                    lip.translation
+                )));
+            }
+            let norm = lip.rotation.iter().map(|c| c * c).sum::<f64>().sqrt();
+            if !(norm.is_finite() && (norm - 1.0).abs() <= 1e-3) {
+                return Err(self.bad(format!(
+                    "rig.lips.{name}.rotation = {:?} is not a unit quaternion",
+                    lip.rotation
+                )));
+            }
+            *dst = LipKeys {
+                rotation: lip.rotation,
+                translation_m: lip.translation,
+            };
+        }
+        if let Some(w) = rig.performer_width_m {
+            let (lo, hi) = PERFORMER_WIDTH_M;
+            if !(lo..=hi).contains(&w) {
+                return Err(self.bad(format!(
+                    "rig.performer_width_m = {w} is not a mouth width in metres ({lo} to {hi})"
+                )));
+            }
+        }
         Ok(RigKeys {
             jaw_angle_deg: jaw.angle_deg,
             jaw_slide_m: jaw.slide_m,
             curves,
+            lips,
+            performer_width_m: rig.performer_width_m,
         })
     }
 
@@ -446,6 +522,49 @@ mod tests {
         let e =
             error_of(&rig_line("0", 12.5).replace("\"angle_deg\": 12.5", "\"angle_deg\": null"));
         assert!(e.contains("line 1: not a take line"), "{e}");
+    }
+
+    /// The performer's mouth width is read when the line has it (takes before it have none)
+    /// and refused naming the line when it is no mouth width; absurd lip motions too.
+    #[test]
+    fn the_performers_width_and_the_lips_are_checked() {
+        assert_eq!(
+            read_all(&rig_line("0", 1.0)).unwrap()[0]
+                .rig
+                .unwrap()
+                .performer_width_m,
+            None
+        );
+        let with = |w: &str| {
+            rig_line("0", 1.0).replace(
+                "\"curves\"",
+                &format!("\"performer_width_m\": {w}, \"curves\""),
+            )
+        };
+        let rig = read_all(&with("0.052")).unwrap()[0].rig.unwrap();
+        assert_eq!(rig.performer_width_m, Some(0.052));
+        for bad in ["0", "-0.05", "1e300", "0.001"] {
+            let e = error_of(&with(bad));
+            assert!(
+                e.contains("line 1: rig.performer_width_m") && e.contains("0.005 to 0.5"),
+                "{bad}: {e}"
+            );
+        }
+        let e = error_of(&with("\"wide\""));
+        assert!(e.contains("line 1: not a take line"), "{e}");
+        let upper = r#""upper": {"rotation": [1, 0, 0, 0], "translation": [0, 0, 0]"#;
+        let far = rig_line("0", 1.0).replace(
+            upper,
+            r#""upper": {"rotation": [1, 0, 0, 0], "translation": [0, 1e300, 0]"#,
+        );
+        let e = error_of(&far);
+        assert!(e.contains("line 1: rig.lips.upper.translation"), "{e}");
+        let skew = rig_line("0", 1.0).replace(
+            upper,
+            r#""upper": {"rotation": [2, 0, 0, 0], "translation": [0, 0, 0]"#,
+        );
+        let e = error_of(&skew);
+        assert!(e.contains("line 1: rig.lips.upper.rotation"), "{e}");
     }
 
     #[test]

@@ -15,9 +15,10 @@
 //! - [`mapping`]: segments placed on the phone timeline (stable stage scaled, change stage of
 //!   constant length T; short phones start their change stage early).
 //! - [`stitch`]: one pass over the placed segments, blending overlaps linearly.
+//! - [`take`]: the weight curves → the performer's lip dots → the retarget core → take lines.
 //!
-//! No I/O: everything parses `&str` and returns values; the `mouthpiece lipsync` command
-//! reads the files and writes the take.
+//! No file I/O: everything parses `&str` and writes to a caller's `Write`; the
+//! `mouthpiece lipsync` command reads the files and places the take.
 
 pub mod classes;
 pub mod curve;
@@ -28,6 +29,7 @@ pub mod phones;
 pub mod poses;
 pub mod segments;
 pub mod stitch;
+pub mod take;
 
 pub use classes::ClassTable;
 pub use error::Error;

@@ -48,6 +48,9 @@ enum Command {
     /// Speech to a take: phone files or WAV audio (PocketSphinx) → viseme weight curves → the
     /// character's mouth (JSONL, the format of `process`).
     Lipsync(cmd::lipsync::Args),
+    /// Send a take (JSONL) over the VMC protocol, each frame at its time, as the daemon sends
+    /// a live character: rig curves, VRM visemes, head and eyes.
+    Play(cmd::play::Args),
 }
 
 fn main() -> ExitCode {
@@ -55,6 +58,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Retarget(args) => cmd::retarget::run(args),
+        Command::Play(args) => cmd::play::run(args),
         Command::Process(args) => cmd::process::run(args),
         Command::Evaluate(args) => cmd::evaluate::run(args),
         Command::CheckConfig(args) => cmd::check_config::run(args),

@@ -142,4 +142,23 @@ fn a_bad_osc_target_or_character_exits_2_naming_the_element() {
         stdout.contains("osc localhost:39539, [::1]:39540"),
         "{stdout}"
     );
+    // [osc.characters]: a character that is not configured, named by its key and line.
+    let (code, _, stderr) = check("[osc]\n[osc.characters]\nghost = [\"127.0.0.1:39540\"]\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains(":3:")
+            && stderr.contains("osc.characters.ghost[0]")
+            && stderr.contains("human, wolf"),
+        "{stderr}"
+    );
+    // Each character its own target.
+    let (code, stdout, stderr) = check(
+        "[osc]\ntargets = [\"127.0.0.1:39539\"]\ncharacter = \"wolf\"\n\
+         [osc.characters]\nhuman = [\"127.0.0.1:39540\"]\n",
+    );
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stdout.contains("osc 127.0.0.1:39539, 127.0.0.1:39540 (human)"),
+        "{stdout}"
+    );
 }

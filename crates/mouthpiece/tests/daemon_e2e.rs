@@ -1348,3 +1348,119 @@ impl WaitOutput for Child {
         out
     }
 }
+
+/// Angle in degrees between the rotations of two unit quaternions `[w, x, y, z]` (without
+/// acos's loss of precision near 1).
+fn quat_angle_deg(a: [f64; 4], b: [f64; 4]) -> f64 {
+    let dot: f64 = a.iter().zip(&b).map(|(p, q)| p * q).sum();
+    let s = if dot < 0.0 { -1.0 } else { 1.0 };
+    let norm = |f: &dyn Fn(f64, f64) -> f64| {
+        a.iter()
+            .zip(&b)
+            .map(|(p, q)| f(*p, s * q).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    (4.0 * norm(&|p, q| p - q).atan2(norm(&|p, q| p + q))).to_degrees()
+}
+
+/// A take of the demo recorded by the daemon while a client turns the wolf's head to a
+/// viewpoint over the WebSocket: `mouthpiece export` of that take (which runs the tracker
+/// again, knowing nothing of the request) keeps the turn, as the take recorded it: the
+/// exported head ends where the live stream's did, far from where it started.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_take_exported_keeps_the_look_at_turn_made_live() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
+    let mut daemon = Daemon::start(
+        &format!("replay:{}?loop=1", demo.display()),
+        "",
+        &["--record", "turn"],
+        &[],
+    );
+    let mut ws = daemon.connect().await;
+    let wolf_head = |v: &Value| {
+        v["characters"]
+            .as_array()
+            .and_then(|c| c.iter().find(|c| c["name"] == "wolf"))
+            .map(|c| c["head"].clone())
+            .unwrap_or(Value::Null)
+    };
+    let quat = |v: &Value| -> [f64; 4] { [0, 1, 2, 3].map(|k| v[k].as_f64().unwrap()) };
+    // After the neutral second the wolf is driven, its head following the performer's.
+    wait_for(&mut ws, Duration::from_secs(30), |v| {
+        v["type"] == "frame" && tracked_wolf(v).is_some()
+    })
+    .await;
+    send(
+        &mut ws,
+        json!({"type": "look_at", "id": 9, "character": "wolf", "point": [0.8, -2.5, 0.5]}),
+    )
+    .await;
+    let looked = wait_for(&mut ws, Duration::from_secs(5), |v| v["type"] == "result").await;
+    assert_eq!(looked["detail"]["in_reach"], true, "{looked}");
+    let turned = wait_for(&mut ws, Duration::from_secs(10), |v| {
+        v["type"] == "frame" && wolf_head(v)["mode"] == "look_at" && wolf_head(v)["progress"] == 1.0
+    })
+    .await;
+    let faced = quat(&wolf_head(&turned)["rotation"]);
+    // A few more frames facing the viewpoint, then the take stops.
+    for _ in 0..10 {
+        wait_for(&mut ws, Duration::from_secs(5), |v| v["type"] == "frame").await;
+    }
+    send(
+        &mut ws,
+        json!({"type": "record", "id": 2, "action": "stop"}),
+    )
+    .await;
+    let stopped = wait_for(&mut ws, Duration::from_secs(10), |v| {
+        (v["type"] == "result" || v["type"] == "error") && v["id"] == 2
+    })
+    .await;
+    assert_eq!(stopped["type"], "result", "{stopped}");
+    daemon.signal(libc::SIGTERM);
+    assert!(daemon.wait_exit(Duration::from_secs(5)).is_some());
+    let files = takes_in(daemon.dir.path());
+    assert_eq!(files.len(), 1, "{files:?}\n{}", daemon.log());
+
+    let csv = daemon.dir.path().join("take.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .arg("export")
+        .arg(&files[0])
+        .arg("--character")
+        .arg(repo.join("config/characters/wolf.toml"))
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let qw = header
+        .iter()
+        .position(|c| *c == "head_qw")
+        .expect("head columns");
+    let heads: Vec<[f64; 4]> = lines
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            [0, 1, 2, 3].map(|k| cells[qw + k].parse().unwrap())
+        })
+        .collect();
+    assert!(heads.len() >= 30, "{} rows", heads.len());
+    let last = *heads.last().unwrap();
+    // The export ends facing the viewpoint as the live stream did (the take holds 32-bit
+    // floats), ...
+    let off = quat_angle_deg(last, faced);
+    assert!(
+        off < 0.01,
+        "the exported head ends {off:.2}° from the live one: {last:?} against {faced:?}"
+    );
+    // ... which is a turn: the head was somewhere else when the take began.
+    let turn = quat_angle_deg(heads[0], last);
+    assert!(turn > 10.0, "the exported head turned only {turn:.2}°");
+}

@@ -283,11 +283,15 @@ fn csv_has_a_header_and_the_take_exactly() {
     let text = std::fs::read_to_string(&out).unwrap();
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    // The points, then the rig's jaw and curves (empty: this take has no `rig`).
-    assert_eq!(header.len(), 1 + 3 * 12 + 2 + 27);
+    // The points, then the rig's jaw, lips and curves (empty: this take has no `rig`).
+    assert_eq!(header.len(), 1 + 3 * 12 + 16 + 27);
     assert_eq!(&header[..4], ["t", "P1_x", "P1_y", "P1_z"]);
     assert_eq!(header[36], "P12_z");
-    assert_eq!(&header[37..40], ["jaw_angle_deg", "jaw_slide_m", "jawOpen"]);
+    assert_eq!(
+        &header[37..40],
+        ["jaw_angle_deg", "jaw_slide", "lip_upper_qw"]
+    );
+    assert_eq!(header[53], "jawOpen");
     for ((t, points), line) in take.iter().zip(lines.by_ref()) {
         let cells: Vec<&str> = line.split(',').collect();
         let numbers: Vec<f64> = cells[..37].iter().map(|c| c.parse().unwrap()).collect();
@@ -574,7 +578,10 @@ fn wolf_take_from_retarget_lands_on_the_wolf_model() {
         "{check}"
     );
 
-    // CSV: the rig's columns are the take's numbers, digit for digit.
+    // CSV: the rig's columns are the take's numbers, digit for digit (the slide and the lips'
+    // translations scaled to the wolf's mouth).
+    let xs = character.neutral.iter().map(|p| p.x);
+    let wolf_width = xs.clone().fold(f64::MIN, f64::max) - xs.fold(f64::MAX, f64::min);
     let csv = dir.path().join("wolf.csv");
     export_ok(&[t, "--out", csv.to_str().unwrap(), "--character", c]);
     let csv_text = std::fs::read_to_string(&csv).unwrap();
@@ -594,7 +601,18 @@ fn wolf_take_from_retarget_lands_on_the_wolf_model() {
             cell("jaw_angle_deg"),
             rig["jaw"]["angle_deg"].as_f64().unwrap()
         );
-        assert_eq!(cell("jaw_slide_m"), rig["jaw"]["slide_m"].as_f64().unwrap());
+        // The slide and the lips' translations in the wolf's units: its mouth width over the
+        // performer's.
+        let scale = wolf_width / rig["performer_width_m"].as_f64().unwrap();
+        let slide = rig["jaw"]["slide_m"].as_f64().unwrap() * scale;
+        assert!((cell("jaw_slide") - slide).abs() <= 1e-15, "{row}");
+        for lip in ["upper", "lower"] {
+            for (axis, a) in ["x", "y", "z"].iter().enumerate() {
+                let t = rig["lips"][lip]["translation"][axis].as_f64().unwrap() * scale;
+                let name = format!("lip_{lip}_{a}");
+                assert!((cell(&name) - t).abs() <= 1e-15, "{name}: {row}");
+            }
+        }
         for name in &names {
             assert_eq!(cell(name), rig["curves"][name].as_f64().unwrap(), "{name}");
         }
@@ -699,6 +717,7 @@ fn assert_rig_matches(check: &Value, frames: u64) {
         check["max_jaw_slide_error"].as_f64().unwrap() < 1e-7,
         "{check}"
     );
+    assert!(check["max_lip_error"].as_f64().unwrap() < 1e-6, "{check}");
 }
 
 /// A small synthetic recording (320x240, the camera 0.35 m from the mouth) of `seconds`

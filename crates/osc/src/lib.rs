@@ -1,8 +1,8 @@
-//! OSC output (docs/osc.md): one character's rig curves, head and eyes as VMC protocol
-//! messages over UDP, to every `[osc] targets` entry, once per processed frame.
+//! OSC output (docs/osc.md): characters' rig curves, head and eyes as VMC protocol messages
+//! over UDP, each target getting its own character's, once per processed frame.
 //!
-//! The processing thread only copies the chosen character's curves and rotations into a
-//! [`VmcFrame`] (about 130 bytes, no allocation) and offers it to a bounded queue
+//! The processing thread only copies the sent characters' curves and rotations into
+//! [`VmcFrames`] (a fixed array of [`VmcFrame`]s, no allocation) and offers it to a bounded queue
 //! ([`QUEUE_FRAMES`]); when the queue is full the oldest frame is dropped and counted. The
 //! `mouthpiece-osc` thread takes frames off the queue, converts the rotations to the VMC
 //! protocol's (Unity's) axes, encodes one OSC bundle (`rosc`) and sends it to each target on
@@ -45,24 +45,35 @@ pub mod address {
     pub const BLEND_APPLY: &str = "/VMC/Ext/Blend/Apply";
 }
 
+/// Most characters sent over OSC at once (each target gets one).
+pub const MAX_CHARACTERS: usize = 8;
+
 /// One resolved target.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Target {
     /// As configured (`host:port`): the counters' label.
     pub label: String,
     pub addr: SocketAddr,
+    /// Index of its character in [`OscSettings::characters`].
+    pub character: usize,
+}
+
+/// A character whose rig, head and eyes go out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OscCharacter {
+    pub name: String,
+    /// Its head-frame axes (left, up, forward) in its model frame, as columns.
+    pub axes: Matrix3<f64>,
 }
 
 /// `[osc]` checked and resolved (the daemon resolves it from its configuration).
 #[derive(Debug, Clone, PartialEq)]
 pub struct OscSettings {
     pub targets: Vec<Target>,
-    /// The character whose rig, head and eyes go out.
-    pub character: String,
+    /// The characters the targets name, at most [`MAX_CHARACTERS`].
+    pub characters: Vec<OscCharacter>,
     pub head: bool,
     pub eyes: bool,
-    /// That character's head-frame axes (left, up, forward) in its model frame, as columns.
-    pub axes: Matrix3<f64>,
     /// The curves' blend-shape names.
     pub names: CurveNaming,
     /// The visemes sent, and their names.
@@ -100,6 +111,23 @@ impl VmcFrame {
             eye_left: head.eye_left,
             eye_right: head.eye_right,
         })
+    }
+}
+
+/// One frame's values of each sent character, in [`OscSettings::characters`] order (`None`:
+/// the frame does not carry that character). Fixed-size and `Copy`: offering it to the queue
+/// does not allocate.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct VmcFrames(pub [Option<VmcFrame>; MAX_CHARACTERS]);
+
+impl VmcFrames {
+    /// The values of `characters` in `frame`.
+    pub fn from_stream(frame: &StreamFrame, characters: &[String]) -> Self {
+        let mut out = VmcFrames::default();
+        for (slot, name) in out.0.iter_mut().zip(characters) {
+            *slot = VmcFrame::from_stream(frame, name);
+        }
+        out
     }
 }
 
@@ -317,15 +345,15 @@ impl std::fmt::Debug for OscOutput {
 }
 
 struct Inner {
-    frames: Sender<VmcFrame>,
+    frames: Sender<VmcFrames>,
     /// Kept to drop the oldest frame when the queue is full, and handed to the thread.
-    frames_rx: Receiver<VmcFrame>,
+    frames_rx: Receiver<VmcFrames>,
     control: Sender<Control>,
     control_rx: Receiver<Control>,
     /// Some target is configured: frames are worth offering.
     active: AtomicBool,
-    /// The character whose values go out.
-    character: Mutex<String>,
+    /// The characters whose values go out, in [`OscSettings::characters`] order.
+    characters: Mutex<Vec<String>>,
     counters: Arc<OscCounters>,
     throttle: Duration,
     thread: Mutex<Option<JoinHandle<()>>>,
@@ -357,7 +385,7 @@ impl OscOutput {
                 control,
                 control_rx,
                 active: AtomicBool::new(false),
-                character: Mutex::new(String::new()),
+                characters: Mutex::new(Vec::new()),
                 counters,
                 throttle,
                 thread: Mutex::new(None),
@@ -388,11 +416,12 @@ impl OscOutput {
                 );
             }
         }
-        inner
-            .character
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .clone_from(&settings.character);
+        *inner.characters.lock().unwrap_or_else(|e| e.into_inner()) = settings
+            .characters
+            .iter()
+            .take(MAX_CHARACTERS)
+            .map(|c| c.name.clone())
+            .collect();
         if inner
             .control
             .try_send(Control::Configure(settings))
@@ -406,7 +435,7 @@ impl OscOutput {
         Ok(())
     }
 
-    /// Offers the frame's values of the configured character to the sender thread. Never
+    /// Offers the frame's values of the configured characters to the sender thread. Never
     /// blocks: a full queue loses its oldest frame (counted).
     pub fn offer(&self, frame: &StreamFrame) {
         let inner = &self.inner;
@@ -414,10 +443,10 @@ impl OscOutput {
             return;
         }
         let vmc = {
-            let character = inner.character.lock().unwrap_or_else(|e| e.into_inner());
-            VmcFrame::from_stream(frame, &character)
+            let characters = inner.characters.lock().unwrap_or_else(|e| e.into_inner());
+            VmcFrames::from_stream(frame, &characters)
         };
-        if let Some(vmc) = vmc {
+        if vmc.0.iter().any(Option::is_some) {
             push_drop_oldest(&inner.frames, &inner.frames_rx, vmc, &|| {
                 inner.counters.dropped.fetch_add(1, Ordering::Relaxed);
             });
@@ -522,7 +551,8 @@ impl Link {
 struct SenderState {
     links: Vec<Link>,
     packet: VmcPacket,
-    axes: UnitQuaternion<f64>,
+    /// Per character: [`axes_rotation`] of its head frame.
+    axes: Vec<UnitQuaternion<f64>>,
     throttle: Duration,
 }
 
@@ -547,13 +577,24 @@ impl SenderState {
             settings.names,
             settings.visemes,
         );
-        self.axes = axes_rotation(&settings.axes);
-        let shown: Vec<&str> = self.links.iter().map(|l| l.target.label.as_str()).collect();
-        tracing::info!(
-            character = %settings.character,
-            "OSC (VMC protocol) to [{}]",
-            shown.join(", ")
-        );
+        self.axes = settings
+            .characters
+            .iter()
+            .take(MAX_CHARACTERS)
+            .map(|c| axes_rotation(&c.axes))
+            .collect();
+        let shown: Vec<String> = self
+            .links
+            .iter()
+            .map(|l| {
+                let name = settings
+                    .characters
+                    .get(l.target.character)
+                    .map_or("?", |c| c.name.as_str());
+                format!("{} ({name})", l.target.label)
+            })
+            .collect();
+        tracing::info!("OSC (VMC protocol) to [{}]", shown.join(", "));
         true
     }
 }
@@ -562,7 +603,7 @@ impl SenderState {
 /// gone. A configuration waiting when a frame arrives is applied first (it was given before
 /// the frame was offered).
 fn run(
-    frames: Receiver<VmcFrame>,
+    frames: Receiver<VmcFrames>,
     control: Receiver<Control>,
     counters: Arc<OscCounters>,
     throttle: Duration,
@@ -570,7 +611,7 @@ fn run(
     let mut state = SenderState {
         links: Vec::new(),
         packet: VmcPacket::new(true, true, CurveNaming::Arkit, VisemeNaming::Vrm0),
-        axes: UnitQuaternion::identity(),
+        axes: Vec::new(),
         throttle,
     };
     let mut bytes = Vec::with_capacity(2048);
@@ -593,17 +634,77 @@ fn run(
                 if state.links.is_empty() {
                     continue;
                 }
-                state.packet.fill(&frame, &state.axes);
-                for i in 0..state.packet.packets().len() {
-                    state.packet.encode(i, &mut bytes);
-                    for link in &mut state.links {
-                        link.send(&bytes);
+                // One character at a time: its values into the bundles, then to its targets.
+                for (c, axes) in state.axes.iter().enumerate() {
+                    let Some(values) = &frame.0[c] else { continue };
+                    if !state.links.iter().any(|l| l.target.character == c) {
+                        continue;
+                    }
+                    state.packet.fill(values, axes);
+                    for i in 0..state.packet.packets().len() {
+                        state.packet.encode(i, &mut bytes);
+                        for link in state.links.iter_mut().filter(|l| l.target.character == c) {
+                            link.send(&bytes);
+                        }
                     }
                 }
             }
         }
     }
     tracing::info!("OSC sender stopped");
+}
+
+/// Sends VMC frames from the caller's thread, every frame to every target, in order: for
+/// playing a take, where each frame is due at its time and none may be dropped (the live
+/// output's [`OscOutput`] drops the oldest instead of waiting).
+pub struct VmcSender {
+    packet: VmcPacket,
+    axes: UnitQuaternion<f64>,
+    sockets: Vec<(SocketAddr, UdpSocket)>,
+    bytes: Vec<u8>,
+    /// Datagrams sent, and sends that failed (a target refusing: nothing listens there).
+    pub sent: u64,
+    pub errors: u64,
+}
+
+impl VmcSender {
+    /// `axes`: the character's head-frame axes (left, up, forward) in its model frame.
+    pub fn new(
+        targets: &[SocketAddr],
+        axes: &Matrix3<f64>,
+        head: bool,
+        eyes: bool,
+        names: CurveNaming,
+        visemes: VisemeNaming,
+    ) -> std::io::Result<Self> {
+        let sockets = targets
+            .iter()
+            .map(|&addr| Ok((addr, open_socket(addr)?)))
+            .collect::<std::io::Result<_>>()?;
+        Ok(VmcSender {
+            packet: VmcPacket::new(head, eyes, names, visemes),
+            axes: axes_rotation(axes),
+            sockets,
+            bytes: Vec::with_capacity(2048),
+            sent: 0,
+            errors: 0,
+        })
+    }
+
+    /// Sends one frame's bundles to every target. A target that refuses is counted, not an
+    /// error: a receiver started later still gets the frames after it.
+    pub fn send(&mut self, frame: &VmcFrame) {
+        self.packet.fill(frame, &self.axes);
+        for i in 0..self.packet.packets().len() {
+            self.packet.encode(i, &mut self.bytes);
+            for (_, socket) in &self.sockets {
+                match socket.send(&self.bytes) {
+                    Ok(_) => self.sent += 1,
+                    Err(_) => self.errors += 1,
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]

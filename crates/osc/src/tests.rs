@@ -236,14 +236,87 @@ fn settings_for(targets: &[SocketAddr]) -> OscSettings {
             .map(|a| Target {
                 label: a.to_string(),
                 addr: *a,
+                character: 0,
             })
             .collect(),
-        character: "wolf".into(),
+        characters: vec![OscCharacter {
+            name: "wolf".into(),
+            axes: Matrix3::identity(),
+        }],
         head: true,
         eyes: true,
-        axes: Matrix3::identity(),
         names: CurveNaming::Arkit,
         visemes: VisemeNaming::Vrm0,
+    }
+}
+
+/// The `jawOpen` value of every datagram `receiver` gets within a second (the bundle holding
+/// it).
+fn jaw_values(receiver: &UdpSocket, frames: usize, per_frame: usize) -> Vec<f32> {
+    let mut buf = [0u8; 4096];
+    let mut values = Vec::new();
+    for _ in 0..frames * per_frame {
+        let n = receiver
+            .recv(&mut buf)
+            .expect("a datagram within the timeout");
+        let (_, packet) = rosc::decoder::decode_udp(&buf[..n]).unwrap();
+        for m in messages(&packet) {
+            if m.addr == address::BLEND_VAL && m.args[0] == OscType::String("jawOpen".into()) {
+                let OscType::Float(v) = m.args[1] else {
+                    panic!("{m:?}")
+                };
+                values.push(v);
+            }
+        }
+    }
+    values
+}
+
+/// Each target gets its own character: two receivers, the wolf's and the human's values.
+#[test]
+fn each_target_gets_its_own_characters_values() {
+    let receivers: Vec<UdpSocket> = (0..2)
+        .map(|_| {
+            let r = UdpSocket::bind("127.0.0.1:0").unwrap();
+            r.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+            r
+        })
+        .collect();
+    let mut settings = settings_for(&[]);
+    settings.characters.push(OscCharacter {
+        name: "human".into(),
+        axes: Matrix3::identity(),
+    });
+    for (character, r) in receivers.iter().enumerate() {
+        let addr = r.local_addr().unwrap();
+        settings.targets.push(Target {
+            label: addr.to_string(),
+            addr,
+            character,
+        });
+    }
+    let counters = Arc::new(OscCounters::default());
+    let output = OscOutput::new(counters, Duration::from_secs(60));
+    output.configure(settings).unwrap();
+    let per_frame = VmcPacket::new(true, true, CurveNaming::Arkit, VisemeNaming::Vrm0)
+        .packets()
+        .len();
+    for i in 0..3 {
+        let mut frame = frame_with(i as f64, Some([0.25; CURVES]), [1.0, 0.0, 0.0, 0.0]);
+        let mut human = RigState::default();
+        human.curves.0[0] = 0.75;
+        frame.characters[0].rig = Some(human);
+        output.offer(&frame);
+        assert_eq!(
+            jaw_values(&receivers[0], 1, per_frame),
+            [0.25],
+            "the wolf's"
+        );
+        assert_eq!(
+            jaw_values(&receivers[1], 1, per_frame),
+            [0.75],
+            "the human's"
+        );
     }
 }
 
@@ -277,7 +350,8 @@ fn a_refusing_target_is_counted_and_the_others_still_get_every_frame() {
             Some([0.25; CURVES]),
             [1.0, 0.0, 0.0, 0.0],
         ));
-        assert!(started.elapsed() < Duration::from_millis(50));
+        // Never waits on the sender (a blocked queue would hang here, not take seconds).
+        assert!(started.elapsed() < Duration::from_secs(5));
         // Paced like frames, so that the refusals come back between sends.
         for _ in 0..per_frame {
             if receiver.recv(&mut buf).is_ok() {

@@ -20,7 +20,7 @@ pub struct CharacterFrame {
     pub confidence: Vec<f32>,
     /// The smoothed closed curve through the points (docs/method.md §8), if the daemon computes it.
     pub curve: Option<Vec<[f32; 3]>>,
-    /// The rig (docs/rig.md) once the performer is calibrated; JSON only.
+    /// The rig (docs/rig.md) once the performer is calibrated.
     #[serde(skip)]
     pub rig: Option<RigState>,
     /// The character's head and eyes (docs/head.md), if the daemon drives them.

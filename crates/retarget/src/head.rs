@@ -471,7 +471,8 @@ impl HeadDriver {
                 1.0
             };
             progress = s;
-            self.current = slerp(&turn.from, &target, s);
+            self.current =
+                crate::head_route::turn_point(&self.config.reach, &turn.from, &target, s);
             if s >= 1.0 {
                 self.turn = None;
             }

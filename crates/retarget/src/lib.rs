@@ -38,12 +38,14 @@
 //! # Ok(()) }
 //! ```
 
+pub mod batch;
 pub mod character;
 pub mod deform;
 mod error;
 pub mod frame;
 pub mod head;
 mod head_file;
+mod head_route;
 pub mod jsonl;
 pub mod kabsch;
 pub mod layout;

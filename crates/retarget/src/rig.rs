@@ -277,6 +277,11 @@ pub struct RigFrame {
     /// ([`visemes_from`]).
     #[serde(default = "default_visemes")]
     pub visemes: Named<f64>,
+    /// The performer's neutral mouth width (corner to corner), metres: what the export scales
+    /// the slide and the lip translations by to the character's size (docs/export.md).
+    /// Absent in takes made before it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub performer_width_m: Option<f64>,
 }
 
 fn default_visemes() -> Named<f64> {
@@ -290,6 +295,7 @@ impl Default for RigFrame {
             lips: LipsState::default(),
             curves: Named(CURVE_NAMES.iter().map(|n| (n.to_string(), 0.0)).collect()),
             visemes: default_visemes(),
+            performer_width_m: None,
         }
     }
 }
@@ -388,7 +394,10 @@ impl Rig {
                 jaw_slide: 0.0,
             },
             values: [0.0; CURVES],
-            out: RigFrame::default(),
+            out: RigFrame {
+                performer_width_m: Some(neutral.mouth_width()),
+                ..RigFrame::default()
+            },
             settings,
         })
     }
@@ -448,6 +457,7 @@ impl Rig {
     pub fn output_for(&self, character: &RangeOverrides, out: &mut RigFrame) {
         out.jaw = self.out.jaw;
         out.lips = self.out.lips;
+        out.performer_width_m = self.out.performer_width_m;
         if character.is_empty() {
             out.curves.clone_from(&self.out.curves);
             out.visemes.clone_from(&self.out.visemes);

@@ -17,8 +17,9 @@ pub const FOXGLOVE_SUBPROTOCOL: &str = "foxglove.websocket.v1";
 pub const TOKEN_PROTOCOL_PREFIX: &str = "mouthpiece.token.";
 /// Magic bytes at the start of a binary `frame`.
 pub const BINARY_MAGIC: &[u8; 4] = b"MPF1";
-/// Version of the binary `frame` layout.
-pub const BINARY_VERSION: u16 = 1;
+/// Version of the binary `frame` layout: 2 added each character's head block and, on
+/// request, its rig block.
+pub const BINARY_VERSION: u16 = 2;
 /// Size of the fixed binary header, before the character blocks.
 pub const BINARY_HEADER_LEN: usize = 76;
 
@@ -119,7 +120,7 @@ pub enum OptionalField {
     Curve,
     /// The performer's lip dots (head motion removed, performer mouth frame).
     Performer,
-    /// Each character's `rig`: jaw, lip motions, ARKit-named curves (JSON frames only).
+    /// Each character's `rig`: jaw, lip motions, ARKit-named curves.
     Rig,
     /// Not part of `frame`: a `health` message about once a second.
     Health,
@@ -233,6 +234,10 @@ pub struct HelloMessage<'a> {
     pub clock: ClockDescription,
     /// What this connection may do: `read` or `control`.
     pub access: &'static str,
+    /// The rig's curve names, in the order of `rig.curves` and of the binary rig block.
+    pub rig_curves: &'static [&'static str],
+    /// The rig's VRM viseme names, in the order of `rig.visemes` and of the binary rig block.
+    pub rig_visemes: &'static [&'static str],
 }
 
 /// Server name and version in `hello`.
@@ -423,6 +428,26 @@ impl<'a> FrameView<'a> {
     }
 }
 
+/// Flags of the binary `frame` header (`docs/protocol.md`).
+mod flag {
+    pub const HEAD_LOST: u16 = 1;
+    pub const CURVES: u16 = 1 << 1;
+    pub const PERFORMER: u16 = 1 << 2;
+    pub const WALL_CLOCK: u16 = 1 << 3;
+    pub const HEADS: u16 = 1 << 4;
+    pub const RIGS: u16 = 1 << 5;
+}
+
+/// Bytes of a character's head block: presence, mode and reach bytes, three quaternions and
+/// the turn's progress.
+pub const BINARY_HEAD_LEN: usize = 4 + 13 * 4;
+
+/// Bytes of a character's rig block: presence, curve and viseme counts, jaw (2 floats), each
+/// lip (rotation, translation, residual: 8 floats), one float per curve and per viseme.
+pub const fn binary_rig_len(curves: usize, visemes: usize) -> usize {
+    8 + (2 + 8 + 8 + curves + visemes) * 4
+}
+
 /// Encodes the binary form of `frame` (layout in `docs/protocol.md`), appending to `out`.
 ///
 /// `character_names` is the `characters` list of the current `hello`: each character block
@@ -445,18 +470,21 @@ pub fn encode_binary_frame(
     } else {
         None
     };
-    let mut flags = 0u16;
+    let mut flags = flag::HEADS;
     if f.head.lost {
-        flags |= 1;
+        flags |= flag::HEAD_LOST;
     }
     if with_curve {
-        flags |= 2;
+        flags |= flag::CURVES;
     }
     if performer.is_some() {
-        flags |= 4;
+        flags |= flag::PERFORMER;
     }
     if f.wall_us.is_some() {
-        flags |= 8;
+        flags |= flag::WALL_CLOCK;
+    }
+    if selection.rig {
+        flags |= flag::RIGS;
     }
     out.extend_from_slice(BINARY_MAGIC);
     out.extend_from_slice(&BINARY_VERSION.to_le_bytes());
@@ -488,6 +516,10 @@ pub fn encode_binary_frame(
             out.extend_from_slice(&0u16.to_le_bytes());
             push_points(out, curve);
         }
+        push_head(out, c.head.as_ref());
+        if selection.rig {
+            push_rig(out, c.rig.as_ref());
+        }
     }
     if let Some(p) = performer {
         out.extend_from_slice(&(p.points.len() as u16).to_le_bytes());
@@ -495,6 +527,62 @@ pub fn encode_binary_frame(
         push_points(out, &p.points);
         push_floats(out, &p.confidence, p.points.len());
     }
+}
+
+/// A character's head block: fixed size, with a presence byte (a character whose head the
+/// daemon does not drive writes 0 and identities).
+fn push_head(out: &mut Vec<u8>, head: Option<&mouthpiece_output::CharacterHead>) {
+    let start = out.len();
+    let default = mouthpiece_output::CharacterHead::default();
+    let h = head.unwrap_or(&default);
+    let mode = match h.mode {
+        mouthpiece_output::LookMode::Follow => 0u8,
+        mouthpiece_output::LookMode::LookAt => 1,
+    };
+    let in_reach = match h.in_reach {
+        Some(false) => 0u8,
+        Some(true) => 1,
+        None => 0xFF,
+    };
+    out.extend_from_slice(&[u8::from(head.is_some()), mode, in_reach, 0]);
+    for v in h.rotation.iter().chain(&h.eye_left).chain(&h.eye_right) {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out.extend_from_slice(&h.progress.to_le_bytes());
+    debug_assert_eq!(out.len() - start, BINARY_HEAD_LEN);
+}
+
+/// A character's rig block: fixed size for a given curve list, with a presence flag (the rig
+/// is absent before the performer is calibrated: 0 and zeros).
+fn push_rig(out: &mut Vec<u8>, rig: Option<&mouthpiece_output::RigState>) {
+    let start = out.len();
+    let default = mouthpiece_output::RigState::default();
+    let r = rig.unwrap_or(&default);
+    let (curves, visemes) = (&r.curves.0, &r.visemes.0);
+    out.extend_from_slice(&u16::from(rig.is_some()).to_le_bytes());
+    out.extend_from_slice(&(curves.len() as u16).to_le_bytes());
+    out.extend_from_slice(&(visemes.len() as u16).to_le_bytes());
+    out.extend_from_slice(&0u16.to_le_bytes());
+    let lip = |l: &mouthpiece_output::RigLip| {
+        let mut v = [0f32; 8];
+        v[..4].copy_from_slice(&l.rotation);
+        v[4..7].copy_from_slice(&l.translation);
+        v[7] = l.residual;
+        v
+    };
+    let floats = [r.jaw.angle_deg, r.jaw.slide_m]
+        .into_iter()
+        .chain(lip(&r.lips.upper))
+        .chain(lip(&r.lips.lower))
+        .chain(curves.iter().copied())
+        .chain(visemes.iter().copied());
+    for v in floats {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    debug_assert_eq!(
+        out.len() - start,
+        binary_rig_len(curves.len(), visemes.len())
+    );
 }
 
 fn push_points(out: &mut Vec<u8>, points: &[[f32; 3]]) {

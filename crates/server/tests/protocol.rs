@@ -96,38 +96,41 @@ async fn subscription_selects_characters_fields_and_rate() {
     server.stop().await;
 }
 
-/// Decodes the documented binary layout independently of the encoder.
-#[tokio::test]
-async fn binary_frames_follow_the_documented_layout() {
-    let server = TestServer::start(ServerConfig::default()).await;
-    let mut ws = connect_v1(&server.url()).await;
-    send_json(
-        &mut ws,
-        json!({"type": "subscribe", "format": "binary", "fields": ["curve", "performer"]}),
-    )
-    .await;
-    next_of_type(&mut ws, "result").await;
-    let mut expected = mouthpiece_server::StreamFrame::default();
-    mouthpiece_server::loadgen::synthetic_frame(7, 60.0, &mut expected);
-    server.hub.publish(&expected);
-    let bytes = loop {
+/// The next binary message (frames; previews are not asked for here).
+async fn next_binary(ws: &mut Client) -> Vec<u8> {
+    loop {
         match tokio::time::timeout(Duration::from_secs(5), ws.next())
             .await
             .unwrap()
             .unwrap()
             .unwrap()
         {
-            Message::Binary(b) => break b,
+            Message::Binary(b) => break b.to_vec(),
             _ => continue,
         }
-    };
+    }
+}
+
+/// Decodes the documented binary layout (docs/protocol.md) independently of the encoder,
+/// checking every field against the published frame; `rig_curves` is `hello.rig_curves`.
+fn check_binary_frame(
+    bytes: &[u8],
+    expected: &mouthpiece_server::StreamFrame,
+    with_rig: bool,
+    rig_curves: &[serde_json::Value],
+    rig_visemes: &[serde_json::Value],
+) {
     let u16_at = |o: usize| u16::from_le_bytes([bytes[o], bytes[o + 1]]);
     let u64_at = |o: usize| u64::from_le_bytes(bytes[o..o + 8].try_into().unwrap());
     let f32_at = |o: usize| f32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
     assert_eq!(&bytes[0..4], b"MPF1");
-    assert_eq!(u16_at(4), 1);
-    assert_eq!(u16_at(6), 2 | 4 | 8, "curve, performer, wall clock");
-    assert_eq!(u64_at(8), 0);
+    assert_eq!(u16_at(4), 2);
+    let rig_flag = if with_rig { 32 } else { 0 };
+    assert_eq!(
+        u16_at(6),
+        2 | 4 | 8 | 16 | rig_flag,
+        "curve, performer, wall clock, heads, rig"
+    );
     assert_eq!(
         f64::from_le_bytes(bytes[16..24].try_into().unwrap()),
         expected.t
@@ -152,12 +155,80 @@ async fn binary_frames_follow_the_documented_layout() {
         let k = u16_at(o) as usize;
         assert_eq!(k, 48);
         o += 4 + k * 12;
+        // The head block.
+        let head = c.head.as_ref().expect("the synthetic frame drives heads");
+        assert_eq!(bytes[o], 1, "head present");
+        assert_eq!(bytes[o + 1], 0, "follow");
+        assert_eq!(bytes[o + 2], 0xFF, "in_reach null while following");
+        o += 4;
+        for q in [head.rotation, head.eye_left, head.eye_right] {
+            for v in q {
+                assert_eq!(f32_at(o), v);
+                o += 4;
+            }
+        }
+        assert_eq!(f32_at(o), head.progress);
+        o += 4;
+        if with_rig {
+            let rig = c.rig.as_ref().expect("the synthetic frame has a rig");
+            assert_eq!(u16_at(o), 1, "rig present");
+            assert_eq!(u16_at(o + 2) as usize, rig_curves.len());
+            assert_eq!(u16_at(o + 4) as usize, rig_visemes.len());
+            o += 8;
+            assert_eq!(f32_at(o), rig.jaw.angle_deg);
+            assert_eq!(f32_at(o + 4), rig.jaw.slide_m);
+            o += 8;
+            for lip in [&rig.lips.upper, &rig.lips.lower] {
+                assert_eq!(f32_at(o), lip.rotation[0]);
+                assert_eq!(f32_at(o + 16), lip.translation[0]);
+                assert_eq!(f32_at(o + 28), lip.residual);
+                o += 32;
+            }
+            for name in rig_curves {
+                let name = name.as_str().unwrap();
+                assert_eq!(f32_at(o), rig.curve(name).unwrap(), "{name}");
+                o += 4;
+            }
+            for (i, name) in rig_visemes.iter().enumerate() {
+                assert_eq!(f32_at(o), rig.visemes.0[i], "{name}");
+                o += 4;
+            }
+        }
     }
     assert_eq!(u16_at(o), 12);
     o += 4;
     assert_eq!(f32_at(o), expected.performer.as_ref().unwrap().points[0][0]);
     o += 12 * 12 + 12 * 4;
     assert_eq!(o, bytes.len());
+}
+
+/// Binary frames, with and without the rig, decoded from the documented table.
+#[tokio::test]
+async fn binary_frames_follow_the_documented_layout() {
+    let server = TestServer::start(ServerConfig::default()).await;
+    let mut ws = connect_v1(&server.url()).await;
+    let hello = next_of_type(&mut ws, "hello").await;
+    let rig_curves = hello["rig_curves"].as_array().unwrap().clone();
+    assert_eq!(rig_curves[0], "jawOpen");
+    let rig_visemes = hello["rig_visemes"].as_array().unwrap().clone();
+    assert_eq!(rig_visemes, ["aa", "ih", "ou", "ee", "oh"]);
+    let mut expected = mouthpiece_server::StreamFrame::default();
+    mouthpiece_server::loadgen::synthetic_frame(7, 60.0, &mut expected);
+    for with_rig in [false, true] {
+        let mut fields = vec!["curve", "performer"];
+        if with_rig {
+            fields.push("rig");
+        }
+        send_json(
+            &mut ws,
+            json!({"type": "subscribe", "format": "binary", "fields": fields}),
+        )
+        .await;
+        next_of_type(&mut ws, "result").await;
+        server.hub.publish(&expected);
+        let bytes = next_binary(&mut ws).await;
+        check_binary_frame(&bytes, &expected, with_rig, &rig_curves, &rig_visemes);
+    }
     server.stop().await;
 }
 

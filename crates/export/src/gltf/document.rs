@@ -210,8 +210,19 @@ impl GltfWriter {
                 mesh: Some(mesh),
                 ..Default::default()
             });
-            mouth_children.extend([jaw, shapes]);
-            Some([jaw, jaw, shapes])
+            // The lips' rigid motions: nodes at the mouth frame's origin, rotation and
+            // translation keys (a point of a lip at rest position p goes to R p + t).
+            let lip = |root: &mut json::Root, name: &str| {
+                root.push(json::Node {
+                    name: Some(name.into()),
+                    mesh: marker_mesh,
+                    ..Default::default()
+                })
+            };
+            let upper = lip(&mut root, "lip_upper");
+            let lower = lip(&mut root, "lip_lower");
+            mouth_children.extend([jaw, shapes, upper, lower]);
+            Some([jaw, jaw, shapes, upper, upper, lower, lower])
         } else {
             None
         };
@@ -254,7 +265,18 @@ impl GltfWriter {
             channel_nodes.extend([head_node, eye_left, eye_right]);
         }
         if let Some(nodes) = rig_nodes {
-            channel_names.extend(["jaw", "jaw", "blendshapes"].map(String::from));
+            channel_names.extend(
+                [
+                    "jaw",
+                    "jaw",
+                    "blendshapes",
+                    "lip_upper",
+                    "lip_upper",
+                    "lip_lower",
+                    "lip_lower",
+                ]
+                .map(String::from),
+            );
             channel_nodes.extend(nodes);
         }
         // The rig's channels come last; without a rig in the take they are left out.
@@ -324,12 +346,12 @@ impl GltfWriter {
             );
             let (min, max) = channel.v_bounds.json_first(channel.width.min(4));
             let (kind, path, count) = match channel.kind {
-                Kind::Head | Kind::JawRotation => (
+                Kind::Head | Kind::JawRotation | Kind::LipRotation => (
                     json::accessor::Type::Vec4,
                     json::animation::Property::Rotation,
                     channel.keys,
                 ),
-                Kind::Point | Kind::JawTranslation => (
+                Kind::Point | Kind::JawTranslation | Kind::LipTranslation => (
                     json::accessor::Type::Vec3,
                     json::animation::Property::Translation,
                     channel.keys,

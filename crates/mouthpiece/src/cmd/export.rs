@@ -336,6 +336,8 @@ fn take_from_recording(args: &Args) -> anyhow::Result<TakeInput> {
         // `mouthpiece process`'s default, so that --curve has a curve to export.
         smooth: Some(Smooth::Bspline),
         opencv_threads: 0,
+        // A daemon's take: the head as it turned live (`look_at` over the WebSocket).
+        recorded_heads: true,
     };
     let summary = process_recording(&setup, &mut BufWriter::new(&mut file))?;
     summary.log();

@@ -16,12 +16,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use mouthpiece_lipsync::phones::{self, PhoneFormat};
-use mouthpiece_lipsync::{BasicPoses, ClassTable, PhoneSpan, SegmentTable, Weights};
-use mouthpiece_retarget::jsonl::OutputLine;
-use mouthpiece_retarget::{
-    CharacterRetarget, CharacterSettings, NeutralPose, PerformerLayout, RetargetOutput,
-    RigidTransform, StabilisedFrame, Vec3,
-};
+use mouthpiece_lipsync::take::{phones_jsonl, Source, TakeWriter};
+pub use mouthpiece_lipsync::take::{Tables, DEFAULT_POSES};
+use mouthpiece_lipsync::{BasicPoses, PhoneSpan, Weights};
+#[cfg(test)]
+use mouthpiece_retarget::{NeutralPose, PerformerLayout, Vec3};
 use mouthpiece_speech::{ModelPaths, Task, TimedPhone};
 #[cfg(test)]
 use mouthpiece_synth::DotLayout;
@@ -31,11 +30,6 @@ use crate::cmd::process::{load_character, smoothing};
 use crate::cmd::retarget::Smooth;
 use crate::exit::bad_input;
 use mouthpiece_lipsync::input::cut;
-
-/// The shipped class table.
-pub const DEFAULT_CLASSES: &str = include_str!("../../../../config/lipsync/classes.toml");
-/// The shipped basic poses (derived from the synthetic performer: [`poses_from_synth`]).
-pub const DEFAULT_POSES: &str = include_str!("../../../../config/lipsync/poses.toml");
 
 #[derive(Debug, clap::Args)]
 #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
@@ -122,61 +116,38 @@ pub fn read_text(path: &Path, what: &str, limit: u64) -> anyhow::Result<String> 
     mouthpiece_lipsync::input::decode_text(&bytes, &name).map_err(bad_input)
 }
 
-/// The method's tables: classes, segments (with overrides), poses.
-pub struct Tables {
-    /// The pose file's name, for errors.
-    pub pose_name: String,
-    pub classes: ClassTable,
-    pub segments: SegmentTable,
-    pub poses: BasicPoses,
-    /// `poses.poses[order[i]]` is the class table's key pose i.
-    pub order: Vec<usize>,
-}
-
-impl Tables {
-    pub fn load(
-        classes: Option<&Path>,
-        poses: Option<&Path>,
-        segments: Option<&Path>,
-    ) -> anyhow::Result<Self> {
-        let (text, name) = match classes {
-            Some(p) => (
-                read_text(p, "class table", MAX_TABLE_FILE_BYTES)?,
+/// The method's tables from `--classes`, `--poses` and `--segments` (the shipped ones when
+/// absent).
+pub fn load_tables(
+    classes: Option<&Path>,
+    poses: Option<&Path>,
+    segments: Option<&Path>,
+) -> anyhow::Result<Tables> {
+    use mouthpiece_lipsync::take::{DEFAULT_CLASSES, DEFAULT_CLASSES_NAME, DEFAULT_POSES_NAME};
+    let read = |path: Option<&Path>, what: &str| -> anyhow::Result<Option<(String, String)>> {
+        path.map(|p| {
+            Ok((
+                read_text(p, what, MAX_TABLE_FILE_BYTES)?,
                 p.display().to_string(),
-            ),
-            None => (
-                DEFAULT_CLASSES.to_string(),
-                "config/lipsync/classes.toml".into(),
-            ),
-        };
-        let classes = ClassTable::from_toml_str(&text, &name).map_err(bad_input)?;
-        let (text, pose_name) = match poses {
-            Some(p) => (
-                read_text(p, "pose file", MAX_TABLE_FILE_BYTES)?,
-                p.display().to_string(),
-            ),
-            None => (
-                DEFAULT_POSES.to_string(),
-                "config/lipsync/poses.toml".into(),
-            ),
-        };
-        let poses = BasicPoses::from_toml_str(&text, &pose_name).map_err(bad_input)?;
-        let order = poses.order_for(&classes, &pose_name).map_err(bad_input)?;
-        let mut table = SegmentTable::generate(&classes);
-        if let Some(p) = segments {
-            let text = read_text(p, "segment overrides", MAX_TABLE_FILE_BYTES)?;
-            table
-                .apply_overrides(&classes, &text, &p.display().to_string())
-                .map_err(bad_input)?;
-        }
-        Ok(Self {
-            pose_name,
-            classes,
-            segments: table,
-            poses,
-            order,
+            ))
         })
+        .transpose()
+    };
+    let classes = read(classes, "class table")?;
+    let poses = read(poses, "pose file")?;
+    let segments = read(segments, "segment overrides")?;
+    fn source<'a>(file: &'a Option<(String, String)>, text: &'a str, name: &'a str) -> Source<'a> {
+        match file {
+            Some((text, name)) => Source { text, name },
+            None => Source { text, name },
+        }
     }
+    Tables::parse(
+        source(&classes, DEFAULT_CLASSES, DEFAULT_CLASSES_NAME),
+        source(&poses, DEFAULT_POSES, DEFAULT_POSES_NAME),
+        segments.as_ref().map(|(text, name)| Source { text, name }),
+    )
+    .map_err(bad_input)
 }
 
 /// Recogniser names that are not speech sounds: silence and fillers.
@@ -259,107 +230,6 @@ fn input_phones(args: &Args) -> anyhow::Result<(Vec<PhoneSpan>, String)> {
     Ok((spans, source))
 }
 
-/// The performer's neutral pose of a pose file (its mouth frame is the file's frame).
-pub fn neutral_of(poses: &BasicPoses) -> anyhow::Result<NeutralPose> {
-    let v = |p: &[f64; 3]| Some(Vec3::new(p[0], p[1], p[2]));
-    let layout = PerformerLayout {
-        lip_dots: poses.lip_dots(),
-        forehead_dots: poses.forehead.len(),
-    };
-    NeutralPose::from_positions(
-        layout,
-        poses.neutral_lip.iter().map(v).collect(),
-        poses.forehead.iter().map(v).collect(),
-        1,
-    )
-    .context("the basic poses' neutral dots")
-    .map_err(bad_input)
-}
-
-/// The retarget core bound to a character and the basic poses' neutral, ready to turn
-/// weight curves into take lines. Made before any output file is created: a character that
-/// does not fit the poses is bad input, not a half-written take.
-pub struct TakeWriter {
-    neutral: NeutralPose,
-    retarget: CharacterRetarget,
-    line: OutputLine,
-}
-
-impl TakeWriter {
-    /// `character_name` names the character file in errors.
-    pub fn new(
-        tables: &Tables,
-        character: mouthpiece_retarget::Character,
-        character_name: &str,
-        smooth: Smooth,
-    ) -> anyhow::Result<Self> {
-        let neutral =
-            neutral_of(&tables.poses).with_context(|| format!("pose file {}", tables.pose_name))?;
-        let settings = CharacterSettings {
-            smoothing: smoothing(smooth),
-            one_euro: None,
-        };
-        let line = OutputLine::for_character(&character, &settings.smoothing);
-        let retarget = CharacterRetarget::new(character, &neutral, settings)
-            .with_context(|| {
-                format!(
-                    "character {character_name} does not fit the basic poses of {}",
-                    tables.pose_name
-                )
-            })
-            .map_err(bad_input)?;
-        Ok(Self {
-            neutral,
-            retarget,
-            line,
-        })
-    }
-
-    /// Writes one take line per sample of `weights` to `out`, as it goes.
-    pub fn write(
-        mut self,
-        weights: &Weights,
-        tables: &Tables,
-        out: &mut dyn Write,
-    ) -> anyhow::Result<()> {
-        let n = tables.poses.lip_dots();
-        let mut performer = StabilisedFrame {
-            t: 0.0,
-            lip: self.neutral.lip.clone(),
-            confidence: vec![1.0; n],
-            head: RigidTransform::IDENTITY,
-            head_lost: false,
-        };
-        let mut displacement = vec![[0.0; 3]; n];
-        for k in 0..weights.len() {
-            performer.t = weights.time(k);
-            // D = D⁰ + Σ wᵢ poseᵢ, in the mouth frame (blend from a zero neutral: displacement).
-            tables
-                .poses
-                .displacement(weights.sample(k), &tables.order, &mut displacement);
-            for (d, (base, off)) in performer
-                .lip
-                .iter_mut()
-                .zip(self.neutral.lip.iter().zip(&displacement))
-            {
-                *d = base + Vec3::new(off[0], off[1], off[2]);
-            }
-            let frame = self.retarget.apply(&performer);
-            self.line.update(
-                k as u64,
-                &RetargetOutput {
-                    performer: &performer,
-                    character: frame,
-                },
-            );
-            serde_json::to_writer(&mut *out, &self.line).context("cannot write the take")?;
-            out.write_all(b"\n").context("cannot write the take")?;
-        }
-        out.flush().context("cannot write the take")?;
-        Ok(())
-    }
-}
-
 /// The weight curves as CSV: `t,phone,class,<pose>…` (the dominant phone and its class),
 /// written to `out` as it goes.
 pub fn write_weights_csv(
@@ -401,19 +271,6 @@ pub fn write_weights_csv(
     Ok(())
 }
 
-/// Phones as JSONL `{start, end, phone}` (what `--phonemes` reads).
-pub fn phones_jsonl(phones: &[PhoneSpan]) -> String {
-    let mut s = String::new();
-    for p in phones {
-        let _ = writeln!(
-            s,
-            "{}",
-            serde_json::json!({"start": p.start, "end": p.end, "phone": p.phone})
-        );
-    }
-    s
-}
-
 fn create_file(path: &Path) -> anyhow::Result<mouthpiece_export::PendingFile> {
     mouthpiece_export::PendingFile::create(path)
         .with_context(|| format!("cannot create {}", path.display()))
@@ -438,7 +295,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )));
     }
     mouthpiece_lipsync::mapping::check_t_change(args.t_change).map_err(bad_input)?;
-    let tables = Tables::load(
+    let tables = load_tables(
         args.classes.as_deref(),
         args.poses.as_deref(),
         args.segments.as_deref(),
@@ -455,7 +312,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.fps,
     )
     .map_err(bad_input)?;
-    let take = TakeWriter::new(&tables, character, &character_name, args.smooth)?;
+    let take = TakeWriter::new(&tables, character, &character_name, smoothing(args.smooth))
+        .map_err(bad_input)?;
     // Streamed to temporary files beside the outputs, renamed into place at the end.
     let mut pending = vec![create_file(out)?];
     take.write(&weights, &tables, &mut pending[0])
@@ -676,6 +534,8 @@ pub fn mouth_keys_from_weights(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mouthpiece_lipsync::take::DEFAULT_CLASSES;
+    use mouthpiece_lipsync::{ClassTable, SegmentTable};
 
     /// The shipped poses are the synthetic performer's (set `MOUTHPIECE_WRITE_POSES=1` to
     /// rewrite config/lipsync/poses.toml after changing the mouth model or the states).

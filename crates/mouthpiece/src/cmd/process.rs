@@ -16,6 +16,7 @@ use mouthpiece_pipeline::{Pipeline, PipelineConfig, RetargetSettings};
 use mouthpiece_recording::SessionReader;
 use mouthpiece_retarget::{Character, ShapeSmoothing};
 
+use crate::cmd::recorded_heads::RecordedHeads;
 use crate::cmd::retarget::Smooth;
 use crate::exit::{bad_input, bad_input_if};
 
@@ -106,12 +107,17 @@ impl Input {
     }
 
     pub fn next_frame(&mut self) -> anyhow::Result<Option<Frame>> {
+        Ok(self.next_logged()?.map(|(f, _)| f))
+    }
+
+    /// The next frame and, from an MCAP file, its log time (ns).
+    pub fn next_logged(&mut self) -> anyhow::Result<Option<(Frame, Option<u64>)>> {
         match self {
             Input::Mcap(r) => Ok(r
                 .next_frame()
                 .map_err(|e| bad_input_if(e.is_bad_input(), e))?
-                .map(|f| f.frame)),
-            Input::Oni(s) => Ok(s.next_frame()?),
+                .map(|f| (f.frame, Some(f.log_time)))),
+            Input::Oni(s) => Ok(s.next_frame()?.map(|f| (f, None))),
         }
     }
 }
@@ -125,6 +131,9 @@ pub struct ProcessSetup<'a> {
     pub config: Option<&'a Path>,
     pub smooth: Option<Smooth>,
     pub opencv_threads: i32,
+    /// A take's character head as the daemon recorded it (`/character/<name>`'s `head`, with
+    /// the `look_at` turns made live) instead of the re-run's, where the take has one.
+    pub recorded_heads: bool,
 }
 
 /// What one pass over a recording did.
@@ -138,6 +147,8 @@ pub struct ProcessSummary {
     pub frames_with_missing_dots: u64,
     pub pipeline_median_ms: f64,
     pub pipeline_p99_ms: f64,
+    /// Frames whose character head is the one the take recorded (`recorded_heads`).
+    pub recorded_heads: u64,
 }
 
 impl ProcessSummary {
@@ -154,6 +165,7 @@ impl ProcessSummary {
             pipeline_p99_ms = format!("{:.3}", self.pipeline_p99_ms),
             calibrated_at_s = ?self.calibrated_at,
             frames_with_missing_dots = self.frames_with_missing_dots,
+            recorded_heads = self.recorded_heads,
             "process done"
         );
         if self.calibrated_at.is_none() && self.frames > 0 {
@@ -177,11 +189,16 @@ pub fn process_recording(
     if let Some(smooth) = setup.smooth {
         config.retarget.smooth = smooth;
     }
+    let character_name = character.name.clone();
     let mut pipeline = Pipeline::for_characters(config, vec![character]).map_err(bad_input)?;
     if setup.opencv_threads > 0 {
         mouthpiece_detect::set_opencv_threads(setup.opencv_threads)?;
     }
     let mut input = Input::open(setup.input)?;
+    let mut recorded = match (&input, setup.recorded_heads) {
+        (Input::Mcap(_), true) => Some(RecordedHeads::open(setup.input, &character_name)?),
+        _ => None,
+    };
 
     let progress = io::stderr().is_terminal().then(|| {
         let bar = indicatif::ProgressBar::new_spinner();
@@ -199,8 +216,9 @@ pub fn process_recording(
     let mut calibrated_at = None;
     let mut frames_with_missing = 0u64;
     let mut pipeline_ms: Vec<f64> = Vec::new();
-    while let Some(frame) = input
-        .next_frame()
+    let mut recorded_frames = 0u64;
+    while let Some((frame, log_time)) = input
+        .next_logged()
         .with_context(|| format!("reading {}", setup.input.display()))?
     {
         let tick = Instant::now();
@@ -208,7 +226,18 @@ pub fn process_recording(
             .process(&frame)
             .with_context(|| format!("frame {}", frame.seq))?;
         pipeline_ms.push(tick.elapsed().as_secs_f64() * 1e3);
-        serde_json::to_writer(&mut *out, &line).context("cannot write output")?;
+        let head = match (&mut recorded, log_time) {
+            (Some(r), Some(t)) => r.at(t)?,
+            _ => None,
+        };
+        if let Some(head) = head {
+            let mut value = serde_json::to_value(&line).context("cannot write output")?;
+            value["character_head"] = serde_json::to_value(head).context("cannot write output")?;
+            serde_json::to_writer(&mut *out, &value).context("cannot write output")?;
+            recorded_frames += 1;
+        } else {
+            serde_json::to_writer(&mut *out, &line).context("cannot write output")?;
+        }
         out.write_all(b"\n").context("cannot write output")?;
         if tracked.status.neutral_taken && calibrated_at.is_none() {
             calibrated_at = Some(tracked.t);
@@ -251,6 +280,7 @@ pub fn process_recording(
         frames_with_missing_dots: frames_with_missing,
         pipeline_median_ms: pct(0.5),
         pipeline_p99_ms: pct(0.99),
+        recorded_heads: recorded_frames,
     })
 }
 
@@ -261,6 +291,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config: args.config.as_deref(),
         smooth: args.smooth,
         opencv_threads: args.opencv_threads,
+        recorded_heads: false,
     };
     if args.out.as_os_str() == "-" {
         let mut out = BufWriter::new(io::stdout().lock());

@@ -250,6 +250,8 @@ impl Writer {
             timecode_rate: rate,
             clock: ClockDescription::default(),
             access: self.access.as_str(),
+            rig_curves: &mouthpiece_output::CURVE_NAMES,
+            rig_visemes: &mouthpiece_output::VISEME_NAMES,
         }));
         self.send(Message::text(text)).await
     }

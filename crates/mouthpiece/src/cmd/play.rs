@@ -1,0 +1,162 @@
+//! `mouthpiece play`: a take (JSONL from `process`, `retarget` or `lipsync`) sent over the VMC
+//! protocol as the daemon sends a live character (docs/osc.md): the rig's curves, the VRM
+//! visemes, the head and the eyes, each frame at its time. A speech-driven take and a camera
+//! take drive an avatar app alike.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::net::{SocketAddr, ToSocketAddrs};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, Context as _};
+use mouthpiece_export::{ExportError, TakeReader};
+use mouthpiece_osc::{VmcFrame, VmcSender};
+use mouthpiece_output::{visemes_from, CurveNaming, RigCurves, RigVisemes, VisemeNaming};
+
+use crate::cmd::process::load_character;
+use crate::exit::{bad_input, bad_input_if};
+
+/// Fastest `--speed`.
+pub const MAX_SPEED: f64 = 1000.0;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The take (JSONL from `mouthpiece process`, `retarget` or `lipsync`).
+    pub take: PathBuf,
+    /// The take's character file (TOML): its head frame orients the head and eye bones.
+    #[arg(long)]
+    pub character: PathBuf,
+    /// Where to send, `host:port` (UDP); repeat for several receivers.
+    #[arg(long = "osc", value_name = "HOST:PORT", required = true)]
+    pub targets: Vec<String>,
+    /// Curve names: `arkit` (jawOpen) or `arkit-pascal` (JawOpen).
+    #[arg(long, value_parser = naming::<CurveNaming>, default_value = "arkit")]
+    pub names: CurveNaming,
+    /// Visemes sent: `vrm0` (A I U E O), `vrm1` (aa ih ou ee oh) or `none`.
+    #[arg(long, value_parser = naming::<VisemeNaming>, default_value = "vrm0")]
+    pub visemes: VisemeNaming,
+    /// Do not send the head bone.
+    #[arg(long)]
+    pub no_head: bool,
+    /// Do not send the eye bones.
+    #[arg(long)]
+    pub no_eyes: bool,
+    /// Playback speed: 1 is the take's own timing, 2 twice as fast (up to 1000).
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+}
+
+/// The configuration file's names for the naming options (`[osc] names`, `visemes`).
+fn naming<T: serde::de::DeserializeOwned>(s: &str) -> Result<T, String> {
+    T::deserialize(serde::de::value::StrDeserializer::<serde::de::value::Error>::new(s))
+        .map_err(|e| e.to_string())
+}
+
+fn resolve(text: &str) -> anyhow::Result<SocketAddr> {
+    let target: mouthpiece_config::OscTarget = text
+        .parse()
+        .map_err(|e: String| bad_input(anyhow!("--osc: {e}")))?;
+    let addrs: Vec<SocketAddr> = (target.host.as_str(), target.port)
+        .to_socket_addrs()
+        .with_context(|| format!("--osc: cannot resolve {}", target.host))
+        .map_err(bad_input)?
+        .collect();
+    addrs
+        .iter()
+        .find(|a| a.is_ipv4())
+        .or(addrs.first())
+        .copied()
+        .ok_or_else(|| bad_input(anyhow!("--osc: {} resolves to no address", target.host)))
+}
+
+fn export_error(e: ExportError) -> anyhow::Error {
+    bad_input_if(e.is_bad_input(), e)
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if !(args.speed.is_finite() && args.speed > 0.0 && args.speed <= MAX_SPEED) {
+        return Err(bad_input(anyhow!(
+            "--speed must be above 0 and at most {MAX_SPEED}, got {}",
+            args.speed
+        )));
+    }
+    let targets = args
+        .targets
+        .iter()
+        .map(|t| resolve(t))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let character = load_character(&args.character)?;
+    let name = args.take.display().to_string();
+    let file = File::open(&args.take)
+        .with_context(|| format!("cannot open take {name}"))
+        .map_err(bad_input)?;
+    let mut reader = TakeReader::with_points(
+        BufReader::new(file),
+        name.clone(),
+        character.point_names.clone(),
+    );
+    let mut sender = VmcSender::new(
+        &targets,
+        &character.frame.axes,
+        !args.no_head,
+        !args.no_eyes,
+        args.names,
+        args.visemes,
+    )
+    .context("cannot open a UDP socket")?;
+    let mut start: Option<(Instant, f64)> = None;
+    let mut frames = 0u64;
+    while let Some(frame) = reader.next_frame().map_err(export_error)? {
+        if frames == 0 {
+            if let Some(take) = reader.character() {
+                if take != character.name {
+                    return Err(bad_input(ExportError::CharacterMismatch {
+                        take: take.to_owned(),
+                        file: character.name.clone(),
+                    }));
+                }
+            }
+        }
+        // Each frame at its time from the first, divided by the speed; a late frame goes at
+        // once (the receiver sees the take's times in /VMC/Ext/T either way).
+        let (t0_wall, t0) = *start.get_or_insert((Instant::now(), frame.t));
+        let due = t0_wall + Duration::from_secs_f64(((frame.t - t0) / args.speed).max(0.0));
+        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+        sender.send(&vmc_frame(&frame));
+        frames += 1;
+    }
+    if frames == 0 {
+        return Err(bad_input(ExportError::EmptyTake { source_name: name }));
+    }
+    eprintln!(
+        "sent {frames} frames of {name} to {}: {} datagrams, {} refused",
+        args.targets.join(", "),
+        sender.sent,
+        sender.errors
+    );
+    Ok(())
+}
+
+/// A take frame as the live output sends it: without a rig (before the neutral pose) every
+/// curve and viseme at rest; without a head, identities.
+fn vmc_frame(frame: &mouthpiece_export::TakeFrame) -> VmcFrame {
+    let f32s = |q: [f64; 4]| q.map(|v| v as f32);
+    let head = frame.head.unwrap_or(mouthpiece_export::HeadKeys {
+        head: [1.0, 0.0, 0.0, 0.0],
+        eye_left: [1.0, 0.0, 0.0, 0.0],
+        eye_right: [1.0, 0.0, 0.0, 0.0],
+    });
+    VmcFrame {
+        t: frame.t,
+        curves: frame.rig.map(|r| RigCurves(r.curves.map(|v| v as f32))),
+        visemes: frame
+            .rig
+            .map(|r| RigVisemes(visemes_from(&r.curves).map(|v| v as f32))),
+        head: f32s(head.head),
+        eye_left: f32s(head.eye_left),
+        eye_right: f32s(head.eye_right),
+    }
+}
