@@ -12,7 +12,9 @@ Per session it prints:
   computes from the same stabilised dots, neutral dots and ranges (both the tracked and the
   true side): the file's curves are what the definitions give;
 - `worst curve` and `funnel r`, `jawOpen r`: recomputed from the rows, the figures of
-  `evaluate`'s rig table (numpy's `corrcoef`, not the Rust accumulator);
+  `evaluate`'s rig table (numpy's `corrcoef`, not the Rust accumulator); "funnel r" is the
+  rounding's, `mouthFunnel + mouthPucker` (the two split it by the lips' opening), as in
+  `evaluate`;
 - `funnel r, common error off`: the funnel's correlation with the synthetic rounding after the
   part of the tracked dots' error that every lip dot shares (the mean of tracked − true over
   the dots, per frame: mostly the head pose's error, which moves every dot alike) is taken off
@@ -65,10 +67,15 @@ def session_report(rows):
     jaw = np.array([float(r["true_jaw_deg"]) for r in rows])
     rms = np.sqrt(((tracked - true) ** 2).mean(axis=0))
     worst = int(np.argmax(rms))
-    funnel, jaw_open = NAMES.index("mouthFunnel"), NAMES.index("jawOpen")
+    funnel, pucker = NAMES.index("mouthFunnel"), NAMES.index("mouthPucker")
+    jaw_open = NAMES.index("jawOpen")
 
     def r(x, y):
         return np.corrcoef(x, y)[0, 1]
+
+    def rounding(c):
+        """The rounding, which mouthFunnel and mouthPucker split by the lips' opening."""
+        return c[:, funnel] + c[:, pucker]
 
     common = (tracked_dots - true_dots).mean(axis=1, keepdims=True)
     without_common = np.array([curves(tracked_rig, g, d)
@@ -86,10 +93,10 @@ def session_report(rows):
         "recomputed": recomputed,
         "worst": (NAMES[worst], rms[worst]),
         "jawOpen r": r(tracked[:, jaw_open], jaw),
-        "funnel r": r(tracked[:, funnel], rnd),
-        "funnel r, true dots": r(true[:, funnel], rnd),
-        "funnel r, common error off": r(without_common[:, funnel], rnd),
-        "funnel r, depth error off": r(without_depth_error[:, funnel], rnd),
+        "funnel r": r(rounding(tracked), rnd),
+        "funnel r, true dots": r(rounding(true), rnd),
+        "funnel r, common error off": r(rounding(without_common), rnd),
+        "funnel r, depth error off": r(rounding(without_depth_error), rnd),
         "common error RMS (mm, x y z)": 1e3 * np.sqrt((common[:, 0, :] ** 2).mean(axis=0)),
         "worst, unseen dots true": np.sqrt(((with_perfect_fill - true) ** 2).mean(axis=0)).max(),
         "unseen": int((~seen).sum()),

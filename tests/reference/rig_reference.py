@@ -41,7 +41,7 @@ DEFAULT_RANGES = {
     "mouthLowerDownLeft": 0.12, "mouthLowerDownRight": 0.12, "mouthPressLeft": 0.15,
     "mouthPressRight": 0.15, "jawForward": 0.15, "jawLeft": 0.10, "jawRight": 0.10,
     "mouthFrownLeft": 0.08, "mouthFrownRight": 0.08, "mouthShrugUpper": 0.10,
-    "mouthShrugLower": 0.16, "mouthDimpleLeft": 0.10, "mouthDimpleRight": 0.10,
+    "mouthShrugLower": 0.16, "mouthDimpleLeft": 0.30, "mouthDimpleRight": 0.30,
 }
 
 # docs/rig.md: the lips' opening (mouth widths) at which the rounding is all funnel; where

@@ -417,7 +417,7 @@ pub(crate) mod tests {
         keys.jaw_angle_deg = 14.25;
         keys.jaw_slide_m = -0.0015;
         for (k, c) in keys.curves.iter_mut().enumerate() {
-            *c = k as f64 / 32.0;
+            *c = k as f64 / CURVES as f64;
         }
         for (line, rig) in [(1, None), (2, Some(keys))] {
             w.push(&TakeFrame {
@@ -445,9 +445,9 @@ pub(crate) mod tests {
             ["1", "0", "0", "0", "0", "0", "0"].repeat(2)
         );
         for (k, cell) in rows[2][20..].iter().enumerate() {
-            assert_eq!(cell.parse::<f64>().unwrap(), k as f64 / 32.0);
+            assert_eq!(cell.parse::<f64>().unwrap(), k as f64 / CURVES as f64);
         }
-        assert!(rows.iter().all(|r| r.len() == 1 + 3 + 16 + 18));
+        assert!(rows.iter().all(|r| r.len() == 1 + 3 + 16 + CURVES));
     }
 
     /// A rig whose mouth (corner to corner along x) is `width` wide, in metres.

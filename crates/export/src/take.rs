@@ -479,7 +479,7 @@ mod tests {
             .iter()
             .enumerate()
             .rev()
-            .map(|(k, n)| format!("\"{n}\": {}", k as f64 / 20.0))
+            .map(|(k, n)| format!("\"{n}\": {}", k as f64 / CURVES as f64))
             .collect();
         let rig = format!(
             r#""rig": {{"jaw": {{"angle_deg": {angle}, "slide_m": -0.001}}, "lips": {{"upper": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0], "residual": 0}}, "lower": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0], "residual": 0}}}}, "curves": {{{}}}}}"#,
@@ -505,7 +505,7 @@ mod tests {
         let rig = frames[1].rig.unwrap();
         assert_eq!((rig.jaw_angle_deg, rig.jaw_slide_m), (12.5, -0.001));
         for (k, v) in rig.curves.iter().enumerate() {
-            assert_eq!(*v, k as f64 / 20.0, "{}", CURVE_NAMES[k]);
+            assert_eq!(*v, k as f64 / CURVES as f64, "{}", CURVE_NAMES[k]);
         }
         // Bad rigs name the key.
         let e =
@@ -514,7 +514,8 @@ mod tests {
             e.contains("line 1: rig.curves has no mouthPressLeft"),
             "{e}"
         );
-        let e = error_of(&rig_line("0", 12.5).replace(": 0.85", ": 1.5"));
+        let press = format!("\"mouthPressRight\": {}", 17.0 / CURVES as f64);
+        let e = error_of(&rig_line("0", 12.5).replace(&press, "\"mouthPressRight\": 1.5"));
         assert!(
             e.contains("line 1: rig.curves.mouthPressRight = 1.5 is not in 0..1"),
             "{e}"

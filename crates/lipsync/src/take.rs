@@ -8,6 +8,7 @@
 use std::io::{self, Write};
 
 use mouthpiece_retarget::jsonl::OutputLine;
+use mouthpiece_retarget::rig::{RangeOverrides, Rig, RigSettings};
 use mouthpiece_retarget::{
     Character, CharacterRetarget, CharacterSettings, NeutralPose, PerformerLayout, RetargetOutput,
     RigidTransform, ShapeSmoothing, StabilisedFrame, Vec3,
@@ -105,6 +106,10 @@ pub struct TakeWriter {
     neutral: NeutralPose,
     retarget: CharacterRetarget,
     line: OutputLine,
+    /// The rig on the speech-driven dots, as on a camera's (docs/rig.md): jaw, curves and
+    /// visemes in every line; `None` for a layout the rig cannot measure.
+    rig: Option<Rig>,
+    ranges: RangeOverrides,
 }
 
 impl TakeWriter {
@@ -125,6 +130,8 @@ impl TakeWriter {
             one_euro: None,
         };
         let line = OutputLine::for_character(&character, &settings.smoothing);
+        let ranges = character.rig_ranges;
+        let rig = Rig::new(&neutral, RigSettings::default()).ok();
         let retarget = CharacterRetarget::new(character, &neutral, settings).map_err(|source| {
             TakeError::Character {
                 character_name: character_name.to_string(),
@@ -136,6 +143,8 @@ impl TakeWriter {
             neutral,
             retarget,
             line,
+            rig,
+            ranges,
         })
     }
 
@@ -176,6 +185,14 @@ impl TakeWriter {
                     character: frame,
                 },
             );
+            if let Some(rig) = &mut self.rig {
+                rig.step(&performer);
+                // With the character's own ranges where it has them (docs/rig.md).
+                rig.output_for(
+                    &self.ranges,
+                    self.line.rig.get_or_insert_with(Default::default),
+                );
+            }
             serde_json::to_writer(&mut *out, &self.line)?;
             out.write_all(b"\n")?;
         }
@@ -218,6 +235,48 @@ mod tests {
 
     fn human() -> Character {
         Character::from_toml_str(include_str!("../../../config/characters/human.toml")).unwrap()
+    }
+
+    /// The rig runs on the speech-driven dots as on a camera's: every line carries the
+    /// jaw, the curves and the visemes; the neutral mouth reads nothing, the "open" pose an
+    /// open jaw (viseme `aa`), the "round" pose a rounding.
+    #[test]
+    fn lines_carry_the_rig_of_the_speech_driven_dots() {
+        let tables = shipped();
+        let k = tables.classes.poses.len();
+        let pose = |name: &str| tables.classes.poses.iter().position(|p| p == name).unwrap();
+        let mut values = vec![0.0; 3 * k];
+        values[k + pose("open")] = 1.0;
+        values[2 * k + pose("round")] = 1.0;
+        let weights = Weights {
+            fps: 10.0,
+            poses: k,
+            values,
+            owner: vec![0; 3],
+        };
+        let writer = TakeWriter::new(&tables, human(), "human.toml", ShapeSmoothing::None).unwrap();
+        let mut out = Vec::new();
+        writer.write(&weights, &tables, &mut out).unwrap();
+        let lines: Vec<serde_json::Value> = String::from_utf8(out)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        let curve = |i: usize, name: &str| lines[i]["rig"]["curves"][name].as_f64().unwrap();
+        let viseme = |i: usize, name: &str| lines[i]["rig"]["visemes"][name].as_f64().unwrap();
+        assert!(
+            curve(0, "jawOpen") < 1e-9 && viseme(0, "aa") < 1e-9,
+            "{}",
+            lines[0]
+        );
+        assert!(curve(1, "jawOpen") > 0.2, "{}", lines[1]["rig"]);
+        assert!(viseme(1, "aa") > 0.1, "{}", lines[1]["rig"]);
+        let rounding = curve(2, "mouthFunnel") + curve(2, "mouthPucker");
+        assert!(rounding > 0.2, "{}", lines[2]["rig"]);
+        assert_eq!(
+            lines[2]["rig"]["curves"].as_object().unwrap().len(),
+            mouthpiece_retarget::rig::CURVES
+        );
     }
 
     #[test]
