@@ -104,33 +104,22 @@ fn blender_samples(file: &Path, animation: &str, times: &[f64]) -> Value {
     serde_json::from_str(line).unwrap()
 }
 
-const CURVE_NAMES: [&str; 18] = [
-    "jawOpen",
-    "mouthClose",
-    "mouthFunnel",
-    "mouthPucker",
-    "mouthLeft",
-    "mouthRight",
-    "mouthSmileLeft",
-    "mouthSmileRight",
-    "mouthStretchLeft",
-    "mouthStretchRight",
-    "mouthRollUpper",
-    "mouthRollLower",
-    "mouthUpperUpLeft",
-    "mouthUpperUpRight",
-    "mouthLowerDownLeft",
-    "mouthLowerDownRight",
-    "mouthPressLeft",
-    "mouthPressRight",
-];
+use mouthpiece_output::CURVE_NAMES;
 
 /// Frames without `rig` at the start (before the neutral pose: every curve 0).
 const NO_RIG: usize = 3;
 
-/// Curve `k` at time `t` in the test take.
+/// Curve `k` at time `t` in the test take; past the curves, the VRM visemes the curves give
+/// (`mouthpiece_output::visemes_from`, as the rig computes them).
 fn curve(k: usize, t: f64) -> f64 {
-    0.5 + 0.5 * (3.0 * t + k as f64).sin()
+    let raw = |k: usize| 0.5 + 0.5 * (3.0 * t + k as f64).sin();
+    match k.checked_sub(mouthpiece_output::CURVES) {
+        None => raw(k),
+        Some(v) => {
+            let curves: [f64; mouthpiece_output::CURVES] = std::array::from_fn(raw);
+            mouthpiece_output::visemes_from(&curves)[v]
+        }
+    }
 }
 
 /// A take of `frames` lines at slightly uneven times with every curve moving, the first
@@ -275,7 +264,7 @@ fn onto_glb_animates_the_arkit_named_shape_keys_and_keeps_the_rest() {
     let dir = tempfile::tempdir().unwrap();
     let avatar = dir.path().join("avatar.glb");
     // Case differs from the take's `jawOpen`, `mouthSmileLeft`; `eyeBlinkLeft` (default 0.25)
-    // and the VRM 0.x viseme `A` have no curve (the take carries no visemes).
+    // has no curve; the VRM 0.x viseme `A` is the rig's `aa`, from the take's curves.
     make_avatar(
         &avatar,
         "GLB",
@@ -304,9 +293,9 @@ fn onto_glb_animates_the_arkit_named_shape_keys_and_keeps_the_rest() {
 
     // The report: what matched (and from which curve), what did not, on both meshes.
     for line in [
-        "meshes[0] (`FaceMesh`): 3 of 5 morph targets matched (node 0 (`Face`))",
-        "  matched: JawOpen ← jawOpen, mouthsmileleft ← mouthSmileLeft, mouthFunnel\n",
-        "  no curve for: eyeBlinkLeft, A\n",
+        "meshes[0] (`FaceMesh`): 4 of 5 morph targets matched (node 0 (`Face`))",
+        "  matched: JawOpen ← jawOpen, mouthsmileleft ← mouthSmileLeft, mouthFunnel, A ← aa\n",
+        "  no curve for: eyeBlinkLeft\n",
         "meshes[1] (`SpinnerMesh`): 0 of 1 morph targets matched",
         "  no curve for: Bulge\n",
         "wrote ",
@@ -315,8 +304,9 @@ fn onto_glb_animates_the_arkit_named_shape_keys_and_keeps_the_rest() {
     }
     let unused: Vec<&str> = CURVE_NAMES
         .iter()
+        .chain(&mouthpiece_output::VISEME_NAMES)
         .copied()
-        .filter(|n| !["jawOpen", "mouthSmileLeft", "mouthFunnel"].contains(n))
+        .filter(|n| !["jawOpen", "mouthSmileLeft", "mouthFunnel", "aa"].contains(n))
         .collect();
     assert!(
         report.contains(&format!("curves with no target: {}\n", unused.join(", "))),
@@ -352,8 +342,13 @@ fn onto_glb_animates_the_arkit_named_shape_keys_and_keeps_the_rest() {
         &samples,
         &times,
         &probes,
-        &[("JawOpen", 0), ("mouthsmileleft", 6), ("mouthFunnel", 2)],
-        &[("eyeBlinkLeft", 0.25), ("A", 0.0)],
+        &[
+            ("JawOpen", 0),
+            ("mouthsmileleft", 6),
+            ("mouthFunnel", 2),
+            ("A", mouthpiece_output::CURVES),
+        ],
+        &[("eyeBlinkLeft", 0.25)],
     );
     // The untouched parts: objects, material, and the Spinner's own animation.
     assert_eq!(samples["objects"], serde_json::json!(["Face", "Spinner"]));
@@ -555,5 +550,51 @@ fn onto_a_malformed_avatar_is_exit_2_naming_the_file_and_element() {
                 assert!(!out.exists(), "case {i}");
             }
         }
+    }
+}
+
+/// A speech-driven take (`mouthpiece lipsync`) drives an ARKit- and VRM-named avatar as a
+/// camera take does: its rig's `jawOpen` and the `aa` viseme it gives reach the shape keys.
+#[test]
+fn onto_a_lipsync_take_moves_the_avatars_mouth() {
+    let dir = tempfile::tempdir().unwrap();
+    let avatar = dir.path().join("avatar.glb");
+    make_avatar(&avatar, "GLB", &["jawOpen", "A"]);
+    let phn = dir.path().join("ah.phn");
+    // Silence, "aa" for half a second, silence (TIMIT samples at 16 kHz).
+    std::fs::write(&phn, "0 4000 h#\n4000 12000 aa\n12000 16000 h#\n").unwrap();
+    let take = dir.path().join("speech.jsonl");
+    let character = repo().join("config/characters/human.toml");
+    let made = mouthpiece(&[
+        "lipsync",
+        "--phonemes",
+        phn.to_str().unwrap(),
+        "--character",
+        character.to_str().unwrap(),
+        "--out",
+        take.to_str().unwrap(),
+    ]);
+    assert!(made.status.success(), "{}", stderr(&made));
+    let out = dir.path().join("animated.glb");
+    let run = mouthpiece(&[
+        "export",
+        take.to_str().unwrap(),
+        "--onto",
+        avatar.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let report = stderr(&run);
+    assert!(run.status.success(), "{report}");
+    assert!(report.contains("matched: jawOpen, A ← aa\n"), "{report}");
+    assert_clean(&out);
+    // Blender at the middle of the "aa": the jaw open and the viseme on.
+    let samples = blender_samples(&out, "take", &[0.5]);
+    let keys = &samples["shape_keys"]["0.5"]["Face"];
+    for name in ["jawOpen", "A"] {
+        let v = keys[name]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{name}: {keys}"));
+        assert!(v > 0.2, "{name} {v} at the middle of \"aa\": {keys}");
     }
 }

@@ -289,9 +289,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// the avatar as one weight animation.
 fn export_onto(args: &Args, avatar_path: &Path, glb_out: bool) -> anyhow::Result<()> {
     use mouthpiece_export::onto::{Avatar, CurveTable};
+    use mouthpiece_output::{visemes_from, VISEMES, VISEME_NAMES};
     use mouthpiece_retarget::rig::{CURVES, CURVE_NAMES};
     let avatar = Avatar::read(avatar_path).map_err(export_error)?;
-    let table = CurveTable::new(&CURVE_NAMES);
+    // The curves, then the VRM visemes (VRM avatars' `aa ih ou ee oh`, `A I U E O`).
+    let names: Vec<&str> = CURVE_NAMES.iter().chain(&VISEME_NAMES).copied().collect();
+    let per_frame = CURVES + VISEMES;
+    let table = CurveTable::new(&names);
     let plan = avatar.plan(&table).map_err(export_error)?;
     let character = args.character.as_deref().map(load_character).transpose()?;
     let input = open_take(args)?;
@@ -306,7 +310,11 @@ fn export_onto(args: &Args, avatar_path: &Path, glb_out: bool) -> anyhow::Result
         progress.set_position(reader.bytes_read());
         times.push(frame.t as f32);
         let curves = frame.rig.map_or([0.0; CURVES], |r| r.curves);
-        values.extend(curves.iter().map(|&c| c as f32));
+        // As the rig computes them: a take stores the visemes its curves give.
+        let visemes = frame
+            .rig
+            .map_or([0.0; VISEMES], |r| visemes_from(&r.curves));
+        values.extend(curves.iter().chain(&visemes).map(|&c| c as f32));
     }
     if times.is_empty() {
         return Err(bad_input(ExportError::EmptyTake {
@@ -315,7 +323,7 @@ fn export_onto(args: &Args, avatar_path: &Path, glb_out: bool) -> anyhow::Result
     }
     progress.set_message("writing");
     let summary = avatar
-        .write_onto(&plan, &times, &values, CURVES, &args.out, glb_out)
+        .write_onto(&plan, &times, &values, per_frame, &args.out, glb_out)
         .map_err(export_error)?;
     progress.finish_and_clear();
     eprint!("{}", plan.report);
