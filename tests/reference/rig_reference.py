@@ -39,8 +39,8 @@ DEFAULT_RANGES = {
     "mouthStretchLeft": 0.15, "mouthStretchRight": 0.15, "mouthRollUpper": 0.10,
     "mouthRollLower": 0.16, "mouthUpperUpLeft": 0.10, "mouthUpperUpRight": 0.10,
     "mouthLowerDownLeft": 0.12, "mouthLowerDownRight": 0.12, "mouthPressLeft": 0.15,
-    "mouthPressRight": 0.15, "jawForward": 0.15, "jawLeft": 0.10, "jawRight": 0.10,
-    "mouthFrownLeft": 0.08, "mouthFrownRight": 0.08, "mouthShrugUpper": 0.10,
+    "mouthPressRight": 0.15, "jawForward": 0.20, "jawLeft": 0.18, "jawRight": 0.18,
+    "mouthFrownLeft": 0.11, "mouthFrownRight": 0.11, "mouthShrugUpper": 0.14,
     "mouthShrugLower": 0.16, "mouthDimpleLeft": 0.30, "mouthDimpleRight": 0.30,
 }
 

@@ -63,12 +63,12 @@ pub const DEFAULT_RANGES: [f64; CURVES] = [
     0.12, // mouthLowerDownRight
     0.15, // mouthPressLeft
     0.15, // mouthPressRight
-    0.15, // jawForward: the lower lip's distance from the hinge grows
-    0.10, // jawLeft: the slide along the hinge
-    0.10, // jawRight
-    0.08, // mouthFrownLeft: corner down
-    0.08, // mouthFrownRight
-    0.10, // mouthShrugUpper: the upper lip up and out
+    0.20, // jawForward: the lower lip's distance from the hinge grows
+    0.18, // jawLeft: the slide along the hinge
+    0.18, // jawRight
+    0.11, // mouthFrownLeft: corner down
+    0.11, // mouthFrownRight
+    0.14, // mouthShrugUpper: the upper lip up and out
     0.16, // mouthShrugLower: the lower lip up and out
     0.30, // mouthDimpleLeft: corner back against the upper lip (wide: depth noise)
     0.30, // mouthDimpleRight
@@ -1342,6 +1342,7 @@ mod tests {
         let n = neutral();
         let w = n.mouth_width();
         let mut rig = rig();
+        let range = |name: &str| DEFAULT_RANGES[curve_index(name).unwrap()];
         let moved = |f: &dyn Fn(usize, &mut Vec3)| -> Vec<Vec3> {
             let mut lip = n.lip.clone();
             for (i, p) in lip.iter_mut().enumerate() {
@@ -1358,7 +1359,7 @@ mod tests {
         });
         let out = rig.step(&frame(slid)).clone();
         assert!(
-            (out.curve("jawLeft") - 0.003 / w / 0.10).abs() < 1e-9,
+            (out.curve("jawLeft") - 0.003 / w / range("jawLeft")).abs() < 1e-9,
             "{out:?}"
         );
         assert!(out.curve("jawRight") < 1e-9, "{out:?}");
@@ -1369,7 +1370,7 @@ mod tests {
             }
         });
         let out = rig.step(&frame(thrust)).clone();
-        assert!(out.curve("jawForward") > 0.2, "{out:?}");
+        assert!(out.curve("jawForward") > 0.15, "{out:?}");
         assert!(out.curve("jawOpen") < 1e-9, "{out:?}");
         // The left corner and its neighbours 2 mm down: a frown on the left only.
         let down = moved(&|i, p| {
@@ -1381,7 +1382,8 @@ mod tests {
         // (The lower neighbour's drop turns the jaw a little, which takes a little off it.)
         let frown = out.curve("mouthFrownLeft");
         assert!(
-            frown > 0.9 * 0.002 / w / 0.08 && frown < 0.002 / w / 0.08,
+            frown > 0.9 * 0.002 / w / range("mouthFrownLeft")
+                && frown < 0.002 / w / range("mouthFrownLeft"),
             "{out:?}"
         );
         assert!(out.curve("mouthFrownRight") < 1e-9, "{out:?}");
@@ -1407,7 +1409,7 @@ mod tests {
             }
         });
         let out = rig.step(&frame(out_up)).clone();
-        let want = (0.001 + DEPTH_WEIGHT * 0.002) / w / 0.10;
+        let want = (0.001 + DEPTH_WEIGHT * 0.002) / w / range("mouthShrugUpper");
         assert!(
             (out.curve("mouthShrugUpper") - want).abs() < 1e-9,
             "{out:?}"
@@ -1426,7 +1428,7 @@ mod tests {
             "{out:?}"
         );
         assert!(
-            out.curve("jawForward") > 0.1,
+            out.curve("jawForward") > 0.075,
             "(a pout reads as a thrust too)"
         );
         assert!(out.curve("jawOpen") < 1e-9, "{out:?}");
