@@ -296,7 +296,26 @@ struct Emitter<'a> {
     sink: &'a mut dyn LineSink,
 }
 
-impl Emitter<'_> {
+impl<'a> Emitter<'a> {
+    fn new(
+        retargeter: Retargeter,
+        layout: PerformerLayout,
+        line_out: OutputLine,
+        look_at: Option<LookAt>,
+        sink: &'a mut dyn LineSink,
+    ) -> Self {
+        Self {
+            retargeter,
+            layout,
+            dots: PerformerDots::new(layout),
+            rig: None,
+            line_out,
+            seq: 0,
+            look_at,
+            sink,
+        }
+    }
+
     fn emit(&mut self, line: &InputLine, at: impl Fn() -> String) -> Result<(), BatchError> {
         line.dots_into(self.layout, &mut self.dots)
             .map_err(|e| BatchError::input(at(), e))?;
@@ -350,16 +369,7 @@ pub fn retarget_file<R: BufRead>(
     let (retargeter, layout) = neutral.build(input_name, character, config)?;
     drop(neutral);
     let mut checker = LineChecker::new(input_name, layout.lip_dots);
-    let mut out = Emitter {
-        retargeter,
-        layout,
-        dots: PerformerDots::new(layout),
-        rig: None,
-        line_out,
-        seq: 0,
-        look_at,
-        sink,
-    };
+    let mut out = Emitter::new(retargeter, layout, line_out, look_at, sink);
     let mut lines = Lines::new(reader);
     while let Some((line_no, text)) = lines.next_line(input_name)? {
         let Some(line) = checker.check(line_no, text)? else {
@@ -422,16 +432,7 @@ pub fn retarget_stream<R: BufRead>(
             }
             let (character, config, line_out, look_at, sink) = start.take().expect("started once");
             let (retargeter, layout) = pending.build(input_name, character, config)?;
-            let mut emitter = Emitter {
-                retargeter,
-                layout,
-                dots: PerformerDots::new(layout),
-                rig: None,
-                line_out,
-                seq: 0,
-                look_at,
-                sink,
-            };
+            let mut emitter = Emitter::new(retargeter, layout, line_out, look_at, sink);
             if pending.flagged {
                 for (l, &line_no) in pending.lines.iter().zip(&pending_numbers) {
                     emitter.emit(l, || at_line(input_name, line_no))?;
