@@ -425,7 +425,7 @@ impl<'a> WavWriter<'a> {
 }
 
 /// Real speech through Festival and PocketSphinx: two sentences, both modes. The bounds are
-/// the targets for alignment (median ≤ 20 ms, p90 ≤ 50 ms, ≥ 85 % of frames in the
+/// the lip sync's targets for alignment (median ≤ 20 ms, p90 ≤ 50 ms, ≥ 85 % of frames in the
 /// right class) and loose sanity bounds for recognition (docs/lipsync.md has the full table).
 #[test]
 fn festival_speech_through_pocketsphinx_meets_the_targets() {
