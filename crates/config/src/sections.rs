@@ -382,6 +382,24 @@ pub struct OscTarget {
     pub port: u16,
 }
 
+impl OscTarget {
+    /// The address datagrams go to: the host resolved now (an IPv4 address is taken when a
+    /// name has both kinds). The error says why, naming the host.
+    pub fn resolve(&self) -> Result<std::net::SocketAddr, String> {
+        use std::net::ToSocketAddrs as _;
+        let addrs: Vec<std::net::SocketAddr> = (self.host.as_str(), self.port)
+            .to_socket_addrs()
+            .map_err(|e| format!("cannot resolve {}: {e}", self.host))?
+            .collect();
+        addrs
+            .iter()
+            .find(|a| a.is_ipv4())
+            .or(addrs.first())
+            .copied()
+            .ok_or_else(|| format!("{} resolves to no address", self.host))
+    }
+}
+
 impl fmt::Display for OscTarget {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if self.host.contains(':') {

@@ -3,8 +3,6 @@
 //! `character` (the first configured by default); `[osc.characters]` names more characters,
 //! each with its own targets.
 
-use std::net::{SocketAddr, ToSocketAddrs};
-
 use mouthpiece_config::Config;
 pub use mouthpiece_osc::{OscCharacter, OscOutput, OscSettings, Target, VmcFrame};
 
@@ -65,16 +63,7 @@ pub fn settings(config: &Config) -> Result<OscSettings, CheckError> {
             }
         };
         let target: mouthpiece_config::OscTarget = text.parse().map_err(|e| invalid(&key, e))?;
-        let addrs: Vec<SocketAddr> = (target.host.as_str(), target.port)
-            .to_socket_addrs()
-            .map_err(|e| invalid(&key, format!("cannot resolve {}: {e}", target.host)))?
-            .collect();
-        let addr = addrs
-            .iter()
-            .find(|a| a.is_ipv4())
-            .or(addrs.first())
-            .copied()
-            .ok_or_else(|| invalid(&key, format!("{} resolves to no address", target.host)))?;
+        let addr = target.resolve().map_err(|e| invalid(&key, e))?;
         targets.push(Target {
             label: text.to_owned(),
             addr,

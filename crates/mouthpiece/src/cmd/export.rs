@@ -357,7 +357,7 @@ impl<R: BufRead> Frames<'_, R> {
 }
 
 /// The user's mistakes exit 2, the machine's exit 1.
-fn export_error(err: ExportError) -> anyhow::Error {
+pub(crate) fn export_error(err: ExportError) -> anyhow::Error {
     bad_input_if(err.is_bad_input(), err)
 }
 

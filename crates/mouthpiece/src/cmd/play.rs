@@ -5,7 +5,7 @@
 
 use std::fs::File;
 use std::io::BufReader;
-use std::net::{SocketAddr, ToSocketAddrs};
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -14,8 +14,9 @@ use mouthpiece_export::{ExportError, TakeReader};
 use mouthpiece_osc::{VmcFrame, VmcSender};
 use mouthpiece_output::{visemes_from, CurveNaming, RigCurves, RigVisemes, VisemeNaming};
 
+use crate::cmd::export::export_error;
 use crate::cmd::process::load_character;
-use crate::exit::{bad_input, bad_input_if};
+use crate::exit::bad_input;
 
 /// Fastest `--speed`.
 pub const MAX_SPEED: f64 = 1000.0;
@@ -57,21 +58,9 @@ fn resolve(text: &str) -> anyhow::Result<SocketAddr> {
     let target: mouthpiece_config::OscTarget = text
         .parse()
         .map_err(|e: String| bad_input(anyhow!("--osc: {e}")))?;
-    let addrs: Vec<SocketAddr> = (target.host.as_str(), target.port)
-        .to_socket_addrs()
-        .with_context(|| format!("--osc: cannot resolve {}", target.host))
-        .map_err(bad_input)?
-        .collect();
-    addrs
-        .iter()
-        .find(|a| a.is_ipv4())
-        .or(addrs.first())
-        .copied()
-        .ok_or_else(|| bad_input(anyhow!("--osc: {} resolves to no address", target.host)))
-}
-
-fn export_error(e: ExportError) -> anyhow::Error {
-    bad_input_if(e.is_bad_input(), e)
+    target
+        .resolve()
+        .map_err(|e| bad_input(anyhow!("--osc: {e}")))
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
