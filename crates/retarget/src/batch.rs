@@ -504,6 +504,18 @@ mod tests {
         }
     }
 
+    /// `input` retargeted onto the human as a stream named `name`.
+    fn stream(input: &str, name: &str, sink: &mut dyn LineSink) -> Result<u64, BatchError> {
+        retarget_stream(
+            Cursor::new(input),
+            name,
+            human(),
+            RetargetConfig::default(),
+            None,
+            sink,
+        )
+    }
+
     #[test]
     fn a_file_and_a_stream_give_the_same_lines() {
         let input = performer(20, 3);
@@ -520,15 +532,7 @@ mod tests {
         )
         .unwrap();
         let mut from_stream = Vec::new();
-        let m = retarget_stream(
-            Cursor::new(&input),
-            "in",
-            human(),
-            RetargetConfig::default(),
-            None,
-            &mut collect(&mut from_stream),
-        )
-        .unwrap();
+        let m = stream(&input, "in", &mut collect(&mut from_stream)).unwrap();
         assert_eq!((n, m), (20, 20));
         assert_eq!(from_file, from_stream);
         assert!(from_file[10].contains("\"rig\""), "{}", from_file[10]);
@@ -539,15 +543,7 @@ mod tests {
         let mut input = performer(6, 2);
         input.push_str(&performer(1, 1));
         let mut out = Vec::new();
-        let e = retarget_stream(
-            Cursor::new(&input),
-            "stdin",
-            human(),
-            RetargetConfig::default(),
-            None,
-            &mut collect(&mut out),
-        )
-        .unwrap_err();
+        let e = stream(&input, "stdin", &mut collect(&mut out)).unwrap_err();
         assert!(e.is_bad_input());
         assert_eq!(e.to_string(), "stdin line 7");
         assert_eq!(out.len(), 6, "the lines before it were written");
@@ -558,25 +554,9 @@ mod tests {
         let input = performer(4, 1);
         let mut broken =
             |_: &OutputLine| -> io::Result<()> { Err(io::ErrorKind::BrokenPipe.into()) };
-        let e = retarget_stream(
-            Cursor::new(&input),
-            "stdin",
-            human(),
-            RetargetConfig::default(),
-            None,
-            &mut broken,
-        )
-        .unwrap_err();
+        let e = stream(&input, "stdin", &mut broken).unwrap_err();
         assert!(!e.is_bad_input() && e.is_broken_pipe(), "{e:?}");
-        let e = retarget_stream(
-            Cursor::new(""),
-            "stdin",
-            human(),
-            RetargetConfig::default(),
-            None,
-            &mut broken,
-        )
-        .unwrap_err();
+        let e = stream("", "stdin", &mut broken).unwrap_err();
         assert!(e.is_bad_input() && e.to_string().contains("no lines"));
     }
 }
