@@ -101,6 +101,14 @@ pub struct HeadKeys {
 }
 
 impl HeadKeys {
+    /// The head and eyes at rest (identities): what a frame without a head shows, as
+    /// [`RigKeys::REST`] is for the rig.
+    pub const REST: HeadKeys = HeadKeys {
+        head: [1.0, 0.0, 0.0, 0.0],
+        eye_left: [1.0, 0.0, 0.0, 0.0],
+        eye_right: [1.0, 0.0, 0.0, 0.0],
+    };
+
     /// The three rotations in node order: head, left eye, right eye.
     pub fn rotations(&self) -> [[f64; 4]; 3] {
         [self.head, self.eye_left, self.eye_right]

@@ -133,11 +133,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// curve and viseme at rest; without a head, identities.
 fn vmc_frame(frame: &mouthpiece_export::TakeFrame) -> VmcFrame {
     let f32s = |q: [f64; 4]| q.map(|v| v as f32);
-    let head = frame.head.unwrap_or(mouthpiece_export::HeadKeys {
-        head: [1.0, 0.0, 0.0, 0.0],
-        eye_left: [1.0, 0.0, 0.0, 0.0],
-        eye_right: [1.0, 0.0, 0.0, 0.0],
-    });
+    let head = frame.head.unwrap_or(mouthpiece_export::HeadKeys::REST);
     VmcFrame {
         t: frame.t,
         curves: frame.rig.map(|r| RigCurves(r.curves.map(|v| v as f32))),
