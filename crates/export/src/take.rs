@@ -174,6 +174,18 @@ impl<R: BufRead> TakeReader<R> {
         self.character.as_deref()
     }
 
+    /// Whether the take (once its first frame is read) was made for the character of a file
+    /// named `file`: a take made for another character is [`ExportError::CharacterMismatch`].
+    pub fn check_character(&self, file: &str) -> Result<(), ExportError> {
+        match self.character() {
+            Some(take) if take != file => Err(ExportError::CharacterMismatch {
+                take: take.to_owned(),
+                file: file.to_owned(),
+            }),
+            _ => Ok(()),
+        }
+    }
+
     /// Bytes consumed so far (for progress).
     pub fn bytes_read(&self) -> u64 {
         self.bytes_read

@@ -163,13 +163,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })?;
     let rig = match character {
         Some(rig) => {
-            if let (Some(take), Some(file)) = (reader.character(), rig.character()) {
-                if take != file {
-                    return Err(bad_input(ExportError::CharacterMismatch {
-                        take: take.to_owned(),
-                        file: file.to_owned(),
-                    }));
-                }
+            if let Some(file) = rig.character() {
+                reader.check_character(file).map_err(bad_input)?;
             }
             rig
         }

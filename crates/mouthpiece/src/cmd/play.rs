@@ -98,14 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut frames = 0u64;
     while let Some(frame) = reader.next_frame().map_err(export_error)? {
         if frames == 0 {
-            if let Some(take) = reader.character() {
-                if take != character.name {
-                    return Err(bad_input(ExportError::CharacterMismatch {
-                        take: take.to_owned(),
-                        file: character.name.clone(),
-                    }));
-                }
-            }
+            reader.check_character(&character.name).map_err(bad_input)?;
         }
         // Each frame at its time from the first, divided by the speed; a late frame goes at
         // once (the receiver sees the take's times in /VMC/Ext/T either way).
