@@ -17,7 +17,10 @@ use std::time::{Instant, SystemTime};
 
 use serde::{Deserialize, Serialize};
 
+pub mod audio;
 pub mod registration;
+
+pub use audio::{AudioBlock, AudioFormat, AudioSource, AudioSourceInfo};
 
 /// Pinhole intrinsics of one camera, plus lens distortion in OpenCV's `plumb_bob` order.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
