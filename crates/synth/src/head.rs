@@ -132,6 +132,11 @@ fn surface(a: f64, v: f64, zc: f64) -> [f64; 3] {
 
 /// The attributes of the head's material point (a, v).
 pub fn attrs_at(a: f64, v: f64, zc: f64) -> Attrs {
+    attrs_coloured(a, v, zc, LIP)
+}
+
+/// [`attrs_at`] with the lips' own colour `lip` (linear RGB, 0..1).
+fn attrs_coloured(a: f64, v: f64, zc: f64, lip: [f32; 3]) -> Attrs {
     let p0 = surface(a, v, zc);
     let front = a.cos() > 0.0;
     let x = if front { a * E0 } else { 1.0 };
@@ -172,7 +177,7 @@ pub fn attrs_at(a: f64, v: f64, zc: f64) -> Attrs {
     };
     let mut albedo = [0.0f32; 3];
     for c in 0..3 {
-        let mut col = SKIN[c] + (LIP[c] - SKIN[c]) * lipness as f32;
+        let mut col = SKIN[c] + (lip[c] - SKIN[c]) * lipness as f32;
         col += (BROW[c] - col) * brow as f32;
         col += (INTERIOR[c] - col) * interior as f32;
         albedo[c] = col;
@@ -307,6 +312,11 @@ fn steps(from: f64, to: f64, step: impl Fn(f64) -> f64) -> Vec<f64> {
 
 impl Geometry {
     pub fn new() -> Self {
+        Self::with_lip_colour(LIP)
+    }
+
+    /// The head with the lips' own colour `lip` (linear RGB, 0..1).
+    pub fn with_lip_colour(lip: [f32; 3]) -> Self {
         // The lips meet at z = 0: the seam point's neutral depth with zc = 0, negated.
         let zc = -surface(0.0, 0.0, 0.0)[2];
         // Columns: fine (0.6 mm) across the face, coarse at the back.
@@ -333,7 +343,7 @@ impl Geometry {
         let mut material = Vec::with_capacity(attrs.capacity());
         for &v in &rows {
             for &a in &cols {
-                attrs.push(attrs_at(a, v, zc));
+                attrs.push(attrs_coloured(a, v, zc, lip));
                 material.push([a as f32, v as f32]);
             }
         }

@@ -6,6 +6,7 @@
 //! forehead_radius_mm = 4.0      # forehead dots: larger (skin there does not move)
 //! lip_color = [40, 200, 70]     # RGB
 //! forehead_color = [40, 90, 230]
+//! lip_skin_color = [200, 102, 102]  # optional: the lips' own colour (default a muted red)
 //! [[forehead]]                  # optional; default F1..F3 below
 //! name = "F1"
 //! x_mm = 35.0                   # performer's left is +x
@@ -38,6 +39,8 @@ pub struct DotLayout {
     pub forehead_radius_mm: f64,
     pub lip_color: [u8; 3],
     pub forehead_color: [u8; 3],
+    /// The lips' own colour (RGB, under the paint); `None`: the built-in muted red.
+    pub lip_skin_color: Option<[u8; 3]>,
     pub forehead: Vec<ForeheadDot>,
 }
 
@@ -54,6 +57,7 @@ impl Default for DotLayout {
             forehead_radius_mm: 4.0,
             lip_color: crate::LIP_DOT_RGB,
             forehead_color: crate::FOREHEAD_DOT_RGB,
+            lip_skin_color: None,
             // A wide, tall triangle (70 × 40 mm): the head pose rests on depth and pixel
             // differences across it, so its size sets the head pose's precision (docs/detection.md,
             // "Painting the dots").

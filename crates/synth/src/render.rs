@@ -155,7 +155,6 @@ fn invert(e: &Extrinsics) -> Extrinsics {
 
 impl Renderer {
     pub fn new(cfg: &SynthConfig) -> Self {
-        let geo = Geometry::new();
         let layout = &cfg.layout;
         let lin = |c: [u8; 3]| {
             [
@@ -163,6 +162,10 @@ impl Renderer {
                 c[1] as f32 / 255.0,
                 c[2] as f32 / 255.0,
             ]
+        };
+        let geo = match layout.lip_skin_color {
+            Some(c) => Geometry::with_lip_colour(lin(c)),
+            None => Geometry::new(),
         };
         let mut dots = Vec::new();
         let names = layout.names();

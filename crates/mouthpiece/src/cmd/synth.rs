@@ -82,6 +82,11 @@ pub struct Args {
     /// The basic poses whose mouth states `--speech` blends (default: the shipped ones).
     #[arg(long, requires = "speech")]
     pub poses: Option<PathBuf>,
+    /// The lips' own colour under the paint, R,G,B (0–255), e.g. 200,102,102 for saturated
+    /// red lips (OpenCV saturation ≈ 125). Default: a muted red. Overrides the layout file's
+    /// `lip_skin_color`.
+    #[arg(long, value_name = "R,G,B", value_parser = parse_rgb)]
+    pub lip_skin_colour: Option<[u8; 3]>,
     #[command(flatten)]
     pub jaw: JawArgs,
 }
@@ -178,6 +183,19 @@ pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
         .parse()
         .map_err(|_| format!("bad height in {s:?}"))?;
     Ok((w, h))
+}
+
+fn parse_rgb(s: &str) -> Result<[u8; 3], String> {
+    let v: Vec<u8> = s
+        .split(',')
+        .map(|x| {
+            x.trim()
+                .parse::<u8>()
+                .map_err(|_| format!("bad colour component {x:?} in {s:?}: expected 0–255"))
+        })
+        .collect::<Result<_, _>>()?;
+    v.try_into()
+        .map_err(|v: Vec<u8>| format!("expected 3 values R,G,B, got {}", v.len()))
 }
 
 fn parse_distortion(s: &str) -> Result<[f64; 5], String> {
@@ -282,6 +300,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(path) = &args.layout {
         config.layout = DotLayout::from_file(path).map_err(bad_input)?;
+    }
+    if let Some(rgb) = args.lip_skin_colour {
+        config.layout.lip_skin_color = Some(rgb);
     }
     let calibration = config.calibration();
     let neutral_seconds = config.neutral_seconds;
