@@ -19,13 +19,20 @@
 //! hue shared with another class split between them), saturation from the lowest level at
 //! which the face shows (almost) no pixel of that hue, value from the paint's low tail.
 //! [`Proposal::to_toml`] prints it as a `[detect]` snippet.
+//!
+//! [`ColourSampler::propose_checked`] runs the detector with the ranges in use and with the
+//! proposed ones on the sampled frames (at most [`MAX_CHECK_FRAMES`], spread evenly) and
+//! counts the dots each finds; a proposal that finds fewer is not to be offered
+//! ([`CheckedProposal::offered`]).
 
+mod check;
 mod hue;
 mod proposal;
 mod sampling;
 
 use crate::DetectConfig;
 
+pub use check::{CheckedProposal, ClassFound, DotsFound, MAX_CHECK_FRAMES};
 pub use hue::hue_ranges;
 pub use proposal::{ClusterSummary, Proposal, ProposedClass};
 pub use sampling::{performer_distance, ColourSampler, FrameSample, SampledBlob};

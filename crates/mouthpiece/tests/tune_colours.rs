@@ -208,6 +208,57 @@ fn red_lip_paint_wraps_hue_and_finds_every_dot() {
     assert_eq!(default_all, 0);
 }
 
+/// A head with saturated red lips (OpenCV saturation ≈ 125) under lip paint inside the
+/// documented ranges (hue 45–85, saturation ≥ 90): the lips lift the face's saturation, the
+/// proposal's saturation floor lands above most of the paint and would find almost no lip
+/// dot where the ranges in use find all twelve. It must not be offered: exit 2, nothing on
+/// stdout, both counts said; and whatever is offered finds at least what the ranges in use
+/// find.
+#[test]
+fn a_proposal_finding_fewer_dots_than_the_ranges_in_use_is_never_offered() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("red_lips.mcap");
+    let layout = dir.path().join("red_lips.layout.toml");
+    std::fs::write(&layout, "lip_color = [60, 200, 90]\n").unwrap();
+    let status = mouthpiece()
+        .args(["synth", "--seed", "7", "--seconds", "2", "--out"])
+        .arg(&out)
+        .arg("--layout")
+        .arg(&layout)
+        .args(["--lip-skin-colour", "200,102,102"])
+        .status()
+        .unwrap();
+    assert!(status.success(), "synth failed");
+    // Dots found over the session (per frame at most 12 lip and 3 forehead dots).
+    let dots = |config: DetectConfig| -> usize {
+        blobs_per_frame(&out, config)
+            .iter()
+            .map(|c| c[0].min(12) + c[1].min(3) + c[2].min(15))
+            .sum()
+    };
+    let in_use = dots(DetectConfig::default());
+    let frames = 60;
+    assert_eq!(in_use, 15 * frames, "the ranges in use find every dot");
+    let run = tune(&[out.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    if run.status.success() {
+        // Offered: it must find what the ranges in use find.
+        let config = PipelineConfig::from_toml_str(&stdout).unwrap().detect;
+        let proposed = dots(config);
+        panic!(
+            "offered a proposal that finds {proposed} dots in {frames} frames (the ranges in use: {in_use}):\n{stdout}"
+        );
+    }
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(stdout.is_empty(), "{stdout}");
+    assert!(
+        stderr.contains("the ranges in use find 15.0 of 15 dots per frame")
+            && stderr.contains("the proposed ranges find"),
+        "both counts are said: {stderr}"
+    );
+}
+
 #[test]
 fn one_paint_for_every_dot_is_role_any() {
     let dir = tempfile::tempdir().unwrap();

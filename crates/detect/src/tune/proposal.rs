@@ -7,10 +7,38 @@ use super::hue::{
     circular_mean, hue_diff, hue_ranges, hue_set, median_f64, median_u8, percentile_u8,
     set_to_ranges,
 };
+use super::check::{dots_found, CheckedProposal, DotsFound};
 use super::sampling::{ColourSampler, SampledBlob};
-use crate::{ColorClass, DetectConfig, DotRole};
+use crate::{ColorClass, DetectConfig, DetectError, DotRole};
 
 impl ColourSampler {
+    /// [`propose`](Self::propose), then the detector with `in_use` (the ranges the tracker
+    /// runs with now) and with the proposal, on the sampled frames: the dots each finds.
+    pub fn propose_checked(&self, in_use: &DetectConfig) -> Result<CheckedProposal, DetectError> {
+        let (lip, forehead) = (self.options.lip_dots, self.options.forehead_dots);
+        let proposal = self.propose();
+        let in_use_found = dots_found(&self.kept, in_use, lip, forehead)?;
+        let proposed = if proposal.classes.is_empty() {
+            DotsFound {
+                frames: in_use_found.frames,
+                expected: in_use_found.expected,
+                ..DotsFound::default()
+            }
+        } else {
+            dots_found(&self.kept, &proposal.detect_config(in_use), lip, forehead)?
+        };
+        Ok(CheckedProposal {
+            proposal,
+            in_use: in_use_found,
+            proposed,
+        })
+    }
+
+    /// Frames kept to check a proposal on.
+    pub fn check_frames(&self) -> usize {
+        self.kept.len()
+    }
+
     /// Clusters the blobs into paints and proposes a class for each dot role found.
     pub fn propose(&self) -> Proposal {
         let opts = &self.options;

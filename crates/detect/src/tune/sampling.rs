@@ -50,6 +50,8 @@ pub struct ColourSampler {
     /// skin, lips and mouth a class's ranges must leave out.
     pub(super) face_hist: Vec<u64>,
     pub(super) face_pixels: u64,
+    /// Frames kept to check a proposal on (`propose_checked`).
+    pub(super) kept: super::check::KeptFrames,
     hsv: Mat,
     labels: Mat,
     stats: Mat,
@@ -76,6 +78,7 @@ impl ColourSampler {
             thresholds: Vec::new(),
             face_hist: vec![0; 180 * 256],
             face_pixels: 0,
+            kept: Default::default(),
             hsv: Mat::default(),
             labels: Mat::default(),
             stats: Mat::default(),
@@ -123,6 +126,7 @@ impl ColourSampler {
                 )));
             }
         }
+        self.kept.offer(color, depth, fx);
         let opts = &self.options;
         let frame_idx = self.frames;
         self.frames += 1;

@@ -118,7 +118,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if with_depth == 0 {
         tracing::warn!("no depth showed a performer: the background is not masked");
     }
-    let proposal = sampler.propose();
+    let checked = sampler
+        .propose_checked(&config.detect)
+        .context("checking the proposal with the detector")?;
+    let proposal = &checked.proposal;
     for w in &proposal.warnings {
         tracing::warn!("{w}");
     }
@@ -139,7 +142,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     detect
         .validate()
         .context("the proposed classes do not validate (a bug)")?;
+    let (lip, forehead) = (config.track.lip_dots, config.track.forehead_dots);
+    let report = checked.report(lip, forehead);
+    for line in &report {
+        tracing::info!("{line}");
+    }
+    // Never offer ranges that find fewer dots than those in use on the same frames.
+    if !checked.offered() {
+        return Err(bad_input(anyhow::anyhow!(
+            "{}: no proposal: the proposed ranges find fewer dots than the ranges in use on the \
+             same frames ({}; {}); keep the ranges in use",
+            args.source,
+            report[0],
+            report[1]
+        )));
+    }
     print!("{}", proposal.to_toml(&args.source));
+    println!();
+    for line in &report {
+        println!("# {line}");
+    }
     Ok(())
 }
 
