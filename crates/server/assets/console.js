@@ -28,11 +28,21 @@
     preview: { images: 0, overlay: null, width: 0, height: 0, toCanvas: null, drawnAt: null },
     calibration: { phase: "idle", message: "" },
     lastResult: null,
+    // The microphone meter: the peak held for holdMs, the clip warning for clipHoldMs.
+    audio: { state: "off", text: "", level: -Infinity, heldPeak: -Infinity, heldAt: 0, clipAt: -Infinity,
+      clipShown: false, holdMs: 2000, clipHoldMs: 3000 },
+    // The zoomed mouth: its scale (inset pixels per source pixel), dots and label boxes.
+    inset: null,
+    token: null,
+    // Called with every status message (console-takes.js); `request` sends a control request.
+    statusHooks: [],
+    request: null,
   };
   window.mouthpiece = state;
 
   const params = new URLSearchParams(location.search);
   const token = params.get("token");
+  state.token = token;
   const countdownFrom = Math.max(0, parseInt(params.get("countdown") || "3", 10) || 0);
   const scheme = location.protocol === "https:" ? "wss:" : "ws:";
   const url = `${scheme}//${location.host}/`;
@@ -109,6 +119,7 @@
     const control = msg.access === "control";
     el("controls").hidden = !control;
     el("readonly").hidden = control;
+    el("tune").hidden = !control;
     showStatus();
   }
 
@@ -130,6 +141,8 @@
     showStatus();
     showTakes();
     showRecord();
+    showAudio();
+    for (const hook of state.statusHooks) hook(msg);
   }
 
   function onResult(msg) {
@@ -154,6 +167,7 @@
     const what = msg.id ? pending.get(msg.id) : null;
     if (msg.id) pending.delete(msg.id);
     if (what === "calibrate") setCalibration("idle", "");
+    if (what === "tune") { el("tune-say").textContent = msg.message || msg.code; return; }
     showError(msg.message || msg.code);
     console.warn("mouthpiece error", msg);
   }
@@ -228,7 +242,9 @@
     cctx.font = `${Math.round(11 * dpr)}px system-ui, sans-serif`;
     cctx.textBaseline = "middle";
     // Labels first, then the dots over them: a dot is never hidden by a neighbour's label.
+    // The lip dots are too close together here to label: the zoomed mouth labels them.
     for (const d of overlay.dots) {
+      if (isLip(d)) continue;
       const [x, y] = toCanvas(d.x, d.y);
       cctx.fillStyle = DOT_COLOURS[d.state] || "#ffffff";
       cctx.fillText(d.name, x + r + 3 * dpr, y - r - 2 * dpr);
@@ -255,6 +271,116 @@
     state.preview.toCanvas = toCanvas;
     state.preview.drawnAt = Date.now();
     el("camera-note").hidden = true;
+    drawInset(bitmap, overlay);
+  }
+
+  function isLip(d) { return /^D\d+$/.test(d.name); }
+
+  // The mouth enlarged: the lip dots' box with room around it, every dot with its label
+  // placed outwards from the mouth's centre (nudged further out until no label overlaps
+  // another label or a dot).
+  const zoom = el("mouth-zoom");
+  const zctx = zoom.getContext("2d");
+  function drawInset(bitmap, overlay) {
+    const [w, h, dpr] = fitCanvas(zoom);
+    zctx.setTransform(1, 0, 0, 1, 0, 0);
+    zctx.fillStyle = "#000";
+    zctx.fillRect(0, 0, w, h);
+    const lips = overlay.dots.filter(isLip);
+    if (!lips.length || !w || !h) { state.inset = null; return; }
+    let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+    for (const d of lips) { x0 = Math.min(x0, d.x); x1 = Math.max(x1, d.x); y0 = Math.min(y0, d.y); y1 = Math.max(y1, d.y); }
+    const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
+    // Room for the labels: the mouth fills about half the inset.
+    const span = Math.max((x1 - x0) * 2.0, (y1 - y0) * 2.0 * w / h, 24);
+    const scale = w / span;
+    const toInset = (x, y) => [w / 2 + (x - cx) * scale, h / 2 + (y - cy) * scale];
+    const sw = overlay.source_width, sh = overlay.source_height;
+    const [ix, iy] = toInset(0, 0);
+    zctx.imageSmoothingEnabled = true;
+    zctx.drawImage(bitmap, 0, 0, bitmap.width, bitmap.height, ix, iy, sw * scale, sh * scale);
+    const r = 5 * dpr;
+    const dots = lips.map((d) => { const [x, y] = toInset(d.x, d.y); return { name: d.name, state: d.state, x, y }; });
+    zctx.font = `600 ${Math.round(13 * dpr)}px system-ui, sans-serif`;
+    zctx.textBaseline = "middle";
+    zctx.textAlign = "left";
+    const labels = [];
+    const overlaps = (a, b) => a.x < b.x + b.w && b.x < a.x + a.w && a.y < b.y + b.h && b.y < a.y + a.h;
+    const hitsDot = (box) => dots.some((p) => p.x + r > box.x && p.x - r < box.x + box.w && p.y + r > box.y && p.y - r < box.y + box.h);
+    for (const p of dots) {
+      let dx = p.x - w / 2, dy = p.y - h / 2;
+      const n = Math.hypot(dx, dy) || 1;
+      dx /= n; dy /= n;
+      const tw = zctx.measureText(p.name).width, th = 14 * dpr;
+      let box = null;
+      for (let k = 0; k < 40; k++) {
+        const dist = r + 4 * dpr + k * 3 * dpr;
+        const ax = p.x + dx * dist, ay = p.y + dy * dist;
+        // The label's box sits on the side the direction points to.
+        const bxl = dx > 0.35 ? ax : dx < -0.35 ? ax - tw : ax - tw / 2;
+        const byl = dy > 0.35 ? ay : dy < -0.35 ? ay - th : ay - th / 2;
+        box = { name: p.name, x: bxl, y: byl, w: tw, h: th };
+        if (!labels.some((l) => overlaps(l, box)) && !hitsDot(box)) break;
+      }
+      labels.push(box);
+    }
+    // Dark plates, then the labels, then the dots.
+    zctx.fillStyle = "rgba(0, 0, 0, 0.6)";
+    for (const b of labels) zctx.fillRect(b.x - 2 * dpr, b.y, b.w + 4 * dpr, b.h);
+    for (const [i, b] of labels.entries()) {
+      zctx.fillStyle = DOT_COLOURS[dots[i].state] || "#ffffff";
+      zctx.fillText(b.name, b.x, b.y + b.h / 2);
+    }
+    zctx.fillStyle = "#000";
+    for (const p of dots) { zctx.beginPath(); zctx.arc(p.x, p.y, r + 1.5 * dpr, 0, 2 * Math.PI); zctx.fill(); }
+    for (const p of dots) {
+      zctx.beginPath();
+      zctx.arc(p.x, p.y, r, 0, 2 * Math.PI);
+      zctx.fillStyle = DOT_COLOURS[p.state] || "#ffffff";
+      zctx.fill();
+    }
+    state.inset = { scale, width: w, height: h, radius: r, dots, labels };
+  }
+
+  // ---- microphone ------------------------------------------------------------------------
+
+  const METER_FLOOR_DB = -60;
+  function dbfs(v) { return typeof v === "number" && Number.isFinite(v) ? v : -Infinity; }
+  function meterShare(db) { return Math.max(0, Math.min(1, (db - METER_FLOOR_DB) / -METER_FLOOR_DB)); }
+
+  function showAudio() {
+    const a = (state.status && state.status.audio) || { state: "off" };
+    const m = state.audio;
+    const now = performance.now();
+    m.state = a.state;
+    const live = a.state === "live" || a.state === "replay";
+    let text;
+    if (a.state === "no_device") {
+      text = `no microphone: ${a.device || "the device"} cannot be opened (retrying)`;
+    } else if (!live) {
+      text = "no microphone (audio is off in the configuration)";
+    } else {
+      const fmt = `${a.sample_rate} Hz · ${a.channels === 1 ? "mono" : a.channels + " channels"}`;
+      text = `${a.state === "replay" ? "replay " : ""}${a.device} · ${fmt}`;
+      if (a.overruns || a.dropped_blocks) text += ` · overruns ${a.overruns || 0}, dropped ${a.dropped_blocks || 0}`;
+    }
+    m.text = text;
+    const peak = live ? dbfs(a.peak_dbfs) : -Infinity;
+    m.level = live ? dbfs(a.level_dbfs) : -Infinity;
+    if (!live) { m.heldPeak = -Infinity; m.clipAt = -Infinity; }
+    if (peak >= m.heldPeak || now - m.heldAt > m.holdMs) { m.heldPeak = peak; m.heldAt = now; }
+    if (live && (a.clip || peak >= -1)) m.clipAt = now;
+    m.clipShown = now - m.clipAt <= m.clipHoldMs;
+    const s = el("mic-state");
+    s.textContent = text;
+    s.title = text;
+    s.className = live ? "" : "bad";
+    el("meter-level").style.width = `${(meterShare(m.level) * 100).toFixed(1)}%`;
+    el("meter").style.setProperty("--meter-width", `${el("meter").clientWidth}px`);
+    const held = el("meter-peak");
+    held.hidden = !live || !Number.isFinite(m.heldPeak);
+    held.style.left = `${(meterShare(m.heldPeak) * 100).toFixed(1)}%`;
+    el("meter-clip").hidden = !m.clipShown;
   }
 
   // ---- status --------------------------------------------------------------------------
@@ -285,8 +411,10 @@
       `lip wobble ${wobble} (${c.frames} frames)`;
   }
 
-  function tile(key, value, cls) {
-    return `<div class="tile"><span class="k">${key}</span><span class="v ${cls || ""}">${value}</span></div>`;
+  // `title` (plain text) is shown in full on hover when the value is cut short.
+  function tile(key, value, cls, title) {
+    const t = title == null ? "" : ` title="${esc(title)}"`;
+    return `<div class="tile"><span class="k">${key}</span><span class="v ${cls || ""}"${t}>${value}</span></div>`;
   }
 
   function esc(text) {
@@ -301,7 +429,7 @@
       const rate = hello && hello.frame_rate ? ` @ ${hello.frame_rate.toFixed(0)} fps` : "";
       tiles.push(tile("source", `${st.source}${mode ? " · " + mode + rate : ""}`, st.source === "up" ? "good" : "bad"));
     }
-    if (hello) tiles.push(tile("device", esc(hello.source || "–")));
+    if (hello) tiles.push(tile("device", esc(hello.source || "–"), "device", hello.source || ""));
     if (st) {
       const c = st.calibration;
       tiles.push(tile("calibration", st.calibrating ? "calibrating…" : c
@@ -332,7 +460,7 @@
     const takes = (state.status && state.status.takes) || [];
     el("takes").innerHTML = takes.length
       ? takes.slice().reverse().map((t) =>
-        `<li>${esc(t.slate)} take ${t.take} · ${t.seconds.toFixed(1)} s · ${t.frames} frames` +
+        `<li><button class="play" data-file="${esc(t.file)}" data-seconds="${t.seconds}">▶ Play</button>${esc(t.slate)} take ${t.take} · ${t.seconds.toFixed(1)} s · ${t.frames} frames` +
         `${t.error ? ` · <span class="bad">${esc(t.error)}</span>` : ""}<br><span class="muted">${esc(t.file)}</span></li>`).join("")
       : '<li class="muted">none yet</li>';
   }
@@ -399,6 +527,7 @@
     request(msg, "record-start");
   }
 
+  state.request = (msg, what) => (canControl() ? request(msg, what) : null);
   el("calibrate").addEventListener("click", startCalibration);
   el("record").addEventListener("click", toggleRecord);
   document.addEventListener("keydown", (e) => {
@@ -513,7 +642,8 @@
     requestAnimationFrame(draw);
   }
 
-  setInterval(() => { showStatus(); showRecord(); }, 500);
+  setInterval(() => { showStatus(); showRecord(); showAudio(); }, 500);
+  showAudio();
   connect();
   requestAnimationFrame(draw);
 })();

@@ -174,6 +174,7 @@ pub async fn respond<S: AsyncWrite + Unpin>(
         408 => "Request Timeout",
         426 => "Upgrade Required",
         431 => "Request Header Fields Too Large",
+        500 => "Internal Server Error",
         503 => "Service Unavailable",
         _ => "Error",
     };

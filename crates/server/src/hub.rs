@@ -124,6 +124,10 @@ pub struct Status {
     pub calibration: Option<crate::console::CalibrationReport>,
     /// Takes recorded in this run of the daemon, oldest first.
     pub takes: Vec<crate::console::TakeSummary>,
+    /// The microphone (`None`: no audio configured, shown as `off`).
+    pub audio: Option<crate::console::AudioStatus>,
+    /// The last paint check (`tune_colours`).
+    pub tune: Option<crate::console::TuneReport>,
 }
 
 /// A control action requested by a client.
@@ -150,6 +154,13 @@ pub enum ControlCommand {
         character: String,
         /// Finite, within ±1e6.
         point: Option<[f64; 3]>,
+    },
+    /// Propose colour ranges from `seconds` of live frames and check them (`apply: false`),
+    /// or write the last offered proposal into the configuration and reload (`apply: true`).
+    TuneColours {
+        apply: bool,
+        /// Sampling time (`None`: the daemon's default).
+        seconds: Option<Duration>,
     },
 }
 
@@ -262,6 +273,8 @@ pub(crate) struct HubInner {
     pub(crate) health: watch::Sender<crate::console::Health>,
     /// The daemon's OSC output counters (`/metrics`, `/healthz`).
     pub(crate) osc: Arc<crate::osc::OscCounters>,
+    /// The takes the console plays back (`/take`).
+    pub(crate) takes: crate::takes_http::TakeService,
 }
 
 impl Hub {
@@ -287,6 +300,7 @@ impl Hub {
                 preview: Arc::new(crate::preview::PreviewShared::new()),
                 health: watch::Sender::new(crate::console::Health::default()),
                 osc: Arc::default(),
+                takes: Default::default(),
             }),
         };
         (hub, ControlReceiver { rx })

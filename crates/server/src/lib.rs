@@ -61,6 +61,7 @@
 //! - [`metrics`]: counters and histograms for `/metrics`.
 //! - [`preview`]: the opt-in camera preview (downscaled JPEG with the dots, latest only).
 //! - [`console`]: health figures, the last calibration and the session's takes.
+//! - [`takes_http`]: `/take`, chunks of a take for the console's player.
 //! - [`timecode`]: SMPTE time-of-day timecode.
 //! - [`loadgen`]: the load tool behind `mouthpiece-loadgen` and the load tests.
 
@@ -81,11 +82,12 @@ pub mod protocol;
 pub mod rig;
 mod server;
 mod session;
+pub mod takes_http;
 pub mod timecode;
 mod tls;
 
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
-pub use console::{CalibrationReport, FramePose, Health, TakeSummary};
+pub use console::{AudioState, AudioStatus, CalibrationReport, TuneClass, TuneFound, TuneReport, FramePose, Health, TakeSummary};
 pub use error::ServerError;
 pub use foxglove::{
     check_client_message as check_foxglove_client_message, FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL,
@@ -103,6 +105,7 @@ pub use mouthpiece_output::{
 pub use osc::{OscCounters, OscTargetCounters, OscTargetFigures};
 pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
 pub use server::run;
+pub use takes_http::{ChunkAudio, ChunkFrame, TakeArchive, TakeChunk, TakeChunkError};
 
 /// Loads the certificate and key as [`run`] will, so that a configuration check refuses
 /// what serving would refuse.

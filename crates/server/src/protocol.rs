@@ -82,6 +82,29 @@ pub enum ClientMessage {
         #[serde(default)]
         point: Option<[f64; 3]>,
     },
+    /// Check the paint: propose colour ranges from the live frames and count what the ranges
+    /// in use and the proposed ones find (`run`), or write the last offered proposal into the
+    /// configuration file and reload it (`apply`).
+    TuneColours {
+        /// Echoed in the answer.
+        #[serde(default)]
+        id: Option<RequestId>,
+        /// `run` or `apply`.
+        action: TuneAction,
+        /// Seconds of frames to sample (`run`; default 2, at most 10).
+        #[serde(default)]
+        seconds: Option<f64>,
+    },
+}
+
+/// `tune_colours` actions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TuneAction {
+    /// Sample, propose and check.
+    Run,
+    /// Write the last offered proposal and reload.
+    Apply,
 }
 
 /// The `preview` request.
@@ -294,6 +317,12 @@ pub struct StatusMessage<'a> {
     /// Takes recorded in this run of the daemon.
     #[serde(skip_serializing_if = "<[_]>::is_empty")]
     pub takes: &'a [crate::console::TakeSummary],
+    /// The microphone, when audio is configured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub audio: Option<&'a crate::console::AudioStatus>,
+    /// The last paint check.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tune: Option<&'a crate::console::TuneReport>,
 }
 
 impl<'a> StatusMessage<'a> {
@@ -307,6 +336,8 @@ impl<'a> StatusMessage<'a> {
             lagged,
             calibration: status.calibration.as_ref(),
             takes: &status.takes,
+            audio: status.audio.as_ref(),
+            tune: status.tune.as_ref(),
         }
     }
 }
@@ -471,6 +502,7 @@ pub fn parse_client_message(text: &str) -> Result<ClientMessage, ParseFailure> {
         "ping",
         "preview",
         "look_at",
+        "tune_colours",
     ];
     let kind_name = kind.as_str().unwrap_or_default().to_owned();
     match kind.as_str() {
@@ -531,6 +563,11 @@ fn validate(message: &ClientMessage) -> Result<(), String> {
             Err(format!("record: slate must be {SLATE_RULE}, got {slate:?}"))
         }
         ClientMessage::LookAt { point: Some(p), .. } => crate::head::check_point(p),
+        ClientMessage::TuneColours {
+            seconds: Some(s), ..
+        } if !(s.is_finite() && *s > 0.0 && *s <= 10.0) => Err(format!(
+            "tune_colours: seconds must be in (0, 10], got {s}"
+        )),
         _ => Ok(()),
     }
 }

@@ -24,6 +24,8 @@ use crate::protocol::{FOXGLOVE_SUBPROTOCOL, SUBPROTOCOL, TOKEN_PROTOCOL_PREFIX};
 const CONSOLE_HTML: &str = include_str!("../assets/console.html");
 /// The console's script.
 const CONSOLE_JS: &str = include_str!("../assets/console.js");
+/// The console's take player and paint check.
+const CONSOLE_TAKES_JS: &str = include_str!("../assets/console-takes.js");
 
 /// A byte stream a session runs on: plain TCP or TLS.
 pub(crate) trait Io: AsyncRead + AsyncWrite + Unpin + Send {}
@@ -339,6 +341,16 @@ async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io
             )
             .await
         }
+        "/console-takes.js" => {
+            http::respond(
+                io,
+                200,
+                "text/javascript; charset=utf-8",
+                CONSOLE_TAKES_JS.as_bytes(),
+            )
+            .await
+        }
+        "/take" => crate::takes_http::serve(shared, io, req).await,
         "/healthz" => {
             if let Some(reason) = shared.hub.failure() {
                 let body = serde_json::json!({ "status": "failed", "reason": reason });
@@ -375,7 +387,7 @@ async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io
             )
             .await
         }
-        _ => http::respond_error(io, 404, "not found (try /, /healthz, /metrics)").await,
+        _ => http::respond_error(io, 404, "not found (try /, /healthz, /metrics, /take)").await,
     }
 }
 

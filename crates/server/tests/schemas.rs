@@ -56,6 +56,11 @@ async fn server_messages_match_the_published_schemas() {
                     "mode": if point.is_some() { "look_at" } else { "follow" },
                     "in_reach": point.map(|_| true),
                 }))),
+                ControlCommand::TuneColours { apply, .. } => r.reply(if apply {
+                    Err(ControlFailure::new("no proposal to apply"))
+                } else {
+                    Ok(json!({"sampling_s": 2.0}))
+                }),
             }
         }
     });
@@ -167,6 +172,8 @@ async fn server_messages_match_the_published_schemas() {
         client_msgs.push(m);
     }
     client_msgs.push(json!({"type": "preview", "enable": false}));
+    client_msgs.push(json!({"type": "tune_colours", "id": "t", "action": "run", "seconds": 2}));
+    client_msgs.push(json!({"type": "tune_colours", "action": "apply"}));
     server.hub.set_health(mouthpiece_server::Health {
         fps: 30.0,
         dots_found: 0.99,
@@ -198,9 +205,51 @@ async fn server_messages_match_the_published_schemas() {
         seconds: 4.0,
         error: None,
     });
+    server.hub.set_audio(Some(mouthpiece_server::AudioStatus {
+        state: mouthpiece_server::AudioState::Live,
+        device: "default".into(),
+        sample_rate: 48000,
+        channels: 1,
+        level_dbfs: -23.5,
+        // Silence: serialised as null.
+        peak_dbfs: f64::NEG_INFINITY,
+        clip: false,
+        overruns: 0,
+        dropped_blocks: 0,
+    }));
+    let class = |per_frame: f64| mouthpiece_server::TuneClass {
+        name: "lip".into(),
+        role: "lip".into(),
+        hue: vec![[0, 8], [172, 179]],
+        saturation: [100, 255],
+        value: [40, 255],
+        per_frame,
+    };
+    server.hub.set_tune(Some(mouthpiece_server::TuneReport {
+        state: "done".into(),
+        message: "not offered".into(),
+        frames: 30,
+        in_use: Some(mouthpiece_server::TuneFound {
+            share: 1.0,
+            per_frame: 15.0,
+            dots: 15,
+            classes: vec![class(12.0)],
+        }),
+        proposed: Some(mouthpiece_server::TuneFound {
+            share: 0.73,
+            per_frame: 11.0,
+            dots: 15,
+            classes: vec![class(8.0)],
+        }),
+        offered: false,
+        toml: Some("[[detect.class]]\n".into()),
+    }));
     loop {
         let v = next_of_type(&mut console, "status").await;
-        let done = v.get("takes").is_some() && v.get("calibration").is_some();
+        let done = v.get("takes").is_some()
+            && v.get("calibration").is_some()
+            && v.get("audio").is_some()
+            && v.get("tune").is_some();
         log.push(v);
         if done {
             break;

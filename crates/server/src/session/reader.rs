@@ -166,6 +166,22 @@ pub(super) async fn read_loop(
                     ControlCommand::LookAt { character, point },
                 ),
             },
+            ClientMessage::TuneColours {
+                id,
+                action,
+                seconds,
+            } => control(
+                &shared,
+                &out,
+                access,
+                peer,
+                id,
+                "tune_colours",
+                ControlCommand::TuneColours {
+                    apply: action == protocol::TuneAction::Apply,
+                    seconds: seconds.map(Duration::from_secs_f64),
+                },
+            ),
             ClientMessage::Record {
                 id,
                 action,
