@@ -127,6 +127,10 @@ async fn serve<F: Factory>(
         timecode_rate: rate,
         ..HubConfig::default()
     });
+    // The console's player reads the takes folder (`/take`).
+    hub.set_take_archive(Some(Arc::new(crate::take_player::TakeFolder::new(
+        config.takes.folder.clone(),
+    ))));
 
     let spec = config.source.spec.as_str().to_owned();
     // The first `hello` already names the characters.
@@ -177,6 +181,7 @@ async fn serve<F: Factory>(
             epoch,
             stop: stop.clone(),
             osc: osc.clone(),
+            tuner: crate::tune::Tuner::new(hub.clone(), options.config_path.clone()),
         },
     )
     .map_err(DaemonError::Runtime)?;

@@ -15,7 +15,9 @@
 //! - [`notify`]: systemd's notify protocol (READY, STATUS, WATCHDOG, STOPPING);
 //! - [`osc`]: the rig, head and eyes as VMC protocol messages over UDP, from its own sender
 //!   thread behind a bounded queue;
-//! - [`logging`]: journald-friendly `tracing` set-up.
+//! - [`logging`]: journald-friendly `tracing` set-up;
+//! - [`take_player`]: the takes folder read chunk by chunk for the console's player;
+//! - [`tune`]: the console's paint check (propose colour ranges, count what they find, apply).
 //!
 //! Threads: the source thread, the processing thread, one take-writer thread while a take
 //! records, the OSC sender thread once `[osc]` has a target, and the async server's runtime. Only bounded queues connect them.
@@ -39,6 +41,8 @@ pub mod rig;
 pub mod settings;
 pub mod slot;
 pub mod source;
+pub mod take_player;
+pub mod tune;
 
 pub use daemon::{run, DaemonError, RunOptions};
 /// Takes (one MCAP file per take from its own writer thread) live in their own crate.

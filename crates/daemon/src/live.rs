@@ -346,6 +346,15 @@ impl Processor for LiveProcessor {
         self.calibration_report.take()
     }
 
+    fn detect_in_use(&self) -> Option<crate::tune::InUse> {
+        let layout = self.config.track.layout();
+        Some(crate::tune::InUse {
+            detect: self.config.detect.clone(),
+            lip_dots: layout.lip_dots,
+            forehead_dots: layout.forehead_dots,
+        })
+    }
+
     fn reload(&mut self, setup: Setup) -> Result<(), String> {
         if setup.config.detect != self.config.detect || setup.config.track != self.config.track {
             // New colour ranges or tracking settings: a new pipeline, which calibrates afresh.

@@ -86,6 +86,12 @@ pub trait Processor: Send {
         mouthpiece_server::Overlay::default()
     }
 
+    /// The colour ranges the detector runs with and the dot counts, for the paint check
+    /// (`None`: this processor has none).
+    fn detect_in_use(&self) -> Option<crate::tune::InUse> {
+        None
+    }
+
     /// Turns `character`'s head to `point` (its model frame), or back to following the
     /// performer (`None`): the `look_at` request. `Ok` carries the answer's `detail`.
     fn look_at(
@@ -132,6 +138,8 @@ pub struct Context<R> {
     pub stop: Arc<AtomicBool>,
     /// The OSC output (`[osc]`): offered every published frame, never blocks.
     pub osc: crate::osc::OscOutput,
+    /// The console's paint check: offered every frame while it samples, never blocks.
+    pub tuner: crate::tune::Tuner,
 }
 
 /// Starts the processing thread.
@@ -221,6 +229,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                 let wall_us = mouthpiece_takes::unix_us(wall);
                 out.flags.neutral_taken = false;
                 processor.process(&frame, &mut out);
+                ctx.tuner.offer(&frame);
                 if processor.take_info_changed() {
                     ctx.hub
                         .set_info(processor.stream_info(frame_rate, &ctx.spec));
@@ -405,6 +414,14 @@ fn handle_control<P: Processor>(
             start_take(ctx, &slate, take, Box::new(reply));
         }
         ControlCommand::RecordStop => stop_take(ctx, Box::new(reply)),
+        ControlCommand::TuneColours { apply: true, .. } => reply(ctx.tuner.apply()),
+        ControlCommand::TuneColours {
+            apply: false,
+            seconds,
+        } => reply(match processor.detect_in_use() {
+            Some(in_use) => ctx.tuner.run(in_use, seconds),
+            None => Err("this processor has no colour ranges to check".into()),
+        }),
     }
 }
 

@@ -1,0 +1,368 @@
+//! The takes folder as the console's player reads it ([`TakeFolder`], served at `/take`):
+//! one chunk of a take at a time, its colour images as stored (JPEG), the tracked dots
+//! projected into the image, and the sound of its `/audio` channel (`foxglove.RawAudio`,
+//! `pcm-s16`) placed on the same clock.
+//!
+//! Only plain take file names are opened (what the daemon names takes: ASCII letters, digits,
+//! `-`, `_`, `.`, ending in `.mcap`), and only when the file, symlinks resolved, lies directly
+//! in the takes folder. A chunk holds at most [`MAX_CHUNK_BYTES`] of images and
+//! [`MAX_AUDIO_BYTES`] of sound; a chunk that reaches the first cap ends early (its `next_s`
+//! says where the next one starts). Sound is written as it arrives, after the pictures of its
+//! time, so a chunk reads [`LATE_AUDIO_S`] past its end for it. Each read goes through the
+//! file from its start (chunks are decompressed and checked, not kept): a chunk late in a long
+//! take costs a read of everything before it.
+
+use std::path::{Path, PathBuf};
+
+use mouthpiece_frame::{Calibration, Intrinsics};
+use mouthpiece_recording::cdr::{CameraCalibration, CompressedImage, COMPRESSED_IMAGE_SCHEMA_NAME};
+use mouthpiece_recording::{MessageReader, RawMessage};
+use mouthpiece_server::{
+    ChunkAudio, ChunkFrame, DotState, ImageDot, TakeArchive, TakeChunk, TakeChunkError,
+};
+
+/// Most image bytes in one chunk.
+pub const MAX_CHUNK_BYTES: usize = 24 << 20;
+/// Most sound bytes in one chunk (10 s of 8 channels at 96 kHz).
+pub const MAX_AUDIO_BYTES: usize = 16 << 20;
+/// The sound channel of a take.
+pub const TOPIC_AUDIO: &str = "/audio";
+/// How far past a chunk's end its messages are read for sound written late, seconds.
+pub const LATE_AUDIO_S: f64 = 1.0;
+/// The tracked dots of a take (camera frame, metres).
+pub const TOPIC_POINTS: &str = "/performer/points";
+
+/// The daemon's takes folder, read for the console's player.
+#[derive(Debug, Clone)]
+pub struct TakeFolder {
+    folder: PathBuf,
+}
+
+impl TakeFolder {
+    pub fn new(folder: impl Into<PathBuf>) -> Self {
+        Self {
+            folder: folder.into(),
+        }
+    }
+
+    /// The file of take `name`: a take file name, directly in the folder.
+    pub fn path_of(&self, name: &str) -> Result<PathBuf, TakeChunkError> {
+        let plain = name.len() <= 255
+            && name.ends_with(".mcap")
+            && name.chars().next().is_some_and(|c| c.is_ascii_alphanumeric())
+            && name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
+        if !plain {
+            return Err(TakeChunkError::BadName(format!(
+                "{:?} is not a take's file name (letters, digits, '-', '_', '.', ending in .mcap; no folders)",
+                name.chars().take(80).collect::<String>()
+            )));
+        }
+        let folder = std::fs::canonicalize(&self.folder)
+            .map_err(|_| TakeChunkError::NotFound("there is no takes folder yet".into()))?;
+        let real = std::fs::canonicalize(folder.join(name))
+            .map_err(|_| TakeChunkError::NotFound(format!("no take {name} in the takes folder")))?;
+        if real.parent() != Some(folder.as_path()) || !real.is_file() {
+            return Err(TakeChunkError::BadName(format!(
+                "{name} is not a take in the takes folder"
+            )));
+        }
+        Ok(real)
+    }
+}
+
+impl TakeArchive for TakeFolder {
+    fn chunk(&self, file: &str, from_s: f64, seconds: f64) -> Result<TakeChunk, TakeChunkError> {
+        let path = self.path_of(file)?;
+        read_chunk(&path, from_s, seconds, MAX_CHUNK_BYTES)
+    }
+}
+
+/// A `foxglove.RawAudio` message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawAudio {
+    pub data: Vec<u8>,
+    pub format: String,
+    pub sample_rate: u32,
+    pub channels: u32,
+}
+
+/// Decodes `foxglove.RawAudio` in CDR (`foxglove_msgs/msg/RawAudio`: timestamp, `uint8[]
+/// data`, `string format`, `uint32 sample_rate`, `uint32 number_of_channels`) or JSON (`data`
+/// in base64).
+pub fn decode_raw_audio(encoding: &str, data: &[u8]) -> Result<RawAudio, String> {
+    match encoding {
+        "cdr" => decode_raw_audio_cdr(data),
+        "json" => {
+            use base64::Engine as _;
+            #[derive(serde::Deserialize)]
+            struct Json {
+                data: String,
+                format: String,
+                sample_rate: u32,
+                number_of_channels: u32,
+            }
+            let j: Json = serde_json::from_slice(data).map_err(|e| format!("bad JSON: {e}"))?;
+            Ok(RawAudio {
+                data: base64::engine::general_purpose::STANDARD
+                    .decode(j.data.as_bytes())
+                    .map_err(|e| format!("bad base64 data: {e}"))?,
+                format: j.format,
+                sample_rate: j.sample_rate,
+                channels: j.number_of_channels,
+            })
+        }
+        other => Err(format!("message encoding {other:?} is not read here (cdr, json)")),
+    }
+}
+
+fn decode_raw_audio_cdr(data: &[u8]) -> Result<RawAudio, String> {
+    // 4-byte encapsulation header, then fields aligned relative to its end.
+    if data.len() < 4 || data[1] != 1 {
+        return Err("not little-endian CDR".into());
+    }
+    let body = &data[4..];
+    let mut at = 0usize;
+    let u32_at = |at: &mut usize| -> Result<u32, String> {
+        *at = at.div_ceil(4) * 4;
+        let b = body
+            .get(*at..*at + 4)
+            .ok_or_else(|| format!("message ends at byte {}", *at + 4))?;
+        *at += 4;
+        Ok(u32::from_le_bytes(b.try_into().expect("4 bytes")))
+    };
+    let _sec = u32_at(&mut at)?;
+    let _nanosec = u32_at(&mut at)?;
+    let len = u32_at(&mut at)? as usize;
+    let pcm = body
+        .get(at..at.saturating_add(len))
+        .ok_or_else(|| format!("data of {len} bytes runs past the message"))?
+        .to_vec();
+    at += len;
+    let slen = u32_at(&mut at)? as usize;
+    let text = body
+        .get(at..at.saturating_add(slen))
+        .ok_or("format runs past the message")?;
+    let format = String::from_utf8_lossy(text.strip_suffix(&[0]).unwrap_or(text)).into_owned();
+    at += slen;
+    let sample_rate = u32_at(&mut at)?;
+    let channels = u32_at(&mut at)?;
+    Ok(RawAudio {
+        data: pcm,
+        format,
+        sample_rate,
+        channels,
+    })
+}
+
+/// Sound gathered for a chunk: blocks placed at their times, silence between.
+struct AudioGather {
+    sample_rate: u32,
+    channels: u16,
+    start_s: f64,
+    pcm: Vec<u8>,
+}
+
+fn read_chunk(
+    path: &Path,
+    from_s: f64,
+    seconds: f64,
+    max_bytes: usize,
+) -> Result<TakeChunk, TakeChunkError> {
+    let unreadable = |e: &dyn std::fmt::Display| {
+        TakeChunkError::Unreadable(format!(
+            "{}: {e}",
+            path.file_name().unwrap_or_default().to_string_lossy()
+        ))
+    };
+    let mut reader = MessageReader::open(path).map_err(|e| unreadable(&e))?;
+    let to_s = from_s + seconds;
+    let mut chunk = TakeChunk::default();
+    let mut calibration: Option<Intrinsics> = None;
+    let mut first_ns: Option<u64> = None;
+    let mut last_frame_ns: Option<u64> = None;
+    let mut image_bytes = 0usize;
+    let mut audio: Option<AudioGather> = None;
+    let mut raw_colour_noted = false;
+    let mut ended_early = false;
+    // Where the chunk ends (earlier when the images reach their cap), and whether a picture
+    // past it was seen (else the take ends in this chunk).
+    let mut end_s = to_s;
+    let mut past_end = false;
+    loop {
+        let Some(msg) = reader.next_message().map_err(|e| unreadable(&e))? else {
+            chunk.end = !past_end;
+            break;
+        };
+        if calibration.is_none() {
+            calibration = calibration_from_metadata(&reader);
+        }
+        let t = |first: u64| msg.log_time.saturating_sub(first) as f64 / 1e9;
+        // Sound is written as it arrives, after the pictures of its time: read on a little.
+        if first_ns.is_some_and(|first| t(first) >= end_s + LATE_AUDIO_S) {
+            break;
+        }
+        match &*msg.topic {
+            mouthpiece_recording::TOPIC_CALIBRATION if calibration.is_none() => {
+                if let Ok(c) = CameraCalibration::decode(&msg.data) {
+                    calibration = Some(intrinsics_from(&c));
+                }
+            }
+            mouthpiece_recording::TOPIC_COLOR => {
+                let first = *first_ns.get_or_insert(msg.log_time);
+                let t = t(first);
+                if t < from_s {
+                    continue;
+                }
+                if t >= end_s {
+                    past_end = true;
+                    continue;
+                }
+                if &*msg.schema_name != COMPRESSED_IMAGE_SCHEMA_NAME {
+                    if !raw_colour_noted {
+                        chunk.notes.push(
+                            "this take stores its colour losslessly: the player shows no image".into(),
+                        );
+                        raw_colour_noted = true;
+                    }
+                    last_frame_ns = None;
+                    continue;
+                }
+                let image = CompressedImage::decode(&msg.data).map_err(|e| unreadable(&e))?;
+                if image_bytes + image.data.len() > max_bytes && !chunk.frames.is_empty() {
+                    chunk.next_s = t;
+                    end_s = t;
+                    ended_early = true;
+                    past_end = true;
+                    continue;
+                }
+                image_bytes += image.data.len();
+                chunk.frames.push(ChunkFrame {
+                    t,
+                    jpeg: image.data,
+                    dots: Vec::new(),
+                });
+                last_frame_ns = Some(msg.log_time);
+            }
+            TOPIC_POINTS if last_frame_ns == Some(msg.log_time) => {
+                if let (Some(k), Some(frame)) = (&calibration, chunk.frames.last_mut()) {
+                    frame.dots = dots_in_image(&msg, k);
+                }
+            }
+            TOPIC_AUDIO => {
+                let Some(first) = first_ns else { continue };
+                let t = t(first);
+                if t < from_s || t >= end_s {
+                    continue;
+                }
+                add_audio(&mut audio, &mut chunk.notes, &msg, t);
+            }
+            _ => {}
+        }
+    }
+    if let Some(k) = &calibration {
+        chunk.width = k.width;
+        chunk.height = k.height;
+    }
+    if !ended_early {
+        chunk.next_s = to_s;
+    }
+    chunk.audio = audio.map(|a| ChunkAudio {
+        sample_rate: a.sample_rate,
+        channels: a.channels,
+        start_s: a.start_s,
+        pcm_s16le: a.pcm,
+    });
+    Ok(chunk)
+}
+
+fn add_audio(gather: &mut Option<AudioGather>, notes: &mut Vec<String>, msg: &RawMessage, t: f64) {
+    let mut note = |text: String| {
+        if !notes.contains(&text) {
+            notes.push(text);
+        }
+    };
+    let block = match decode_raw_audio(&msg.message_encoding, &msg.data) {
+        Ok(b) => b,
+        Err(e) => return note(format!("sound not played: {e}")),
+    };
+    if block.format != "pcm-s16" {
+        return note(format!(
+            "sound not played: format {:?} (pcm-s16 is played)",
+            block.format.chars().take(40).collect::<String>()
+        ));
+    }
+    if !(8000..=192_000).contains(&block.sample_rate) || !(1..=8).contains(&block.channels) {
+        return note(format!(
+            "sound not played: {} Hz, {} channels (8–192 kHz, 1–8 channels are played)",
+            block.sample_rate, block.channels
+        ));
+    }
+    let a = gather.get_or_insert_with(|| AudioGather {
+        sample_rate: block.sample_rate,
+        channels: block.channels as u16,
+        start_s: t,
+        pcm: Vec::new(),
+    });
+    if a.sample_rate != block.sample_rate || u32::from(a.channels) != block.channels {
+        return note("sound not played past a change of format".into());
+    }
+    let frame_bytes = 2 * usize::from(a.channels);
+    // The block's place after the chunk's first sample; a gap is filled with silence.
+    let at = ((t - a.start_s) * f64::from(a.sample_rate)).round().max(0.0) as usize * frame_bytes;
+    let whole = block.data.len() / frame_bytes * frame_bytes;
+    let end = at.max(a.pcm.len()) + whole;
+    if end > MAX_AUDIO_BYTES {
+        return note("sound cut: too much in one chunk".into());
+    }
+    if at > a.pcm.len() {
+        a.pcm.resize(at, 0);
+    }
+    a.pcm.extend_from_slice(&block.data[..whole]);
+}
+
+fn calibration_from_metadata(reader: &MessageReader) -> Option<Intrinsics> {
+    reader
+        .metadata()
+        .iter()
+        .find(|(name, _)| name == mouthpiece_recording::METADATA_CALIBRATION)
+        .and_then(|(_, map)| map.get("calibration"))
+        .and_then(|json| serde_json::from_str::<Calibration>(json).ok())
+        .map(|c| c.color)
+}
+
+fn intrinsics_from(c: &CameraCalibration) -> Intrinsics {
+    let mut k = Intrinsics::ideal(c.width, c.height, c.k[0], c.k[4], c.k[2], c.k[5]);
+    for (d, s) in k.distortion.iter_mut().zip(&c.d) {
+        *d = *s;
+    }
+    k
+}
+
+/// The seen dots of a `/performer/points` message in image pixels.
+fn dots_in_image(msg: &RawMessage, k: &Intrinsics) -> Vec<ImageDot> {
+    #[derive(serde::Deserialize)]
+    struct Points {
+        points: serde_json::Map<String, serde_json::Value>,
+    }
+    let Ok(p) = serde_json::from_slice::<Points>(&msg.data) else {
+        return Vec::new();
+    };
+    p.points
+        .iter()
+        .filter_map(|(name, v)| {
+            let xyz: [f64; 3] = serde_json::from_value(v.clone()).ok()?;
+            let [x, y] = k.project(xyz)?;
+            Some(ImageDot {
+                name: name.clone(),
+                x: x as f32,
+                y: y as f32,
+                state: DotState::Tracked,
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests;
