@@ -49,7 +49,10 @@ impl TakeFolder {
     pub fn path_of(&self, name: &str) -> Result<PathBuf, TakeChunkError> {
         let plain = name.len() <= 255
             && name.ends_with(".mcap")
-            && name.chars().next().is_some_and(|c| c.is_ascii_alphanumeric())
+            && name
+                .chars()
+                .next()
+                .is_some_and(|c| c.is_ascii_alphanumeric())
             && name
                 .chars()
                 .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'));
@@ -113,7 +116,9 @@ pub fn decode_raw_audio(encoding: &str, data: &[u8]) -> Result<RawAudio, String>
                 channels: j.number_of_channels,
             })
         }
-        other => Err(format!("message encoding {other:?} is not read here (cdr, json)")),
+        other => Err(format!(
+            "message encoding {other:?} is not read here (cdr, json)"
+        )),
     }
 }
 
@@ -222,7 +227,8 @@ fn read_chunk(
                 if &*msg.schema_name != COMPRESSED_IMAGE_SCHEMA_NAME {
                     if !raw_colour_noted {
                         chunk.notes.push(
-                            "this take stores its colour losslessly: the player shows no image".into(),
+                            "this take stores its colour losslessly: the player shows no image"
+                                .into(),
                         );
                         raw_colour_noted = true;
                     }
@@ -310,7 +316,10 @@ fn add_audio(gather: &mut Option<AudioGather>, notes: &mut Vec<String>, msg: &Ra
     }
     let frame_bytes = 2 * usize::from(a.channels);
     // The block's place after the chunk's first sample; a gap is filled with silence.
-    let at = ((t - a.start_s) * f64::from(a.sample_rate)).round().max(0.0) as usize * frame_bytes;
+    let at = ((t - a.start_s) * f64::from(a.sample_rate))
+        .round()
+        .max(0.0) as usize
+        * frame_bytes;
     let whole = block.data.len() / frame_bytes * frame_bytes;
     let end = at.max(a.pcm.len()) + whole;
     if end > MAX_AUDIO_BYTES {

@@ -91,7 +91,11 @@ impl Tuner {
     }
 
     /// Starts a check over `seconds` of frames against the ranges `in_use`.
-    pub fn run(&self, in_use: InUse, seconds: Option<Duration>) -> Result<serde_json::Value, String> {
+    pub fn run(
+        &self,
+        in_use: InUse,
+        seconds: Option<Duration>,
+    ) -> Result<serde_json::Value, String> {
         let seconds = seconds.map_or(DEFAULT_SECONDS, |d| d.as_secs_f64());
         let mut feed = self.shared.feed.lock().unwrap_or_else(|e| e.into_inner());
         if feed.is_some() || self.shared.sampling.load(Ordering::Relaxed) {
@@ -105,7 +109,11 @@ impl Tuner {
             .map_err(|e| format!("cannot start the paint check: {e}"))?;
         *feed = Some((tx, Instant::now() + Duration::from_secs_f64(seconds)));
         self.shared.sampling.store(true, Ordering::Relaxed);
-        *self.shared.offered.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        *self
+            .shared
+            .offered
+            .lock()
+            .unwrap_or_else(|e| e.into_inner()) = None;
         self.hub.set_tune(Some(TuneReport {
             state: "sampling".into(),
             message: format!("sampling {seconds:.1} s of frames: hold still, mouth closed"),
@@ -118,9 +126,18 @@ impl Tuner {
         let report = match sample_and_check(&in_use, frames) {
             Ok(checked) => {
                 let report = report_of(&checked, &in_use);
-                *self.shared.offered.lock().unwrap_or_else(|e| e.into_inner()) = checked
-                    .offered()
-                    .then(|| checked.proposal.classes.iter().map(|c| c.class.clone()).collect());
+                *self
+                    .shared
+                    .offered
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner()) = checked.offered().then(|| {
+                    checked
+                        .proposal
+                        .classes
+                        .iter()
+                        .map(|c| c.class.clone())
+                        .collect()
+                });
                 report
             }
             Err(message) => TuneReport {
@@ -164,7 +181,11 @@ impl Tuner {
                 t.message = format!("written to {} and reloaded", path.display());
             }
         });
-        *self.shared.offered.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        *self
+            .shared
+            .offered
+            .lock()
+            .unwrap_or_else(|e| e.into_inner()) = None;
         Ok(serde_json::json!({ "written": path.display().to_string() }))
     }
 }
@@ -285,7 +306,10 @@ pub fn write_classes(path: &Path, classes: &[ColorClass]) -> Result<(), String> 
         });
         let mut hue = toml_edit::Array::new();
         for [lo, hi] in &c.hue {
-            hue.push(toml_edit::Array::from_iter([i64::from(*lo), i64::from(*hi)]));
+            hue.push(toml_edit::Array::from_iter([
+                i64::from(*lo),
+                i64::from(*hi),
+            ]));
         }
         t["hue"] = toml_edit::value(hue);
         let pair = |p: [u8; 2]| toml_edit::Array::from_iter([i64::from(p[0]), i64::from(p[1])]);
@@ -340,11 +364,15 @@ mod tests {
         }];
         write_classes(&path, &classes).unwrap();
         let written = std::fs::read_to_string(&path).unwrap();
-        assert!(written.contains("# booth A") && written.contains("# the rehearsal"), "{written}");
+        assert!(
+            written.contains("# booth A") && written.contains("# the rehearsal"),
+            "{written}"
+        );
         assert!(written.contains("min_area_px = 3"), "{written}");
         assert!(!written.contains("\"old\""), "{written}");
         let config = mouthpiece_config::Config::parse(&written, &path).unwrap();
-        let pipeline = mouthpiece_pipeline::PipelineConfig::from_text(config.text().unwrap()).unwrap();
+        let pipeline =
+            mouthpiece_pipeline::PipelineConfig::from_text(config.text().unwrap()).unwrap();
         assert_eq!(pipeline.detect.classes, classes);
         // Ranges the detector refuses are not written.
         let bad = vec![ColorClass {
@@ -354,6 +382,10 @@ mod tests {
         let err = write_classes(&path, &bad).unwrap_err();
         assert!(err.contains("nothing written"), "{err}");
         assert_eq!(std::fs::read_to_string(&path).unwrap(), written);
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "no file left behind");
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            1,
+            "no file left behind"
+        );
     }
 }

@@ -77,7 +77,11 @@ fn write_take(session: &Path, take: &Path) {
             .unwrap();
         while blocks * 20_000_000 <= log_time - first {
             writer
-                .write_json("/audio", first + blocks * 20_000_000, &audio_block(blocks * 960))
+                .write_json(
+                    "/audio",
+                    first + blocks * 20_000_000,
+                    &audio_block(blocks * 960),
+                )
                 .unwrap();
             blocks += 1;
         }
@@ -99,7 +103,10 @@ fn get(port: u16, target: &str) -> (u16, String) {
     s.read_to_end(&mut raw).unwrap();
     let text = String::from_utf8_lossy(&raw).into_owned();
     let code = text[9..12].parse().unwrap();
-    let body = text.split_once("\r\n\r\n").map(|(_, b)| b.to_owned()).unwrap_or_default();
+    let body = text
+        .split_once("\r\n\r\n")
+        .map(|(_, b)| b.to_owned())
+        .unwrap_or_default();
     (code, body)
 }
 
@@ -166,7 +173,10 @@ fn a_take_plays_in_the_page_with_its_dots_and_its_sound() {
     assert_eq!(code, 200);
     for (target, want) in [
         (format!("/take?file={TAKE}"), 401),
-        (format!("/take?file={TAKE}&token=wrong-token-0123456789"), 401),
+        (
+            format!("/take?file={TAKE}&token=wrong-token-0123456789"),
+            401,
+        ),
         (format!("/take?file=..%2Fsecret.mcap&token={READ}"), 400),
         (format!("/take?file=../mouthpiece.toml&token={READ}"), 400),
         (format!("/take?file=%2Fetc%2Fpasswd&token={READ}"), 400),
@@ -198,7 +208,10 @@ fn a_take_plays_in_the_page_with_its_dots_and_its_sound() {
         if v["ended"] == true || !v["failed"].is_null() {
             break v;
         }
-        assert!(Instant::now() < deadline, "the take did not play to its end: {v}");
+        assert!(
+            Instant::now() < deadline,
+            "the take did not play to its end: {v}"
+        );
         std::thread::sleep(Duration::from_millis(200));
     };
     assert!(done["failed"].is_null(), "{done}");
@@ -211,22 +224,41 @@ fn a_take_plays_in_the_page_with_its_dots_and_its_sound() {
         "three seen dots per picture (the unseen one left out): {done}"
     );
     for p in done["pixels"].as_array().unwrap() {
-        let rgb: Vec<i64> = p["rgb"].as_array().unwrap().iter().map(|c| c.as_i64().unwrap()).collect();
-        let off: i64 = rgb.iter().zip([0x3d, 0xdc, 0x84]).map(|(a, b)| (a - b).abs()).sum();
-        assert!(off <= 24, "dot {} not drawn where it was tracked: {rgb:?}; {done}", p["name"]);
+        let rgb: Vec<i64> = p["rgb"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_i64().unwrap())
+            .collect();
+        let off: i64 = rgb
+            .iter()
+            .zip([0x3d, 0xdc, 0x84])
+            .map(|(a, b)| (a - b).abs())
+            .sum();
+        assert!(
+            off <= 24,
+            "dot {} not drawn where it was tracked: {rgb:?}; {done}",
+            p["name"]
+        );
     }
     // The sound: all of it, from the first picture on, as written.
     let audio = done["audio"].as_array().unwrap();
     assert!(!audio.is_empty(), "no sound: {done}");
     assert!(audio[0]["start_s"].as_f64().unwrap().abs() < 1e-6, "{done}");
     let samples: u64 = audio.iter().map(|a| a["samples"].as_u64().unwrap()).sum();
-    assert!(samples >= u64::from(RATE) * 19 / 10, "{samples} samples: {done}");
+    assert!(
+        samples >= u64::from(RATE) * 19 / 10,
+        "{samples} samples: {done}"
+    );
     for a in audio {
         assert_eq!(a["sample_rate"], RATE, "{a}");
         assert_eq!(a["channels"], 1, "{a}");
         assert_eq!(a["scheduled"], true, "{a}");
         // Mean |sample| of a sine of amplitude 8000: 8000 · 2/π ≈ 5093.
         let mean = a["sum"].as_f64().unwrap() / a["samples"].as_f64().unwrap();
-        assert!((mean - 5093.0).abs() < 150.0, "not the tone that was written: {mean}; {a}");
+        assert!(
+            (mean - 5093.0).abs() < 150.0,
+            "not the tone that was written: {mean}; {a}"
+        );
     }
 }

@@ -84,7 +84,10 @@ fn daemon(dir: &Path, name: &str, session: &Path) -> (Daemon, String) {
         assert!(Instant::now() < deadline, "the daemon did not listen");
         std::thread::sleep(Duration::from_millis(50));
     }
-    (Daemon(child), format!("http://127.0.0.1:{port}/?token={CONTROL}"))
+    (
+        Daemon(child),
+        format!("http://127.0.0.1:{port}/?token={CONTROL}"),
+    )
 }
 
 const TUNE: &str = "const m = window.mouthpiece; if (!m) return null; \
@@ -125,15 +128,21 @@ fn the_paint_check_shows_both_counts_refuses_a_worse_proposal_and_applies_a_bett
         v["access"] == "control" && v["hidden"] == false
     });
     driver.script("document.getElementById('tune-run').click(); return null;");
-    let v = wait(&driver, "the check's result", |v| v["report"]["state"] == "done");
+    let v = wait(&driver, "the check's result", |v| {
+        v["report"]["state"] == "done"
+    });
     let report = &v["report"];
     assert_eq!(report["offered"], false, "{v}");
     assert_eq!(report["in_use"]["per_frame"], 15.0, "{v}");
-    assert!(report["proposed"]["per_frame"].as_f64().unwrap() < 15.0, "{v}");
+    assert!(
+        report["proposed"]["per_frame"].as_f64().unwrap() < 15.0,
+        "{v}"
+    );
     assert!(v["refused"] == true && v["apply"] == false, "{v}");
     let totals = v["totals"].as_str().unwrap();
     assert!(
-        totals.contains("in use: 15.0 of 15 dots per frame (100 %)") && totals.contains("proposed:"),
+        totals.contains("in use: 15.0 of 15 dots per frame (100 %)")
+            && totals.contains("proposed:"),
         "{v}"
     );
     // Every range of both, with what it finds.
@@ -145,7 +154,9 @@ fn the_paint_check_shows_both_counts_refuses_a_worse_proposal_and_applies_a_bett
         "window.mouthpiece.request({type: 'tune_colours', action: 'apply'}, 'tune'); return null;",
     );
     wait(&driver, "apply refused", |v| {
-        v["said"].as_str().is_some_and(|s| s.contains("no proposal to apply"))
+        v["said"]
+            .as_str()
+            .is_some_and(|s| s.contains("no proposal to apply"))
     });
     assert_eq!(std::fs::read_to_string(&config).unwrap(), before);
     drop(driver);
@@ -158,7 +169,9 @@ fn the_paint_check_shows_both_counts_refuses_a_worse_proposal_and_applies_a_bett
     let driver = webdriver::open_page(&page, profile.path());
     wait(&driver, "control access", |v| v["access"] == "control");
     driver.script("document.getElementById('tune-run').click(); return null;");
-    let v = wait(&driver, "the check's result", |v| v["report"]["state"] == "done");
+    let v = wait(&driver, "the check's result", |v| {
+        v["report"]["state"] == "done"
+    });
     assert_eq!(v["report"]["offered"], true, "{v}");
     assert!(v["apply"] == true, "{v}");
     let in_use = v["report"]["in_use"]["per_frame"].as_f64().unwrap();

@@ -87,7 +87,10 @@ pub mod timecode;
 mod tls;
 
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
-pub use console::{AudioState, AudioStatus, CalibrationReport, TuneClass, TuneFound, TuneReport, FramePose, Health, TakeSummary};
+pub use console::{
+    AudioState, AudioStatus, CalibrationReport, FramePose, Health, TakeSummary, TuneClass,
+    TuneFound, TuneReport,
+};
 pub use error::ServerError;
 pub use foxglove::{
     check_client_message as check_foxglove_client_message, FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL,

@@ -565,9 +565,9 @@ fn validate(message: &ClientMessage) -> Result<(), String> {
         ClientMessage::LookAt { point: Some(p), .. } => crate::head::check_point(p),
         ClientMessage::TuneColours {
             seconds: Some(s), ..
-        } if !(s.is_finite() && *s > 0.0 && *s <= 10.0) => Err(format!(
-            "tune_colours: seconds must be in (0, 10], got {s}"
-        )),
+        } if !(s.is_finite() && *s > 0.0 && *s <= 10.0) => {
+            Err(format!("tune_colours: seconds must be in (0, 10], got {s}"))
+        }
         _ => Ok(()),
     }
 }

@@ -301,7 +301,10 @@ mod tests {
     #[test]
     fn requests_are_checked_at_the_door() {
         let r = parse_request(&request("file=a_T001.mcap&from=2.5&seconds=3")).unwrap();
-        assert_eq!((r.file.as_str(), r.from_s, r.seconds), ("a_T001.mcap", 2.5, 3.0));
+        assert_eq!(
+            (r.file.as_str(), r.from_s, r.seconds),
+            ("a_T001.mcap", 2.5, 3.0)
+        );
         for (query, says) in [
             ("from=1", "missing ?file="),
             ("file=a.mcap&from=NaN", "from: expected 0–86400"),
@@ -351,7 +354,10 @@ mod tests {
         let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + len]).unwrap();
         let data = &bytes[8 + len..];
         let slice = |v: &serde_json::Value| {
-            let (o, l) = (v[0].as_u64().unwrap() as usize, v[1].as_u64().unwrap() as usize);
+            let (o, l) = (
+                v[0].as_u64().unwrap() as usize,
+                v[1].as_u64().unwrap() as usize,
+            );
             data[o..o + l].to_vec()
         };
         assert_eq!(slice(&header["frames"][1]["image"]), vec![4, 5]);

@@ -49,7 +49,11 @@ fn dots() -> Vec<ImageDot> {
         let x = cx + half_w - (i as f32 + 1.0) * 2.0 * half_w / 6.0;
         lip(format!("D{}", i + 8), x, cy + 6.0);
     }
-    for (name, x, y) in [("F1", 290.0, 200.0), ("F2", 320.0, 170.0), ("F3", 350.0, 200.0)] {
+    for (name, x, y) in [
+        ("F1", 290.0, 200.0),
+        ("F2", 320.0, 170.0),
+        ("F3", 350.0, 200.0),
+    ] {
         lip(name.into(), x, y);
     }
     dots
@@ -197,7 +201,12 @@ fn drive(page: &str, hub: &Hub) {
     let a = wait_until(&driver, "no microphone", AUDIO, |v| v["state"] == "off");
     assert!(a["text"].as_str().unwrap().contains("no microphone"), "{a}");
     assert_eq!(a["peak_shown"], false, "{a}");
-    hub.set_audio(audio(AudioState::NoDevice, f64::NEG_INFINITY, f64::NEG_INFINITY, false));
+    hub.set_audio(audio(
+        AudioState::NoDevice,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+        false,
+    ));
     let a = wait_until(&driver, "no device", AUDIO, |v| v["state"] == "no_device");
     let text = a["text"].as_str().unwrap();
     assert!(
@@ -226,7 +235,9 @@ fn drive(page: &str, hub: &Hub) {
     assert_eq!(a["clip"], true, "{a}");
     // A peak at −1 dBFS is a clip even when the device does not say so.
     driver.script("window.mouthpiece.audio.clipAt = -Infinity; return null;");
-    wait_until(&driver, "clip warning let go", AUDIO, |v| v["clip"] == false);
+    wait_until(&driver, "clip warning let go", AUDIO, |v| {
+        v["clip"] == false
+    });
     hub.set_audio(audio(AudioState::Live, -10.0, -1.0, false));
     wait_until(&driver, "clip at -1 dBFS", AUDIO, |v| v["clip"] == true);
     hub.set_audio(None);
@@ -237,7 +248,11 @@ fn drive(page: &str, hub: &Hub) {
 fn check_inset(inset: &Value, width: u32) {
     let labels = inset["labels"].as_array().unwrap();
     let dots = inset["dots"].as_array().unwrap();
-    assert_eq!(dots.len(), 12, "every lip dot in the inset at {width}: {inset}");
+    assert_eq!(
+        dots.len(),
+        12,
+        "every lip dot in the inset at {width}: {inset}"
+    );
     assert_eq!(labels.len(), 12, "{inset}");
     let r = inset["radius"].as_f64().unwrap();
     let (w, h) = (
@@ -249,13 +264,21 @@ fn check_inset(inset: &Value, width: u32) {
     for (i, a) in dots.iter().enumerate() {
         for b in &dots[i + 1..] {
             let d = (f(a, "x") - f(b, "x")).hypot(f(a, "y") - f(b, "y"));
-            assert!(d > 4.0 * r, "dots {} and {} {d:.1} px apart at {width}", a["name"], b["name"]);
+            assert!(
+                d > 4.0 * r,
+                "dots {} and {} {d:.1} px apart at {width}",
+                a["name"],
+                b["name"]
+            );
         }
     }
     for (i, a) in labels.iter().enumerate() {
         // Inside the inset.
         assert!(
-            f(a, "x") >= 0.0 && f(a, "y") >= 0.0 && f(a, "x") + f(a, "w") <= w && f(a, "y") + f(a, "h") <= h,
+            f(a, "x") >= 0.0
+                && f(a, "y") >= 0.0
+                && f(a, "x") + f(a, "w") <= w
+                && f(a, "y") + f(a, "h") <= h,
             "label {} outside the inset at {width}: {a}",
             a["name"]
         );
@@ -265,7 +288,11 @@ fn check_inset(inset: &Value, width: u32) {
                 || f(b, "x") + f(b, "w") <= f(a, "x")
                 || f(a, "y") + f(a, "h") <= f(b, "y")
                 || f(b, "y") + f(b, "h") <= f(a, "y");
-            assert!(apart, "labels {} and {} overlap at {width}: {a} {b}", a["name"], b["name"]);
+            assert!(
+                apart,
+                "labels {} and {} overlap at {width}: {a} {b}",
+                a["name"], b["name"]
+            );
         }
         // No label over a dot.
         for d in dots {
@@ -273,7 +300,11 @@ fn check_inset(inset: &Value, width: u32) {
                 && f(d, "x") - r < f(a, "x") + f(a, "w")
                 && f(d, "y") + r > f(a, "y")
                 && f(d, "y") - r < f(a, "y") + f(a, "h");
-            assert!(!covers, "label {} covers dot {} at {width}", a["name"], d["name"]);
+            assert!(
+                !covers,
+                "label {} covers dot {} at {width}",
+                a["name"], d["name"]
+            );
         }
     }
 }

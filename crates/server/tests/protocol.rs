@@ -291,9 +291,7 @@ async fn control_requests_reach_the_daemon_and_answers_come_back() {
                     json!({"character": character, "point": point, "in_reach": true}),
                 )),
 
-                ControlCommand::TuneColours { .. } => {
-                    request.reply(Ok(json!({"sampling_s": 2.0})))
-                }
+                ControlCommand::TuneColours { .. } => request.reply(Ok(json!({"sampling_s": 2.0}))),
             }
             if seen.len() == 4 {
                 return seen;

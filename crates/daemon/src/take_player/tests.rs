@@ -38,7 +38,10 @@ fn raw_audio_json(samples: &[i16], rate: u32) -> serde_json::Value {
 fn raw_audio_decodes_from_cdr_and_json() {
     let samples = [1i16, -2, 300, -32768, 32767];
     let a = decode_raw_audio("cdr", &raw_audio_cdr(&samples, 48000, 1)).unwrap();
-    assert_eq!((a.format.as_str(), a.sample_rate, a.channels), ("pcm-s16", 48000, 1));
+    assert_eq!(
+        (a.format.as_str(), a.sample_rate, a.channels),
+        ("pcm-s16", 48000, 1)
+    );
     assert_eq!(a.data.len(), 10);
     assert_eq!(i16::from_le_bytes([a.data[6], a.data[7]]), -32768);
     let j = serde_json::to_vec(&raw_audio_json(&samples, 44100)).unwrap();
@@ -103,7 +106,10 @@ fn a_chunk_holds_the_images_the_dots_and_the_sound_in_its_window() {
     let n = chunk.frames.len();
     assert!((29..=31).contains(&n), "{n} frames in one second");
     assert!(chunk.frames.iter().all(|f| (0.5..1.5).contains(&f.t)));
-    assert!(chunk.frames.iter().all(|f| f.jpeg.starts_with(&[0xff, 0xd8])));
+    assert!(chunk
+        .frames
+        .iter()
+        .all(|f| f.jpeg.starts_with(&[0xff, 0xd8])));
     // The seen dot, projected; the unseen one left out.
     let dots = &chunk.frames[0].dots;
     assert_eq!(dots.len(), 1, "{dots:?}");

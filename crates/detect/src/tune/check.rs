@@ -105,11 +105,15 @@ impl DotsFound {
             lip_dots + forehead_dots,
             self.share() * 100.0
         );
-        let parts: Vec<String> = [("lip", self.lip), ("forehead", self.forehead), ("any", self.any)]
-            .iter()
-            .filter(|(name, n)| *n > 0 || *name != "any")
-            .map(|(name, n)| format!("{name} {:.1}", *n as f64 / f))
-            .collect();
+        let parts: Vec<String> = [
+            ("lip", self.lip),
+            ("forehead", self.forehead),
+            ("any", self.any),
+        ]
+        .iter()
+        .filter(|(name, n)| *n > 0 || *name != "any")
+        .map(|(name, n)| format!("{name} {:.1}", *n as f64 / f))
+        .collect();
         s.push_str(": ");
         s.push_str(&parts.join(", "));
         s
@@ -181,12 +185,8 @@ pub(super) fn dots_found(
     };
     let mut per_class = vec![0usize; config.classes.len()];
     for f in &kept.frames {
-        let found = detector.detect(
-            &f.color,
-            f.depth.as_ref().map(|(d, s)| (d, *s)),
-            f.fx,
-            None,
-        )?;
+        let found =
+            detector.detect(&f.color, f.depth.as_ref().map(|(d, s)| (d, *s)), f.fx, None)?;
         per_class.fill(0);
         for b in &found.blobs {
             per_class[b.class] += 1;
@@ -265,7 +265,10 @@ mod tests {
         assert!(!checked(12, 8).offered());
         assert!(!checked(0, 0).offered(), "a proposal that finds nothing");
         let lines = checked(12, 8).report(12, 3);
-        assert!(lines[0].contains("12.0 of 15 dots per frame (80 %)"), "{lines:?}");
+        assert!(
+            lines[0].contains("12.0 of 15 dots per frame (80 %)"),
+            "{lines:?}"
+        );
         assert!(lines[1].contains("8.0 of 15"), "{lines:?}");
     }
 }

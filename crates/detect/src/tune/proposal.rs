@@ -3,11 +3,11 @@
 
 use std::fmt::Write as _;
 
+use super::check::{dots_found, CheckedProposal, DotsFound};
 use super::hue::{
     circular_mean, hue_diff, hue_ranges, hue_set, median_f64, median_u8, percentile_u8,
     set_to_ranges,
 };
-use super::check::{dots_found, CheckedProposal, DotsFound};
 use super::sampling::{ColourSampler, SampledBlob};
 use crate::{ColorClass, DetectConfig, DetectError, DotRole};
 
