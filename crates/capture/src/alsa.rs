@@ -62,7 +62,7 @@ fn alsa_error(spec: &str, what: &str, err: alsa::Error) -> SourceError {
 }
 
 impl AlsaSource {
-    /// Opens and configures the device; the stream starts with the first read.
+    /// Opens, configures and starts the device.
     pub fn open(request: &AlsaRequest) -> Result<AlsaSource, SourceError> {
         let spec = request.device.clone();
         let pcm = PCM::new(&request.device, Direction::Capture, false)
@@ -142,6 +142,9 @@ impl AlsaSource {
             frames_per_block: period as u32,
             live: true,
         };
+        // Capture starts now (a read would start it too, but the wait before it would not).
+        pcm.start()
+            .map_err(|e| alsa_error(&spec, "the device would not start capturing", e))?;
         tracing::info!(device = %spec, description = %info.description, "audio device open");
         Ok(AlsaSource {
             pcm,
