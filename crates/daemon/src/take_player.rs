@@ -26,7 +26,7 @@ pub const MAX_CHUNK_BYTES: usize = 24 << 20;
 /// Most sound bytes in one chunk (10 s of 8 channels at 96 kHz).
 pub const MAX_AUDIO_BYTES: usize = 16 << 20;
 /// The sound channel of a take.
-pub const TOPIC_AUDIO: &str = "/audio";
+pub const TOPIC_AUDIO: &str = mouthpiece_recording::TOPIC_AUDIO;
 /// How far past a chunk's end its messages are read for sound written late, seconds.
 pub const LATE_AUDIO_S: f64 = 1.0;
 /// The tracked dots of a take (camera frame, metres).
@@ -123,41 +123,12 @@ pub fn decode_raw_audio(encoding: &str, data: &[u8]) -> Result<RawAudio, String>
 }
 
 fn decode_raw_audio_cdr(data: &[u8]) -> Result<RawAudio, String> {
-    // 4-byte encapsulation header, then fields aligned relative to its end.
-    if data.len() < 4 || data[1] != 1 {
-        return Err("not little-endian CDR".into());
-    }
-    let body = &data[4..];
-    let mut at = 0usize;
-    let u32_at = |at: &mut usize| -> Result<u32, String> {
-        *at = at.div_ceil(4) * 4;
-        let b = body
-            .get(*at..*at + 4)
-            .ok_or_else(|| format!("message ends at byte {}", *at + 4))?;
-        *at += 4;
-        Ok(u32::from_le_bytes(b.try_into().expect("4 bytes")))
-    };
-    let _sec = u32_at(&mut at)?;
-    let _nanosec = u32_at(&mut at)?;
-    let len = u32_at(&mut at)? as usize;
-    let pcm = body
-        .get(at..at.saturating_add(len))
-        .ok_or_else(|| format!("data of {len} bytes runs past the message"))?
-        .to_vec();
-    at += len;
-    let slen = u32_at(&mut at)? as usize;
-    let text = body
-        .get(at..at.saturating_add(slen))
-        .ok_or("format runs past the message")?;
-    let format = String::from_utf8_lossy(text.strip_suffix(&[0]).unwrap_or(text)).into_owned();
-    at += slen;
-    let sample_rate = u32_at(&mut at)?;
-    let channels = u32_at(&mut at)?;
+    let m = mouthpiece_recording::cdr::RawAudio::decode(data).map_err(|e| e.to_string())?;
     Ok(RawAudio {
-        data: pcm,
-        format,
-        sample_rate,
-        channels,
+        data: m.data,
+        format: m.format,
+        sample_rate: m.sample_rate,
+        channels: m.number_of_channels,
     })
 }
 

@@ -39,16 +39,19 @@ fn free_port() -> u16 {
         .port()
 }
 
-/// One 20 ms block of a 440 Hz tone starting at sample `first`, as foxglove.RawAudio JSON.
+/// 20 ms of a 440 Hz tone starting at sample `first`.
+fn tone(first: u64) -> Vec<i16> {
+    (first..first + 960)
+        .map(|i| {
+            (8000.0 * (i as f64 * 440.0 * std::f64::consts::TAU / f64::from(RATE)).sin()) as i16
+        })
+        .collect()
+}
+
+/// One 20 ms block of the tone as foxglove.RawAudio JSON.
 fn audio_block(first: u64) -> Value {
     use base64::Engine as _;
-    let pcm: Vec<u8> = (first..first + 960)
-        .flat_map(|i| {
-            let v = (8000.0 * (i as f64 * 440.0 * std::f64::consts::TAU / f64::from(RATE)).sin())
-                as i16;
-            v.to_le_bytes()
-        })
-        .collect();
+    let pcm: Vec<u8> = tone(first).iter().flat_map(|v| v.to_le_bytes()).collect();
     json!({
         "timestamp": {"sec": 0, "nsec": 0},
         "data": base64::engine::general_purpose::STANDARD.encode(pcm),
@@ -64,6 +67,10 @@ fn write_take(session: &Path, take: &Path) {
     let mut writer = SessionWriter::create(take, WriterOptions::default()).unwrap();
     let mut first = None;
     let mut blocks = 0u64;
+    let format = mouthpiece_frame::AudioFormat {
+        sample_rate: RATE,
+        channels: 1,
+    };
     while let Some(f) = reader.next_frame().unwrap() {
         let log_time = writer.write_frame(&f.frame).unwrap();
         let first = *first.get_or_insert(log_time);
@@ -76,13 +83,16 @@ fn write_take(session: &Path, take: &Path) {
             )
             .unwrap();
         while blocks * 20_000_000 <= log_time - first {
-            writer
-                .write_json(
-                    "/audio",
-                    first + blocks * 20_000_000,
-                    &audio_block(blocks * 960),
-                )
-                .unwrap();
+            let at = first + blocks * 20_000_000;
+            // Every other block as JSON (foxglove's JSON encoding), the rest in CDR as
+            // takes write it: the player reads both.
+            if blocks % 2 == 0 {
+                writer
+                    .write_json("/audio", at, &audio_block(blocks * 960))
+                    .unwrap();
+            } else {
+                writer.write_audio(at, format, &tone(blocks * 960)).unwrap();
+            }
             blocks += 1;
         }
     }

@@ -355,8 +355,9 @@
     m.state = a.state;
     const live = a.state === "live" || a.state === "replay";
     let text;
+    const why = state.status && state.status.audio_message;
     if (a.state === "no_device") {
-      text = `no microphone: ${a.device || "the device"} cannot be opened (retrying)`;
+      text = `no microphone: ${a.device || "the device"} cannot be opened (retrying)${why ? ": " + why : ""}`;
     } else if (!live) {
       text = "no microphone (audio is off in the configuration)";
     } else {
@@ -378,7 +379,7 @@
     el("meter-level").style.width = `${(meterShare(m.level) * 100).toFixed(1)}%`;
     el("meter").style.setProperty("--meter-width", `${el("meter").clientWidth}px`);
     const held = el("meter-peak");
-    held.hidden = !live || !Number.isFinite(m.heldPeak);
+    held.hidden = !live || !(m.heldPeak > METER_FLOOR_DB);
     held.style.left = `${(meterShare(m.heldPeak) * 100).toFixed(1)}%`;
     el("meter-clip").hidden = !m.clipShown;
   }

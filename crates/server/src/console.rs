@@ -57,40 +57,6 @@ pub struct TakeSummary {
     pub error: Option<String>,
 }
 
-/// The microphone as the console shows it (`audio` in `status`; absent means `off`).
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-pub struct AudioStatus {
-    /// `off` (no `[audio]` configured), `no_device` (configured, cannot be opened),
-    /// `live` (capturing), `replay` (a recording's sound).
-    pub state: AudioState,
-    /// The ALSA PCM name (or the replayed file).
-    pub device: String,
-    /// The format the device agreed to.
-    pub sample_rate: u32,
-    pub channels: u16,
-    /// RMS level over the last block(s), dBFS (null when silent).
-    pub level_dbfs: f64,
-    /// Peak sample level, dBFS (null when silent).
-    pub peak_dbfs: f64,
-    /// A sample reached −1 dBFS or above recently.
-    pub clip: bool,
-    /// ALSA overruns (xruns) recovered from since the capture started.
-    pub overruns: u64,
-    /// Blocks dropped from the full queue since the capture started.
-    pub dropped_blocks: u64,
-}
-
-/// What the microphone is doing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum AudioState {
-    #[default]
-    Off,
-    NoDevice,
-    Live,
-    Replay,
-}
-
 /// The last paint check (`tune_colours`), as `tune` in `status`.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct TuneReport {
@@ -184,11 +150,6 @@ impl Hub {
         self.update_status(|s| s.calibration = Some(report));
     }
 
-    /// Sets the microphone's state shown in `status` (`None`: no audio configured).
-    pub fn set_audio(&self, audio: Option<AudioStatus>) {
-        self.update_status(|s| s.audio = audio);
-    }
-
     /// Sets the last paint check shown in `status`.
     pub fn set_tune(&self, report: Option<TuneReport>) {
         self.update_status(|s| s.tune = report);
@@ -224,43 +185,6 @@ mod tests {
         assert_eq!(takes.len(), MAX_LISTED_TAKES);
         assert_eq!(takes.last().unwrap().take, MAX_LISTED_TAKES as u32 + 4);
         assert_eq!(takes[0].take, 5);
-    }
-
-    #[test]
-    fn audio_status_has_the_agreed_field_names() {
-        let v = serde_json::to_value(AudioStatus {
-            state: AudioState::NoDevice,
-            device: "hw:1".into(),
-            sample_rate: 48000,
-            channels: 1,
-            level_dbfs: -20.5,
-            peak_dbfs: -3.0,
-            clip: false,
-            overruns: 2,
-            dropped_blocks: 1,
-        })
-        .unwrap();
-        let mut keys: Vec<&str> = v.as_object().unwrap().keys().map(String::as_str).collect();
-        keys.sort_unstable();
-        assert_eq!(
-            keys,
-            [
-                "channels",
-                "clip",
-                "device",
-                "dropped_blocks",
-                "level_dbfs",
-                "overruns",
-                "peak_dbfs",
-                "sample_rate",
-                "state"
-            ]
-        );
-        assert_eq!(v["state"], "no_device");
-        let (hub, _control) = Hub::new(&crate::HubConfig::default());
-        assert!(hub.status().audio.is_none());
-        hub.set_audio(Some(AudioStatus::default()));
-        assert_eq!(hub.status().audio.unwrap().state, AudioState::Off);
     }
 
     #[test]

@@ -124,8 +124,10 @@ pub struct Status {
     pub calibration: Option<crate::console::CalibrationReport>,
     /// Takes recorded in this run of the daemon, oldest first.
     pub takes: Vec<crate::console::TakeSummary>,
-    /// The microphone (`None`: no audio configured, shown as `off`).
-    pub audio: Option<crate::console::AudioStatus>,
+    /// The microphone: state, format, level meter (set by the daemon's audio thread).
+    pub audio: crate::audio::AudioStatus,
+    /// Why the configured microphone is not live (cannot be opened, lost).
+    pub audio_message: Option<String>,
     /// The last paint check (`tune_colours`).
     pub tune: Option<crate::console::TuneReport>,
 }
@@ -275,6 +277,8 @@ pub(crate) struct HubInner {
     pub(crate) osc: Arc<crate::osc::OscCounters>,
     /// The takes the console plays back (`/take`).
     pub(crate) takes: crate::takes_http::TakeService,
+    /// The daemon's audio thread counters (`/metrics`).
+    pub(crate) audio: Arc<crate::audio::AudioCounters>,
 }
 
 impl Hub {
@@ -301,6 +305,7 @@ impl Hub {
                 health: watch::Sender::new(crate::console::Health::default()),
                 osc: Arc::default(),
                 takes: Default::default(),
+                audio: Arc::default(),
             }),
         };
         (hub, ControlReceiver { rx })
@@ -455,7 +460,13 @@ impl Hub {
         let mut text = self.inner.metrics.render();
         crate::preview::render_metrics(&self.inner.preview, &mut text);
         self.inner.osc.render_metrics(&mut text);
+        self.inner.audio.render_metrics(&mut text);
         text
+    }
+
+    /// The audio thread's counters, for the daemon's audio thread to update.
+    pub fn audio_counters(&self) -> Arc<crate::audio::AudioCounters> {
+        self.inner.audio.clone()
     }
 
     /// The OSC output's counters, for the daemon's OSC sender to update.

@@ -65,6 +65,7 @@
 //! - [`timecode`]: SMPTE time-of-day timecode.
 //! - [`loadgen`]: the load tool behind `mouthpiece-loadgen` and the load tests.
 
+pub mod audio;
 pub mod config;
 pub mod console;
 mod error;
@@ -86,10 +87,10 @@ pub mod takes_http;
 pub mod timecode;
 mod tls;
 
+pub use audio::{AudioCounters, AudioState, AudioStatus, SILENCE_DBFS};
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
 pub use console::{
-    AudioState, AudioStatus, CalibrationReport, FramePose, Health, TakeSummary, TuneClass,
-    TuneFound, TuneReport,
+    CalibrationReport, FramePose, Health, TakeSummary, TuneClass, TuneFound, TuneReport,
 };
 pub use error::ServerError;
 pub use foxglove::{

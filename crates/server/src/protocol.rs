@@ -317,9 +317,11 @@ pub struct StatusMessage<'a> {
     /// Takes recorded in this run of the daemon.
     #[serde(skip_serializing_if = "<[_]>::is_empty")]
     pub takes: &'a [crate::console::TakeSummary],
-    /// The microphone, when audio is configured.
+    /// The microphone (state, format, level meter).
+    pub audio: &'a crate::audio::AudioStatus,
+    /// Why the configured microphone is not live.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub audio: Option<&'a crate::console::AudioStatus>,
+    pub audio_message: Option<&'a str>,
     /// The last paint check.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tune: Option<&'a crate::console::TuneReport>,
@@ -336,7 +338,8 @@ impl<'a> StatusMessage<'a> {
             lagged,
             calibration: status.calibration.as_ref(),
             takes: &status.takes,
-            audio: status.audio.as_ref(),
+            audio: &status.audio,
+            audio_message: status.audio_message.as_deref(),
             tune: status.tune.as_ref(),
         }
     }

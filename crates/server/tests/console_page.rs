@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use common::*;
 use mouthpiece_server::{
     AudioState, AudioStatus, DotState, Health, Hub, ImageDot, Overlay, PreviewInput, ServerConfig,
-    TakeSummary,
+    TakeSummary, SILENCE_DBFS,
 };
 use serde_json::{json, Value};
 use webdriver::{open_page, WebDriver};
@@ -116,8 +116,8 @@ const AUDIO: &str = "const a = window.mouthpiece.audio; \
       level: document.getElementById('meter-level').style.width, \
       peak_shown: !document.getElementById('meter-peak').hidden};";
 
-fn audio(state: AudioState, level: f64, peak: f64, clip: bool) -> Option<AudioStatus> {
-    Some(AudioStatus {
+fn audio(state: AudioState, level: f64, peak: f64, clip: bool) -> AudioStatus {
+    AudioStatus {
         state,
         device: "hw:CARD=USB,DEV=0".into(),
         sample_rate: 48000,
@@ -127,7 +127,14 @@ fn audio(state: AudioState, level: f64, peak: f64, clip: bool) -> Option<AudioSt
         clip,
         overruns: 0,
         dropped_blocks: 0,
-    })
+    }
+}
+
+fn set_audio(hub: &Hub, audio: AudioStatus, message: Option<&str>) {
+    hub.update_status(|s| {
+        s.audio = audio;
+        s.audio_message = message.map(str::to_owned);
+    });
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -201,21 +208,22 @@ fn drive(page: &str, hub: &Hub) {
     let a = wait_until(&driver, "no microphone", AUDIO, |v| v["state"] == "off");
     assert!(a["text"].as_str().unwrap().contains("no microphone"), "{a}");
     assert_eq!(a["peak_shown"], false, "{a}");
-    hub.set_audio(audio(
-        AudioState::NoDevice,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-        false,
-    ));
+    set_audio(
+        hub,
+        audio(AudioState::NoDevice, SILENCE_DBFS, SILENCE_DBFS, false),
+        Some("cannot open hw:CARD=USB,DEV=0: No such device"),
+    );
     let a = wait_until(&driver, "no device", AUDIO, |v| v["state"] == "no_device");
     let text = a["text"].as_str().unwrap();
     assert!(
-        text.contains("no microphone") && text.contains("hw:CARD=USB,DEV=0"),
+        text.contains("no microphone")
+            && text.contains("hw:CARD=USB,DEV=0")
+            && text.contains("No such device"),
         "{a}"
     );
     // The peak is held for as long as the page is told (here: the whole test).
     driver.script("window.mouthpiece.audio.holdMs = 1e9; window.mouthpiece.audio.clipHoldMs = 1e9; return null;");
-    hub.set_audio(audio(AudioState::Live, -20.0, -6.0, false));
+    set_audio(hub, audio(AudioState::Live, -20.0, -6.0, false), None);
     let a = wait_until(&driver, "live level", AUDIO, |v| v["state"] == "live");
     assert_eq!(a["level"], "66.7%", "-20 dBFS on a -60..0 scale: {a}");
     assert_eq!(a["held"], -6.0, "{a}");
@@ -225,11 +233,11 @@ fn drive(page: &str, hub: &Hub) {
         a["text"].as_str().unwrap().contains("48000 Hz · mono"),
         "the agreed format: {a}"
     );
-    hub.set_audio(audio(AudioState::Live, -30.0, -0.5, true));
+    set_audio(hub, audio(AudioState::Live, -30.0, -0.5, true), None);
     let a = wait_until(&driver, "clip", AUDIO, |v| v["clip"] == true);
     assert_eq!(a["held"], -0.5, "{a}");
     // Quieter again: the peak and the warning are held.
-    hub.set_audio(audio(AudioState::Live, -40.0, -35.0, false));
+    set_audio(hub, audio(AudioState::Live, -40.0, -35.0, false), None);
     let a = wait_until(&driver, "quieter", AUDIO, |v| v["level"] == "33.3%");
     assert_eq!(a["held"], -0.5, "{a}");
     assert_eq!(a["clip"], true, "{a}");
@@ -238,9 +246,9 @@ fn drive(page: &str, hub: &Hub) {
     wait_until(&driver, "clip warning let go", AUDIO, |v| {
         v["clip"] == false
     });
-    hub.set_audio(audio(AudioState::Live, -10.0, -1.0, false));
+    set_audio(hub, audio(AudioState::Live, -10.0, -1.0, false), None);
     wait_until(&driver, "clip at -1 dBFS", AUDIO, |v| v["clip"] == true);
-    hub.set_audio(None);
+    set_audio(hub, AudioStatus::default(), None);
     let a = wait_until(&driver, "off again", AUDIO, |v| v["state"] == "off");
     assert_eq!(a["clip"], false, "{a}");
 }

@@ -205,18 +205,19 @@ async fn server_messages_match_the_published_schemas() {
         seconds: 4.0,
         error: None,
     });
-    server.hub.set_audio(Some(mouthpiece_server::AudioStatus {
-        state: mouthpiece_server::AudioState::Live,
-        device: "default".into(),
-        sample_rate: 48000,
-        channels: 1,
-        level_dbfs: -23.5,
-        // Silence: serialised as null.
-        peak_dbfs: f64::NEG_INFINITY,
-        clip: false,
-        overruns: 0,
-        dropped_blocks: 0,
-    }));
+    server.hub.update_status(|s| {
+        s.audio = mouthpiece_server::AudioStatus {
+            state: mouthpiece_server::AudioState::Live,
+            device: "default".into(),
+            sample_rate: 48000,
+            channels: 1,
+            level_dbfs: -23.5,
+            peak_dbfs: -6.0,
+            clip: false,
+            overruns: 0,
+            dropped_blocks: 0,
+        }
+    });
     let class = |per_frame: f64| mouthpiece_server::TuneClass {
         name: "lip".into(),
         role: "lip".into(),
@@ -248,7 +249,7 @@ async fn server_messages_match_the_published_schemas() {
         let v = next_of_type(&mut console, "status").await;
         let done = v.get("takes").is_some()
             && v.get("calibration").is_some()
-            && v.get("audio").is_some()
+            && v["audio"]["state"] == "live"
             && v.get("tune").is_some();
         log.push(v);
         if done {

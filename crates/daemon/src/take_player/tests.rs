@@ -54,7 +54,8 @@ fn raw_audio_decodes_from_cdr_and_json() {
 }
 
 /// A 2-second take: synthetic frames (JPEG colour), a dot on the optical axis, and 20 ms
-/// blocks of sound whose samples say which block they are, from 0.1 s on.
+/// blocks of sound (`foxglove.RawAudio` in CDR, as takes write it) whose samples say which
+/// block they are, from 0.1 s on.
 fn write_take(dir: &Path, name: &str) -> (PathBuf, Intrinsics) {
     let path = dir.join(name);
     let mut writer = SessionWriter::create(&path, WriterOptions::default()).unwrap();
@@ -82,9 +83,11 @@ fn write_take(dir: &Path, name: &str) -> (PathBuf, Intrinsics) {
         // Sound blocks up to this frame's time.
         while 100_000_000 + u64::from(block as u16) * 20_000_000 <= log_time - first {
             let at = first + 100_000_000 + u64::from(block as u16) * 20_000_000;
-            writer
-                .write_json(TOPIC_AUDIO, at, &raw_audio_json(&[block; 960], 48000))
-                .unwrap();
+            let format = mouthpiece_frame::AudioFormat {
+                sample_rate: 48000,
+                channels: 1,
+            };
+            writer.write_audio(at, format, &[block; 960]).unwrap();
             block += 1;
         }
     }
