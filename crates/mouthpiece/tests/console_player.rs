@@ -1,6 +1,7 @@
 //! The console plays a take back in headless Chromium (Debian's `chromium` and
 //! `chromium-driver`): the real daemon serves a take written here (synthetic frames, tracked
-//! dots, and a `/audio` channel of `foxglove.RawAudio` `pcm-s16` blocks, a 440 Hz tone), and
+//! dots, and a `/audio` channel of `foxglove.RawAudio` `pcm-s16` blocks in CDR as takes write
+//! them, a 440 Hz tone), and
 //! the page shows its images with the dots drawn where they were tracked and schedules its
 //! sound, all of it, on the same clock. `/take` serves nothing but the takes in the takes
 //! folder, and only with a token.
@@ -48,19 +49,6 @@ fn tone(first: u64) -> Vec<i16> {
         .collect()
 }
 
-/// One 20 ms block of the tone as foxglove.RawAudio JSON.
-fn audio_block(first: u64) -> Value {
-    use base64::Engine as _;
-    let pcm: Vec<u8> = tone(first).iter().flat_map(|v| v.to_le_bytes()).collect();
-    json!({
-        "timestamp": {"sec": 0, "nsec": 0},
-        "data": base64::engine::general_purpose::STANDARD.encode(pcm),
-        "format": "pcm-s16",
-        "sample_rate": RATE,
-        "number_of_channels": 1,
-    })
-}
-
 /// The take: the session's frames, three dots tracked at fixed places, and 2 s of sound.
 fn write_take(session: &Path, take: &Path) {
     let mut reader = SessionReader::open(session).unwrap();
@@ -84,15 +72,7 @@ fn write_take(session: &Path, take: &Path) {
             .unwrap();
         while blocks * 20_000_000 <= log_time - first {
             let at = first + blocks * 20_000_000;
-            // Every other block as JSON (foxglove's JSON encoding), the rest in CDR as
-            // takes write it: the player reads both.
-            if blocks % 2 == 0 {
-                writer
-                    .write_json("/audio", at, &audio_block(blocks * 960))
-                    .unwrap();
-            } else {
-                writer.write_audio(at, format, &tone(blocks * 960)).unwrap();
-            }
+            writer.write_audio(at, format, &tone(blocks * 960)).unwrap();
             blocks += 1;
         }
     }
