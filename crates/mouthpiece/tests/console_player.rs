@@ -16,7 +16,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use mouthpiece_recording::{SessionReader, SessionWriter, WriterOptions};
-use serde_json::{json, Value};
+use serde_json::json;
 
 const CONTROL: &str = "player-control-token-0123";
 const READ: &str = "player-read-token-0123456";
