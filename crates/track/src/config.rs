@@ -153,8 +153,18 @@ impl TrackConfig {
         };
         // The keys in pixels of older files: refused, naming the key that replaced each.
         for (old, set, new, default) in [
-            ("min_gate_px", self.min_gate_px, "min_gate_spacings", MIN_GATE_SPACINGS),
-            ("roi_margin_px", self.roi_margin_px, "roi_margin_spacings", ROI_MARGIN_SPACINGS),
+            (
+                "min_gate_px",
+                self.min_gate_px,
+                "min_gate_spacings",
+                MIN_GATE_SPACINGS,
+            ),
+            (
+                "roi_margin_px",
+                self.roi_margin_px,
+                "roi_margin_spacings",
+                ROI_MARGIN_SPACINGS,
+            ),
         ] {
             if set.is_some() {
                 return bad(

@@ -576,7 +576,10 @@ mod tests {
         let (vga, hd) = (rect(525.0), rect(1050.0));
         let spacing = DotSpacing::of_rest(&scene.rest, 525.0).unwrap().px(0.6);
         let margin = config.roi_margin_spacings * spacing;
-        assert!((15.0..25.0).contains(&margin), "{margin} px at 640x480, 0.6 m");
+        assert!(
+            (15.0..25.0).contains(&margin),
+            "{margin} px at 640x480, 0.6 m"
+        );
         // The dots' box is the same; the margin on each side doubled (to the pixel).
         let grown = (hd.width - vga.width) as f64 / 2.0;
         assert!((grown - margin).abs() <= 1.0, "{grown} against {margin}");
