@@ -550,7 +550,7 @@ mod tests {
         };
         let (vga, spacing) = floor(&scene.tracks[..12], 525.0);
         assert!((vga - scene.config.min_gate_spacings * spacing).abs() < 1e-9);
-        assert!((2.0..3.0).contains(&vga), "{vga} px at 640x480, 0.6 m");
+        assert!((2.5..4.0).contains(&vga), "{vga} px at 640x480, 0.6 m");
         let (hd, _) = floor(&scene.tracks[..12], 1050.0);
         assert!((hd - 2.0 * vga).abs() < 1e-9, "{hd} against {vga}");
         let mut far = scene.tracks[..12].to_vec();
