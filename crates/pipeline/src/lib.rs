@@ -687,6 +687,36 @@ mod tests {
         assert_eq!(off.unwrap().track.head_filter_accel, [0.0, 0.0]);
     }
 
+    /// A file of before the thresholds were in dot spacings still sets `min_gate_px` or
+    /// `roi_margin_px`: refused, the error at that key's line and naming the key that
+    /// replaced it; the new keys read.
+    #[test]
+    fn the_pixel_keys_are_refused_naming_the_keys_in_dot_spacings() {
+        for (old, new) in [
+            ("min_gate_px", "track.min_gate_spacings"),
+            ("roi_margin_px", "track.roi_margin_spacings"),
+        ] {
+            let text = format!("[track]\ncalibration_s = 1.0\n{old} = 2.5\n");
+            let err = PipelineConfig::from_toml_str(&text)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(&format!(":3:1: key `track.{old}`")) && err.contains(new),
+                "{err}"
+            );
+        }
+        let cfg = PipelineConfig::from_toml_str(
+            "[track]\nmin_gate_spacings = 0.5\nroi_margin_spacings = 3.0\n",
+        )
+        .unwrap();
+        assert_eq!(cfg.track.min_gate_spacings, 0.5);
+        assert_eq!(cfg.track.roi_margin_spacings, 3.0);
+        let err = PipelineConfig::from_toml_str("[track]\nmin_gate_spacings = 0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("track.min_gate_spacings"), "{err}");
+    }
+
     /// `[retarget]` configures every caller's smoothing; bad values name their key.
     #[test]
     fn retarget_settings_are_read_and_checked() {

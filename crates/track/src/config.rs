@@ -5,6 +5,22 @@ use serde::{Deserialize, Serialize};
 
 use crate::TrackError;
 
+/// Default [`TrackConfig::min_gate_spacings`] (*gate floor*): about a third of a dot spacing,
+/// 2.5 px at 640x480 and 0.8 m (the floor the gates had in pixels, kept at the far end of
+/// the working range: there the prediction's error is the largest share of the spacing) and
+/// 3.3 px at 0.6 m. It binds only where predictions crowd (a gate is otherwise half the
+/// distance to the nearest other prediction, about half a spacing).
+pub const MIN_GATE_SPACINGS: f64 = 0.36;
+
+/// Default [`TrackConfig::roi_margin_spacings`] (*search margin*): 2.2 dot spacings, 20 px at
+/// 640x480 and 0.6 m (the margin the search region had in pixels there): a lip dot moves up
+/// to 1.4 spacings in a frame, plus its paint's radius and the prediction's own error.
+pub const ROI_MARGIN_SPACINGS: f64 = 2.2;
+
+/// The dot spacing of the synthetic performer's mouth at rest at 640x480 (fx 525) and 0.6 m,
+/// pixels: for the error that names the replaced pixel keys.
+pub const PX_PER_SPACING_VGA_0_6M: f64 = 9.2;
+
 /// The tracker's settings (`[track]` in a configuration file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -62,12 +78,14 @@ pub struct TrackConfig {
     /// smoother, slower to follow a change of speed. `[0, 0]`: no filter on the motion, the
     /// forehead dots' depth filter above instead.
     pub head_filter_accel: [f64; 2],
-    /// Margin around the predicted dots for the search region, pixels.
-    pub roi_margin_px: f64,
+    /// Margin around the predicted dots for the search region, in dot spacings (the neutral
+    /// mouth's mean distance between neighbouring lip dots, projected at the lips' depth):
+    /// the same share of the face at any resolution and distance.
+    pub roi_margin_spacings: f64,
     /// While dots are missing, search the full frame every this many frames.
     pub full_search_every: u32,
-    /// Smallest gate (pixels) around a prediction.
-    pub min_gate_px: f64,
+    /// Smallest gate around a prediction, in dot spacings at the dot's depth.
+    pub min_gate_spacings: f64,
     /// Gate as a fraction of the distance to the nearest other predicted dot.
     pub gate_fraction: f64,
     /// Largest difference between a lip candidate's depth and the dot's depth, metres: its
@@ -76,6 +94,16 @@ pub struct TrackConfig {
     /// the lips move a few millimetres in depth between frames). Widened by a fifth per
     /// frame the dot has been missing, up to 10 frames.
     pub lip_depth_gate_m: f64,
+    /// Replaced by `min_gate_spacings` (a pixel floor meant other things at other
+    /// resolutions and distances): a file that still sets it is refused with an error that
+    /// names the new key.
+    #[doc(hidden)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min_gate_px: Option<f64>,
+    /// Replaced by `roi_margin_spacings`, as `min_gate_px`.
+    #[doc(hidden)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub roi_margin_px: Option<f64>,
     /// After this many frames with no dot named, forget the names and re-acquire from geometry.
     pub lost_after_frames: u32,
     /// How long a missing lip dot keeps its last value, then decays to neutral (seconds);
@@ -101,11 +129,13 @@ impl Default for TrackConfig {
             forehead_depth_beta: 400.0,
             nose_bridge_reach: 0.5,
             head_filter_accel: [0.05, 0.003],
-            roi_margin_px: 20.0,
+            roi_margin_spacings: ROI_MARGIN_SPACINGS,
             full_search_every: 8,
-            min_gate_px: 2.5,
+            min_gate_spacings: MIN_GATE_SPACINGS,
             gate_fraction: 0.5,
             lip_depth_gate_m: 0.008,
+            min_gate_px: None,
+            roi_margin_px: None,
             lost_after_frames: 15,
             missing_hold_s: 0.5,
             missing_decay_s: 0.5,
@@ -121,6 +151,32 @@ impl TrackConfig {
                 message: message.into(),
             })
         };
+        // The keys in pixels of older files: refused, naming the key that replaced each.
+        for (old, set, new, default) in [
+            (
+                "min_gate_px",
+                self.min_gate_px,
+                "min_gate_spacings",
+                MIN_GATE_SPACINGS,
+            ),
+            (
+                "roi_margin_px",
+                self.roi_margin_px,
+                "roi_margin_spacings",
+                ROI_MARGIN_SPACINGS,
+            ),
+        ] {
+            if set.is_some() {
+                return bad(
+                    old,
+                    &format!(
+                        "was replaced by track.{new}, in dot spacings (the neutral mouth's \
+                         distance between neighbouring lip dots, about {PX_PER_SPACING_VGA_0_6M} px at \
+                         640x480 and 0.6 m) instead of pixels; the default is {default}"
+                    ),
+                );
+            }
+        }
         if self.lip_dots < 4 || !self.lip_dots.is_multiple_of(2) {
             return bad("lip_dots", "must be even and at least 4");
         }
@@ -138,8 +194,8 @@ impl TrackConfig {
             ("still_tolerance_m", self.still_tolerance_m),
             ("max_opening_ratio", self.max_opening_ratio),
             ("forehead_depth_patch_m", self.forehead_depth_patch_m),
-            ("roi_margin_px", self.roi_margin_px),
-            ("min_gate_px", self.min_gate_px),
+            ("roi_margin_spacings", self.roi_margin_spacings),
+            ("min_gate_spacings", self.min_gate_spacings),
             ("gate_fraction", self.gate_fraction),
             ("lip_depth_gate_m", self.lip_depth_gate_m),
             ("lip_depth_across_m", self.lip_depth_across_m),

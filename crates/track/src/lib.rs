@@ -377,6 +377,7 @@ impl Tracker {
             &self.config,
             self.step_ratio,
             [frame.color.width as usize, frame.color.height as usize],
+            k.fx,
         );
         self.out.searched = None;
         self.detector.detect_into(

@@ -140,8 +140,61 @@ pub(crate) fn stretch_sides(pixels: &mut [[f64; 2]], layout: &PerformerLayout, s
     }
 }
 
-/// Corners nearer than this (pixels) give no line to measure a shift along.
-pub(crate) const MIN_CORNER_LINE_PX: f64 = 1.0;
+/// *Corners a line apart*: corners nearer than this many dot spacings ([`DotSpacing`]) give
+/// no line to measure a shift along. A mouth wears half its lip dots' spacings between its
+/// corners (six for twelve dots) and a pucker draws them in by a third at most: corners
+/// within one spacing are predictions gone wrong, and the direction between them is noise.
+pub(crate) const MIN_CORNER_LINE_SPACINGS: f64 = 1.0;
+
+/// Depths nearer than this (metres) are taken as this for a pixel length: no division by a
+/// depth of zero.
+const MIN_SPACING_DEPTH_M: f64 = 0.05;
+
+/// The tracker's unit of length in the image, the *dot spacing*: the mean distance between
+/// neighbouring lip dots of the mouth at rest (the neutral pose once taken, else the first
+/// full naming), in pixels at a given depth. The gates' floor, the search region's margin
+/// and the corner line's least length are set in it, so they mean the same on the face at
+/// any camera resolution and any distance from the camera (the score's motion term uses the
+/// same unit: [`crate::naming::score::spacing_px`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct DotSpacing {
+    /// The spacing in metres times the focal length in pixels: its pixels at 1 m.
+    px_at_1m: f64,
+}
+
+impl DotSpacing {
+    /// The spacing of `rest` (lip dots in layout order, around the mouth, metres) seen with
+    /// a focal length of `fx` pixels; `None` with fewer than two dots, all in one place, or
+    /// no focal length.
+    pub(crate) fn of_rest(rest: &[Vec3], fx: f64) -> Option<Self> {
+        let metres = mean_neighbour_distance(rest)?;
+        let px_at_1m = metres * fx;
+        (px_at_1m.is_finite() && px_at_1m > 0.0).then_some(Self { px_at_1m })
+    }
+
+    /// The spacing in pixels at depth `z` (metres).
+    pub(crate) fn px(&self, z: f64) -> f64 {
+        self.px_at_1m / z.max(MIN_SPACING_DEPTH_M)
+    }
+}
+
+/// The lip dots' mean last depth (metres; 0 before any names).
+pub(crate) fn lips_depth(ctx: &Context) -> f64 {
+    let lips = &ctx.tracks[..ctx.layout.lip_dots.min(ctx.tracks.len())];
+    lips.iter().map(|t| t.depth).sum::<f64>() / lips.len().max(1) as f64
+}
+
+/// The mean distance between neighbouring points of a closed loop (the lip dots around the
+/// mouth); `None` with fewer than two points.
+pub(crate) fn mean_neighbour_distance(points: &[Vec3]) -> Option<f64> {
+    let n = points.len();
+    (n >= 2).then(|| {
+        (0..n)
+            .map(|i| (points[(i + 1) % n] - points[i]).norm())
+            .sum::<f64>()
+            / n as f64
+    })
+}
 
 /// The line through the two mouth corners' pixels: its midpoint, the unit direction from
 /// the right corner to the left one, and the corners' distance.
@@ -165,9 +218,14 @@ impl CornerLine {
         })
     }
 
-    /// The line of `pixels`' corners when they are at least [`MIN_CORNER_LINE_PX`] apart.
-    pub(crate) fn measurable(pixels: &[[f64; 2]], layout: &PerformerLayout) -> Option<Self> {
-        Self::of(pixels, layout).filter(|line| line.len >= MIN_CORNER_LINE_PX)
+    /// The line of `pixels`' corners when they are at least [`MIN_CORNER_LINE_SPACINGS`]
+    /// dot spacings (`spacing_px` pixels each) apart.
+    pub(crate) fn measurable(
+        pixels: &[[f64; 2]],
+        layout: &PerformerLayout,
+        spacing_px: f64,
+    ) -> Option<Self> {
+        Self::of(pixels, layout).filter(|line| line.len >= MIN_CORNER_LINE_SPACINGS * spacing_px)
     }
 
     /// Whether `shift` (pixels) has a component along the line of more than `share` of the
@@ -205,7 +263,8 @@ pub(crate) fn forehead_predictions(ctx: &Context, k: &Intrinsics) -> Small<[f64;
 }
 
 /// Gate per prediction: a fraction of the distance to the nearest other prediction of the
-/// group, at least `min_gate_px`, widened a little for dots missing for a while. Lip dots
+/// group, at least [`TrackConfig::min_gate_spacings`] dot spacings at the dot's last depth
+/// (no floor without a `spacing`), widened a little for dots missing for a while. Lip dots
 /// are gated in depth too: a candidate further than [`TrackConfig::lip_depth_gate_m`]
 /// from the dot's expected depth is not this dot (widened for dots missing for a while).
 /// The window spans the dot's last depth and its last place carried by this frame's head
@@ -218,6 +277,7 @@ pub(crate) fn gated(
     tracks: &[DotTrack],
     slot: Slot,
     head: &RigidTransform,
+    spacing: Option<DotSpacing>,
 ) -> Small<labels::Prediction> {
     preds
         .iter()
@@ -229,7 +289,8 @@ pub(crate) fn gated(
                 .filter(|(j, _)| *j != i)
                 .map(|(_, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt())
                 .fold(f64::INFINITY, f64::min);
-            let base = (config.gate_fraction * nearest).max(config.min_gate_px);
+            let floor = spacing.map_or(0.0, |s| config.min_gate_spacings * s.px(tracks[i].depth));
+            let base = (config.gate_fraction * nearest).max(floor);
             let missing = tracks[i].missing.min(GATE_WIDENING_MAX_FRAMES) as f64;
             let mut gate = labels::Prediction::in_image(
                 *p,
@@ -271,9 +332,10 @@ pub(crate) struct Tracks {
 /// *Slipped names*: after this many frames in a row with a lip blob left unnamed between two
 /// named neighbours (`naming::checks::blob_between_neighbours`), the names are taken to have
 /// slipped along the lip and are forgotten, to be found again from geometry (when geometry
-/// can name the frame: a lasting extra blob must not lose the names). In 60 sessions
-/// without a slip (36 of 6 s, 24 of 20 s) such a blob stayed at most 4 frames (a motion-blur
-/// ghost, a corner's fold); a lip slipped as one piece kept one for 4 s.
+/// can name the frame: a lasting extra blob must not lose the names). A passing extra blob
+/// (a motion-blur ghost, a corner's fold) lasts a few frames; a lip slipped as one piece
+/// keeps one for seconds, so twice the longest passing one tells them apart (the
+/// measurement: docs/lab/detection-log.md).
 pub(crate) const SLIPPED_NAMES_FRAMES: u32 = 8;
 
 impl Tracks {
@@ -296,15 +358,24 @@ impl Tracks {
         self.frames_with_blob_between >= SLIPPED_NAMES_FRAMES
     }
 
-    /// Where to look: around the predicted dots, growing while some are missing; the full
-    /// frame (`None`) when nothing is named or every few frames while dots are missing.
+    /// The dot spacing of the lips at rest seen with focal length `fx` (pixels).
+    pub(crate) fn spacing(&self, fx: f64) -> Option<DotSpacing> {
+        DotSpacing::of_rest(&self.rest, fx)
+    }
+
+    /// Where to look: around the predicted dots plus [`TrackConfig::roi_margin_spacings`]
+    /// dot spacings at the lips' mean last depth (camera focal length `fx`, pixels), the
+    /// margin growing while some are missing; the full frame (`None`) when nothing is named,
+    /// every few frames while dots are missing, or without a spacing.
     pub(crate) fn search_region(
         &self,
         config: &TrackConfig,
         step_ratio: f64,
         image: [usize; 2],
+        fx: f64,
     ) -> Option<PixelRect> {
         let tracks = self.dots.as_ref()?;
+        let spacing = self.spacing(fx)?;
         if self.frames_with_missing > 0
             && self
                 .frames_with_missing
@@ -313,7 +384,9 @@ impl Tracks {
             return None;
         }
         let grow = (1u32 << self.frames_with_missing.min(SEARCH_GROWTH_MAX_DOUBLINGS)) as f64;
-        let margin = config.roi_margin_px * grow;
+        let lips = &tracks[..self.rest.len().min(tracks.len())];
+        let z = lips.iter().map(|t| t.depth).sum::<f64>() / lips.len().max(1) as f64;
+        let margin = config.roi_margin_spacings * spacing.px(z) * grow;
         let rect = PixelRect::around(tracks.iter().map(|t| t.predicted_pixel(step_ratio)), margin)?;
         let full = image[0] as i64 * image[1] as i64;
         (rect.area() < full / FULL_FRAME_DIVISOR).then_some(rect)
@@ -431,5 +504,96 @@ impl Tracks {
             rest: &self.rest,
             last: self.head,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::naming::recovery::test_support::Scene;
+
+    /// The scene's mouth at rest (lip dots about 10 mm apart at 0.6 m, fx 525): its dot
+    /// spacing in pixels grows with the focal length and shrinks with the depth.
+    #[test]
+    fn the_dot_spacing_is_the_rest_mouths_spacing_projected() {
+        let scene = Scene::calibrated();
+        let vga = DotSpacing::of_rest(&scene.rest, 525.0).unwrap();
+        let hd = DotSpacing::of_rest(&scene.rest, 1050.0).unwrap();
+        let px = vga.px(0.6);
+        assert!((7.0..11.0).contains(&px), "{px}");
+        assert!((hd.px(0.6) - 2.0 * px).abs() < 1e-9);
+        assert!((vga.px(1.2) - px / 2.0).abs() < 1e-9);
+        assert!(DotSpacing::of_rest(&scene.rest[..1], 525.0).is_none());
+        assert!(DotSpacing::of_rest(&scene.rest, 0.0).is_none());
+    }
+
+    /// Gates' floor: D1's and D2's predictions crowd (half a pixel apart), so their gates
+    /// are the floor, [`TrackConfig::min_gate_spacings`] dot spacings at the dot's depth:
+    /// twice the pixels with twice the focal length (1280x720 against 640x480), half at
+    /// twice the depth; the same share of the mouth at any resolution and distance.
+    #[test]
+    fn the_gates_floor_is_a_share_of_the_dot_spacing() {
+        let scene = Scene::calibrated();
+        let mut preds = scene.rest_pixels()[..12].to_vec();
+        preds[1] = [preds[0][0] + 0.5, preds[0][1]];
+        let floor = |tracks: &[DotTrack], fx: f64| {
+            let spacing = DotSpacing::of_rest(&scene.rest, fx);
+            let gates = gated(
+                &scene.config,
+                &preds,
+                tracks,
+                Slot::Lip,
+                &RigidTransform::IDENTITY,
+                spacing,
+            );
+            (gates[0].gate_px, spacing.unwrap().px(tracks[0].depth))
+        };
+        let (vga, spacing) = floor(&scene.tracks[..12], 525.0);
+        assert!((vga - scene.config.min_gate_spacings * spacing).abs() < 1e-9);
+        assert!((2.5..4.0).contains(&vga), "{vga} px at 640x480, 0.6 m");
+        let (hd, _) = floor(&scene.tracks[..12], 1050.0);
+        assert!((hd - 2.0 * vga).abs() < 1e-9, "{hd} against {vga}");
+        let mut far = scene.tracks[..12].to_vec();
+        far.iter_mut().for_each(|t| t.depth *= 2.0);
+        let (at_far, _) = floor(&far, 525.0);
+        assert!((at_far - vga / 2.0).abs() < 1e-9, "{at_far} against {vga}");
+    }
+
+    /// The search region's margin is [`TrackConfig::roi_margin_spacings`] dot spacings at
+    /// the lips' depth: with twice the focal length (the same dots' pixels), twice the
+    /// pixels around them.
+    #[test]
+    fn the_search_margin_is_in_dot_spacings() {
+        let scene = Scene::calibrated();
+        let tracks = Tracks {
+            dots: Some(scene.tracks.clone()),
+            rest: scene.rest.clone(),
+            ..Tracks::default()
+        };
+        let config = &scene.config;
+        let image = [4000, 4000];
+        let rect = |fx: f64| tracks.search_region(config, 1.0, image, fx).unwrap();
+        let (vga, hd) = (rect(525.0), rect(1050.0));
+        let spacing = DotSpacing::of_rest(&scene.rest, 525.0).unwrap().px(0.6);
+        let margin = config.roi_margin_spacings * spacing;
+        assert!(
+            (15.0..25.0).contains(&margin),
+            "{margin} px at 640x480, 0.6 m"
+        );
+        // The dots' box is the same; the margin on each side doubled (to the pixel).
+        let grown = (hd.width - vga.width) as f64 / 2.0;
+        assert!((grown - margin).abs() <= 1.0, "{grown} against {margin}");
+    }
+
+    /// *Corners a line apart*: corners 5 px apart are a line where the dots are 4 px apart,
+    /// and none where they are 8 px apart (the same predictions seen from twice as near).
+    #[test]
+    fn corners_a_line_apart_are_measured_in_dot_spacings() {
+        let layout = PerformerLayout::default();
+        let mut pixels = vec![[100.0, 100.0]; layout.lip_dots];
+        pixels[layout.right_corner()] = [95.0, 100.0];
+        assert!(CornerLine::measurable(&pixels, &layout, 4.0).is_some());
+        assert!(CornerLine::measurable(&pixels, &layout, 8.0).is_none());
+        assert!(CornerLine::of(&pixels, &layout).is_some());
     }
 }

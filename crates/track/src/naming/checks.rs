@@ -13,7 +13,8 @@ use crate::Vec3;
 
 /// In the neutral mouth frame a corner stays out beyond its two neighbours, and each
 /// upper-lip dot above the lower-lip dot opposite it, by at least this share of their gap at
-/// rest (12 sessions: wrong names 136 → 25 with the check).
+/// rest: speech narrows those gaps but never turns them over, so a name that does is on
+/// another dot's blob (the check's measurement: docs/lab/detection-log.md).
 pub const NEIGHBOUR_MARGIN: f64 = 0.4;
 
 /// A dot unseen for at most this many frames is taken to be where it was last seen.

@@ -63,6 +63,19 @@ impl Context<'_> {
     pub(crate) fn dot_radius_px(&self, z: f64) -> f64 {
         self.sensor.dot_radius_px(z)
     }
+
+    /// The dot spacing of the lips at rest ([`prediction::DotSpacing`]); `None` before any
+    /// names.
+    pub(crate) fn spacing(&self) -> Option<prediction::DotSpacing> {
+        prediction::DotSpacing::of_rest(self.head.rest, self.sensor.k.fx)
+    }
+
+    /// The smallest gate around a prediction at depth `z`, pixels
+    /// ([`TrackConfig::min_gate_spacings`]; 0 without a spacing).
+    pub(crate) fn min_gate_px(&self, z: f64) -> f64 {
+        self.spacing()
+            .map_or(0.0, |s| self.config.min_gate_spacings * s.px(z))
+    }
 }
 
 /// The frame's candidates: the detector's blobs with a depth, then those a step made (split
@@ -388,6 +401,7 @@ fn assign_forehead(
         &ctx.tracks[n..],
         Slot::Forehead,
         &ctx.head.last,
+        ctx.spacing(),
     );
     let forehead = labels::assign(&gates, cands, &taken, solver);
     let (from, to): (Small<crate::Vec3>, Small<crate::Vec3>) = forehead
@@ -412,7 +426,14 @@ pub(crate) fn checked_pass(
 ) -> (Pass, NameSet) {
     let n = ctx.layout.lip_dots;
     let preds = prediction::lip_predictions(ctx, &head, motion);
-    let gates = prediction::gated(ctx.config, &preds, &ctx.tracks[..n], Slot::Lip, &head);
+    let gates = prediction::gated(
+        ctx.config,
+        &preds,
+        &ctx.tracks[..n],
+        Slot::Lip,
+        &head,
+        ctx.spacing(),
+    );
     let mut names = NameSet::of(
         std::iter::repeat_n(None, n).chain(forehead.iter().copied()),
         cands.len(),

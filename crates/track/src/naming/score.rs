@@ -135,14 +135,7 @@ pub fn motion_term(distance_px: f64, spacing_px: f64) -> f64 {
 /// The neutral mouth's mean distance between neighbouring lip dots, metres; `None` before the
 /// neutral pose is taken.
 pub(crate) fn neutral_spacing_m(ctx: &Context) -> Option<f64> {
-    let lip = &ctx.neutral?.lip;
-    let n = lip.len();
-    (n >= 2).then(|| {
-        (0..n)
-            .map(|i| (lip[(i + 1) % n] - lip[i]).norm())
-            .sum::<f64>()
-            / n as f64
-    })
+    crate::prediction::mean_neighbour_distance(&ctx.neutral?.lip)
 }
 
 /// The dot spacing in pixels at depth `z`: the neutral mouth's spacing projected there, or,

@@ -1,6 +1,6 @@
 //! Faint corners: a mouth corner the names left missing may show only a speck of paint (the
 //! corner of the mouth folds in over it). A faint blob (smaller than a dot, see
-//! [`mouthpiece_detect::Detections::faint`]) within `min_gate_px` of where the corner is
+//! [`mouthpiece_detect::Detections::faint`]) within `min_gate_spacings` of where the corner is
 //! predicted (moving on or stopped), at the corner's depth (`lip_depth_gate_m`), names it,
 //! if the corner checks still hold with it (one transaction: otherwise nothing of it
 //! stays). Only corners seen within the last [`FAINT_CORNER_MISSING_FRAMES`]: elsewhere on
@@ -57,7 +57,7 @@ impl Step for FaintCorners {
                 .iter()
                 .filter_map(|q| camera::project(k, &head.apply(q)))
                 .collect();
-            let gate = ctx.config.min_gate_px;
+            let gate = ctx.min_gate_px(track.depth);
             let nearest = faint
                 .iter()
                 .filter(|b| matches!(ctx.roles[b.class], DotRole::Lip | DotRole::Any))

@@ -29,7 +29,7 @@ use super::{
 use crate::labels::{Candidate, Small};
 use crate::naming::checks::{blob_and_paint_area, depth_window};
 use crate::naming::{checked_pass, score};
-use crate::prediction::{lip_predictions, CornerLine, LipMotion};
+use crate::prediction::{lip_predictions, lips_depth, CornerLine, LipMotion};
 
 /// Farthest a lower-lip dot that is missing or on a ghost is looked for beyond its
 /// prediction when the jaw jumps, in dot spacings ([`score::spacing_px`] at the dot's last
@@ -260,7 +260,8 @@ fn whole_lip_shift(
 /// predicted corners (`preds`, layout order) is more than [`ALONG_LIP_SHARE`] of the lip
 /// dots' spacing. Corners too close to give a line: no.
 fn runs_along_the_lip(ctx: &Context, preds: &[[f64; 2]], shift: [f64; 2]) -> bool {
-    CornerLine::measurable(preds, &ctx.layout)
+    let spacing = score::spacing_px(ctx, preds, lips_depth(ctx));
+    CornerLine::measurable(preds, &ctx.layout, spacing)
         .is_some_and(|line| line.runs_along(&shift, ctx.layout.lip_dots, ALONG_LIP_SHARE))
 }
 

@@ -19,8 +19,10 @@ use crate::naming::checks::blob_and_paint_area;
 /// A neighbour that moved less than its gate pulls a dot only to a blob within this share
 /// of the gate of where its motion points ...
 pub const NEAR_REACH_SHARE: f64 = 0.25;
-/// ... and only when the two misses differ by more than this share of the gate (a ghost
-/// nearer the prediction than the dot wins the assignment; 12 sessions: wrong names 13 → 8).
+/// ... and only when the two misses differ by more than this share of the gate: a ghost
+/// nearer the prediction than the dot wins the assignment, and a neighbour's motion that
+/// differs from the dot's by less is the lip's own bend (the measurement:
+/// docs/lab/detection-log.md).
 pub const NEAR_APART_SHARE: f64 = 0.5;
 
 /// A neighbour named on a blob of at least this many dots' area leads no one (named

@@ -170,7 +170,14 @@ pub(crate) fn name_moved(
     for &(i, p) in moved {
         all[i] = p;
     }
-    let gates = prediction::gated(ctx.config, &all, &ctx.tracks[..n], Slot::Lip, &pass.head);
+    let gates = prediction::gated(
+        ctx.config,
+        &all,
+        &ctx.tracks[..n],
+        Slot::Lip,
+        &pass.head,
+        ctx.spacing(),
+    );
     let these: Small<labels::Prediction> = moved.iter().map(|&(i, _)| gates[i]).collect();
     let mut found = false;
     let assigned = labels::assign(&these, &cands.list, names.taken(), solver);

@@ -8,9 +8,9 @@
 
 use mouthpiece_detect::DotRole;
 
-use super::{name_moved, Candidates, Context, NameSet, Pass, Scratch, Step};
+use super::{name_moved, score, Candidates, Context, NameSet, Pass, Scratch, Step};
 use crate::labels::{self, Candidate, Small};
-use crate::prediction::CornerLine;
+use crate::prediction::{lips_depth, CornerLine};
 
 /// Largest part of a shift along the lip line, as a share of the spacing between lip dots
 /// (half the mouth's width over half the lip dots).
@@ -51,7 +51,8 @@ impl Step for ShiftAcrossLip {
             return false;
         }
         let preds = &pass.preds;
-        let Some(line) = CornerLine::measurable(preds, &ctx.layout) else {
+        let spacing = score::spacing_px(ctx, preds, lips_depth(ctx));
+        let Some(line) = CornerLine::measurable(preds, &ctx.layout, spacing) else {
             return false;
         };
         let list = &cands.list;

@@ -18,13 +18,15 @@ use crate::lip_depth::lip_depth;
 use crate::naming::checks::{self, depth_window, disc_area};
 use crate::prediction::{lip_predictions, LipMotion};
 
-/// A lip dot unseen for longer than this many frames is not looked for in a merged blob (a
-/// corner often comes back out of the mouth's fold merged with its neighbour; 12 sessions:
-/// wrong names 19 with 2 frames, 13 with 10).
+/// A lip dot unseen for longer than this many frames is not looked for in a merged blob: a
+/// corner often comes back out of the mouth's fold merged with its neighbour after several
+/// frames hidden, while a dot gone longer has no prediction worth splitting a blob for (the
+/// measurement: docs/lab/detection-log.md).
 pub const SPLIT_MISSING_FRAMES: u32 = 10;
 
-/// A blob of at least this many dots' area may hold two (a corner half folded away adds
-/// less than a dot; 1.5 at first: wrong names 8 → 5 with 1.2, 6 with 1.0).
+/// A blob of at least this many dots' area may hold two: a corner half folded away adds
+/// less than a whole dot to its neighbour's blob, and one dot's paint at a slant reaches
+/// little over its own area (the values tried: docs/lab/detection-log.md).
 pub const MERGED_AREA_DOTS: f64 = 1.2;
 
 /// Halves less than this many paint radii apart are one dot, not two.
@@ -71,7 +73,6 @@ impl Step for SplitMergedBlobs {
             .map(|t| depth_window(t, &head, ctx.config.lip_depth_gate_m))
             .collect();
         let real = cands.len();
-        let min_gate = ctx.config.min_gate_px;
         names.begin();
         let mut split_any = false;
         for i in 0..n {
@@ -79,6 +80,7 @@ impl Step for SplitMergedBlobs {
                 continue;
             }
             let p = preds[i];
+            let min_gate = ctx.min_gate_px(tracks[i].depth);
             // From its prediction or, if that overshot (a velocity measured on merged blobs
             // is poor), from where it was last seen.
             let last = last_seen[i];

@@ -219,7 +219,15 @@ impl Scene {
     pub fn pass(&self, preds: &[[f64; 2]], cands: &Candidates) -> Pass {
         let preds: Small<[f64; 2]> = preds[..12].iter().copied().collect();
         let head = RigidTransform::IDENTITY;
-        let gates = prediction::gated(&self.config, &preds, &self.tracks[..12], Slot::Lip, &head);
+        let spacing = self.ctx().spacing();
+        let gates = prediction::gated(
+            &self.config,
+            &preds,
+            &self.tracks[..12],
+            Slot::Lip,
+            &head,
+            spacing,
+        );
         Pass {
             head,
             forehead: (0..cands.len())
