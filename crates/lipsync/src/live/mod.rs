@@ -196,3 +196,83 @@ impl LiveAnalyser {
         &self.weights
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::time::Instant;
+
+    use mouthpiece_frame::audio::AudioFormat;
+
+    use super::*;
+    use crate::take::{DEFAULT_CLASSES, DEFAULT_CLASSES_NAME};
+
+    fn analyser() -> LiveAnalyser {
+        let table = ClassTable::from_toml_str(DEFAULT_CLASSES, DEFAULT_CLASSES_NAME).unwrap();
+        let profiles = Profiles::from_toml_str(SHIPPED_PROFILES, "shipped").unwrap();
+        LiveAnalyser::new(table, &profiles, LiveSettings::default()).unwrap()
+    }
+
+    fn block(first_frame: u64, rate: u32, samples: Vec<i16>) -> AudioBlock {
+        AudioBlock {
+            seq: 0,
+            first_frame,
+            format: AudioFormat {
+                sample_rate: rate,
+                channels: 1,
+            },
+            samples,
+            host_rx: Instant::now(),
+            wall_clock: None,
+        }
+    }
+
+    #[test]
+    fn silence_is_the_silence_class_with_a_neutral_mouth_every_10_ms() {
+        let mut a = analyser();
+        let mut steps = Vec::new();
+        for k in 0..10 {
+            a.push(&block(k * 4800, 48_000, vec![0; 4800]), &mut steps)
+                .unwrap();
+        }
+        // 1 s of sound: a step every 10 ms once the first 25 ms window is full.
+        assert_eq!(steps.len(), 98);
+        assert!(steps.iter().all(|s| s.class == a.table().silence()));
+        assert!(steps.iter().all(|s| s.weights.iter().all(|w| *w == 0.0)));
+        assert!((steps[1].t - steps[0].t - 0.010).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_gap_in_the_stream_restarts_the_window() {
+        let mut a = analyser();
+        let mut steps = Vec::new();
+        a.push(&block(0, 16_000, vec![0; 1600]), &mut steps).unwrap();
+        let before = steps.len();
+        // 1 s missing: the next window needs 25 ms of new sound before its first step.
+        a.push(&block(17_600, 16_000, vec![0; 400]), &mut steps)
+            .unwrap();
+        assert_eq!(steps.len(), before + 1);
+        assert_eq!(steps.last().unwrap().frame, 17_999);
+    }
+
+    #[test]
+    fn a_sample_rate_outside_the_range_is_an_error_naming_it() {
+        let mut a = analyser();
+        let e = a
+            .push(&block(0, 8_000, vec![0; 80]), &mut Vec::new())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("8000 Hz"), "{e}");
+    }
+
+    #[test]
+    fn profiles_with_wrong_lengths_or_nan_are_refused() {
+        let bad_len = "version = 1\nlearned_on = \"x\"\n[[class]]\nname = \"open\"\nframes = 3\nmean = [0.0]\nvar = [1.0]\n";
+        let e = Profiles::from_toml_str(bad_len, "p.toml").unwrap_err().to_string();
+        assert!(e.contains("p.toml") && e.contains("class open"), "{e}");
+        let nan = SHIPPED_PROFILES.replacen("mean = [", "mean = [nan, ", 1);
+        let nan = nan.replacen(", ", "", 0);
+        assert!(Profiles::from_toml_str(&nan, "p.toml").is_err());
+        let unknown = "version = 1\nlearned_on = \"x\"\n[[class]]\nname = \"zz\"\nframes = 3\nmean = [0.0]\nvar = [1.0]\n";
+        assert!(Profiles::from_toml_str(unknown, "p.toml").is_err());
+    }
+}
