@@ -586,6 +586,7 @@ fn derive(
                     curve: c.curve.clone(),
                     head: c.head,
                     rig: c.rig,
+                    source: c.source,
                 }
             })
             .collect(),

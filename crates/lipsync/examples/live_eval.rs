@@ -77,6 +77,7 @@ fn main() {
         .iter()
         .map(|(n, t)| (*n, speak(t, dir.path(), n)))
         .collect();
+    let mut latency = Vec::new();
     println!("| rate | block | sentences | boundary median | boundary p90 | runs matched | class | shape class | processing per second of sound | p95 per block |");
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for (rate, factor, block) in [(16_000u32, 1usize, 160usize), (48_000, 3, 480), (48_000, 3, 960)] {
@@ -93,6 +94,20 @@ fn main() {
         }
         per_block.sort_by(f64::total_cmp);
         let p95 = per_block[(0.95 * (per_block.len() - 1) as f64).round() as usize];
+        // Sound → points: the analyser's onset lag (stream time), plus the wait for the block
+        // holding that sample (at most one block), plus processing, plus the mouth's move to
+        // halfway toward the new class (τ ln 2).
+        let block_s = block as f64 / f64::from(rate);
+        let halfway = LiveSettings::default().mouth_tau_s * std::f64::consts::LN_2;
+        latency.push(format!(
+            "| {} kHz | {:.0} ms | {:.1} ms | {:.1} ms | {:.1} ms | {:.1} ms |",
+            rate / 1000,
+            1e3 * block_s,
+            1e3 * m.lag(0.5),
+            1e3 * m.lag(0.95),
+            1e3 * (block_s + p95 + halfway),
+            1e3 * (m.lag(0.95) + block_s + p95 + halfway),
+        ));
         println!(
             "| {} kHz | {:.0} ms | {} | {:.1} ms | {:.1} ms | {:.0} % | {:.1} % | {:.1} % | {:.2} % of a core | {:.0} µs |",
             rate / 1000,
@@ -106,5 +121,11 @@ fn main() {
             100.0 * busy / sound,
             1e6 * p95,
         );
+    }
+    println!();
+    println!("| rate | block | onset lag median | onset lag p95 | block + processing p95 + mouth halfway | sound → points p95 |");
+    println!("|---|---|---|---|---|---|");
+    for l in latency {
+        println!("{l}");
     }
 }

@@ -22,25 +22,7 @@ pub enum SpeechMode {
     Always,
 }
 
-/// What drove a published step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum MouthSource {
-    Camera,
-    Speech,
-    Blend,
-}
-
-impl MouthSource {
-    /// The name in the output (`"camera"`, `"speech"`, `"blend"`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            MouthSource::Camera => "camera",
-            MouthSource::Speech => "speech",
-            MouthSource::Blend => "blend",
-        }
-    }
-}
+pub use mouthpiece_output::MouthSource;
 
 /// Settings of one character's handover.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -201,6 +201,9 @@ pub struct Measures {
     pub boundary_errors: Vec<f64>,
     pub runs_matched: usize,
     pub truth_runs: usize,
+    /// Per matched run that is not silence: the first step giving its class minus the
+    /// truth's start, seconds (how long after the sound began the analyser said so).
+    pub onset_lags: Vec<f64>,
 }
 
 impl Measures {
@@ -217,6 +220,13 @@ impl Measures {
             return f64::NAN;
         }
         e[((q * (e.len() - 1) as f64).round() as usize).min(e.len() - 1)]
+    }
+    pub fn lag(&self, q: f64) -> f64 {
+        let mut e = self.onset_lags.clone();
+        e.sort_by(f64::total_cmp);
+        e.get(((q * (e.len().max(1) - 1) as f64).round()) as usize)
+            .copied()
+            .unwrap_or(f64::NAN)
     }
     pub fn matched_share(&self) -> f64 {
         self.runs_matched as f64 / self.truth_runs.max(1) as f64
@@ -305,6 +315,9 @@ pub fn measure(table: &ClassTable, phones: &[PhoneSpan], steps: &[LiveStep], m: 
             m.runs_matched += 1;
             m.boundary_errors.push((live[i].0 - truth[j].0).abs());
             m.boundary_errors.push((live[i].1 - truth[j].1).abs());
+            if truth[j].2 != table.silence() {
+                m.onset_lags.push(live[i].0 + hop - truth[j].0);
+            }
         }
     }
     m.truth_runs += truth.len();
