@@ -5,6 +5,7 @@
 //! `[track]` and `[retarget]` tables of a configuration file.
 
 pub mod handover;
+pub mod speech;
 
 use mouthpiece_config::{ConfigError, ConfigText};
 use mouthpiece_detect::DetectConfig;
