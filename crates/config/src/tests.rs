@@ -438,7 +438,10 @@ fn character_speech_settings_are_read_and_checked() {
     let human = config.characters.settings["human"];
     assert_eq!(human.speech, SpeechSetting::Fallback);
     assert_eq!((human.speech_hold_ms, human.speech_blend_ms), (250, 150));
-    assert_eq!(config.characters.settings["wolf"].speech, SpeechSetting::Always);
+    assert_eq!(
+        config.characters.settings["wolf"].speech,
+        SpeechSetting::Always
+    );
     let err = parse("[characters.settings.human]\nspeech = \"loud\"\n").unwrap_err();
     assert!(err.to_string().contains("test.toml:2:"), "{err}");
     assert!(err.to_string().contains("loud"), "{err}");

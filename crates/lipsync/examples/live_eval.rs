@@ -58,7 +58,10 @@ fn main() {
     );
     let profiles = learn(&table, &learning, &learned_on);
     if args.iter().any(|a| a == "--write") {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/lipsync/live_profiles.toml");
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../config/lipsync/live_profiles.toml"
+        );
         std::fs::write(
             path,
             profiles.to_toml_string(
@@ -80,7 +83,11 @@ fn main() {
     let mut latency = Vec::new();
     println!("| rate | block | sentences | boundary median | boundary p90 | runs matched | class | shape class | processing per second of sound | p95 per block |");
     println!("|---|---|---|---|---|---|---|---|---|---|");
-    for (rate, factor, block) in [(16_000u32, 1usize, 160usize), (48_000, 3, 480), (48_000, 3, 960)] {
+    for (rate, factor, block) in [
+        (16_000u32, 1usize, 160usize),
+        (48_000, 3, 480),
+        (48_000, 3, 960),
+    ] {
         let mut m = Measures::default();
         let (mut busy, mut sound, mut per_block) = (0.0, 0.0, Vec::new());
         for (_, line) in &lines {

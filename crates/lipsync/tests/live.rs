@@ -24,7 +24,11 @@ fn shipped_profiles_are_learned_from_the_learning_sentences() {
         assert_eq!(a.name, b.name);
         assert_eq!(a.frames, b.frames, "{}", a.name);
         for (x, y) in a.mean.iter().zip(&b.mean).chain(a.var.iter().zip(&b.var)) {
-            assert!((x - y).abs() <= 1e-3 * (1.0 + y.abs()), "{}: {x} vs {y}", a.name);
+            assert!(
+                (x - y).abs() <= 1e-3 * (1.0 + y.abs()),
+                "{}: {x} vs {y}",
+                a.name
+            );
         }
     }
     // The evaluation sentences are not among the learning ones.
@@ -60,9 +64,21 @@ fn held_out_sentences_keep_the_accuracy_floor_at_16_and_48_khz() {
             m.boundary(0.9),
             m.matched_share()
         );
-        assert!(m.class_share() >= FLOOR_CLASS, "{rate} Hz: class {}", m.class_share());
-        assert!(m.boundary(0.5) <= 0.030, "{rate} Hz: median {}", m.boundary(0.5));
-        assert!(m.matched_share() >= 0.8, "{rate} Hz: matched {}", m.matched_share());
+        assert!(
+            m.class_share() >= FLOOR_CLASS,
+            "{rate} Hz: class {}",
+            m.class_share()
+        );
+        assert!(
+            m.boundary(0.5) <= 0.030,
+            "{rate} Hz: median {}",
+            m.boundary(0.5)
+        );
+        assert!(
+            m.matched_share() >= 0.8,
+            "{rate} Hz: matched {}",
+            m.matched_share()
+        );
     }
 }
 

@@ -208,16 +208,42 @@ mod tests {
                 assert_eq!(m.source, MouthSource::Camera, "t {t}");
             }
         }
-        let first_blend = lost.iter().find(|(_, m)| m.source != MouthSource::Camera).unwrap();
-        assert!((first_blend.0 - 1.3).abs() < 1.0 / 60.0 + 1e-9, "{}", first_blend.0);
-        let speech_from = lost.iter().find(|(_, m)| m.source == MouthSource::Speech).unwrap().0;
-        assert!((speech_from - 1.45).abs() < 1.0 / 60.0 + 1e-9, "{speech_from}");
+        let first_blend = lost
+            .iter()
+            .find(|(_, m)| m.source != MouthSource::Camera)
+            .unwrap();
+        assert!(
+            (first_blend.0 - 1.3).abs() < 1.0 / 60.0 + 1e-9,
+            "{}",
+            first_blend.0
+        );
+        let speech_from = lost
+            .iter()
+            .find(|(_, m)| m.source == MouthSource::Speech)
+            .unwrap()
+            .0;
+        assert!(
+            (speech_from - 1.45).abs() < 1.0 / 60.0 + 1e-9,
+            "{speech_from}"
+        );
         let back = run(&mut h, 2.0, 0.5, false, true);
         assert_eq!(back[0].1.source, MouthSource::Blend);
-        let camera_from = back.iter().find(|(_, m)| m.source == MouthSource::Camera).unwrap().0;
-        assert!((camera_from - 2.15).abs() < 1.0 / 60.0 + 1e-9, "{camera_from}");
+        let camera_from = back
+            .iter()
+            .find(|(_, m)| m.source == MouthSource::Camera)
+            .unwrap()
+            .0;
+        assert!(
+            (camera_from - 2.15).abs() < 1.0 / 60.0 + 1e-9,
+            "{camera_from}"
+        );
         // The weight never moves more than a smoothstep's steepest slope allows per step.
-        let all: Vec<f64> = seen.iter().chain(&lost).chain(&back).map(|(_, m)| m.speech).collect();
+        let all: Vec<f64> = seen
+            .iter()
+            .chain(&lost)
+            .chain(&back)
+            .map(|(_, m)| m.speech)
+            .collect();
         let bound = 1.5 / 0.15 / 60.0 + 1e-9;
         for w in all.windows(2) {
             assert!((w[1] - w[0]).abs() <= bound, "{} -> {}", w[0], w[1]);
@@ -231,7 +257,10 @@ mod tests {
         let before = h.step(0.4, true, true).speech;
         assert!(before > 0.0 && before < 1.0);
         let after = h.step(0.4 + 1.0 / 60.0, false, true).speech;
-        assert!(after < before && before - after < 0.2, "{before} -> {after}");
+        assert!(
+            after < before && before - after < 0.2,
+            "{before} -> {after}"
+        );
     }
 
     #[test]
@@ -247,10 +276,13 @@ mod tests {
         let mut h = fallback();
         for k in 0..10 {
             let t0 = k as f64 * 0.5;
-            for (_, m) in run(&mut h, t0, 0.25, true, true)
-                .into_iter()
-                .chain(run(&mut h, t0 + 0.25, 0.25, false, true))
-            {
+            for (_, m) in run(&mut h, t0, 0.25, true, true).into_iter().chain(run(
+                &mut h,
+                t0 + 0.25,
+                0.25,
+                false,
+                true,
+            )) {
                 assert_eq!(m.source, MouthSource::Camera);
             }
         }

@@ -65,7 +65,8 @@ impl SpeechDriver {
             mouthpiece_lipsync::live::SHIPPED_PROFILES,
             "config/lipsync/live_profiles.toml",
         )?;
-        let analyser = LiveAnalyser::new(tables.classes.clone(), &profiles, LiveSettings::default())?;
+        let analyser =
+            LiveAnalyser::new(tables.classes.clone(), &profiles, LiveSettings::default())?;
         let mouths = characters
             .iter()
             .map(|(c, h)| {

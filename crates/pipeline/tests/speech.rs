@@ -83,8 +83,7 @@ fn fallback_keeps_the_mouth_moving_while_the_dots_are_lost_and_hands_back_withou
         curve: Vec::new(),
         head: Default::default(),
     };
-    let (mut previous, mut last_camera): (Option<Vec<Vec3>>, Vec<Vec3>) =
-        (None, neutral.clone());
+    let (mut previous, mut last_camera): (Option<Vec<Vec3>>, Vec<Vec3>) = (None, neutral.clone());
     let mut rows = Vec::new();
     let n = (seconds * 60.0) as usize;
     let lowest = neutral.iter().map(|p| p.y).fold(f64::MAX, f64::min);
@@ -153,7 +152,10 @@ fn fallback_keeps_the_mouth_moving_while_the_dots_are_lost_and_hands_back_withou
     // camera's opening plus speech's). Without the blend the first step would cover the
     // whole distance, at least CAMERA_OPEN - hi.
     let blend_move = 1.5 / (settings.blend_s * 60.0) * (CAMERA_OPEN + 0.002 + hi);
-    assert!(CAMERA_OPEN - hi > normal + blend_move, "the test's sources are too close");
+    assert!(
+        CAMERA_OPEN - hi > normal + blend_move,
+        "the test's sources are too close"
+    );
     for (from, to) in [
         (lost_from + 0.25, lost_from + 0.5),
         (lost_to - 0.05, lost_to + 0.2),

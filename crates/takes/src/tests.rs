@@ -180,7 +180,11 @@ fn the_rig_is_recorded_per_frame_once_there_is_one() {
     for m in &messages {
         let seq = m["seq"].as_u64().unwrap();
         // Which source drove the mouth is recorded with every frame.
-        assert_eq!(m["source"], if seq < 5 { "camera" } else { "speech" }, "{m}");
+        assert_eq!(
+            m["source"],
+            if seq < 5 { "camera" } else { "speech" },
+            "{m}"
+        );
         if seq < 5 {
             // Before the neutral pose: no `rig` key at all (as in takes made before the
             // rig existed), and the rest of the message as ever.

@@ -80,9 +80,7 @@ impl FeatureExtractor {
         let hop = (HOP_S * sr).round() as usize;
         let n = len.next_power_of_two();
         let window = (0..len)
-            .map(|i| {
-                0.54 - 0.46 * (2.0 * std::f64::consts::PI * i as f64 / (len - 1) as f64).cos()
-            })
+            .map(|i| 0.54 - 0.46 * (2.0 * std::f64::consts::PI * i as f64 / (len - 1) as f64).cos())
             .collect();
         let fft = RealFftPlanner::<f64>::new().plan_fft_forward(n);
         let bins = n / 2 + 1;
@@ -184,11 +182,9 @@ impl FeatureExtractor {
             *v = 0.0;
         }
         // The buffers are sized by the plan: processing cannot fail.
-        let _ = self.fft.process_with_scratch(
-            &mut self.input,
-            &mut self.spectrum,
-            &mut self.scratch,
-        );
+        let _ =
+            self.fft
+                .process_with_scratch(&mut self.input, &mut self.spectrum, &mut self.scratch);
         let mut logmel = [0.0; MEL_BANDS];
         for (b, (first, weights)) in self.bands.iter().enumerate() {
             let e: f64 = weights

@@ -82,7 +82,11 @@ pub struct LiveAnalyser {
 
 impl LiveAnalyser {
     /// An analyser for a class table and profiles bound to it.
-    pub fn new(table: ClassTable, profiles: &Profiles, settings: LiveSettings) -> Result<Self, Error> {
+    pub fn new(
+        table: ClassTable,
+        profiles: &Profiles,
+        settings: LiveSettings,
+    ) -> Result<Self, Error> {
         let bound = profiles.bind(&table, "live profiles")?;
         let k = table.len();
         let p = table.poses.len();
@@ -138,7 +142,10 @@ impl LiveAnalyser {
             if let Some(f) = feature {
                 let class = self.classify(&f);
                 let a = 1.0 - (-HOP_S / self.settings.mouth_tau_s.max(1e-6)).exp();
-                for (w, target) in self.weights.iter_mut().zip(&self.table.classes[class].target)
+                for (w, target) in self
+                    .weights
+                    .iter_mut()
+                    .zip(&self.table.classes[class].target)
                 {
                     *w += (target - *w) * a;
                 }
@@ -174,8 +181,8 @@ impl LiveAnalyser {
                 *x
             };
         }
-        let quiet = f.level_db < self.settings.gate_db
-            || f.relative_db < self.settings.relative_gate_db;
+        let quiet =
+            f.level_db < self.settings.gate_db || f.relative_db < self.settings.relative_gate_db;
         self.class = if quiet {
             self.table.silence()
         } else {
@@ -245,7 +252,8 @@ mod tests {
     fn a_gap_in_the_stream_restarts_the_window() {
         let mut a = analyser();
         let mut steps = Vec::new();
-        a.push(&block(0, 16_000, vec![0; 1600]), &mut steps).unwrap();
+        a.push(&block(0, 16_000, vec![0; 1600]), &mut steps)
+            .unwrap();
         let before = steps.len();
         // 1 s missing: the next window needs 25 ms of new sound before its first step.
         a.push(&block(17_600, 16_000, vec![0; 400]), &mut steps)
@@ -267,7 +275,9 @@ mod tests {
     #[test]
     fn profiles_with_wrong_lengths_or_nan_are_refused() {
         let bad_len = "version = 1\nlearned_on = \"x\"\n[[class]]\nname = \"open\"\nframes = 3\nmean = [0.0]\nvar = [1.0]\n";
-        let e = Profiles::from_toml_str(bad_len, "p.toml").unwrap_err().to_string();
+        let e = Profiles::from_toml_str(bad_len, "p.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("p.toml") && e.contains("class open"), "{e}");
         let nan = SHIPPED_PROFILES.replacen("mean = [", "mean = [nan, ", 1);
         let nan = nan.replacen(", ", "", 0);

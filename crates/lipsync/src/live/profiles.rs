@@ -41,9 +41,12 @@ pub struct Profiles {
 /// Profiles bound to a class table: per class index, its profile and log prior.
 #[derive(Debug, Clone)]
 pub struct Bound {
-    /// Per class of the table: (mean, 1/var, constant term) or `None` for a class never seen.
-    models: Vec<Option<([f64; FEATURES], [f64; FEATURES], f64)>>,
+    /// Per class of the table, or `None` for a class never seen.
+    models: Vec<Option<Model>>,
 }
+
+/// One class's profile ready to score: mean, 1/var, constant term (log prior − ½ Σ ln var).
+type Model = ([f64; FEATURES], [f64; FEATURES], f64);
 
 impl Profiles {
     /// Parses and checks a profile file; `source_name` names it in errors.
@@ -74,7 +77,9 @@ impl Profiles {
                 )));
             }
             if c.mean.iter().any(|v| !v.is_finite() || v.abs() > 1e6)
-                || c.var.iter().any(|v| !v.is_finite() || *v <= 0.0 || *v > 1e6)
+                || c.var
+                    .iter()
+                    .any(|v| !v.is_finite() || *v <= 0.0 || *v > 1e6)
             {
                 return Err(bad(format!(
                     "class {}: means must be finite and variances finite and positive (at most 1e6)",

@@ -17,7 +17,10 @@ use mouthpiece_lipsync::{ClassTable, PhoneSpan};
 
 /// The evaluation sentences of bench/lipsync_accuracy.py: never learned from.
 pub const EVALUATION: [(&str, &str); 8] = [
-    ("sa1", "She had your dark suit in greasy wash water all year."),
+    (
+        "sa1",
+        "She had your dark suit in greasy wash water all year.",
+    ),
     ("sa2", "Don't ask me to carry an oily rag like that."),
     ("s3", "The birch canoe slid on the smooth planks."),
     ("s4", "Glue the sheet to the dark blue background."),
@@ -105,7 +108,11 @@ pub fn speak(text: &str, dir: &Path, name: &str) -> Spoken {
         .arg(&scm)
         .output()
         .expect("festival (Debian festival + festvox-kallpc16k) must be installed");
-    assert!(out.status.success(), "festival: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "festival: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let mut reader = hound::WavReader::open(&wav).unwrap();
     let spec = reader.spec();
     let samples: Vec<i16> = reader
@@ -305,11 +312,13 @@ pub fn measure(table: &ClassTable, phones: &[PhoneSpan], steps: &[LiveStep], m: 
     }
     let hop = steps.get(1).map_or(0.01, |s| s.t - steps[0].t);
     let live = runs(steps.iter().map(|s| (s.t - hop, s.t, s.class)));
-    let truth = runs(
-        phones
-            .iter()
-            .map(|p| (p.start, p.end, table.class_of(&p.phone).unwrap_or(table.silence()))),
-    );
+    let truth = runs(phones.iter().map(|p| {
+        (
+            p.start,
+            p.end,
+            table.class_of(&p.phone).unwrap_or(table.silence()),
+        )
+    }));
     for (i, j) in align(&live, &truth) {
         if live[i].2 == truth[j].2 {
             m.runs_matched += 1;
