@@ -260,8 +260,8 @@ fn align(a: &[(f64, f64, usize)], b: &[(f64, f64, usize)]) -> Vec<(usize, usize)
     for (i, row) in cost.iter_mut().enumerate() {
         row[0] = i as f64;
     }
-    for j in 0..=m {
-        cost[0][j] = j as f64;
+    for (j, c) in cost[0].iter_mut().enumerate() {
+        *c = j as f64;
     }
     let sub = |i: usize, j: usize| if a[i].2 == b[j].2 { 0.0 } else { 1.0 };
     for i in 1..=n {
