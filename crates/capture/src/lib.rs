@@ -19,16 +19,24 @@
 //! - `mcap_replay`: MCAP session replay through the recording crate (feature `mcap`).
 //! - [`record`]: `mouthpiece record` (any source to MCAP; OpenNI2 sources to `.oni`).
 //! - `devices`: what `mouthpiece devices` lists.
+//! - `alsa`: the microphone through ALSA, an [`mouthpiece_frame::AudioSource`] (feature `alsa`).
 //!
 //! This crate has no `unsafe`: all native calls live in `mouthpiece-openni2` and `v4l`.
 
 #![forbid(unsafe_code)]
 // Helpers shared by the backends go unused when a backend feature is off.
 #![cfg_attr(
-    not(all(feature = "openni2", feature = "v4l2", feature = "mcap")),
+    not(all(
+        feature = "openni2",
+        feature = "v4l2",
+        feature = "mcap",
+        feature = "alsa"
+    )),
     allow(dead_code)
 )]
 
+#[cfg(feature = "alsa")]
+pub mod alsa;
 pub mod convert;
 pub mod devices;
 pub mod pace;

@@ -30,11 +30,13 @@ use std::path::{Path, PathBuf};
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 
+mod audio;
 mod locate;
 mod sections;
 mod text;
 mod tokens;
 
+pub use audio::*;
 pub(crate) use locate::{invalid, line_col, span_of_key, state_directory};
 pub use locate::{read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
 pub use sections::*;
@@ -153,6 +155,8 @@ pub struct Config {
     pub rig: toml::Table,
     /// OSC / VMC protocol output to avatar apps and engines (docs/osc.md).
     pub osc: OscConfig,
+    /// The booth's microphone (`[audio]`, docs/daemon.md); `None` (no table): no audio.
+    pub audio: Option<AudioConfig>,
     /// Where this configuration came from, with its text (for [`Config::extract`]).
     #[serde(skip)]
     pub origin: Origin,
@@ -172,6 +176,7 @@ impl Default for Config {
             retarget: toml::Table::new(),
             rig: toml::Table::new(),
             osc: OscConfig::default(),
+            audio: None,
             origin: Origin::Embedded,
         }
     }
@@ -396,6 +401,9 @@ impl Config {
             }
             targets.push(target);
         }
+        if let Some(audio) = &self.audio {
+            audio.check().map_err(|(key, message)| fail(key, message))?;
+        }
         if let Some(name) = self.osc.characters.keys().find(|n| n.is_empty()) {
             return Err(fail(
                 "osc.characters",
@@ -538,7 +546,7 @@ impl Config {
             each.join(", ")
         };
         format!(
-            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, tokens: read {}, control {}",
+            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, audio {}, tokens: read {}, control {}",
             self.origin.describe(),
             self.source.spec.0,
             self.server.listen.0,
@@ -546,6 +554,10 @@ impl Config {
             self.takes.folder.display(),
             self.timecode.rate.0,
             osc,
+            match &self.audio {
+                Some(a) => format!("{} ({} Hz, {} ch)", a.device, a.sample_rate, a.channels),
+                None => "off".to_owned(),
+            },
             if self.server.tokens.read.is_some() { "set" } else { "none" },
             if self.server.tokens.control.is_some() { "set" } else { "none" },
         )

@@ -460,4 +460,58 @@ fn character_speech_settings_are_read_and_checked() {
     );
     let err = parse("[characters.settings.human]\nspeech_hold_ms = -1\n").unwrap_err();
     assert!(err.to_string().contains("speech_hold_ms"), "{err}");
+
+#[test]
+fn audio_is_off_when_absent_and_defaults_when_present() {
+    assert_eq!(parse("").unwrap().audio, None);
+    let audio = parse("[audio]\n").unwrap().audio.unwrap();
+    assert_eq!(audio, AudioConfig::default());
+    assert_eq!(
+        (audio.device.as_str(), audio.sample_rate, audio.channels),
+        ("default", 48_000, 1)
+    );
+    let audio = parse("[audio]\ndevice = \"booth\"\nsample_rate = 44100\nchannels = 2\nperiod_frames = 256\nbuffer_frames = 1024\n")
+        .unwrap()
+        .audio
+        .unwrap();
+    assert_eq!((audio.sample_rate, audio.channels), (44_100, 2));
+}
+
+#[test]
+fn absurd_audio_formats_name_their_key_and_line() {
+    for (text, key, line) in [
+        ("[audio]\nsample_rate = 0\n", "audio.sample_rate", 2),
+        (
+            "[audio]\ndevice = \"x\"\nsample_rate = 10000000\n",
+            "audio.sample_rate",
+            3,
+        ),
+        ("[audio]\nchannels = 0\n", "audio.channels", 2),
+        ("[audio]\nchannels = 300\n", "audio.channels", 2),
+        ("[audio]\nperiod_frames = 0\n", "audio.period_frames", 2),
+        (
+            "[audio]\nperiod_frames = 480\nbuffer_frames = 480\n",
+            "audio.buffer_frames",
+            3,
+        ),
+        ("[audio]\ndevice = \"\"\n", "audio.device", 2),
+        ("[audio]\nqueue_blocks = 0\n", "audio.queue_blocks", 2),
+        ("[audio]\nsample_rate = -1\n", "audio.sample_rate", 2),
+        ("[audio]\nsample_rat = 48000\n", "audio.sample_rat", 2),
+    ] {
+        let err = parse(text).unwrap_err();
+        assert_eq!(err.key(), Some(key), "{text}: {err}");
+        let shown = err.to_string();
+        assert!(
+            shown.starts_with(&format!("/etc/mouthpiece/test.toml:{line}:")),
+            "{text}: {shown}"
+        );
+    }
+    let long = format!("[audio]\ndevice = \"{}\"\n", "x".repeat(100_000));
+    let err = parse(&long).unwrap_err().to_string();
+    assert!(
+        err.len() < 400,
+        "the error does not echo the value: {} bytes",
+        err.len()
+    );
 }

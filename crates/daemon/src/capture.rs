@@ -27,3 +27,34 @@ pub fn check_spec(config: &Config) -> Result<(), CheckError> {
             message: crate::source::error_chain(&e),
         })
 }
+
+/// How the audio thread runs for `config`: the `[audio]` device when configured, else the
+/// sound of a `replay:` recording that has some, else `None` (no audio thread; `status`
+/// says `off`).
+pub fn audio_plan(config: &Config) -> Option<crate::audio::AudioPlan> {
+    let backoff = crate::backoff::Backoff::new(
+        config.source.retry_initial_s.duration(),
+        config.source.retry_max_s.duration(),
+    );
+    let throttle = config.logging.throttle_s.duration();
+    let audio = config.audio.as_ref()?;
+    let request = mouthpiece_capture::alsa::AlsaRequest {
+        device: audio.device.clone(),
+        sample_rate: audio.sample_rate,
+        // Checked in the config: 1 to 32.
+        channels: audio.channels as u16,
+        period_frames: audio.period_frames,
+        buffer_frames: audio.buffer_frames,
+        stall_timeout: config.source.stall_timeout_s.duration(),
+    };
+    Some(crate::audio::AudioPlan {
+        opener: Box::new(move || {
+            mouthpiece_capture::alsa::AlsaSource::open(&request)
+                .map(|s| Box::new(s) as Box<dyn mouthpiece_frame::AudioSource>)
+        }),
+        device: audio.device.clone(),
+        state_when_up: mouthpiece_server::AudioState::Live,
+        backoff,
+        throttle,
+    })
+}

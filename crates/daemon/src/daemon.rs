@@ -148,11 +148,24 @@ async fn serve<F: Factory>(
     )
     .map_err(DaemonError::Runtime)?;
 
+    // The microphone (or a replayed recording's sound) on a thread of its own.
+    let audio = crate::audio::AudioShared::new(hub.audio_counters());
+    let audio_thread = match crate::capture::audio_plan(&config) {
+        Some(plan) => Some(
+            crate::audio::spawn(plan, audio.clone(), hub.clone()).map_err(DaemonError::Runtime)?,
+        ),
+        None => None,
+    };
+    let audio_queue = config
+        .audio
+        .as_ref()
+        .map_or(200, |a| a.queue_blocks as usize);
+
     let (commands_tx, commands_rx) = crossbeam_channel::bounded(8);
     let epoch = Instant::now();
     let heartbeat = Arc::new(AtomicU64::new(0));
     let stop = Arc::new(AtomicBool::new(false));
-    let takes = Takes::new(TakeSettings {
+    let mut takes = Takes::new(TakeSettings {
         folder: config.takes.folder.clone(),
         flush: config.takes.flush_s.duration(),
         min_free_mb: config.takes.min_free_mb,
@@ -161,6 +174,9 @@ async fn serve<F: Factory>(
         max_write_bytes_s: (config.takes.max_write_mb_s > 0.0)
             .then_some(config.takes.max_write_mb_s * 1e6),
     });
+    if audio_thread.is_some() {
+        takes.set_audio(audio.bus.clone(), audio_queue);
+    }
     let processing = pipeline::spawn(
         processor,
         pipeline::Context {
@@ -253,6 +269,10 @@ async fn serve<F: Factory>(
                     died = Some("source");
                     break;
                 }
+                if audio_thread.as_ref().is_some_and(|t| t.is_finished()) {
+                    died = Some("audio");
+                    break;
+                }
                 // Ping only while the processing loop turns: a hung pipeline gets restarted.
                 let age = epoch.elapsed().as_millis() as u64 - heartbeat.load(Ordering::Relaxed).min(epoch.elapsed().as_millis() as u64);
                 if Duration::from_millis(age) < watchdog_every {
@@ -275,11 +295,12 @@ async fn serve<F: Factory>(
 
     let mut processing = Some(processing);
     let mut source_thread = Some(source_thread);
+    let mut audio_thread = audio_thread;
     let failure = died.map(|thread| {
-        let handle = if thread == "processing" {
-            processing.take()
-        } else {
-            source_thread.take()
+        let handle = match thread {
+            "processing" => processing.take(),
+            "audio" => audio_thread.take(),
+            _ => source_thread.take(),
         };
         let message = match handle.map(|h| h.join()) {
             Some(Err(payload)) => format!("panicked: {}", source::panic_message(&*payload)),
@@ -298,6 +319,7 @@ async fn serve<F: Factory>(
     let stopping = Instant::now();
     stop.store(true, Ordering::Release);
     shared.stop();
+    audio.stop();
     if let Some(processing) = processing {
         // The processing thread finishes the take before it ends: every queued frame
         // written, the file and its folder synced (its writer logs what was kept).
@@ -349,6 +371,21 @@ fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) ->
     if let Some(osc) = osc.status() {
         line.push_str("; ");
         line.push_str(&osc);
+    }
+    let status = hub.status();
+    match status.audio.state {
+        mouthpiece_server::AudioState::Off => {}
+        mouthpiece_server::AudioState::NoDevice => {
+            line.push_str("; ");
+            line.push_str(status.audio_message.as_deref().unwrap_or("no microphone"));
+        }
+        state => line.push_str(&format!(
+            "; audio {} ({}, {} Hz, {} ch)",
+            state.as_str(),
+            status.audio.device,
+            status.audio.sample_rate,
+            status.audio.channels
+        )),
     }
     line
 }

@@ -20,6 +20,7 @@
 //! Threads: the source thread, the processing thread, one take-writer thread while a take
 //! records, the OSC sender thread once `[osc]` has a target, and the async server's runtime. Only bounded queues connect them.
 
+pub mod audio;
 pub mod backoff;
 pub mod capture;
 pub mod characters;

@@ -18,9 +18,11 @@ use std::time::{Instant, SystemTime};
 use serde::{Deserialize, Serialize};
 
 pub mod audio;
+pub mod audio_bus;
 pub mod registration;
 
 pub use audio::{AudioBlock, AudioFormat, AudioSource, AudioSourceInfo};
+pub use audio_bus::{AudioBus, AudioEvent, AudioSubscription};
 
 /// Pinhole intrinsics of one camera, plus lens distortion in OpenCV's `plumb_bob` order.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -11,6 +11,8 @@
 pub const RAW_IMAGE_SCHEMA_NAME: &str = "foxglove_msgs/msg/RawImage";
 /// Foxglove `CompressedImage`, ROS 2 flavour.
 pub const COMPRESSED_IMAGE_SCHEMA_NAME: &str = "foxglove_msgs/msg/CompressedImage";
+/// Foxglove `RawAudio`, ROS 2 flavour.
+pub const RAW_AUDIO_SCHEMA_NAME: &str = "foxglove_msgs/msg/RawAudio";
 /// Foxglove `CameraCalibration`, ROS 2 flavour.
 pub const CAMERA_CALIBRATION_SCHEMA_NAME: &str = "foxglove_msgs/msg/CameraCalibration";
 
@@ -32,6 +34,14 @@ pub fn raw_image_schema() -> String {
 /// The `ros2msg` schema text of [`COMPRESSED_IMAGE_SCHEMA_NAME`].
 pub fn compressed_image_schema() -> String {
     format!("builtin_interfaces/Time timestamp\nstring frame_id\nuint8[] data\nstring format\n{TIME_DEFINITION}")
+}
+
+/// The `ros2msg` schema text of [`RAW_AUDIO_SCHEMA_NAME`].
+pub fn raw_audio_schema() -> String {
+    format!(
+        "builtin_interfaces/Time timestamp\nuint8[] data\nstring format\nuint32 sample_rate\n\
+         uint32 number_of_channels\n{TIME_DEFINITION}"
+    )
 }
 
 /// The `ros2msg` schema text of [`CAMERA_CALIBRATION_SCHEMA_NAME`].
@@ -82,6 +92,16 @@ pub struct CompressedImage {
     pub frame_id: String,
     pub data: Vec<u8>,
     pub format: String,
+}
+
+/// Foxglove `RawAudio`: `pcm-s16` is signed 16-bit little-endian, interleaved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawAudio {
+    pub timestamp: Time,
+    pub data: Vec<u8>,
+    pub format: String,
+    pub sample_rate: u32,
+    pub number_of_channels: u32,
 }
 
 /// Foxglove `CameraCalibration`.
@@ -296,6 +316,29 @@ impl CompressedImage {
             frame_id: r.string()?,
             data: r.bytes()?.to_vec(),
             format: r.string()?,
+        })
+    }
+}
+
+impl RawAudio {
+    pub fn encode(&self) -> Vec<u8> {
+        let mut w = Writer::with_capacity(self.data.len() + self.format.len() + 16);
+        w.time(self.timestamp);
+        w.bytes(&self.data);
+        w.string(&self.format);
+        w.u32(self.sample_rate);
+        w.u32(self.number_of_channels);
+        w.buf
+    }
+
+    pub fn decode(data: &[u8]) -> Result<Self, CdrError> {
+        let mut r = Reader::new(data)?;
+        Ok(Self {
+            timestamp: r.time()?,
+            data: r.bytes()?.to_vec(),
+            format: r.string()?,
+            sample_rate: r.u32()?,
+            number_of_channels: r.u32()?,
         })
     }
 }

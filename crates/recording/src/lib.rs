@@ -9,6 +9,7 @@
 //! | `/camera/color` | `foxglove_msgs/msg/CompressedImage` (jpeg) or `foxglove_msgs/msg/RawImage` (bgr8) (`ros2msg`) | `cdr` |
 //! | `/camera/depth` | `foxglove_msgs/msg/RawImage` 16UC1, device units (mm) (`ros2msg`) | `cdr` |
 //! | `/camera/calibration` | `foxglove_msgs/msg/CameraCalibration` (`ros2msg`) | `cdr` |
+//! | `/audio` | `foxglove_msgs/msg/RawAudio` `pcm-s16` (`ros2msg`) | `cdr` |
 //! | `/groundtruth/points` | `mouthpiece.GroundTruth` (`jsonschema`) | `json` |
 //! | anything else | whatever [`SessionWriter::write_json`] is given | `json` |
 //!
@@ -31,7 +32,10 @@ mod reader;
 mod writer;
 
 pub use ground_truth::{GroundTruth, HeadPose, MouthTruth};
-pub use reader::{MessageReader, RawMessage, SessionFrame, SessionReader};
+pub use reader::{
+    AudioMessage, AudioReader, MessageReader, RawMessage, SessionFrame, SessionReader,
+    MAX_AUDIO_CHANNELS, MAX_AUDIO_RATE,
+};
 pub use writer::{ColorEncoding, SessionSummary, SessionWriter, WriterOptions};
 
 /// Colour images.
@@ -40,6 +44,10 @@ pub const TOPIC_COLOR: &str = "/camera/color";
 pub const TOPIC_DEPTH: &str = "/camera/depth";
 /// Colour camera calibration (Foxglove `CameraCalibration`).
 pub const TOPIC_CALIBRATION: &str = "/camera/calibration";
+/// Sound (Foxglove `RawAudio`, `pcm-s16`).
+pub const TOPIC_AUDIO: &str = "/audio";
+/// Where a take's sound started, stopped and why (JSON).
+pub const TOPIC_AUDIO_EVENTS: &str = "/audio/events";
 /// Ground truth of synthetic sessions.
 pub const TOPIC_GROUND_TRUTH: &str = "/groundtruth/points";
 /// Metadata record with format version and the meaning of `log_time`.
@@ -114,6 +122,19 @@ pub enum RecordingError {
         #[source]
         source: mcap::McapError,
     },
+}
+
+/// `s` quoted for an error, cut to 80 characters.
+pub(crate) fn excerpt(s: &str) -> String {
+    if s.chars().count() <= 80 {
+        format!("{s:?}")
+    } else {
+        format!(
+            "{:?}… ({} bytes)",
+            s.chars().take(80).collect::<String>(),
+            s.len()
+        )
+    }
 }
 
 impl RecordingError {

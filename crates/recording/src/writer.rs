@@ -253,6 +253,41 @@ impl<W: Write + Seek> SessionWriter<W> {
         Ok(log_time)
     }
 
+    /// Writes sound on `/audio` (Foxglove `RawAudio`, `pcm-s16`): `samples` interleaved,
+    /// the first one at `log_time` (wall-clock ns, the frames' clock). Returns nothing to
+    /// keep: the channel is created on first use.
+    pub fn write_audio(
+        &mut self,
+        log_time: u64,
+        format: mouthpiece_frame::AudioFormat,
+        samples: &[i16],
+    ) -> Result<(), RecordingError> {
+        let mut data = Vec::with_capacity(samples.len() * 2);
+        for s in samples {
+            data.extend_from_slice(&s.to_le_bytes());
+        }
+        let payload = cdr::RawAudio {
+            timestamp: Time {
+                sec: (log_time / 1_000_000_000) as i32,
+                nanosec: (log_time % 1_000_000_000) as u32,
+            },
+            data,
+            format: "pcm-s16".into(),
+            sample_rate: format.sample_rate,
+            number_of_channels: u32::from(format.channels),
+        }
+        .encode();
+        let channel = self.channel(
+            crate::TOPIC_AUDIO,
+            cdr::RAW_AUDIO_SCHEMA_NAME,
+            "ros2msg",
+            cdr::raw_audio_schema().as_bytes(),
+            "cdr",
+        )?;
+        self.write_raw(channel, log_time, &payload)?;
+        self.maybe_flush(log_time)
+    }
+
     /// Writes a ground-truth message on `/groundtruth/points`.
     pub fn write_ground_truth(
         &mut self,

@@ -124,6 +124,10 @@ pub struct Status {
     pub calibration: Option<crate::console::CalibrationReport>,
     /// Takes recorded in this run of the daemon, oldest first.
     pub takes: Vec<crate::console::TakeSummary>,
+    /// The microphone: state, format, level meter (set by the daemon's audio thread).
+    pub audio: crate::audio::AudioStatus,
+    /// Why the configured microphone is not live (cannot be opened, lost).
+    pub audio_message: Option<String>,
 }
 
 /// A control action requested by a client.
@@ -262,6 +266,8 @@ pub(crate) struct HubInner {
     pub(crate) health: watch::Sender<crate::console::Health>,
     /// The daemon's OSC output counters (`/metrics`, `/healthz`).
     pub(crate) osc: Arc<crate::osc::OscCounters>,
+    /// The daemon's audio thread counters (`/metrics`).
+    pub(crate) audio: Arc<crate::audio::AudioCounters>,
 }
 
 impl Hub {
@@ -287,6 +293,7 @@ impl Hub {
                 preview: Arc::new(crate::preview::PreviewShared::new()),
                 health: watch::Sender::new(crate::console::Health::default()),
                 osc: Arc::default(),
+                audio: Arc::default(),
             }),
         };
         (hub, ControlReceiver { rx })
@@ -441,7 +448,13 @@ impl Hub {
         let mut text = self.inner.metrics.render();
         crate::preview::render_metrics(&self.inner.preview, &mut text);
         self.inner.osc.render_metrics(&mut text);
+        self.inner.audio.render_metrics(&mut text);
         text
+    }
+
+    /// The audio thread's counters, for the daemon's audio thread to update.
+    pub fn audio_counters(&self) -> Arc<crate::audio::AudioCounters> {
+        self.inner.audio.clone()
     }
 
     /// The OSC output's counters, for the daemon's OSC sender to update.

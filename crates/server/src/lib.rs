@@ -64,6 +64,7 @@
 //! - [`timecode`]: SMPTE time-of-day timecode.
 //! - [`loadgen`]: the load tool behind `mouthpiece-loadgen` and the load tests.
 
+pub mod audio;
 pub mod config;
 pub mod console;
 mod error;
@@ -84,6 +85,7 @@ mod session;
 pub mod timecode;
 mod tls;
 
+pub use audio::{AudioCounters, AudioState, AudioStatus, SILENCE_DBFS};
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
 pub use console::{CalibrationReport, FramePose, Health, TakeSummary};
 pub use error::ServerError;

@@ -294,6 +294,11 @@ pub struct StatusMessage<'a> {
     /// Takes recorded in this run of the daemon.
     #[serde(skip_serializing_if = "<[_]>::is_empty")]
     pub takes: &'a [crate::console::TakeSummary],
+    /// The microphone (state, format, level meter).
+    pub audio: &'a crate::audio::AudioStatus,
+    /// Why the configured microphone is not live.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub audio_message: Option<&'a str>,
 }
 
 impl<'a> StatusMessage<'a> {
@@ -307,6 +312,8 @@ impl<'a> StatusMessage<'a> {
             lagged,
             calibration: status.calibration.as_ref(),
             takes: &status.takes,
+            audio: &status.audio,
+            audio_message: status.audio_message.as_deref(),
         }
     }
 }

@@ -351,6 +351,11 @@ async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io
                 "source": status.source.as_str(),
                 "clients": shared.hub.clients(),
                 "frames": shared.hub.frames_published(),
+                "audio": {
+                    "state": status.audio.state.as_str(),
+                    "device": status.audio.device,
+                    "message": status.audio_message,
+                },
             });
             if let Some(osc) = shared.hub.inner.osc.health_json() {
                 body["osc"] = osc;

@@ -15,6 +15,12 @@
 //! MCAP chunk every `flush_s` seconds, so a killed daemon leaves a file readable up to its
 //! last second. A write error (disk full) or free space under `min_free_mb` stops the take;
 //! the processing thread sees it on its next [`Takes::poll`] and tells the clients.
+//!
+//! Sound ([`Takes::set_audio`]): the writer subscribes to the audio thread's bus when the take
+//! starts and writes every block on `/audio` (Foxglove `RawAudio`, `pcm-s16`) at the wall
+//! clock of its first sample, the clock of the frames' log times; `/audio/events` says where
+//! the sound started and stopped (a lost device) and why, and the metadata record
+//! `mouthpiece.audio`, written when the take closes, sums it up.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -23,13 +29,14 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime};
 
 use crossbeam_channel::{Sender, TrySendError};
-use mouthpiece_frame::Frame;
+use mouthpiece_frame::{AudioBus, Frame};
 use serde::Serialize;
 
 use mouthpiece_output::{CharacterHead, HeadPose, RigState, Throttle};
 
 use crate::writer::WriterJob;
 
+mod audio;
 mod file;
 mod writer;
 
@@ -206,6 +213,8 @@ pub struct Takes {
     /// Held by a writer while it picks its take number and creates its file.
     naming: Arc<Mutex<()>>,
     drop_warnings: Throttle,
+    /// The audio thread's bus and the queue length each take's writer subscribes with.
+    audio: Option<(Arc<AudioBus>, usize)>,
 }
 
 impl Takes {
@@ -216,7 +225,14 @@ impl Takes {
             closing: Vec::new(),
             naming: Arc::new(Mutex::new(())),
             drop_warnings: Throttle::new(Duration::from_secs(10)),
+            audio: None,
         }
+    }
+
+    /// Records the sound of `bus` in every take from now on (`/audio`): each take's writer
+    /// subscribes with a queue of `queue_blocks` blocks (oldest dropped when full).
+    pub fn set_audio(&mut self, bus: Arc<AudioBus>, queue_blocks: usize) {
+        self.audio = Some((bus, queue_blocks));
     }
 
     pub fn settings(&self) -> &TakeSettings {
@@ -263,6 +279,10 @@ impl Takes {
             started,
             ended,
             on_stopped: on_stopped.clone(),
+            audio: self
+                .audio
+                .as_ref()
+                .map(|(bus, queue)| bus.subscribe(*queue)),
         };
         let writer = match std::thread::Builder::new()
             .name("mouthpiece-take".into())

@@ -374,7 +374,7 @@ fn disk_full_stops_the_take_and_says_so() {
     drop(queue);
     let dir = tempfile::tempdir().unwrap();
     let failed = AtomicBool::new(false);
-    let result = write_take(writer, items, &settings(dir.path()), &failed);
+    let result = write_take(writer, items, None, &settings(dir.path()), &failed);
     let error = result.error.unwrap();
     assert!(error.contains("No space left on device"), "{error}");
     assert!(failed.load(Ordering::Acquire));
@@ -478,4 +478,104 @@ fn free_space_is_reported() {
     let dir = tempfile::tempdir().unwrap();
     assert!(free_mb(dir.path()).is_some());
     assert_eq!(free_mb(Path::new("/nonexistent/x")), None);
+}
+
+/// A block of `n` samples of value `v`, its first sample at `wall`.
+fn sound(first_frame: u64, n: usize, v: i16, wall: SystemTime) -> mouthpiece_frame::AudioEvent {
+    mouthpiece_frame::AudioEvent::Block(Arc::new(mouthpiece_frame::AudioBlock {
+        seq: first_frame / n as u64,
+        first_frame,
+        format: mouthpiece_frame::AudioFormat {
+            sample_rate: 48_000,
+            channels: 1,
+        },
+        samples: vec![v; n],
+        host_rx: Instant::now(),
+        wall_clock: Some(wall),
+    }))
+}
+
+#[test]
+fn a_take_records_the_sound_and_where_it_stopped() {
+    use mouthpiece_frame::{AudioBus, AudioEvent, AudioFormat, AudioSourceInfo};
+    let dir = tempfile::tempdir().unwrap();
+    let bus = AudioBus::new();
+    let mut takes = Takes::new(settings(dir.path()));
+    takes.set_audio(bus.clone(), 1000);
+    let info = start_wait(&mut takes, "voice", None).unwrap();
+    let t0 = UNIX_EPOCH + Duration::from_micros(1_795_316_645_000_000);
+    bus.publish(AudioEvent::Started(AudioSourceInfo {
+        spec: "booth".into(),
+        description: "test".into(),
+        format: AudioFormat {
+            sample_rate: 48_000,
+            channels: 1,
+        },
+        frames_per_block: 480,
+        live: true,
+    }));
+    for i in 0..10u64 {
+        // Block 5 was lost to an overrun: a gap of 480 frames.
+        if i != 5 {
+            bus.publish(sound(
+                i * 480,
+                480,
+                i as i16,
+                t0 + Duration::from_millis(i * 10),
+            ));
+        }
+        takes.push(frame(i), derived(i));
+    }
+    bus.publish(AudioEvent::Stopped {
+        reason: "the device was unplugged".into(),
+        at: t0 + Duration::from_millis(100),
+        frames: 4800,
+    });
+    let ended = stop_wait(&mut takes).unwrap();
+    assert_eq!(
+        (ended.frames, ended.error),
+        (10, None),
+        "the video is all there"
+    );
+    let mut reader = mouthpiece_recording::AudioReader::open(&info.path).unwrap();
+    let mut blocks = Vec::new();
+    while let Some(m) = reader.next_audio().unwrap() {
+        blocks.push(m);
+    }
+    assert_eq!(blocks.len(), 9);
+    assert_eq!(blocks[5].samples[0], 6);
+    assert_eq!(
+        blocks[5].log_time, 1_795_316_645_060_000_000,
+        "a block's log time is the wall clock of its first sample"
+    );
+    let (topics, metadata) = topics(&info.path);
+    assert_eq!(
+        topics.get("/audio/events"),
+        Some(&3),
+        "started, gap, stopped: {topics:?}"
+    );
+    assert!(
+        metadata.iter().any(|m| m == "mouthpiece.audio"),
+        "{metadata:?}"
+    );
+    let mut messages = mouthpiece_recording::MessageReader::open(&info.path).unwrap();
+    let mut events = Vec::new();
+    while let Some(m) = messages.next_message().unwrap() {
+        if &*m.topic == "/audio/events" {
+            events.push(serde_json::from_slice::<serde_json::Value>(&m.data).unwrap());
+        }
+    }
+    assert_eq!(events[1]["event"], "gap");
+    assert_eq!(events[1]["missing_frames"], 480);
+    assert_eq!(events[2]["event"], "stopped");
+    assert_eq!(events[2]["wall_us"], 1_795_316_645_100_000i64);
+    let audio = messages
+        .metadata()
+        .iter()
+        .find(|(name, _)| name == "mouthpiece.audio")
+        .map(|(_, m)| m.clone())
+        .unwrap();
+    assert_eq!(audio["stopped_unix_us"], "1795316645100000");
+    assert_eq!(audio["blocks"], "9");
+    assert!(audio["stop_reason"].contains("unplugged"));
 }

@@ -6,10 +6,11 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
 use crossbeam_channel::Receiver;
-use mouthpiece_frame::Frame;
+use mouthpiece_frame::{AudioSubscription, Frame};
 use mouthpiece_output::error_chain;
 use mouthpiece_recording::{SessionWriter, WriterOptions};
 
+use crate::audio::AudioTrack;
 use crate::file::{
     create_new_take_file, file_name, free_mb, next_take, sync_take, unix_us, TakeFile,
 };
@@ -30,6 +31,8 @@ pub(crate) struct WriterJob {
     pub(crate) started: OnStarted,
     pub(crate) ended: OnEnded,
     pub(crate) on_stopped: Arc<Mutex<StopSlot>>,
+    /// The take's subscription to the audio thread (with `[audio]` or a replayed sound).
+    pub(crate) audio: Option<AudioSubscription>,
 }
 
 impl WriterJob {
@@ -61,7 +64,7 @@ impl WriterJob {
         };
         tracing::info!(slate = %info.slate, take = info.take, path = %info.path.display(), "take started");
         (self.started)(Ok(info.clone()));
-        let result = write_take(writer, self.items, &self.settings, &self.failed);
+        let result = write_take(writer, self.items, self.audio, &self.settings, &self.failed);
         let synced = match &result.error {
             None => sync_take(&file, &info.path),
             Some(_) => Ok(()),
@@ -178,14 +181,33 @@ pub(crate) struct WriterResult {
 pub(crate) fn write_take(
     mut writer: TakeWriter,
     items: Receiver<TakeItem>,
+    audio: Option<AudioSubscription>,
     settings: &TakeSettings,
     failed: &AtomicBool,
 ) -> WriterResult {
     let mut frames = 0;
     let mut last_space_check = Instant::now();
     let mut error = None;
+    let mut track = AudioTrack::default();
+    let never = crossbeam_channel::never();
+    let sound = audio.as_ref().map_or(&never, |a| &a.events);
     // Runs until the queue is closed (stop) and drained, or a write fails.
-    for item in items.iter() {
+    loop {
+        let item = crossbeam_channel::select! {
+            recv(items) -> item => match item {
+                Ok(item) => item,
+                Err(_) => break,
+            },
+            recv(sound) -> event => {
+                if let Ok(event) = event {
+                    if let Err(e) = track.write(&mut writer, event) {
+                        error = Some(error_chain(&e));
+                        break;
+                    }
+                }
+                continue;
+            }
+        };
         let TakeItem::Frame { frame, derived } = item;
         if let Err(e) = write_one(&mut writer, &frame, &derived) {
             error = Some(error_chain(&e));
@@ -204,6 +226,20 @@ pub(crate) fn write_take(
                     break;
                 }
             }
+        }
+    }
+    if error.is_none() {
+        // The sound already queued when the take stopped, and the summary.
+        for event in sound.try_iter() {
+            if let Err(e) = track.write(&mut writer, event) {
+                error = Some(error_chain(&e));
+                break;
+            }
+        }
+    }
+    if let (None, Some(audio)) = (&error, &audio) {
+        if let Err(e) = track.finish(&mut writer, audio.dropped()) {
+            error = Some(error_chain(&e));
         }
     }
     if error.is_some() {
