@@ -460,6 +460,7 @@ fn character_speech_settings_are_read_and_checked() {
     );
     let err = parse("[characters.settings.human]\nspeech_hold_ms = -1\n").unwrap_err();
     assert!(err.to_string().contains("speech_hold_ms"), "{err}");
+}
 
 #[test]
 fn audio_is_off_when_absent_and_defaults_when_present() {
