@@ -355,6 +355,33 @@ impl Config {
                 ));
             }
         }
+        for (name, o) in &self.characters.settings {
+            let key = format!("characters.settings.{name}");
+            if name.is_empty() {
+                return Err(fail(
+                    "characters.settings",
+                    format!("expected a character's name, got {name:?}"),
+                ));
+            }
+            if o.speech_hold_ms > MAX_SPEECH_HOLD_MS {
+                return Err(fail(
+                    &format!("{key}.speech_hold_ms"),
+                    format!(
+                        "expected 0 to {MAX_SPEECH_HOLD_MS} ms, got {}",
+                        o.speech_hold_ms
+                    ),
+                ));
+            }
+            if o.speech_blend_ms > MAX_SPEECH_BLEND_MS {
+                return Err(fail(
+                    &format!("{key}.speech_blend_ms"),
+                    format!(
+                        "expected 0 to {MAX_SPEECH_BLEND_MS} ms, got {}",
+                        o.speech_blend_ms
+                    ),
+                ));
+            }
+        }
         let all = self.osc.all_targets();
         if all.len() > MAX_OSC_TARGETS {
             return Err(fail(

@@ -159,12 +159,57 @@ impl std::str::FromStr for ListenAddr {
 pub struct CharactersConfig {
     /// Character files (TOML). Empty = the built-in human and wolf.
     pub files: Vec<PathBuf>,
+    /// `[characters.settings.NAME]`: per character, by name (docs/daemon.md, "Speech").
+    pub settings: std::collections::BTreeMap<String, CharacterOptions>,
 }
 
 #[allow(clippy::derivable_impls)] // spelled out: the default is part of the documented config
 impl Default for CharactersConfig {
     fn default() -> Self {
-        CharactersConfig { files: Vec::new() }
+        CharactersConfig {
+            files: Vec::new(),
+            settings: std::collections::BTreeMap::new(),
+        }
+    }
+}
+
+/// Whether the microphone may drive a character's mouth.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SpeechSetting {
+    /// The camera alone.
+    #[default]
+    Off,
+    /// Speech when the lip dots are lost for longer than `speech_hold_ms`.
+    Fallback,
+    /// Speech alone (a booth without a camera).
+    Always,
+}
+
+/// Longest `speech_hold_ms`.
+pub const MAX_SPEECH_HOLD_MS: u32 = 10_000;
+/// Longest `speech_blend_ms`.
+pub const MAX_SPEECH_BLEND_MS: u32 = 2_000;
+
+/// `[characters.settings.NAME]`: one character's options.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CharacterOptions {
+    /// `"off"` (default), `"fallback"` or `"always"`.
+    pub speech: SpeechSetting,
+    /// How long the lip dots must be lost before speech takes over, ms (0 to 10 000).
+    pub speech_hold_ms: u32,
+    /// How long each handover blends, ms (0 to 2 000).
+    pub speech_blend_ms: u32,
+}
+
+impl Default for CharacterOptions {
+    fn default() -> Self {
+        CharacterOptions {
+            speech: SpeechSetting::Off,
+            speech_hold_ms: 300,
+            speech_blend_ms: 150,
+        }
     }
 }
 

@@ -424,6 +424,44 @@ fn huge_osc_values_are_refused_without_echoing_them() {
     assert!(err.to_string().contains("at most 16"), "{err}");
 }
 
+/// `[characters.settings.NAME]`: speech off by default; modes, hold and blend read; a bad
+/// mode or an absurd time is an error naming the key and line.
+#[test]
+fn character_speech_settings_are_read_and_checked() {
+    let config = parse("").unwrap();
+    assert!(config.characters.settings.is_empty());
+    let config = parse(
+        "[characters.settings.human]\nspeech = \"fallback\"\nspeech_hold_ms = 250\n\
+         [characters.settings.wolf]\nspeech = \"always\"\n",
+    )
+    .unwrap();
+    let human = config.characters.settings["human"];
+    assert_eq!(human.speech, SpeechSetting::Fallback);
+    assert_eq!((human.speech_hold_ms, human.speech_blend_ms), (250, 150));
+    assert_eq!(
+        config.characters.settings["wolf"].speech,
+        SpeechSetting::Always
+    );
+    let err = parse("[characters.settings.human]\nspeech = \"loud\"\n").unwrap_err();
+    assert!(err.to_string().contains("test.toml:2:"), "{err}");
+    assert!(err.to_string().contains("loud"), "{err}");
+    let err = parse("[characters.settings.human]\n\nspeech_hold_ms = 99999\n").unwrap_err();
+    assert_eq!(
+        err.key(),
+        Some("characters.settings.human.speech_hold_ms"),
+        "{err}"
+    );
+    assert!(err.to_string().contains("test.toml:3:"), "{err}");
+    let err = parse("[characters.settings.human]\nspeech_blend_ms = 5000\n").unwrap_err();
+    assert_eq!(
+        err.key(),
+        Some("characters.settings.human.speech_blend_ms"),
+        "{err}"
+    );
+    let err = parse("[characters.settings.human]\nspeech_hold_ms = -1\n").unwrap_err();
+    assert!(err.to_string().contains("speech_hold_ms"), "{err}");
+}
+
 #[test]
 fn audio_is_off_when_absent_and_defaults_when_present() {
     assert_eq!(parse("").unwrap().audio, None);

@@ -181,6 +181,10 @@ async fn serve<F: Factory>(
     if audio_thread.is_some() {
         takes.set_audio(audio.bus.clone(), audio_queue);
     }
+    let mut processor = processor;
+    if audio_thread.is_some() {
+        processor.set_audio(&audio.bus);
+    }
     let processing = pipeline::spawn(
         processor,
         pipeline::Context {

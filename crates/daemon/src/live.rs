@@ -5,8 +5,12 @@
 
 use std::time::{Duration, Instant};
 
-use mouthpiece_config::Config;
+use mouthpiece_config::{Config, SpeechSetting};
+use mouthpiece_frame::AudioSubscription;
 use mouthpiece_frame::Frame;
+use mouthpiece_output::MouthSource;
+use mouthpiece_pipeline::handover::{HandoverSettings, SpeechMode};
+use mouthpiece_pipeline::speech::SpeechDriver;
 use mouthpiece_pipeline::{Pipeline, PipelineConfig};
 use mouthpiece_retarget::{Character, PerformerLayout};
 use mouthpiece_server::{CharacterFrame, CharacterInfo, PerformerFrame, StreamInfo};
@@ -23,6 +27,8 @@ use mouthpiece_output::Throttle;
 pub struct Setup {
     pub characters: Vec<Character>,
     pub config: PipelineConfig,
+    /// Per character (same order): whether speech may drive its mouth.
+    pub speech: Vec<HandoverSettings>,
 }
 
 /// Loads and validates characters, `[detect]`, `[track]` and `[retarget]`.
@@ -50,9 +56,38 @@ pub fn setup(config: &Config) -> Result<Setup, CheckError> {
             ));
         }
     }
+    for name in config.characters.settings.keys() {
+        if !characters.iter().any(|c| &c.name == name) {
+            return Err(invalid(
+                &format!("characters.settings.{name}"),
+                format!("no configured character is named {name:?}"),
+            ));
+        }
+    }
+    let speech = characters
+        .iter()
+        .map(|c| {
+            let o = config
+                .characters
+                .settings
+                .get(&c.name)
+                .copied()
+                .unwrap_or_default();
+            HandoverSettings {
+                mode: match o.speech {
+                    SpeechSetting::Off => SpeechMode::Off,
+                    SpeechSetting::Fallback => SpeechMode::Fallback,
+                    SpeechSetting::Always => SpeechMode::Always,
+                },
+                hold_s: f64::from(o.speech_hold_ms) / 1e3,
+                blend_s: f64::from(o.speech_blend_ms) / 1e3,
+            }
+        })
+        .collect();
     Ok(Setup {
         characters,
         config: pipeline,
+        speech,
     })
 }
 
@@ -100,6 +135,14 @@ pub struct LiveProcessor {
     history: crate::console::DotHistory,
     /// How good the neutral pose taken on the last frame was, until collected.
     calibration_report: Option<mouthpiece_server::CalibrationReport>,
+    /// The mouths from speech, when a character's `speech` is not `off`.
+    speech: Option<SpeechDriver>,
+    /// The audio thread's bus, when the daemon captures sound.
+    bus: Option<std::sync::Arc<mouthpiece_frame::AudioBus>>,
+    /// The audio thread's blocks, drained before each frame (while `speech` is on).
+    audio: Option<AudioSubscription>,
+    /// A character step mixed with speech (reused).
+    mixed: Option<mouthpiece_retarget::CharacterStep>,
 }
 
 impl LiveProcessor {
@@ -107,7 +150,12 @@ impl LiveProcessor {
         let pipeline = Pipeline::for_characters(setup.config.clone(), setup.characters)
             .map_err(|e| crate::source::error_chain(&e))?;
         let dot_names = TrackedFrame::names(pipeline.tracker().layout());
+        let speech = speech_driver(&setup.config, pipeline.characters(), &setup.speech)?;
         Ok(LiveProcessor {
+            speech,
+            bus: None,
+            audio: None,
+            mixed: None,
             pipeline,
             config: setup.config,
             dot_names,
@@ -117,6 +165,15 @@ impl LiveProcessor {
             history: Default::default(),
             calibration_report: None,
         })
+    }
+
+    /// Listens to the audio bus while some character's mouth may follow speech.
+    fn subscribe_audio(&mut self) {
+        self.audio = match (&self.bus, &self.speech) {
+            // 64 blocks: 0.6 s of 10 ms periods; older sound is of no use to a live mouth.
+            (Some(bus), Some(_)) => Some(self.audio.take().unwrap_or_else(|| bus.subscribe(64))),
+            _ => None,
+        };
     }
 
     /// Every character at rest, confidence 0, no performer: before calibration, and when a
@@ -144,6 +201,30 @@ impl LiveProcessor {
     }
 }
 
+/// The speech driver for the characters whose `speech` is not `off` (`None` when none is).
+fn speech_driver(
+    config: &PipelineConfig,
+    characters: &[Character],
+    speech: &[HandoverSettings],
+) -> Result<Option<SpeechDriver>, String> {
+    if speech.iter().all(|s| s.mode == SpeechMode::Off) {
+        return Ok(None);
+    }
+    let pairs: Vec<(Character, HandoverSettings)> = characters
+        .iter()
+        .cloned()
+        .zip(speech.iter().copied())
+        .collect();
+    SpeechDriver::new(&pairs, config.retarget.character_settings())
+        .map(Some)
+        .map_err(|e| crate::source::error_chain(&e))
+}
+
+/// The lip dots count as lost when fewer than half of them are seen.
+fn lips_lost(confidence: &[f64]) -> bool {
+    2 * confidence.iter().filter(|&&c| c > 0.0).count() < confidence.len()
+}
+
 fn to_f32(v: &nalgebra::Vector3<f64>) -> [f32; 3] {
     [v.x as f32, v.y as f32, v.z as f32]
 }
@@ -151,7 +232,23 @@ fn to_f32(v: &nalgebra::Vector3<f64>) -> [f32; 3] {
 impl Processor for LiveProcessor {
     type Reload = Setup;
 
+    fn set_audio(&mut self, bus: &std::sync::Arc<mouthpiece_frame::AudioBus>) {
+        self.bus = Some(bus.clone());
+        self.subscribe_audio();
+    }
+
     fn process(&mut self, frame: &Frame, out: &mut Output) {
+        if let (Some(driver), Some(audio)) = (&mut self.speech, &self.audio) {
+            while let Ok(event) = audio.events.try_recv() {
+                if let mouthpiece_frame::AudioEvent::Block(block) = event {
+                    if let Err(e) = driver.push_audio(&block) {
+                        if let Some(held_back) = self.errors.allow(Instant::now()) {
+                            tracing::warn!(held_back, "live lip sync: {e}");
+                        }
+                    }
+                }
+            }
+        }
         if let Err(e) = self.pipeline.step(frame) {
             if let Some(held_back) = self.errors.allow(Instant::now()) {
                 tracing::warn!(
@@ -221,17 +318,28 @@ impl Processor for LiveProcessor {
             .confidence
             .extend(stab.confidence.iter().map(|&c| c as f32));
         // Characters that could not be bound are left out of the frame.
-        let bound = (0..self.pipeline.characters().len()).filter_map(|i| self.pipeline.bound(i));
+        let bound = (0..self.pipeline.characters().len())
+            .filter_map(|i| self.pipeline.bound(i).map(|b| (i, b)));
         let count = bound.clone().count();
         let rig = self.pipeline.rig();
+        let lost = lips_lost(&stab.confidence);
+        let smoothing = self.config.retarget.smoothing();
         stream
             .characters
             .resize_with(count, CharacterFrame::default);
-        for (bound, slot) in bound.zip(stream.characters.iter_mut()) {
+        for ((index, bound), slot) in bound.zip(stream.characters.iter_mut()) {
             if slot.name != bound.character().name {
                 slot.name.clone_from(&bound.character().name);
             }
-            let result = bound.output();
+            let mut result = bound.output();
+            slot.source = MouthSource::Camera;
+            if let Some(driver) = &mut self.speech {
+                let mixed = self.mixed.get_or_insert_with(|| result.clone());
+                mixed.clone_from(result);
+                slot.source =
+                    driver.drive(index, tracked.t, frame.host_rx, lost, &smoothing, mixed);
+                result = mixed;
+            }
             slot.points.clear();
             slot.points.extend(result.points.iter().map(to_f32));
             slot.confidence.clear();
@@ -356,6 +464,7 @@ impl Processor for LiveProcessor {
     }
 
     fn reload(&mut self, setup: Setup) -> Result<(), String> {
+        let speech = speech_driver(&setup.config, &setup.characters, &setup.speech)?;
         if setup.config.detect != self.config.detect || setup.config.track != self.config.track {
             // New colour ranges or tracking settings: a new pipeline, which calibrates afresh.
             self.pipeline = Pipeline::for_characters(setup.config.clone(), setup.characters)
@@ -373,6 +482,8 @@ impl Processor for LiveProcessor {
                 .map_err(|e| crate::source::error_chain(&e))?;
         }
         self.config = setup.config;
+        self.speech = speech;
+        self.subscribe_audio();
         self.info_changed = true;
         Ok(())
     }

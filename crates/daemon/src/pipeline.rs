@@ -66,6 +66,10 @@ pub trait Processor: Send {
     /// The source was reopened (its clock may have started again). Default: nothing.
     fn source_restarted(&mut self) {}
 
+    /// The audio thread's bus, when the daemon captures sound: a processor that drives
+    /// mouths from speech subscribes to it. Default: nothing.
+    fn set_audio(&mut self, _bus: &std::sync::Arc<mouthpiece_frame::AudioBus>) {}
+
     /// Characters, point names and frame rate for `hello`.
     fn stream_info(&self, frame_rate: f64, source: &str) -> StreamInfo;
 
@@ -603,6 +607,7 @@ fn derive(
                     curve: c.curve.clone(),
                     head: c.head,
                     rig: c.rig,
+                    source: c.source,
                 }
             })
             .collect(),

@@ -16,6 +16,8 @@
 //!   constant length T; short phones start their change stage early).
 //! - [`stitch`]: one pass over the placed segments, blending overlaps linearly.
 //! - [`take`]: the weight curves → the performer's lip dots → the retarget core → take lines.
+//! - [`live`]: the causal analyser: sound blocks → a class and key-pose weights every 10 ms
+//!   (MFCC profiles), and the weights → a character's points.
 //!
 //! No file I/O: everything parses `&str` and writes to a caller's `Write`; the
 //! `mouthpiece lipsync` command reads the files and places the take.
@@ -24,6 +26,7 @@ pub mod classes;
 pub mod curve;
 mod error;
 pub mod input;
+pub mod live;
 pub mod mapping;
 pub mod phones;
 pub mod poses;

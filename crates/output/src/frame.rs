@@ -25,6 +25,40 @@ pub struct CharacterFrame {
     pub rig: Option<RigState>,
     /// The character's head and eyes (docs/head.md), if the daemon drives them.
     pub head: Option<CharacterHead>,
+    /// What drove the mouth in this frame (docs/daemon.md, "Speech").
+    #[serde(default)]
+    pub source: MouthSource,
+}
+
+/// What drove a character's mouth in a frame: the camera's lip dots, the microphone's speech,
+/// or a blend of both during a handover.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MouthSource {
+    #[default]
+    Camera,
+    Speech,
+    Blend,
+}
+
+impl MouthSource {
+    /// The name in JSON frames and takes.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            MouthSource::Camera => "camera",
+            MouthSource::Speech => "speech",
+            MouthSource::Blend => "blend",
+        }
+    }
+
+    /// The code in binary frames (docs/protocol.md): 0 camera, 1 speech, 2 blend.
+    pub fn code(self) -> u8 {
+        match self {
+            MouthSource::Camera => 0,
+            MouthSource::Speech => 1,
+            MouthSource::Blend => 2,
+        }
+    }
 }
 
 /// The performer's lip dots in one frame: head motion removed, performer mouth frame, metres.
@@ -69,9 +103,11 @@ impl Clone for CharacterFrame {
             curve: self.curve.clone(),
             rig: self.rig,
             head: self.head,
+            source: self.source,
         }
     }
     fn clone_from(&mut self, other: &Self) {
+        self.source = other.source;
         self.name.clone_from(&other.name);
         self.points.clone_from(&other.points);
         self.confidence.clone_from(&other.confidence);

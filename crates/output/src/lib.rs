@@ -24,7 +24,7 @@ pub use curves::{
     curve_index, pascal_name, visemes_from, CurveNaming, VisemeNaming, CURVES, CURVE_NAMES,
     PASCAL_NAMES, VISEMES, VISEME_NAMES, VISEME_NAMES_VRM0,
 };
-pub use frame::{CharacterFrame, PerformerFrame, StreamFrame};
+pub use frame::{CharacterFrame, MouthSource, PerformerFrame, StreamFrame};
 pub use head::{CharacterHead, HeadPose, LookMode, RigidPose};
 pub use log::{error_chain, Throttle};
 pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RigVisemes};

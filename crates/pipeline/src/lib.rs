@@ -4,6 +4,9 @@
 //! [`Pipeline::step`]). Its settings come from one place, [`PipelineConfig`]: the `[detect]`,
 //! `[track]` and `[retarget]` tables of a configuration file.
 
+pub mod handover;
+pub mod speech;
+
 use mouthpiece_config::{ConfigError, ConfigText};
 use mouthpiece_detect::DetectConfig;
 use mouthpiece_frame::Frame;

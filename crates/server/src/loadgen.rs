@@ -173,6 +173,8 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
             confidence: confidence.clone(),
             rig: Some(rig),
             head,
+            // The synthetic stream shows a speech-driven mouth too.
+            source: mouthpiece_output::MouthSource::Speech,
         },
         CharacterFrame {
             name: "wolf".into(),
@@ -181,6 +183,7 @@ pub fn synthetic_frame(index: u64, fps: f64, frame: &mut StreamFrame) {
             confidence: confidence.clone(),
             rig: Some(rig),
             head,
+            source: Default::default(),
         },
     ];
     frame.performer = Some(PerformerFrame {

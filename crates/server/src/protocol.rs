@@ -416,6 +416,7 @@ struct CharacterView<'a> {
     #[serde(skip_serializing_if = "Option::is_none")]
     rig: Option<&'a mouthpiece_output::RigState>,
     head: Option<&'a mouthpiece_output::CharacterHead>,
+    source: mouthpiece_output::MouthSource,
 }
 
 impl<'a> FrameView<'a> {
@@ -445,6 +446,7 @@ impl<'a> FrameView<'a> {
                     },
                     rig: if selection.rig { c.rig.as_ref() } else { None },
                     head: c.head.as_ref(),
+                    source: c.source,
                 })
                 .collect(),
             performer: if selection.performer {

@@ -160,6 +160,7 @@ fn check_binary_frame(
         assert_eq!(bytes[o], 1, "head present");
         assert_eq!(bytes[o + 1], 0, "follow");
         assert_eq!(bytes[o + 2], 0xFF, "in_reach null while following");
+        assert_eq!(bytes[o + 3], c.source.code(), "mouth source");
         o += 4;
         for q in [head.rotation, head.eye_left, head.eye_right] {
             for v in q {

@@ -111,6 +111,8 @@ pub struct CharacterRecord {
     /// The rig (docs/rig.md): jaw, lip motions and the named curves; `None` before the
     /// neutral pose is taken.
     pub rig: Option<RigState>,
+    /// What drove the mouth (docs/daemon.md, "Speech").
+    pub source: mouthpiece_output::MouthSource,
 }
 
 /// What the processing thread hands the writer.

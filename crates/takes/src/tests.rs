@@ -132,6 +132,11 @@ fn derived(seq: u64) -> Box<Derived> {
             curve: None,
             head: Some(Default::default()),
             rig: (seq >= 5).then(|| rig(seq)),
+            source: if seq >= 5 {
+                mouthpiece_output::MouthSource::Speech
+            } else {
+                mouthpiece_output::MouthSource::Camera
+            },
         }],
         status: serde_json::json!({"calibrating": false}),
     })
@@ -174,6 +179,12 @@ fn the_rig_is_recorded_per_frame_once_there_is_one() {
     assert_eq!(messages.len(), 10);
     for m in &messages {
         let seq = m["seq"].as_u64().unwrap();
+        // Which source drove the mouth is recorded with every frame.
+        assert_eq!(
+            m["source"],
+            if seq < 5 { "camera" } else { "speech" },
+            "{m}"
+        );
         if seq < 5 {
             // Before the neutral pose: no `rig` key at all (as in takes made before the
             // rig existed), and the rest of the message as ever.

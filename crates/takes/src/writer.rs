@@ -325,6 +325,7 @@ fn write_one(
             "character": character.name,
             "points": points,
             "confidence": confidence,
+            "source": character.source.as_str(),
         });
         if let Some(curve) = &character.curve {
             body["curve"] = json!(curve);

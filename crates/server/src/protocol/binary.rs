@@ -98,7 +98,7 @@ pub fn encode_binary_frame(
             out.extend_from_slice(&0u16.to_le_bytes());
             push_points(out, curve);
         }
-        push_head(out, c.head.as_ref());
+        push_head(out, c.head.as_ref(), c.source);
         if selection.rig {
             push_rig(out, c.rig.as_ref());
         }
@@ -113,7 +113,11 @@ pub fn encode_binary_frame(
 
 /// A character's head block: fixed size, with a presence byte (a character whose head the
 /// daemon does not drive writes 0 and identities).
-fn push_head(out: &mut Vec<u8>, head: Option<&mouthpiece_output::CharacterHead>) {
+fn push_head(
+    out: &mut Vec<u8>,
+    head: Option<&mouthpiece_output::CharacterHead>,
+    source: mouthpiece_output::MouthSource,
+) {
     let start = out.len();
     let default = mouthpiece_output::CharacterHead::default();
     let h = head.unwrap_or(&default);
@@ -126,7 +130,7 @@ fn push_head(out: &mut Vec<u8>, head: Option<&mouthpiece_output::CharacterHead>)
         Some(true) => 1,
         None => 0xFF,
     };
-    out.extend_from_slice(&[u8::from(head.is_some()), mode, in_reach, 0]);
+    out.extend_from_slice(&[u8::from(head.is_some()), mode, in_reach, source.code()]);
     for v in h.rotation.iter().chain(&h.eye_left).chain(&h.eye_right) {
         out.extend_from_slice(&v.to_le_bytes());
     }

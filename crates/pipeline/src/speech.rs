@@ -1,0 +1,146 @@
+//! The mouth from speech for every character: the live analyser fed with sound blocks as
+//! they come, and per character the speech-driven points and the handover that mixes them
+//! into the camera's step (docs/daemon.md, "Speech"). The caller steps it with each output
+//! step's time and the host time of that step (both injected: no clock is read here).
+
+use std::time::{Duration, Instant};
+
+use mouthpiece_frame::audio::AudioBlock;
+use mouthpiece_lipsync::live::{LiveAnalyser, LiveMouth, LiveSettings, LiveStep, Profiles};
+use mouthpiece_lipsync::take::{Source, Tables, TakeError, DEFAULT_CLASSES, DEFAULT_CLASSES_NAME};
+use mouthpiece_lipsync::take::{DEFAULT_POSES, DEFAULT_POSES_NAME};
+use mouthpiece_output::MouthSource;
+use mouthpiece_retarget::smooth::smooth_closed;
+use mouthpiece_retarget::{Character, CharacterSettings, CharacterStep, Vec3};
+
+use crate::handover::{mix_points, Handover, HandoverSettings};
+
+/// Speech counts as coming in while its newest step is at most this old.
+pub const SPEECH_STALE: Duration = Duration::from_millis(250);
+
+struct Mouth {
+    mouth: LiveMouth,
+    handover: Handover,
+    mixed: Vec<Vec3>,
+}
+
+/// The analyser and one mouth and handover per character.
+pub struct SpeechDriver {
+    analyser: LiveAnalyser,
+    tables: Tables,
+    mouths: Vec<Mouth>,
+    steps: Vec<LiveStep>,
+    /// The newest step's weights and the host time of its sound.
+    latest: Option<(Vec<f64>, Instant)>,
+}
+
+/// A character that cannot be driven by the shipped poses, or damaged shipped tables.
+#[derive(Debug, thiserror::Error)]
+pub enum SpeechError {
+    #[error(transparent)]
+    Take(#[from] TakeError),
+    #[error(transparent)]
+    Tables(#[from] mouthpiece_lipsync::Error),
+}
+
+impl SpeechDriver {
+    /// The shipped class table, poses and profiles, and one mouth per character with its
+    /// handover settings and output settings.
+    pub fn new(
+        characters: &[(Character, HandoverSettings)],
+        output: CharacterSettings,
+    ) -> Result<Self, SpeechError> {
+        let tables = Tables::parse(
+            Source {
+                text: DEFAULT_CLASSES,
+                name: DEFAULT_CLASSES_NAME,
+            },
+            Source {
+                text: DEFAULT_POSES,
+                name: DEFAULT_POSES_NAME,
+            },
+            None,
+        )?;
+        let profiles = Profiles::from_toml_str(
+            mouthpiece_lipsync::live::SHIPPED_PROFILES,
+            "config/lipsync/live_profiles.toml",
+        )?;
+        let analyser =
+            LiveAnalyser::new(tables.classes.clone(), &profiles, LiveSettings::default())?;
+        let mouths = characters
+            .iter()
+            .map(|(c, h)| {
+                Ok(Mouth {
+                    mouth: LiveMouth::new(&tables, c.clone(), &c.name, output)?,
+                    handover: Handover::new(*h),
+                    mixed: Vec::with_capacity(c.len()),
+                })
+            })
+            .collect::<Result<_, TakeError>>()?;
+        Ok(Self {
+            analyser,
+            tables,
+            mouths,
+            steps: Vec::new(),
+            latest: None,
+        })
+    }
+
+    /// Analyses a block; the newest step becomes the speech mouth.
+    pub fn push_audio(&mut self, block: &AudioBlock) -> Result<(), mouthpiece_lipsync::Error> {
+        self.steps.clear();
+        self.analyser.push(block, &mut self.steps)?;
+        if let Some(s) = self.steps.last() {
+            match &mut self.latest {
+                Some((w, at)) => {
+                    w.clone_from(&s.weights);
+                    *at = s.heard_at;
+                }
+                None => self.latest = Some((s.weights.clone(), s.heard_at)),
+            }
+        }
+        Ok(())
+    }
+
+    /// The class heard last (the class table's index), if any sound came.
+    pub fn latest_weights(&self) -> Option<&[f64]> {
+        self.latest.as_ref().map(|(w, _)| w.as_slice())
+    }
+
+    /// Character `k`'s step at time `t` (seconds) and host time `now`: mixes the speech
+    /// mouth into `step` as the handover says; returns what drove it. `lips_lost`: the camera
+    /// does not see this step's lip dots. `smoothing` remakes the curve of a mixed step.
+    pub fn drive(
+        &mut self,
+        k: usize,
+        t: f64,
+        now: Instant,
+        lips_lost: bool,
+        smoothing: &mouthpiece_retarget::ShapeSmoothing,
+        step: &mut CharacterStep,
+    ) -> MouthSource {
+        let Some(m) = self.mouths.get_mut(k) else {
+            return MouthSource::Camera;
+        };
+        let live = self
+            .latest
+            .as_ref()
+            .is_some_and(|(_, at)| now.saturating_duration_since(*at) <= SPEECH_STALE);
+        let mix = m.handover.step(t, lips_lost, live);
+        if mix.speech <= 0.0 {
+            return mix.source;
+        }
+        let neutral = vec![0.0; self.tables.classes.poses.len()];
+        let weights = self.latest.as_ref().map_or(&neutral, |(w, _)| w);
+        let speech = m.mouth.step(&self.tables, t, weights);
+        m.mixed.clear();
+        m.mixed.resize(step.points.len(), Vec3::zeros());
+        mix_points(&step.points, &speech.points, mix.speech, &mut m.mixed);
+        step.points.clone_from(&m.mixed);
+        for c in &mut step.confidence {
+            *c = *c * (1.0 - mix.speech) + mix.speech;
+        }
+        smooth_closed(&step.points, smoothing, &mut step.curve);
+        mix.source
+    }
+}
