@@ -168,6 +168,29 @@ async fn a_booth_on_nats_streams_takes_control_and_uploads_and_outlives_its_brok
         .collect();
     assert_eq!(names, ["human", "wolf"], "{hello}");
 
+    // The documented Python subscriber (nats-py) gets hello and frames.
+    let python = std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/nats_subscriber.py");
+    let out = tokio::process::Command::new(&python)
+        .arg(&example)
+        .args(["--server", &url, "--booth", "booth-a", "--frames", "10", "--user", "director"])
+        .env("MOUTHPIECE_NATS_PASSWORD", "director-pw")
+        .output()
+        .await
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{python} {}: {stdout}{} (nats-py: pip install nats-py)",
+        example.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.starts_with("hello: "), "{stdout}");
+    let summary: Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    assert_eq!(summary["frames"], 10, "{stdout}");
+    assert_eq!(summary["in_order"], true, "{stdout}");
+    assert_eq!(summary["characters"], json!(["human", "wolf"]), "{stdout}");
+
     // A take over NATS control, uploaded once closed.
     let started = control(
         &client,
