@@ -59,6 +59,15 @@ impl Daemon {
         std::fs::read_to_string(self.dir.join("stderr.log")).unwrap_or_default()
     }
 
+    /// The log's warnings and errors (the debug log is long).
+    fn problems(&self) -> String {
+        self.log()
+            .lines()
+            .filter(|l| l.contains("WARN") || l.contains("ERROR"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
     fn signal(&self, signal: i32) {
         // SAFETY: kill(2) with our own child's pid and a valid signal number.
         let rc = unsafe { libc::kill(self.child.id() as i32, signal) };
@@ -120,10 +129,15 @@ async fn control(client: &async_nats::Client, request: Value) -> Value {
     serde_json::from_slice(&reply.payload).unwrap()
 }
 
-fn takes_cli(url: &str, args: &[&str]) -> std::process::Output {
+/// `mouthpiece takes` with the booth's config (its credentials) and `--server`.
+fn takes_cli(dir: &Path, url: &str, args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-        .args(["takes", "--server", url, "--studio", "e2e"])
+        .arg("takes")
+        .arg("--config")
+        .arg(dir.join("mouthpiece.toml"))
+        .args(["--server", url])
         .args(args)
+        .env("MOUTHPIECE_TEST_NATS_PASSWORD", PASSWORD)
         .output()
         .unwrap()
 }
@@ -151,7 +165,7 @@ async fn a_booth_on_nats_streams_takes_control_and_uploads_and_outlives_its_brok
     let mut frames = client.subscribe("mouthpiece.booth-a.frame").await.unwrap();
     let first = tokio::time::timeout(WAIT, frames.next())
         .await
-        .unwrap_or_else(|_| panic!("no frame on NATS: {}", daemon.log()))
+        .unwrap_or_else(|_| panic!("no frame on NATS: {}", daemon.problems()))
         .unwrap();
     let frame: Value = serde_json::from_slice(&first.payload).unwrap();
     assert_eq!(frame["type"], "frame", "{frame}");
@@ -173,7 +187,9 @@ async fn a_booth_on_nats_streams_takes_control_and_uploads_and_outlives_its_brok
     let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/nats_subscriber.py");
     let out = tokio::process::Command::new(&python)
         .arg(&example)
-        .args(["--server", &url, "--booth", "booth-a", "--frames", "10", "--user", "director"])
+        .args([
+            "--server", &url, "--booth", "booth-a", "--frames", "10", "--user", "director",
+        ])
         .env("MOUTHPIECE_NATS_PASSWORD", "director-pw")
         .output()
         .await
@@ -198,6 +214,10 @@ async fn a_booth_on_nats_streams_takes_control_and_uploads_and_outlives_its_brok
     )
     .await;
     assert_eq!(started["type"], "result", "{started}");
+    // Thirty frames published after the take started (a new subscription: the first one
+    // holds frames from before).
+    drop(frames);
+    let mut frames = client.subscribe("mouthpiece.booth-a.frame").await.unwrap();
     for _ in 0..30 {
         tokio::time::timeout(WAIT, frames.next()).await.unwrap();
     }
@@ -208,24 +228,33 @@ async fn a_booth_on_nats_streams_takes_control_and_uploads_and_outlives_its_brok
     .await;
     assert_eq!(stopped["type"], "result", "{stopped}");
     assert_eq!(stopped["request"], "record", "{stopped}");
+    let mut last_cli = String::new();
     let listed = eventually(WAIT, async || {
-        let out = takes_cli(&url, &["list", "--json"]);
+        let out = takes_cli(dir.path(), &url, &["list", "--json"]);
         let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        last_cli = String::from_utf8_lossy(&out.stderr).into_owned();
         (out.status.success() && text.lines().count() == 1).then_some(text)
     })
     .await
-    .unwrap_or_else(|| panic!("the take was not uploaded: {}", daemon.log()));
+    .unwrap_or_else(|| {
+        panic!(
+            "the take was not uploaded: {last_cli} {}",
+            daemon.problems()
+        )
+    });
     let record: Value = serde_json::from_str(listed.trim()).unwrap();
     assert_eq!(record["booth"], "booth-a", "{record}");
     assert_eq!(record["slate"], "nats", "{record}");
     assert_eq!(record["characters"], json!(["human", "wolf"]), "{record}");
     assert!(record["frames"].as_u64().unwrap() >= 30, "{record}");
+    assert!(record["duration_s"].as_f64().unwrap() >= 0.9, "{record}");
     let object = record["object"].as_str().unwrap();
     assert!(object.starts_with("booth-a/nats_T001_"), "{object}");
     let local = local_takes(dir.path());
     assert_eq!(local.len(), 1);
     let fetched = tempfile::tempdir().unwrap();
     let out = takes_cli(
+        dir.path(),
         &url,
         &["fetch", object, "--out", fetched.path().to_str().unwrap()],
     );
@@ -241,6 +270,7 @@ async fn a_booth_on_nats_streams_takes_control_and_uploads_and_outlives_its_brok
     );
     // Fetching again would overwrite: refused as bad input.
     let again = takes_cli(
+        dir.path(),
         &url,
         &["fetch", object, "--out", fetched.path().to_str().unwrap()],
     );
@@ -282,8 +312,8 @@ async fn a_booth_on_nats_streams_takes_control_and_uploads_and_outlives_its_brok
             .filter(|h| h["nats"]["takes_uploaded"] == 2 && h["nats"]["connected"] == true)
     })
     .await
-    .unwrap_or_else(|| panic!("the backlog was not uploaded: {}", daemon.log()));
-    let out = takes_cli(&url, &["list"]);
+    .unwrap_or_else(|| panic!("the backlog was not uploaded: {}", daemon.problems()));
+    let out = takes_cli(dir.path(), &url, &["list"]);
     let table = String::from_utf8_lossy(&out.stdout);
     assert_eq!(table.lines().count(), 3, "{table}");
     // Both takes stay on the booth's disk, marked as uploaded.

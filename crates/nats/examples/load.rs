@@ -62,7 +62,10 @@ fn options() -> Options {
         }
     }
     assert!(o.booths >= 1 && o.booths <= 64, "--booths 1..64");
-    assert!(o.subscribers >= 1 && o.subscribers <= 512, "--subscribers 1..512");
+    assert!(
+        o.subscribers >= 1 && o.subscribers <= 512,
+        "--subscribers 1..512"
+    );
     assert!(o.seconds > 0.0 && o.seconds <= 600.0, "--seconds up to 600");
     assert!(o.rate > 0.0 && o.rate <= 1000.0, "--rate up to 1000");
     o
@@ -160,7 +163,13 @@ struct Outcome {
     max: f64,
 }
 
-async fn run_once(url: &str, booths: usize, subscribers: usize, seconds: f64, rate: f64) -> Outcome {
+async fn run_once(
+    url: &str,
+    booths: usize,
+    subscribers: usize,
+    seconds: f64,
+    rate: f64,
+) -> Outcome {
     // Subscribers first, so that they see every frame.
     let (done_tx, done_rx) = tokio::sync::watch::channel(false);
     let mut tasks = Vec::new();
@@ -186,7 +195,8 @@ async fn run_once(url: &str, booths: usize, subscribers: usize, seconds: f64, ra
                 let (Some(seq), Some(wall)) = (field(json, "seq"), field(json, "wall_us")) else {
                     continue;
                 };
-                got.latencies_us.push((arrived - wall).clamp(0, u32::MAX as i64) as u32);
+                got.latencies_us
+                    .push((arrived - wall).clamp(0, u32::MAX as i64) as u32);
                 let entry = got
                     .booths
                     .entry(message.subject.to_string())

@@ -12,7 +12,9 @@ use futures_util::StreamExt;
 #[tokio::main]
 async fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
-    let server = args.next().unwrap_or_else(|| "nats://127.0.0.1:4222".into());
+    let server = args
+        .next()
+        .unwrap_or_else(|| "nats://127.0.0.1:4222".into());
     let booth = args.next().unwrap_or_else(|| "booth-a".into());
     let frames: usize = args.next().map_or(Ok(30), |n| n.parse())?;
 
@@ -56,7 +58,10 @@ async fn main() -> Result<(), Box<dyn std::error::Error>> {
             "seq {} t {:.3} latency {} {}",
             frame["seq"],
             frame["t"].as_f64().unwrap_or(0.0),
-            sent_us.map_or("?".into(), |s| format!("{:.2} ms", (now_us - s) as f64 / 1e3)),
+            sent_us.map_or("?".into(), |s| format!(
+                "{:.2} ms",
+                (now_us - s) as f64 / 1e3
+            )),
             jaws.join("; ")
         );
     }

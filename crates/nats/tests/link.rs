@@ -287,10 +287,23 @@ async fn with_the_broker_away_frames_are_dropped_and_counted_and_flow_again_afte
     .expect("the link never noticed the broker went away");
     let dropped = counters.frames_dropped.load(Ordering::Relaxed);
     eventually(WAIT, async || {
-        (counters.frames_dropped.load(Ordering::Relaxed) > dropped + 20).then_some(())
+        (counters.frames_dropped.load(Ordering::Relaxed) > dropped + 5).then_some(())
     })
     .await
     .expect("frames published while the broker is away are not counted as dropped");
+    // Dropped, not queued to go out late: nothing more is handed to the client.
+    let published = counters.frames_published.load(Ordering::Relaxed);
+    let dropped = counters.frames_dropped.load(Ordering::Relaxed);
+    eventually(WAIT, async || {
+        (counters.frames_dropped.load(Ordering::Relaxed) > dropped + 20).then_some(())
+    })
+    .await
+    .expect("frames stopped being counted while the broker is away");
+    assert_eq!(
+        counters.frames_published.load(Ordering::Relaxed),
+        published,
+        "frames were queued for the client while the broker was away"
+    );
     assert_eq!(
         hub.nats().status().as_deref(),
         Some("NATS down (reconnecting)")

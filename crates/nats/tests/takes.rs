@@ -45,6 +45,13 @@ async fn closed_takes_go_to_the_object_store_with_metadata_and_stay_with_a_marke
     let bytes = std::fs::read(&a).unwrap();
     let open = folder.path().join("open_T001_x.mcap");
     std::fs::write(&open, &bytes[..bytes.len() / 2]).unwrap();
+    // Oldest of all, so that it would be tried first.
+    std::fs::File::options()
+        .write(true)
+        .open(&open)
+        .unwrap()
+        .set_modified(std::time::UNIX_EPOCH + Duration::from_secs(1_000_000))
+        .unwrap();
 
     let (hub, _control) = Hub::new(&HubConfig::default());
     let _link = start_link(&hub, server.url(), folder.path()).await;
