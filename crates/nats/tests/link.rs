@@ -328,3 +328,32 @@ async fn with_the_broker_away_frames_are_dropped_and_counted_and_flow_again_afte
     stop.store(true, Ordering::Relaxed);
     publisher.join().unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_booth_starts_without_its_broker_and_connects_when_it_comes() {
+    // Nothing listens on this port yet.
+    let port = harness::free_port();
+    let url = format!("nats://127.0.0.1:{port}");
+    let folder = tempfile::tempdir().unwrap();
+    let hub = hub();
+    let link = tokio::time::timeout(
+        Duration::from_secs(5),
+        start_link(&hub, vec![url.clone()], folder.path()),
+    )
+    .await
+    .expect("the link waited for a broker that is not there");
+    let counters = hub.nats();
+    assert!(!counters.connected.load(Ordering::Relaxed));
+    assert_eq!(
+        hub.nats().status().as_deref(),
+        Some("NATS down (reconnecting)")
+    );
+    let mut server = NatsServer::start_on(port);
+    eventually(WAIT, async || {
+        counters.connected.load(Ordering::Relaxed).then_some(())
+    })
+    .await
+    .expect("the link never connected to the broker that came");
+    server.kill();
+    drop(link);
+}

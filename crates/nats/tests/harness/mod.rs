@@ -47,9 +47,17 @@ impl NatsServer {
 
     /// A single server with JetStream and extra command-line arguments (e.g. `-c FILE`).
     pub fn start_with(extra: &[&str]) -> NatsServer {
+        Self::start_on_with(free_port(), extra)
+    }
+
+    /// A single server with JetStream on `port`.
+    pub fn start_on(port: u16) -> NatsServer {
+        Self::start_on_with(port, &[])
+    }
+
+    fn start_on_with(port: u16, extra: &[&str]) -> NatsServer {
         let temp = tempfile::tempdir().unwrap();
         let dir = temp.path().to_owned();
-        let port = free_port();
         let mut args: Vec<String> = vec![
             "-js".into(),
             "-a".into(),
