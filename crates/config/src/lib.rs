@@ -32,6 +32,7 @@ use serde::Deserialize;
 
 mod audio;
 mod locate;
+mod nats;
 mod sections;
 mod text;
 mod tokens;
@@ -39,6 +40,7 @@ mod tokens;
 pub use audio::*;
 pub(crate) use locate::{invalid, line_col, span_of_key, state_directory};
 pub use locate::{read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
+pub use nats::{subject_safe, NatsConfig, NatsSecrets, MAX_NATS_QUEUE_FRAMES, MAX_NATS_SERVERS};
 pub use sections::*;
 pub use text::ConfigText;
 pub(crate) use tokens::redact_token_error;
@@ -157,6 +159,8 @@ pub struct Config {
     pub osc: OscConfig,
     /// The booth's microphone (`[audio]`, docs/daemon.md); `None` (no table): no audio.
     pub audio: Option<AudioConfig>,
+    /// The booth on a NATS server (docs/nats.md); off by default.
+    pub nats: NatsConfig,
     /// Where this configuration came from, with its text (for [`Config::extract`]).
     #[serde(skip)]
     pub origin: Origin,
@@ -177,6 +181,7 @@ impl Default for Config {
             rig: toml::Table::new(),
             osc: OscConfig::default(),
             audio: None,
+            nats: NatsConfig::default(),
             origin: Origin::Embedded,
         }
     }
@@ -240,6 +245,8 @@ impl Config {
         let base = path.parent().map(Path::to_owned).unwrap_or_default();
         config.resolve_paths(&base, state_directory().as_deref());
         config.server.tokens = config.read_tokens(text, &file)?;
+        config.nats.secrets = config.read_nats_secrets(text, &file)?;
+        config.check_nats_files(text, &file)?;
         Ok(config)
     }
 
@@ -416,6 +423,7 @@ impl Config {
                 "expected a character's name, got \"\"".into(),
             ));
         }
+        self.nats.validate(&fail)?;
         Ok(())
     }
 
@@ -446,6 +454,7 @@ impl Config {
         {
             join(path);
         }
+        self.nats.resolve_paths(&join);
         if let Some(replay) = self.source.spec.replay_path() {
             let mut path = PathBuf::from(replay);
             if path.is_relative() && !base.as_os_str().is_empty() {
@@ -463,27 +472,49 @@ impl Config {
     }
 
     fn read_tokens(&self, text: &str, file: &str) -> Result<Tokens, ConfigError> {
-        let read_one =
-            |key: &str, token: &Option<TokenRef>| -> Result<Option<Secret>, ConfigError> {
-                let Some(token) = token else { return Ok(None) };
-                token.read().map(Some).map_err(|source| {
-                    let span = span_of_key(text, key);
-                    let (line, column) = span.map_or((0, 0), |s| line_col(text, s.start));
-                    ConfigError::Token {
-                        location: Location {
-                            file: file.to_owned(),
-                            line,
-                            column,
-                            key: Some(key.to_owned()),
-                        },
-                        key: key.to_owned(),
-                        source,
-                    }
-                })
-            };
         Ok(Tokens {
-            read: read_one("server.read_token", &self.server.read_token)?,
-            control: read_one("server.control_token", &self.server.control_token)?,
+            read: read_token(text, file, "server.read_token", &self.server.read_token)?,
+            control: read_token(
+                text,
+                file,
+                "server.control_token",
+                &self.server.control_token,
+            )?,
+        })
+    }
+
+    fn read_nats_secrets(&self, text: &str, file: &str) -> Result<NatsSecrets, ConfigError> {
+        let nats = &self.nats;
+        Ok(NatsSecrets {
+            password: read_token(text, file, "nats.password", &nats.password)?,
+            token: read_token(text, file, "nats.token", &nats.token)?,
+            nkey: read_token(text, file, "nats.nkey", &nats.nkey)?,
+        })
+    }
+
+    /// A `.creds` file that cannot be read is a configuration error at load time, not a
+    /// connection that never authenticates.
+    fn check_nats_files(&self, text: &str, file: &str) -> Result<(), ConfigError> {
+        let Some(path) = &self.nats.credentials_file else {
+            return Ok(());
+        };
+        read_bounded(path, 64 * 1024).map(|_| ()).map_err(|source| {
+            let key = "nats.credentials_file";
+            let span = span_of_key(text, key);
+            let (line, column) = span.map_or((0, 0), |s| line_col(text, s.start));
+            ConfigError::Token {
+                location: Location {
+                    file: file.to_owned(),
+                    line,
+                    column,
+                    key: Some(key.to_owned()),
+                },
+                key: key.to_owned(),
+                source: TokenError::File {
+                    path: path.clone(),
+                    source,
+                },
+            }
         })
     }
 
@@ -546,7 +577,7 @@ impl Config {
             each.join(", ")
         };
         format!(
-            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, audio {}, tokens: read {}, control {}",
+            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, audio {}, nats {}, tokens: read {}, control {}",
             self.origin.describe(),
             self.source.spec.0,
             self.server.listen.0,
@@ -558,11 +589,38 @@ impl Config {
                 Some(a) => format!("{} ({} Hz, {} ch)", a.device, a.sample_rate, a.channels),
                 None => "off".to_owned(),
             },
+            self.nats.summary(),
             if self.server.tokens.read.is_some() { "set" } else { "none" },
             if self.server.tokens.control.is_some() { "set" } else { "none" },
         )
     }
 }
 
+/// Reads one secret named at `key` (a token, a password), with the key's line in errors.
+fn read_token(
+    text: &str,
+    file: &str,
+    key: &str,
+    token: &Option<TokenRef>,
+) -> Result<Option<Secret>, ConfigError> {
+    let Some(token) = token else { return Ok(None) };
+    token.read().map(Some).map_err(|source| {
+        let span = span_of_key(text, key);
+        let (line, column) = span.map_or((0, 0), |s| line_col(text, s.start));
+        ConfigError::Token {
+            location: Location {
+                file: file.to_owned(),
+                line,
+                column,
+                key: Some(key.to_owned()),
+            },
+            key: key.to_owned(),
+            source,
+        }
+    })
+}
+
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_nats;

@@ -95,9 +95,15 @@ pub(crate) fn redact_token_error(err: ConfigError) -> ConfigError {
     match err {
         ConfigError::Invalid { location, message }
             if location.key.as_deref().is_some_and(|k| {
-                ["server.read_token", "server.control_token"]
-                    .iter()
-                    .any(|t| k == *t || k.starts_with(&format!("{t}.")))
+                [
+                    "server.read_token",
+                    "server.control_token",
+                    "nats.password",
+                    "nats.token",
+                    "nats.nkey",
+                ]
+                .iter()
+                .any(|t| k == *t || k.starts_with(&format!("{t}.")))
             }) =>
         {
             let _ = message;

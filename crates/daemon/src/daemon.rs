@@ -4,7 +4,7 @@
 //! Threads: `mouthpiece-source` (owns the source), `mouthpiece-process` (processing, takes
 //! control), `mouthpiece-take` (while a take records), `mouthpiece-osc` (once `[osc]` has a
 //! target: the VMC sender behind a bounded queue), and a 2-thread tokio runtime for the
-//! server, the signals and the watchdog. Start-up: validate the config, bind the port, start
+//! server, the NATS link (once `[nats]` has servers), the signals and the watchdog. Start-up: validate the config, bind the port, start
 //! the threads, then `READY=1`. Signals: SIGTERM/SIGINT stop (a take written out to its
 //! last queued frame and synced, clients closed with 1001, exit 0 within 2 s when no take
 //! drains); SIGHUP reloads characters, tokens, colour ranges, `[rig]` and `[osc]`;
@@ -214,6 +214,26 @@ async fn serve<F: Factory>(
         });
     }
 
+    // The NATS link: its own tasks on this runtime, fed from the hub like a WebSocket
+    // client; the booth runs the same whether or not a broker is there.
+    let _nats = match mouthpiece_nats::NatsSettings::from_config(&config.nats) {
+        Some(settings) => match mouthpiece_nats::NatsLink::start(
+            hub.clone(),
+            settings,
+            server_config.name.clone(),
+            config.takes.folder.clone(),
+        )
+        .await
+        {
+            Ok(link) => Some(link),
+            Err(e) => {
+                tracing::error!("NATS link not started, the booth runs without it: {e}");
+                None
+            }
+        },
+        None => None,
+    };
+
     let (shutdown_tx, shutdown_rx) = tokio::sync::oneshot::channel::<()>();
     let mut server = tokio::spawn(mouthpiece_server::run(
         listener,
@@ -396,6 +416,10 @@ fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) ->
             status.audio.channels
         )),
     }
+    if let Some(nats) = hub.nats().status() {
+        line.push_str("; ");
+        line.push_str(&nats);
+    }
     line
 }
 
@@ -433,6 +457,7 @@ fn reload<F: Factory>(
         ),
         ("takes", config.takes != current.takes),
         ("timecode", config.timecode != current.timecode),
+        ("nats", config.nats != current.nats),
     ] {
         if changed {
             tracing::warn!("{what} changed: takes effect after a restart");

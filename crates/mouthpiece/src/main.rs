@@ -51,6 +51,8 @@ enum Command {
     /// Send a take (JSONL) over the VMC protocol, each frame at its time, as the daemon sends
     /// a live character: rig curves, VRM visemes, head and eyes.
     Play(cmd::play::Args),
+    /// List and fetch the takes booths uploaded to the studio's NATS object store.
+    Takes(cmd::takes::Args),
 }
 
 fn main() -> ExitCode {
@@ -70,6 +72,7 @@ fn main() -> ExitCode {
         Command::TuneColours(args) => cmd::tune_colours::run(args),
         Command::Bind(args) => cmd::bind::run(args),
         Command::Lipsync(args) => cmd::lipsync::run(args),
+        Command::Takes(args) => cmd::takes::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

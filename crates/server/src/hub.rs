@@ -279,6 +279,8 @@ pub(crate) struct HubInner {
     pub(crate) takes: crate::takes_http::TakeService,
     /// The daemon's audio thread counters (`/metrics`).
     pub(crate) audio: Arc<crate::audio::AudioCounters>,
+    /// The daemon's NATS link (`/metrics`, `/healthz`).
+    pub(crate) nats: Arc<crate::nats::NatsCounters>,
 }
 
 impl Hub {
@@ -306,6 +308,7 @@ impl Hub {
                 osc: Arc::default(),
                 takes: Default::default(),
                 audio: Arc::default(),
+                nats: Arc::default(),
             }),
         };
         (hub, ControlReceiver { rx })
@@ -416,6 +419,25 @@ impl Hub {
         self.inner.info.borrow().clone()
     }
 
+    /// The `hello` message for `info` (what a client gets first), as `server_name` with
+    /// `access` (`read` or `control`).
+    pub fn hello_json(&self, info: &StreamInfo, server_name: &str, access: &'static str) -> String {
+        use crate::protocol::{ClockDescription, HelloMessage, ServerIdentity, ServerMessage};
+        crate::protocol::to_json(&ServerMessage::Hello(HelloMessage {
+            protocol: crate::protocol::SUBPROTOCOL,
+            server: ServerIdentity {
+                name: server_name.to_owned(),
+                version: env!("CARGO_PKG_VERSION"),
+            },
+            info,
+            timecode_rate: self.inner.timecode_rate.name(),
+            clock: ClockDescription::default(),
+            access,
+            rig_curves: &mouthpiece_output::CURVE_NAMES,
+            rig_visemes: &mouthpiece_output::VISEME_NAMES,
+        }))
+    }
+
     /// Frames published so far.
     pub fn frames_published(&self) -> u64 {
         self.inner.next_seq.load(Ordering::Relaxed)
@@ -461,12 +483,34 @@ impl Hub {
         crate::preview::render_metrics(&self.inner.preview, &mut text);
         self.inner.osc.render_metrics(&mut text);
         self.inner.audio.render_metrics(&mut text);
+        self.inner.nats.render_metrics(&mut text);
         text
     }
 
     /// The audio thread's counters, for the daemon's audio thread to update.
     pub fn audio_counters(&self) -> Arc<crate::audio::AudioCounters> {
         self.inner.audio.clone()
+    }
+
+    /// The NATS link's counters, for the daemon's NATS task to update.
+    pub fn nats(&self) -> Arc<crate::nats::NatsCounters> {
+        self.inner.nats.clone()
+    }
+
+    /// A new receiver of published frames (the NATS publisher reads the ring like a
+    /// client: when it falls behind it loses the oldest frames and learns how many).
+    pub fn subscribe_frames(&self) -> broadcast::Receiver<Arc<PublishedFrame>> {
+        self.inner.frames.subscribe()
+    }
+
+    /// A receiver of status changes.
+    pub fn watch_status(&self) -> watch::Receiver<Status> {
+        self.inner.status.subscribe()
+    }
+
+    /// A receiver of stream description changes (a new `hello`).
+    pub fn watch_info(&self) -> watch::Receiver<Arc<StreamInfo>> {
+        self.inner.info.subscribe()
     }
 
     /// The OSC output's counters, for the daemon's OSC sender to update.

@@ -58,7 +58,9 @@
 //!   tokens, origin).
 //! - `session`: one `mouthpiece.v1` client (reader task + writer loop).
 //! - `foxglove`: one `foxglove.websocket.v1` client.
+//! - [`control`]: control requests from any transport (WebSocket, NATS) to the daemon.
 //! - [`metrics`]: counters and histograms for `/metrics`.
+//! - [`nats`]: the NATS link's counters for `/metrics` and `/healthz`.
 //! - [`preview`]: the opt-in camera preview (downscaled JPEG with the dots, latest only).
 //! - [`console`]: health figures, the last calibration and the session's takes.
 //! - [`takes_http`]: `/take`, chunks of a take for the console's player.
@@ -68,6 +70,7 @@
 pub mod audio;
 pub mod config;
 pub mod console;
+pub mod control;
 mod error;
 mod foxglove;
 pub mod foxglove_scene;
@@ -77,6 +80,7 @@ pub mod http;
 pub mod hub;
 pub mod loadgen;
 pub mod metrics;
+pub mod nats;
 pub mod osc;
 pub mod preview;
 pub mod protocol;
@@ -106,6 +110,7 @@ pub use mouthpiece_output::{
     CharacterFrame, CharacterHead, HeadPose, LookMode, PerformerFrame, RigCurves, RigJaw, RigLip,
     RigLips, RigState, RigVisemes, RigidPose, StreamFrame, CURVE_NAMES,
 };
+pub use nats::NatsCounters;
 pub use osc::{OscCounters, OscTargetCounters, OscTargetFigures};
 pub use preview::{BgrImage, DotState, ImageDot, Overlay, PixelBox, PreviewInput};
 pub use server::run;

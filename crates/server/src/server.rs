@@ -372,6 +372,9 @@ async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io
             if let Some(osc) = shared.hub.inner.osc.health_json() {
                 body["osc"] = osc;
             }
+            if let Some(nats) = shared.hub.inner.nats.health_json() {
+                body["nats"] = nats;
+            }
             http::respond(io, 200, "application/json", body.to_string().as_bytes()).await
         }
         "/metrics" => {

@@ -15,4 +15,5 @@ pub mod recorded_heads;
 pub mod retarget;
 pub mod run;
 pub mod synth;
+pub mod takes;
 pub mod tune_colours;

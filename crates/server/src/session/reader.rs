@@ -4,7 +4,7 @@
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use futures_util::stream::SplitStream;
 use futures_util::StreamExt;
@@ -15,10 +15,7 @@ use tracing::{debug, info};
 
 use super::{error_json, Outgoing, ReaderExit, TokenBucket};
 use crate::config::Access;
-use crate::hub::{ControlCommand, ControlQueueError};
-use crate::protocol::{
-    self, ClientMessage, ErrorCode, RecordAction, RequestId, ResultMessage, ServerMessage,
-};
+use crate::protocol::{self, ClientMessage, ErrorCode, ServerMessage};
 use crate::server::{Shared, Ws};
 
 #[derive(Clone, Copy)]
@@ -136,69 +133,16 @@ pub(super) async fn read_loop(
                 id,
                 server_wall_us: unix_micros_now(),
             })),
-            ClientMessage::Calibrate { id, duration_s } => control(
-                &shared,
-                &out,
-                access,
-                peer,
-                id,
-                "calibrate",
-                ControlCommand::Calibrate {
-                    duration: duration_s.map(Duration::from_secs_f64),
+            other => match crate::control::control_call(other) {
+                Some(call) => match crate::control::refuse_early(&shared.hub, &call) {
+                    Some(refused) if access >= Access::Control => {
+                        metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
+                        reply(refused)
+                    }
+                    _ => control(&shared, &out, access, peer, call),
                 },
-            ),
-            ClientMessage::LookAt {
-                id,
-                character,
-                point,
-            } => match crate::head::unknown_character(&shared.hub.info(), &character) {
-                Some(message) if access >= Access::Control => {
-                    metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
-                    reply(error_json(ErrorCode::BadRequest, message, id))
-                }
-                _ => control(
-                    &shared,
-                    &out,
-                    access,
-                    peer,
-                    id,
-                    "look_at",
-                    ControlCommand::LookAt { character, point },
-                ),
+                None => true,
             },
-            ClientMessage::TuneColours {
-                id,
-                action,
-                seconds,
-            } => control(
-                &shared,
-                &out,
-                access,
-                peer,
-                id,
-                "tune_colours",
-                ControlCommand::TuneColours {
-                    apply: action == protocol::TuneAction::Apply,
-                    seconds: seconds.map(Duration::from_secs_f64),
-                },
-            ),
-            ClientMessage::Record {
-                id,
-                action,
-                slate,
-                take,
-            } => control(
-                &shared,
-                &out,
-                access,
-                peer,
-                id,
-                "record",
-                match action {
-                    RecordAction::Start => ControlCommand::RecordStart { slate, take },
-                    RecordAction::Stop => ControlCommand::RecordStop,
-                },
-            ),
         };
         if !ok {
             return overflow();
@@ -214,11 +158,8 @@ fn control(
     out: &mpsc::Sender<Outgoing>,
     access: Access,
     peer: SocketAddr,
-    id: Option<RequestId>,
-    request: &'static str,
-    command: ControlCommand,
+    call: crate::control::ControlCall,
 ) -> bool {
-    let error = |code, message: String| Outgoing::Text(error_json(code, message, id.clone()));
     if access < Access::Control {
         shared
             .hub
@@ -227,63 +168,21 @@ fn control(
             .bad_messages
             .fetch_add(1, Ordering::Relaxed);
         return out
-            .try_send(error(
+            .try_send(Outgoing::Text(error_json(
                 ErrorCode::Forbidden,
-                format!("{request} needs the control token"),
-            ))
+                format!("{} needs the control token", call.request),
+                call.id,
+            )))
             .is_ok();
     }
-    info!(?command, "control request");
-    // A calibration is answered once the neutral pose is taken: wait its duration longer.
-    let longer = match &command {
-        ControlCommand::Calibrate {
-            duration: Some(duration),
-        } => *duration,
-        _ => Duration::ZERO,
-    };
-    let pending = match shared.hub.request_control(command, peer.to_string()) {
-        Ok(rx) => rx,
-        Err(ControlQueueError::Full) => {
-            return out
-                .try_send(error(
-                    ErrorCode::Busy,
-                    "the daemon has too many control requests waiting; try again".into(),
-                ))
-                .is_ok()
-        }
-        Err(ControlQueueError::NoDaemon) => {
-            return out
-                .try_send(error(
-                    ErrorCode::Unavailable,
-                    "no daemon is taking control requests".into(),
-                ))
-                .is_ok()
-        }
+    let timeout = shared.config.limits.control_timeout;
+    let pending = match crate::control::queue(&shared.hub, call, peer.to_string(), timeout) {
+        Ok(pending) => pending,
+        Err(refused) => return out.try_send(Outgoing::Text(refused)).is_ok(),
     };
     let out = out.clone();
-    let wait = shared.config.limits.control_timeout + longer;
     tokio::spawn(async move {
-        let answer = match tokio::time::timeout(wait, pending).await {
-            Ok(Ok(Ok(detail))) => protocol::to_json(&ServerMessage::Result(ResultMessage {
-                id,
-                request,
-                detail,
-            })),
-            Ok(Ok(Err(failure))) => error_json(ErrorCode::ControlFailed, failure.message, id),
-            Ok(Err(_)) => error_json(
-                ErrorCode::Unavailable,
-                format!("the daemon dropped the {request} request"),
-                id,
-            ),
-            Err(_) => error_json(
-                ErrorCode::Timeout,
-                format!(
-                    "the daemon did not answer {request} within {} s",
-                    wait.as_secs()
-                ),
-                id,
-            ),
-        };
+        let answer = pending.answer().await;
         // A full queue means the client is not reading; the reader closes it on its next
         // message, and the writer on its next stalled write.
         let _ = out.try_send(Outgoing::Text(answer));

@@ -18,9 +18,8 @@ use super::{error_json, truncate_reason, Decimator, Outgoing, ReaderEnd};
 use crate::config::Access;
 use crate::hub::{PublishedFrame, StreamInfo};
 use crate::protocol::{
-    self, ClockDescription, ErrorCode, ErrorMessage, FrameFormat, FrameSelection, FrameView,
-    HelloMessage, ResultMessage, ServerIdentity, ServerMessage, StatusMessage, Subscribe,
-    SUBPROTOCOL,
+    self, ErrorCode, ErrorMessage, FrameFormat, FrameSelection, FrameView, ResultMessage,
+    ServerMessage, StatusMessage, Subscribe,
 };
 use crate::server::{Shared, Ws};
 
@@ -239,20 +238,10 @@ impl Writer {
 
     async fn send_hello(&mut self, info: &StreamInfo) -> Result<(), SendError> {
         self.character_names = info.characters.iter().map(|c| c.name.clone()).collect();
-        let rate = self.shared.hub.inner.timecode_rate.name();
-        let text = protocol::to_json(&ServerMessage::Hello(HelloMessage {
-            protocol: SUBPROTOCOL,
-            server: ServerIdentity {
-                name: self.shared.config.name.clone(),
-                version: env!("CARGO_PKG_VERSION"),
-            },
-            info,
-            timecode_rate: rate,
-            clock: ClockDescription::default(),
-            access: self.access.as_str(),
-            rig_curves: &mouthpiece_output::CURVE_NAMES,
-            rig_visemes: &mouthpiece_output::VISEME_NAMES,
-        }));
+        let text = self
+            .shared
+            .hub
+            .hello_json(info, &self.shared.config.name, self.access.as_str());
         self.send(Message::text(text)).await
     }
 
