@@ -77,7 +77,9 @@ impl Booth {
         )
         .unwrap();
         let jack = Command::new("jackd")
-            .args(["-n", &server, "-r", "-t", "2000", "-d", "dummy", "-r", "48000", "-p", "512"])
+            .args([
+                "-n", &server, "-r", "-t", "2000", "-d", "dummy", "-r", "48000", "-p", "512",
+            ])
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::null())

@@ -48,7 +48,10 @@ fn the_microphone_through_real_alsa() {
     // The sound arrives bit for bit, in the format asked for, in gap-free blocks.
     let mut source = AlsaSource::open(&request("booth", 48_000)).unwrap();
     assert_eq!(
-        (source.info().format.sample_rate, source.info().format.channels),
+        (
+            source.info().format.sample_rate,
+            source.info().format.channels
+        ),
         (48_000, 1)
     );
     assert!(source.info().live);
@@ -62,7 +65,11 @@ fn the_microphone_through_real_alsa() {
     // A device that agrees to another format and rate than asked (JACK delivers FLOAT_LE
     // at 48 kHz only): the agreed rate is read back and the samples are converted.
     let mut source = AlsaSource::open(&request("booth_float", 44_100)).unwrap();
-    assert_eq!(source.info().format.sample_rate, 48_000, "read back, not assumed");
+    assert_eq!(
+        source.info().format.sample_rate,
+        48_000,
+        "read back, not assumed"
+    );
     assert!(
         source.info().description.contains("converted to S16"),
         "{}",

@@ -39,5 +39,5 @@ pub use onto_rig::{animate_rig, RigSummary};
 pub use output::PendingFile;
 pub use reduce::Reducer;
 pub use rig::{MouthRig, RigHead, RigPoint};
-pub use wav::{write_bwf, BextInfo, Timeline, MAX_WAV_DATA_BYTES};
 pub use take::{HeadKeys, LipKeys, RigKeys, TakeFrame, TakeReader};
+pub use wav::{write_bwf, BextInfo, Timeline, MAX_WAV_DATA_BYTES};

@@ -148,12 +148,21 @@ mod tests {
         };
         write_bwf(&mut file, 1000, 1, &bext, &t.samples).unwrap();
         assert_eq!(&file[..4], b"RIFF");
-        assert_eq!(u32::from_le_bytes(file[4..8].try_into().unwrap()) as usize, file.len() - 8);
+        assert_eq!(
+            u32::from_le_bytes(file[4..8].try_into().unwrap()) as usize,
+            file.len() - 8
+        );
         assert_eq!(&file[12..16], b"bext");
         // TimeReferenceLow, High at 338 and 342 of the chunk's body.
         let body = 20;
-        assert_eq!(u32::from_le_bytes(file[body + 338..body + 342].try_into().unwrap()), 7);
-        assert_eq!(u32::from_le_bytes(file[body + 342..body + 346].try_into().unwrap()), 1);
+        assert_eq!(
+            u32::from_le_bytes(file[body + 338..body + 342].try_into().unwrap()),
+            7
+        );
+        assert_eq!(
+            u32::from_le_bytes(file[body + 342..body + 346].try_into().unwrap()),
+            1
+        );
         assert_eq!(&file[file.len() - 40 - 8..file.len() - 40 - 4], b"data");
     }
 }

@@ -112,7 +112,10 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
     let us_of_day = (start / 1000) % DAY_US;
     let time_reference =
         (u128::from(us_of_day) * u128::from(format.sample_rate) / 1_000_000) as u64;
-    let name = match (meta("mouthpiece.take", "slate"), meta("mouthpiece.take", "take")) {
+    let name = match (
+        meta("mouthpiece.take", "slate"),
+        meta("mouthpiece.take", "take"),
+    ) {
         (Some(slate), Some(take)) => format!("{slate} take {take}"),
         _ => recording
             .file_name()
