@@ -224,4 +224,54 @@ fn a_take_from_the_booth_holds_its_sound_and_where_it_stopped_and_exports_a_broa
     assert_eq!(w["length"], w["expected_length"], "{w}");
     assert_eq!(w["time_reference"], w["expected_time_reference"], "{w}");
     assert_eq!(w["first_block_in_place"], true, "{w}");
+
+    // The take replayed: its sound takes the microphone's path (state `replay`) and a take of
+    // the replay holds it again, bit for bit.
+    let port = free_port();
+    let config = format!(
+        "[source]\nspec = \"replay:{}\"\n[server]\nlisten = \"127.0.0.1:{port}\"\n[takes]\nfolder = \"again\"\nflush_s = 0.5\nmin_free_mb = 1\n",
+        take.display()
+    );
+    std::fs::write(dir.path().join("again.toml"), config).unwrap();
+    let mut daemon = Daemon(
+        Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+            .args(["run", "--config", "again.toml", "--record", "again"])
+            .current_dir(dir.path())
+            .env_remove("NOTIFY_SOCKET")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_until("the recording's sound as the microphone", || {
+        http_body(port, "/healthz").contains("\"state\":\"replay\"")
+    });
+    wait_until("replayed sound", || {
+        metric(port, "mouthpiece_audio_blocks_total") >= 50
+    });
+    // SAFETY: kill(2) on our own child with SIGTERM.
+    unsafe { libc::kill(daemon.0.id() as i32, libc::SIGTERM) };
+    assert!(daemon.0.wait().unwrap().success());
+    let again: Vec<PathBuf> = std::fs::read_dir(dir.path().join("again"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    let checked = Command::new(python())
+        .arg(repo().join("tests/python/check_take_audio.py"))
+        .arg(&again[0])
+        .arg(&booth.s16)
+        .output()
+        .unwrap();
+    assert!(
+        checked.status.success(),
+        "{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    let found: Value = serde_json::from_slice(&checked.stdout).unwrap();
+    assert!(found["blocks"].as_u64().unwrap() >= 20, "{found}");
+    assert_eq!(
+        found["exact"], true,
+        "the replayed take's sound is the booth's: {found}"
+    );
 }
