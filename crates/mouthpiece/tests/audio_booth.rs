@@ -275,3 +275,97 @@ fn a_take_from_the_booth_holds_its_sound_and_where_it_stopped_and_exports_a_broa
         "the replayed take's sound is the booth's: {found}"
     );
 }
+
+/// `synth --speech --speech-audio`: Festival's line and the mouth lip-synced from it in one
+/// session; replayed by the daemon, a take keeps sound and picture together: the offset
+/// between them (take vs session, frames matched by device time, sound by content) is
+/// within one frame (33 ms).
+#[test]
+fn a_synthetic_speech_session_keeps_sound_and_picture_within_a_frame_through_the_daemon() {
+    let dir = tempfile::tempdir().unwrap();
+    booth::festival("The quick brown fox jumps over the lazy dog.", dir.path());
+    let wav = dir.path().join("line.wav");
+    let run = |args: &[&str]| {
+        let out = mouthpiece(dir.path(), args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let human = repo().join("config/characters/human.toml");
+    run(&[
+        "lipsync",
+        "--character",
+        human.to_str().unwrap(),
+        "--audio",
+        "line.wav",
+        "--out",
+        "line.jsonl",
+        "--weights",
+        "line.csv",
+    ]);
+    run(&[
+        "synth",
+        "--speech",
+        "line.csv",
+        "--speech-audio",
+        wav.to_str().unwrap(),
+        "--seconds",
+        "5",
+        "--seed",
+        "7",
+        "--size",
+        "320x240",
+        "--out",
+        "speech.mcap",
+    ]);
+    let session = dir.path().join("speech.mcap");
+    let port = free_port();
+    std::fs::write(
+        dir.path().join("replay.toml"),
+        format!(
+            "[source]\nspec = \"replay:{}\"\n[server]\nlisten = \"127.0.0.1:{port}\"\n[takes]\nfolder = \"takes\"\nflush_s = 0.5\nmin_free_mb = 1\n",
+            session.display()
+        ),
+    )
+    .unwrap();
+    let mut daemon = Daemon(
+        Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+            .args(["run", "--config", "replay.toml", "--record", "speech"])
+            .current_dir(dir.path())
+            .env_remove("NOTIFY_SOCKET")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_until("the session's sound", || {
+        metric(port, "mouthpiece_audio_blocks_total") >= 150
+    });
+    // SAFETY: kill(2) on our own child with SIGTERM.
+    unsafe { libc::kill(daemon.0.id() as i32, libc::SIGTERM) };
+    assert!(daemon.0.wait().unwrap().success());
+    let take = std::fs::read_dir(dir.path().join("takes"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let measured = Command::new(python())
+        .arg(repo().join("tests/python/sound_picture_offset.py"))
+        .arg(&session)
+        .arg(&take)
+        .output()
+        .unwrap();
+    assert!(
+        measured.status.success(),
+        "{}",
+        String::from_utf8_lossy(&measured.stderr)
+    );
+    let found: Value = serde_json::from_slice(&measured.stdout).unwrap();
+    eprintln!("sound-picture offset: {found}");
+    let offset = found["offset_ms"].as_f64().unwrap();
+    assert!(offset.abs() <= 33.0, "{found}");
+}
