@@ -16,7 +16,8 @@
 //! - `oni_write`: frames to `.oni` without a device (the synthetic performer), through the
 //!   plain-Rust writer of `mouthpiece-openni2` (feature `openni2`).
 //! - `v4l2`: V4L2 cameras (feature `v4l2`).
-//! - `mcap_replay`: MCAP session replay through the recording crate (feature `mcap`).
+//! - `mcap_replay`: MCAP session replay through the recording crate (feature `mcap`);
+//!   `mcap_audio`: its sound (`/audio`) as an `AudioSource`, paced with its frames.
 //! - [`record`]: `mouthpiece record` (any source to MCAP; OpenNI2 sources to `.oni`).
 //! - `devices`: what `mouthpiece devices` lists.
 //! - `alsa`: the microphone through ALSA, an [`mouthpiece_frame::AudioSource`] (feature `alsa`).
@@ -44,6 +45,8 @@ pub mod pace;
 pub use mouthpiece_frame::registration;
 pub mod spec;
 
+#[cfg(feature = "mcap")]
+pub mod mcap_audio;
 #[cfg(feature = "mcap")]
 pub mod mcap_replay;
 #[cfg(feature = "openni2")]

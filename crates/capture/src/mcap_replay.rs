@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use mouthpiece_frame::{Frame, FrameSource, SourceError, SourceInfo};
 use mouthpiece_recording::{RecordingError, SessionReader};
 
-use crate::pace::Pacer;
+use crate::pace::{Pacer, ReplayClock};
 use crate::spec::{ReplaySpec, SourceSpec};
 use crate::{open_error_with, CaptureConfig};
 
@@ -89,7 +89,9 @@ impl McapReplay {
             spec,
             reader,
             info,
-            pacer: replay.speed.map(Pacer::new),
+            pacer: replay
+                .speed
+                .map(|speed| Pacer::new(speed).sharing(ReplayClock::for_path(&replay.path))),
             ahead: [Some(first), second]
                 .into_iter()
                 .flatten()

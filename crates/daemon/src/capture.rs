@@ -37,7 +37,9 @@ pub fn audio_plan(config: &Config) -> Option<crate::audio::AudioPlan> {
         config.source.retry_max_s.duration(),
     );
     let throttle = config.logging.throttle_s.duration();
-    let audio = config.audio.as_ref()?;
+    let Some(audio) = config.audio.as_ref() else {
+        return replay_audio_plan(config, backoff, throttle);
+    };
     let request = mouthpiece_capture::alsa::AlsaRequest {
         device: audio.device.clone(),
         sample_rate: audio.sample_rate,
@@ -54,6 +56,37 @@ pub fn audio_plan(config: &Config) -> Option<crate::audio::AudioPlan> {
         }),
         device: audio.device.clone(),
         state_when_up: mouthpiece_server::AudioState::Live,
+        backoff,
+        throttle,
+    })
+}
+
+/// The sound of a `replay:` recording that has some (`/audio`), played into the microphone's
+/// path, paced with the recording's frames.
+fn replay_audio_plan(
+    config: &Config,
+    backoff: crate::backoff::Backoff,
+    throttle: Duration,
+) -> Option<crate::audio::AudioPlan> {
+    let Ok(SourceSpec::Replay(replay)) = SourceSpec::parse(config.source.spec.as_str()) else {
+        return None;
+    };
+    let is_mcap = replay
+        .path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if !is_mcap || !mouthpiece_recording::AudioReader::has_audio(&replay.path).unwrap_or(false) {
+        return None;
+    }
+    let device = SourceSpec::Replay(replay.clone()).to_string();
+    tracing::info!(%device, "the replayed recording has sound: it plays as the microphone");
+    Some(crate::audio::AudioPlan {
+        opener: Box::new(move || {
+            mouthpiece_capture::mcap_audio::McapAudioReplay::open(&replay)
+                .map(|s| Box::new(s) as Box<dyn mouthpiece_frame::AudioSource>)
+        }),
+        device,
+        state_when_up: mouthpiece_server::AudioState::Replay,
         backoff,
         throttle,
     })

@@ -30,6 +30,7 @@ mod output;
 pub mod reduce;
 pub mod rig;
 pub mod take;
+pub mod wav;
 
 pub use csv::{CsvSummary, CsvWriter};
 pub use error::ExportError;
@@ -39,3 +40,4 @@ pub use output::PendingFile;
 pub use reduce::Reducer;
 pub use rig::{MouthRig, RigHead, RigPoint};
 pub use take::{HeadKeys, LipKeys, RigKeys, TakeFrame, TakeReader};
+pub use wav::{write_bwf, BextInfo, Timeline, MAX_WAV_DATA_BYTES};

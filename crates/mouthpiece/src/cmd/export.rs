@@ -95,6 +95,25 @@ impl Format {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // A recording's sound goes beside the animation as a Broadcast WAV, moved into place
+    // only once the animation is written.
+    let is_mcap = args
+        .input
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    let wav = if is_mcap && args.onto.is_none() && args.rig.is_none() {
+        crate::cmd::export_audio::prepare(&args.input, &args.out)?
+    } else {
+        None
+    };
+    export_animation(args)?;
+    if let Some(wav) = wav {
+        wav.commit()?;
+    }
+    Ok(())
+}
+
+fn export_animation(args: Args) -> anyhow::Result<()> {
     let format = match args.format {
         Some(f) => f,
         None => Format::from_extension(&args.out).ok_or_else(|| {

@@ -6,6 +6,7 @@ pub mod devices;
 pub mod evaluate;
 pub mod evaluate_rig;
 pub mod export;
+pub mod export_audio;
 pub mod lipsync;
 pub mod lipsync_poses;
 pub mod play;

@@ -87,6 +87,12 @@ pub struct Args {
     /// `lip_skin_color`.
     #[arg(long, value_name = "R,G,B", value_parser = parse_rgb)]
     pub lip_skin_colour: Option<[u8; 3]>,
+    /// The sound the `--speech` weights were made from (a 16-bit PCM WAV, e.g. Festival's
+    /// `text2wave`): written on `/audio` with its true timing, sample 0 at the time the
+    /// weights' 0 s is (after the neutral lead-in), so sound and mouth share one timeline.
+    /// MCAP output only.
+    #[arg(long, requires = "speech", value_name = "WAV")]
+    pub speech_audio: Option<PathBuf>,
     #[command(flatten)]
     pub jaw: JawArgs,
 }
@@ -241,6 +247,83 @@ fn speech_keys(
     Ok(keys)
 }
 
+/// `--speech-audio`: the WAV's samples, written in 10 ms blocks at their true times.
+struct SpeechAudio {
+    format: mouthpiece_frame::AudioFormat,
+    samples: Vec<i16>,
+    /// Log time of sample 0, ns (the session's clock: 0 at the first frame).
+    start_ns: u64,
+    /// Next sample frame to write.
+    next: usize,
+}
+
+impl SpeechAudio {
+    fn read(path: &std::path::Path, start_s: f64) -> anyhow::Result<SpeechAudio> {
+        let reader = hound::WavReader::open(path)
+            .with_context(|| format!("--speech-audio {}: not a readable WAV file", path.display()))
+            .map_err(bad_input)?;
+        let spec = reader.spec();
+        if spec.sample_format != hound::SampleFormat::Int
+            || spec.bits_per_sample != 16
+            || !(8_000..=192_000).contains(&spec.sample_rate)
+            || !(1..=32).contains(&spec.channels)
+        {
+            return Err(bad_input(anyhow::anyhow!(
+                "--speech-audio {}: expected 16-bit PCM, 8000 to 192000 Hz, 1 to 32 channels; got {}-bit {:?}, {} Hz, {} channels",
+                path.display(),
+                spec.bits_per_sample,
+                spec.sample_format,
+                spec.sample_rate,
+                spec.channels
+            )));
+        }
+        // Checked against a day of sound before anything is allocated.
+        let len = u64::from(reader.len());
+        if len > MAX_SECONDS as u64 * u64::from(spec.sample_rate) * u64::from(spec.channels) {
+            return Err(bad_input(anyhow::anyhow!(
+                "--speech-audio {}: {len} samples is more than a day of sound",
+                path.display()
+            )));
+        }
+        let samples = reader
+            .into_samples::<i16>()
+            .collect::<Result<Vec<_>, _>>()
+            .with_context(|| format!("--speech-audio {}: cut short", path.display()))
+            .map_err(bad_input)?;
+        Ok(SpeechAudio {
+            format: mouthpiece_frame::AudioFormat {
+                sample_rate: spec.sample_rate,
+                channels: spec.channels,
+            },
+            samples,
+            start_ns: (start_s * 1e9).round() as u64,
+            next: 0,
+        })
+    }
+
+    /// Writes the blocks that start before `until_ns`.
+    fn write_until(&mut self, writer: &mut SessionWriter, until_ns: u64) -> anyhow::Result<()> {
+        let channels = usize::from(self.format.channels);
+        let block = self.format.sample_rate as usize / 100;
+        let total = self.samples.len() / channels;
+        while self.next < total {
+            let at = self.start_ns
+                + (self.next as u128 * 1_000_000_000 / u128::from(self.format.sample_rate)) as u64;
+            if at >= until_ns {
+                break;
+            }
+            let end = (self.next + block).min(total);
+            writer.write_audio(
+                at,
+                self.format,
+                &self.samples[self.next * channels..end * channels],
+            )?;
+            self.next = end;
+        }
+        Ok(())
+    }
+}
+
 /// Frame rates `--fps` accepts: below one a second a session has no frames to speak of.
 pub const FPS_RANGE: (f64, f64) = (1.0, 1000.0);
 /// Longest session `--seconds` accepts (a day).
@@ -317,6 +400,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .extension()
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("oni"));
+    if is_oni && args.speech_audio.is_some() {
+        return Err(bad_input(anyhow::anyhow!(
+            "--speech-audio needs an MCAP session (--out NAME.mcap): .oni files hold no sound"
+        )));
+    }
     let frames = if is_oni {
         let oni_error = |e: OniWriteError| bad_input_if(e.is_bad_input(), e);
         let mut writer = OniFrameWriter::create(&args.out, &calibration, args.fps)
@@ -338,10 +426,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             },
             ..WriterOptions::default()
         };
+        let mut sound = match &args.speech_audio {
+            Some(path) => Some(SpeechAudio::read(path, neutral_seconds)?),
+            None => None,
+        };
         let mut writer = SessionWriter::create(&args.out, options)
             .with_context(|| format!("cannot write the session {}", args.out.display()))?;
         while let Some((frame, truth)) = synth.render_next() {
+            if let Some(sound) = &mut sound {
+                sound.write_until(&mut writer, frame.device_ts_us * 1000)?;
+            }
             writer.write_frame_with_ground_truth(&frame, Some(&truth))?;
+        }
+        if let Some(sound) = &mut sound {
+            sound.write_until(&mut writer, u64::MAX)?;
         }
         writer.finish()?.frames
     };
