@@ -315,7 +315,7 @@ fn bad_meshes_exit_2_saying_what_is_wrong() {
     let (code, err) = bind(&shipped_head("wolf"));
     assert_eq!(code, Some(2), "{err}");
     assert!(
-        err.contains("mouth point P1") && err.contains("nearest vertex"),
+        err.contains("mouth point P1") && err.contains("surface"),
         "{err}"
     );
     // not glTF

@@ -37,6 +37,14 @@ pub struct Args {
     /// file then holds it in glTF's axes, as Blender's glTF exporter writes it).
     #[arg(long, value_enum, default_value = "y")]
     pub model_up: UpArg,
+    /// A mesh (or its node) that is the face, by name (repeat for several); by default the
+    /// meshes nearest to the mouth points. Other meshes (eyes, teeth) follow the head rigidly.
+    #[arg(long = "face-mesh")]
+    pub face_mesh: Vec<String>,
+    /// The node (usually a bone of the file's skeleton) the mouth's joints hang under; by
+    /// default a joint named like `head`, else a new `root` node.
+    #[arg(long)]
+    pub parent_bone: Option<String>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -219,14 +227,25 @@ fn bind(args: Args) -> anyhow::Result<()> {
         _ => Method::Distance,
     };
     let start = Instant::now();
-    let summary = mouthpiece_bind::bind(&rig, &mesh, &out, args.model_up.into(), method)
-        .map_err(bind_error)?;
+    let mut options = mouthpiece_bind::BindOptions::new(args.model_up.into(), method);
+    options.face_meshes = args.face_mesh;
+    options.parent_bone = args.parent_bone;
+    let summary = mouthpiece_bind::bind(&rig, &mesh, &out, &options).map_err(bind_error)?;
     eprintln!(
-        "wrote {}: {} vertices ({} after merging seams), {} triangles, {} follow the mouth; {:?} weights in {:.2} s",
-        out.display(),
-        summary.vertices,
+        "face: {} ({} vertices after merging seams, {} triangles; {})",
+        summary.face.join(", "),
         summary.welded_vertices,
         summary.triangles,
+        summary.topology
+    );
+    for (part, joint) in &summary.parts {
+        eprintln!("part: {part} follows {joint}");
+    }
+    eprintln!(
+        "wrote {}: the input with a skin added, the mouth under {}; {} vertices in the file, {} follow the mouth; {:?} weights in {:.2} s",
+        out.display(),
+        summary.parent.as_deref().unwrap_or("a new root"),
+        summary.vertices,
         summary.moving_vertices,
         args.method,
         start.elapsed().as_secs_f64()
