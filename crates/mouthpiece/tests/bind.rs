@@ -134,9 +134,11 @@ impl Glb {
         let view = &self.doc["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
         let start = view["byteOffset"].as_u64().unwrap_or(0) as usize
             + a["byteOffset"].as_u64().unwrap_or(0) as usize;
+        assert!(view.get("byteStride").is_none(), "strided views are not read here");
         let n = match a["type"].as_str().unwrap() {
             "SCALAR" => 1,
             "VEC3" => 3,
+            "VEC2" => 2,
             "VEC4" => 4,
             "MAT4" => 16,
             t => panic!("type {t}"),
@@ -144,6 +146,7 @@ impl Glb {
         let (size, read): (usize, fn(&[u8]) -> f64) = match a["componentType"].as_u64().unwrap() {
             5126 => (4, |b| f32::from_le_bytes(b.try_into().unwrap()) as f64),
             5121 => (1, |b| b[0] as f64),
+            5123 => (2, |b| u16::from_le_bytes(b.try_into().unwrap()) as f64),
             5125 => (4, |b| u32::from_le_bytes(b.try_into().unwrap()) as f64),
             c => panic!("component type {c}"),
         };
@@ -720,4 +723,241 @@ fn a_character_without_the_twelve_points_is_refused_naming_its_file() {
             &out,
         );
     }
+}
+
+/// Runs a Blender script headless; its stdout.
+fn blender(script: &str, args: &[&Path]) -> String {
+    let mut cmd = Command::new("blender");
+    cmd.args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
+        .arg(repo().join("tests/blender").join(script))
+        .arg("--")
+        .args(args);
+    let out = cmd
+        .output()
+        .expect("blender (Debian package `blender`, installed by scripts/test)");
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "blender {script} failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+/// The validator's message codes by severity (0 errors, 1 warnings).
+fn validator_codes(path: &Path, severity: u64) -> std::collections::BTreeSet<String> {
+    let out = Command::new("node")
+        .arg(validator_script())
+        .arg(path)
+        .output()
+        .expect("node (Debian package `nodejs`)");
+    let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+    report["issues"]["messages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|m| m["severity"] == severity)
+        .map(|m| m["code"].as_str().unwrap().to_owned())
+        .collect()
+}
+
+fn node_named(doc: &Value, name: &str) -> usize {
+    doc["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .position(|n| n["name"] == name)
+        .unwrap_or_else(|| panic!("no node {name}"))
+}
+
+/// A rigger's head modelled in Blender at test time (tests/blender/make_rigged_head.py: a UV
+/// sphere with a texture, a shape key, an armature with an action, eyes on the head bone,
+/// teeth and a tongue on their own) comes back from `bind` with everything it had, the
+/// mouth's joints joined to its skeleton under `head`; Blender opens it with its texture,
+/// UVs and shape key, and a take exported onto it moves the lower lip.
+#[test]
+fn a_blender_head_comes_back_with_everything_it_had_joined_to_its_skeleton() {
+    let dir = tempfile::tempdir().unwrap();
+    let head = dir.path().join("head.glb");
+    let toml = dir.path().join("head.toml");
+    blender("make_rigged_head.py", &[&head, &toml]);
+    let bound = dir.path().join("bound.glb");
+    let report = ok(&[
+        "bind",
+        "--character",
+        s(&toml),
+        "--mesh",
+        s(&head),
+        "--out",
+        s(&bound),
+    ]);
+    assert!(report.contains("the mouth under head"), "{report}");
+    let (input, output) = (Glb::read(&head), Glb::read(&bound));
+    // kept as they were: materials, textures, images, samplers, animations, scenes' roots
+    for key in ["materials", "textures", "samplers", "animations"] {
+        assert_eq!(input.doc[key], output.doc[key], "{key} changed");
+    }
+    assert_eq!(
+        input.doc["images"].as_array().unwrap().len(),
+        output.doc["images"].as_array().unwrap().len()
+    );
+    for node in input.doc["nodes"].as_array().unwrap() {
+        let name = node["name"].as_str().unwrap();
+        // a rigid part newly skinned moves to the scene's root; its old node keeps its place
+        let out = &output.doc["nodes"][node_named(&output.doc, name)];
+        let placed = output.doc["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["name"] == format!("{name}_transform"))
+            .unwrap_or(out);
+        for key in ["translation", "rotation", "scale"] {
+            assert_eq!(node[key], placed[key], "node {name}: {key}");
+        }
+        // children kept, in order (the mouth joins the head's)
+        let children = node["children"].as_array().cloned().unwrap_or_default();
+        let now = placed["children"].as_array().cloned().unwrap_or_default();
+        assert_eq!(children[..], now[..children.len()], "node {name}: children");
+        assert_eq!(node["mesh"], out["mesh"], "node {name}: mesh");
+    }
+    // every attribute, index list and morph target holds the same numbers
+    let meshes = input.doc["meshes"].as_array().unwrap();
+    for (m, mesh) in meshes.iter().enumerate() {
+        for (p, prim) in mesh["primitives"].as_array().unwrap().iter().enumerate() {
+            let out_prim = &output.doc["meshes"][m]["primitives"][p];
+            let mut accessors: Vec<(String, &Value, &Value)> = vec![(
+                "indices".into(),
+                &prim["indices"],
+                &out_prim["indices"],
+            )];
+            for (name, a) in prim["attributes"].as_object().unwrap() {
+                if !name.starts_with("JOINTS_") && !name.starts_with("WEIGHTS_") {
+                    accessors.push((name.clone(), a, &out_prim["attributes"][name]));
+                }
+            }
+            for (t, target) in prim["targets"].as_array().into_iter().flatten().enumerate() {
+                for (name, a) in target.as_object().unwrap() {
+                    accessors.push((
+                        format!("target {t} {name}"),
+                        a,
+                        &out_prim["targets"][t][name],
+                    ));
+                }
+            }
+            for (name, a, b) in accessors {
+                let (a, b) = (a.as_u64().unwrap(), b.as_u64().unwrap());
+                assert_eq!(
+                    input.accessor(a as usize),
+                    output.accessor(b as usize),
+                    "mesh {m} primitive {p}: {name}"
+                );
+            }
+            assert_eq!(prim["material"], out_prim["material"]);
+        }
+    }
+    // the skin: the old joints in order, then the mouth's, the mouth under `head`
+    let face = node_named(&output.doc, "Head");
+    let skin = output.doc["nodes"][face]["skin"].as_u64().unwrap() as usize;
+    let old_joints = input.doc["skins"][0]["joints"].as_array().unwrap();
+    let joints = output.doc["skins"][skin]["joints"].as_array().unwrap();
+    assert_eq!(&joints[..old_joints.len()], &old_joints[..]);
+    let names: Vec<&str> = joints[old_joints.len()..]
+        .iter()
+        .map(|j| output.doc["nodes"][j.as_u64().unwrap() as usize]["name"].as_str().unwrap())
+        .collect();
+    let mut expected = vec!["mouth".to_owned()];
+    expected.extend((1..=12).map(|k| format!("P{k}")));
+    assert_eq!(names, expected);
+    let mouth = node_named(&output.doc, "mouth");
+    let head_bone = node_named(&output.doc, "head");
+    assert!(output.doc["nodes"][head_bone]["children"]
+        .as_array()
+        .unwrap()
+        .contains(&serde_json::json!(mouth)));
+    // weights far from the mouth are the file's own
+    let weights_in = input.attribute("WEIGHTS_0");
+    let weights_out = output.attribute("WEIGHTS_0");
+    let joints_in = input.attribute("JOINTS_0");
+    let joints_out = output.attribute("JOINTS_0");
+    let (mut kept, mut changed) = (0, 0);
+    for v in 0..weights_in.len() {
+        let mouth_weight: f64 = (0..4)
+            .filter(|&k| joints_out[v][k] as usize >= old_joints.len())
+            .map(|k| weights_out[v][k])
+            .sum();
+        if mouth_weight == 0.0 {
+            assert_eq!(joints_in[v], joints_out[v], "vertex {v}");
+            for k in 0..4 {
+                assert!((weights_in[v][k] - weights_out[v][k]).abs() < 1e-6, "vertex {v}");
+            }
+            kept += 1;
+        } else {
+            changed += 1;
+        }
+    }
+    assert!(kept > 1000 && changed > 12, "kept {kept}, changed {changed}");
+    // valid: no error, no warning the input did not have
+    assert!(validator_codes(&bound, 0).is_empty());
+    let new_warnings: Vec<String> = validator_codes(&bound, 1)
+        .difference(&validator_codes(&head, 1))
+        .cloned()
+        .collect();
+    assert!(new_warnings.is_empty(), "new warnings: {new_warnings:?}");
+
+    // a take onto it
+    let rig = MouthRig::load_character(&toml).unwrap();
+    let take_path = dir.path().join("take.jsonl");
+    let take = write_take(&take_path, &rig, 40);
+    let animated = dir.path().join("take.glb");
+    ok(&[
+        "export",
+        s(&take_path),
+        "--character",
+        s(&toml),
+        "--rig",
+        s(&bound),
+        "--out",
+        s(&animated),
+    ]);
+    assert!(validator_codes(&animated, 0).is_empty());
+    // Blender: the texture, UVs and shape key are there, and the lower lip moves
+    let p10 = rig.placement() * nalgebra::Point3::from(rig.points()[9].rest);
+    let (t, _) = &take[15];
+    let stdout = Command::new("blender")
+        .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
+        .arg(repo().join("tests/blender/inspect_bound.py"))
+        .arg("--")
+        .arg(&animated)
+        .arg(format!("{t:?}"))
+        .arg(format!("{},{},{}", p10.x, p10.y, p10.z))
+        .output()
+        .expect("blender");
+    let stdout = String::from_utf8_lossy(&stdout.stdout);
+    let line = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("BOUND "))
+        .unwrap_or_else(|| panic!("no BOUND line from Blender:\n{stdout}"));
+    let seen: Value = serde_json::from_str(line).unwrap();
+    let head_mesh = &seen["meshes"]["Head"];
+    assert_eq!(head_mesh["uv_layers"], serde_json::json!(["UVMap"]), "{seen}");
+    assert_eq!(head_mesh["images"], serde_json::json!([["skin", 32, 32]]), "{seen}");
+    assert_eq!(head_mesh["shape_keys"], serde_json::json!(["Basis", "Puff"]), "{seen}");
+    assert_eq!(head_mesh["armature"], true);
+    for part in ["EyeL", "EyeR", "TeethUpper", "Tongue"] {
+        assert!(seen["meshes"][part].is_object(), "{part} missing: {seen}");
+    }
+    let bones: Vec<&str> = seen["bones"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b.as_str().unwrap())
+        .collect();
+    for bone in ["root", "neck", "head", "mouth", "P1", "P12"] {
+        assert!(bones.contains(&bone), "{bone} not among {bones:?}");
+    }
+    let moved = seen["moved"].as_f64().unwrap();
+    assert!(
+        moved > 0.05 * rig.mouth_width(),
+        "the lower lip moved {moved} in Blender: {seen}"
+    );
 }
