@@ -169,6 +169,8 @@ pub struct BindSummary {
     pub parts: Vec<(String, &'static str)>,
     /// The node the mouth's joints hang under (none: a new `root`).
     pub parent: Option<String>,
+    /// The mouth points came from the file's nodes named like them.
+    pub points_from_nodes: bool,
 }
 
 /// How to bind, besides the character and the files.
@@ -207,6 +209,9 @@ pub fn bind(
         path: mesh_path.to_path_buf(),
         problem,
     };
+    let from_nodes = select::rig_from_nodes(&loaded, rig, options.model_up)
+        .map_err(|e| bad(format!("the mouth points from the file's nodes: {e}")))?;
+    let rig = from_nodes.as_ref().unwrap_or(rig);
     let placement = file_placement(rig, options.model_up);
     let face = select::face_instances(&loaded, rig, &placement, &options.face_meshes)
         .map_err(bad)?;
@@ -286,6 +291,7 @@ pub fn bind(
         topology,
         face: sub.names,
         parts,
+        points_from_nodes: from_nodes.is_some(),
         parent: parent.map(|p| {
             loaded.document.root.nodes[p]
                 .name

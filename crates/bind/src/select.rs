@@ -203,3 +203,83 @@ pub fn parent_bone(
     }
     Ok(head_in(&mut (0..root.skins.len())))
 }
+
+/// The character's rig with its points moved to the file's nodes named like them (`P1` …,
+/// empties a rigger placed on the mesh), when the file has all of them: the mouth frame from
+/// the corners (the first point and the point halfway round, as the character file has them)
+/// and the character's up, the rest in that frame. None when the file lacks one of them.
+pub fn rig_from_nodes(
+    loaded: &LoadedMesh,
+    rig: &MouthRig,
+    model_up: crate::ModelUp,
+) -> Result<Option<MouthRig>, String> {
+    use nalgebra::{Unit, Vector3};
+    let root = &loaded.document.root;
+    let mut at = Vec::new();
+    for p in rig.points() {
+        let Some(node) = root
+            .nodes
+            .iter()
+            .position(|n| n.name.as_deref() == Some(&p.name))
+        else {
+            return Ok(None);
+        };
+        let w = loaded.document.worlds[node];
+        at.push(Vector3::new(w[(0, 3)], w[(1, 3)], w[(2, 3)]));
+    }
+    // file frame → model frame
+    let to_file = crate::file_placement(rig, model_up) * rig.placement().inverse();
+    let model: Vec<Vector3<f64>> = at
+        .iter()
+        .map(|p| to_file.inverse_transform_point(&Point3::from(*p)).coords)
+        .collect();
+    let (left, right) = (model[0], model[model.len() / 2]);
+    let x = left - right;
+    if !(x.norm() > 0.0) {
+        return Err(format!(
+            "nodes {} and {} (the mouth's corners) are at the same place",
+            rig.points()[0].name,
+            rig.points()[model.len() / 2].name
+        ));
+    }
+    let x = Unit::new_normalize(x);
+    let up = rig.placement().rotation * Vector3::y();
+    let y = up - x.into_inner() * x.dot(&up);
+    if !(y.norm() > 1e-6) {
+        return Err("the mouth's corners lie along the character's up axis".into());
+    }
+    let y = y.normalize();
+    let z = x.cross(&y);
+    let origin = 0.5 * (left + right);
+    let placement = MouthRig::placement_from_axes(
+        origin.into(),
+        x.into_inner().into(),
+        y.into(),
+        z.into(),
+    )
+    .map_err(|e| e.to_string())?;
+    let points = rig
+        .points()
+        .iter()
+        .zip(&model)
+        .map(|(p, m)| mouthpiece_export::RigPoint {
+            name: p.name.clone(),
+            rest: placement.inverse_transform_point(&Point3::from(*m)).coords.into(),
+        })
+        .collect();
+    let mut new = MouthRig::new(rig.character().map(str::to_owned), points, placement)
+        .map_err(|e| e.to_string())?;
+    if let Some(units) = rig.metres_per_unit() {
+        new = new.with_metres_per_unit(units).map_err(|e| e.to_string())?;
+    }
+    if let Some(head) = rig.head() {
+        new = new.with_head(*head).map_err(|e| e.to_string())?;
+    }
+    if let Some(pivot) = rig.jaw_pivot() {
+        let model = rig.placement() * Point3::from(pivot);
+        new = new
+            .with_jaw_pivot(model.coords.into())
+            .map_err(|e| e.to_string())?;
+    }
+    Ok(Some(new))
+}

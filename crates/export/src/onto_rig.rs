@@ -274,6 +274,16 @@ pub fn animate_rig_bytes(
             .ok_or_else(|| take_bad("a channel names a sampler that does not exist"))?;
         let input = copy_accessor(&mut root, &mut bin, sampler.input)?;
         let output = copy_accessor(&mut root, &mut bin, sampler.output)?;
+        // A joint placed elsewhere than the take's point (a rigger's own mouth points) keeps
+        // the take's motion from its own rest: every key moves by the difference.
+        let rest = |n: Option<&json::Node>| n.and_then(|n| n.translation).unwrap_or([0.0; 3]);
+        let here = rest(root.nodes.get(target.value()));
+        let there = rest(take_root.nodes.get(channel.target.node.value()));
+        let offset = [0, 1, 2].map(|k| here[k] - there[k]);
+        if offset.iter().any(|&c| c != 0.0) {
+            shift_vec3(&mut root, &mut bin, output, offset)
+                .map_err(|p| rig_error(take_glb, p))?;
+        }
         let index = json::Index::new(samplers_out.len() as u32);
         samplers_out.push(json::animation::Sampler {
             input,
@@ -310,6 +320,44 @@ pub fn animate_rig_bytes(
         bin,
         channels,
     })
+}
+
+/// Adds `offset` to every element of a copied, tightly packed `VEC3` of `FLOAT` accessor
+/// (its bytes are this document's own copy), dropping its bounds.
+fn shift_vec3(
+    root: &mut json::Root,
+    bin: &mut [u8],
+    accessor: json::Index<json::Accessor>,
+    offset: [f32; 3],
+) -> Result<(), String> {
+    use json::accessor::{ComponentType as C, GenericComponentType as G, Type};
+    let a = &mut root.accessors[accessor.value()];
+    if a.type_ != Valid(Type::Vec3) || !matches!(a.component_type, Valid(G(C::F32))) {
+        return Err("a translation channel's keys are not VEC3 of FLOAT".into());
+    }
+    let view = a
+        .buffer_view
+        .and_then(|v| root.buffer_views.get(v.value()))
+        .ok_or("a translation channel's keys have no buffer view")?;
+    if view.byte_stride.is_some_and(|s| s.0 != 12) {
+        return Err("a translation channel's keys are interleaved".into());
+    }
+    let start = view.byte_offset.map_or(0, |o| o.0) + a.byte_offset.map_or(0, |o| o.0);
+    let end = a
+        .count
+        .0
+        .checked_mul(12)
+        .and_then(|n| n.checked_add(start))
+        .filter(|&e| e <= view.byte_offset.map_or(0, |o| o.0) + view.byte_length.0)
+        .filter(|&e| e <= bin.len() as u64)
+        .ok_or("a translation channel's keys run past their buffer view")?;
+    for (i, chunk) in bin[start as usize..end as usize].chunks_exact_mut(4).enumerate() {
+        let v = f32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]) + offset[i % 3];
+        chunk.copy_from_slice(&v.to_le_bytes());
+    }
+    a.min = None;
+    a.max = None;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -238,6 +238,9 @@ fn bind(args: Args) -> anyhow::Result<()> {
         summary.triangles,
         summary.topology
     );
+    if summary.points_from_nodes {
+        eprintln!("mouth points: the file's nodes named like the character's points");
+    }
     for (part, joint) in &summary.parts {
         eprintln!("part: {part} follows {joint}");
     }
