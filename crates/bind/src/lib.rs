@@ -22,6 +22,7 @@
 mod error;
 pub mod eval;
 pub mod gltf_io;
+pub mod jaw;
 mod gltf_read;
 pub mod mesh;
 pub mod network;
