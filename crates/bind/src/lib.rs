@@ -51,6 +51,10 @@ pub const POINT_DISTANCE_LIMIT: f64 = 0.1;
 /// The trained network shipped with mouthpiece (`mouthpiece bind train`, see docs/bind.md).
 pub const SHIPPED_NETWORK: &[u8] = include_bytes!("../model/network.bin");
 
+/// Separate parts whose node or mesh name holds one of these (any case) follow the jaw; the
+/// others the head.
+pub const JAW_PARTS: [&str; 4] = ["tongue", "jaw", "lower", "chin"];
+
 /// How to compute the weights.
 #[derive(Clone, Copy, Debug)]
 pub enum Method<'a> {
@@ -185,6 +189,11 @@ pub struct BindOptions<'a> {
     /// The node the mouth's joints hang under; none: a joint named like `head` when there is
     /// one, else a new `root` node.
     pub parent_bone: Option<String>,
+    /// Add a jaw joint (carrying the chin and the lower lip's joints).
+    pub jaw: bool,
+    /// The jaw's hinge, model frame; none: the character's (`[rig] jaw_pivot`, else the
+    /// rig's default behind and above the mouth), where a take's jaw turns.
+    pub jaw_hinge: Option<[f64; 3]>,
 }
 
 impl<'a> BindOptions<'a> {
@@ -194,6 +203,8 @@ impl<'a> BindOptions<'a> {
             method,
             face_meshes: Vec::new(),
             parent_bone: None,
+            jaw: true,
+            jaw_hinge: None,
         }
     }
 }
@@ -232,6 +243,39 @@ pub fn bind(
         e
     })?;
     let welded_weights = compute_weights(&prepared, options.method);
+    // the jaw's hinge in the mouth frame (character units), and each welded vertex's share
+    let width = rig.mouth_width();
+    let hinge = match options.jaw_hinge {
+        Some(model) => {
+            if !model.iter().all(|c| c.is_finite()) {
+                return Err(BindError::BadArgument(format!(
+                    "--jaw-hinge {model:?} is not finite"
+                )));
+            }
+            let p = rig.placement().inverse_transform_point(&Point3::from(model));
+            if p.coords.norm() > 10.0 * width {
+                return Err(BindError::BadArgument(format!(
+                    "--jaw-hinge {model:?} is {:.4} from the mouth, more than 10 mouth widths \
+                     ({:.4}): is it in the character's model frame and units?",
+                    p.coords.norm(),
+                    10.0 * width
+                )));
+            }
+            [p.x, p.y, p.z]
+        }
+        None => rig.jaw_hinge(),
+    };
+    let jaw_shares: Vec<f64> = if options.jaw {
+        let positions: Vec<Vector3<f64>> =
+            (0..prepared.mesh.len()).map(|v| prepared.mesh.vertex(v)).collect();
+        jaw::jaw_shares(
+            &positions,
+            &welded_weights,
+            &Vector3::from(hinge.map(|c| c / width)),
+        )
+    } else {
+        vec![0.0; prepared.mesh.len()]
+    };
     let parent = select::parent_bone(&loaded, &face, options.parent_bone.as_deref()).map_err(bad)?;
     let mut bindings = vec![skin_out::Binding::Keep; loaded.instances.len()];
     let mut parts = Vec::new();
@@ -249,7 +293,11 @@ pub fn bind(
                                 .filter(|&j| row[j] > 0.0)
                                 .map(|j| (skin_out::Target::Point(j), row[j]))
                                 .collect();
-                            out.push((skin_out::Target::Parent, row[weights::ROOT]));
+                            let jaw = jaw_shares[to_welded[v] as usize];
+                            if jaw > 0.0 {
+                                out.push((skin_out::Target::Jaw, jaw));
+                            }
+                            out.push((skin_out::Target::Parent, row[weights::ROOT] - jaw));
                             out
                         })
                         .collect()
@@ -266,17 +314,33 @@ pub fn bind(
                     .any(|n| n == p)
             });
             let kept = instance.skin.is_some() || under_parent;
-            if !kept {
-                bindings[i] = skin_out::Binding::Rigid(skin_out::Target::Parent);
-            }
-            parts.push((instance.describe(root), if kept { "kept" } else { "head" }));
+            let (node_name, mesh_name) = instance.names(root);
+            let on_jaw = options.jaw
+                && [node_name, mesh_name].iter().flatten().any(|n| {
+                    let n = n.to_ascii_lowercase();
+                    JAW_PARTS.iter().any(|part| n.contains(part))
+                });
+            let joint = match (kept, on_jaw) {
+                (_, true) => {
+                    bindings[i] = skin_out::Binding::Rigid(skin_out::Target::Jaw);
+                    "jaw"
+                }
+                (true, false) => "kept",
+                (false, false) => {
+                    bindings[i] = skin_out::Binding::Rigid(skin_out::Target::Parent);
+                    "head"
+                }
+            };
+            parts.push((instance.describe(root), joint));
         }
     }
     let plan = skin_out::RigPlan {
         rig,
         placement,
         parent,
-        jaw: None,
+        jaw: options
+            .jaw
+            .then(|| (hinge, jaw::LOWER_LIP.to_vec())),
         generator: format!("mouthpiece bind {}", env!("CARGO_PKG_VERSION")),
     };
     skin_out::write_bound(out, &loaded, &plan, &bindings)?;

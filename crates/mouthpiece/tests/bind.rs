@@ -208,7 +208,7 @@ fn human_and_wolf_bind_with_every_method_into_valid_skinned_glbs() {
                 up,
             ]);
             let glb = Glb::read(&out);
-            let mut names = vec!["root".to_owned(), "mouth".to_owned()];
+            let mut names = vec!["root".to_owned(), "mouth".to_owned(), "jaw".to_owned()];
             names.extend((1..=12).map(|k| format!("P{k}")));
             assert_eq!(glb.joint_names(), names);
             let weights = glb.attribute("WEIGHTS_0");
@@ -241,8 +241,9 @@ fn human_and_wolf_bind_with_every_method_into_valid_skinned_glbs() {
                 let world = match k {
                     0 => nalgebra::Matrix4::identity(),
                     1 => placement,
+                    2 => placement * nalgebra::Matrix4::new_translation(&rig.jaw_hinge().into()),
                     _ => {
-                        let r = rig.points()[k - 2].rest;
+                        let r = rig.points()[k - 3].rest;
                         placement * nalgebra::Matrix4::new_translation(&r.into())
                     }
                 };
@@ -383,6 +384,8 @@ fn a_take_plays_on_the_bound_wolf_in_blender_where_mouthpiece_skins_it() {
         "heat",
         "--model-up",
         "z",
+        // the points' translations only: what this test computes on its own
+        "--no-jaw",
     ]);
     let take_path = dir.path().join("take.jsonl");
     let take = write_take(&take_path, &rig, 40);
@@ -846,9 +849,17 @@ fn a_blender_head_comes_back_with_everything_it_had_joined_to_its_skeleton() {
         .iter()
         .map(|j| output.doc["nodes"][j.as_u64().unwrap() as usize]["name"].as_str().unwrap())
         .collect();
-    let mut expected = vec!["mouth".to_owned()];
+    let mut expected = vec!["mouth".to_owned(), "jaw".to_owned()];
     expected.extend((1..=12).map(|k| format!("P{k}")));
     assert_eq!(names, expected);
+    // the lower lip's joints ride on the jaw
+    let jaw = node_named(&output.doc, "jaw");
+    let jaw_children = output.doc["nodes"][jaw]["children"].as_array().unwrap();
+    assert_eq!(jaw_children.len(), 5);
+    for child in jaw_children {
+        let name = output.doc["nodes"][child.as_u64().unwrap() as usize]["name"].as_str().unwrap();
+        assert!(["P8", "P9", "P10", "P11", "P12"].contains(&name), "{name} on the jaw");
+    }
     let mouth = node_named(&output.doc, "mouth");
     let head_bone = node_named(&output.doc, "head");
     assert!(output.doc["nodes"][head_bone]["children"]
@@ -933,7 +944,9 @@ fn a_blender_head_comes_back_with_everything_it_had_joined_to_its_skeleton() {
         .iter()
         .map(|b| b.as_str().unwrap())
         .collect();
-    for bone in ["root", "neck", "head", "mouth", "P1", "P12"] {
+    assert!(report.contains("\"Tongue\") follows jaw"), "{report}");
+    assert!(report.contains("\"TeethUpper\") follows head"), "{report}");
+    for bone in ["root", "neck", "head", "mouth", "jaw", "P1", "P12"] {
         assert!(bones.contains(&bone), "{bone} not among {bones:?}");
     }
     let moved = seen["moved"].as_f64().unwrap();
@@ -1015,6 +1028,8 @@ fn mouth_points_come_from_the_files_nodes_named_like_them() {
             s(out),
             "--method",
             "distance",
+            // the joints' translations all in the mouth frame, as checked below
+            "--no-jaw",
         ])
     };
     let plain = dir.path().join("plain.glb");
@@ -1100,4 +1115,112 @@ fn mouth_points_come_from_the_files_nodes_named_like_them() {
             );
         }
     }
+}
+
+/// `export --rig` onto a rig with a jaw: the lower lip's joints ride on the jaw, so their keys
+/// are in the jaw's frame; composed with the jaw's keys they land on the take's points.
+#[test]
+fn lower_lip_keys_on_the_jaw_land_on_the_takes_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let human = character("human");
+    let rig = MouthRig::load_character(&human).unwrap();
+    let bound = dir.path().join("bound.glb");
+    ok(&[
+        "bind",
+        "--character",
+        s(&human),
+        "--mesh",
+        s(&shipped_head("human")),
+        "--out",
+        s(&bound),
+        "--method",
+        "distance",
+    ]);
+    let take_path = dir.path().join("take.jsonl");
+    let take = write_take(&take_path, &rig, 30);
+    // the jaw turning and sliding as the take goes
+    let curves: Vec<String> = mouthpiece_output::CURVE_NAMES
+        .iter()
+        .map(|n| format!("\"{n}\": 0.0"))
+        .collect();
+    let text: String = std::fs::read_to_string(&take_path)
+        .unwrap()
+        .lines()
+        .enumerate()
+        .map(|(i, line)| {
+            let rig = format!(
+                r#", "rig": {{"jaw": {{"angle_deg": {:?}, "slide_m": {:?}}}, "lips": {{"upper": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0], "residual": 0}}, "lower": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0], "residual": 0}}}}, "curves": {{{}}}}}"#,
+                15.0 * (0.3 * i as f64).sin().abs(),
+                0.001 * (0.2 * i as f64).sin(),
+                curves.join(", ")
+            );
+            format!("{}\n", line.replace("\"curve\": null", &format!("\"curve\": null{rig}")))
+        })
+        .collect();
+    std::fs::write(&take_path, text).unwrap();
+    let animated = dir.path().join("take.glb");
+    ok(&[
+        "export",
+        s(&take_path),
+        "--character",
+        s(&human),
+        "--rig",
+        s(&bound),
+        "--out",
+        s(&animated),
+    ]);
+    assert_valid(&animated);
+    let glb = Glb::read(&animated);
+    let anim = &glb.doc["animations"][0];
+    let keys = |node: usize, path: &str| -> (Vec<f64>, Vec<Vec<f64>>) {
+        let c = anim["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["target"]["node"] == node && c["target"]["path"] == path)
+            .unwrap_or_else(|| panic!("no {path} keys on node {node}"));
+        let sampler = &anim["samplers"][c["sampler"].as_u64().unwrap() as usize];
+        let times = glb.accessor(sampler["input"].as_u64().unwrap() as usize);
+        (
+            times.iter().map(|t| t[0]).collect(),
+            glb.accessor(sampler["output"].as_u64().unwrap() as usize),
+        )
+    };
+    let jaw = node_named(&glb.doc, "jaw");
+    let (jaw_times, rotations) = keys(jaw, "rotation");
+    let (_, translations) = keys(jaw, "translation");
+    assert!(
+        rotations.iter().any(|q| q[0].abs() > 0.05),
+        "the jaw never turns: the test would prove nothing"
+    );
+    let mut checked = 0;
+    for k in [7usize, 9, 11] {
+        let point = node_named(&glb.doc, &format!("P{}", k + 1));
+        let (times, locals) = keys(point, "translation");
+        for (t, local) in times.iter().zip(&locals) {
+            let Some(f) = jaw_times.iter().position(|jt| jt == t) else {
+                continue;
+            };
+            let q = &rotations[f];
+            let r = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                q[3], q[0], q[1], q[2],
+            ));
+            let world = r * nalgebra::Vector3::new(local[0], local[1], local[2])
+                + nalgebra::Vector3::new(translations[f][0], translations[f][1], translations[f][2]);
+            let frame = take
+                .iter()
+                .position(|(tt, _)| (*tt as f32) == (*t as f32))
+                .expect("a key at a frame's time");
+            let expected = take[frame].1[k];
+            for c in 0..3 {
+                assert!(
+                    (world[c] - expected[c]).abs() < 1e-5,
+                    "P{} at {t}: {world:?} vs {expected:?}",
+                    k + 1
+                );
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked >= 3, "only {checked} keys checked");
 }

@@ -45,6 +45,30 @@ pub struct Args {
     /// default a joint named like `head`, else a new `root` node.
     #[arg(long)]
     pub parent_bone: Option<String>,
+    /// The jaw's hinge `x,y,z` in the character's model frame and units; by default the
+    /// character's `[rig] jaw_pivot`, else the rig's default behind and above the mouth.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub jaw_hinge: Option<[f64; 3]>,
+    /// No jaw joint: the chin stays with the head.
+    #[arg(long)]
+    pub no_jaw: bool,
+}
+
+/// `x,y,z`: three finite numbers.
+fn parse_point(text: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = text.split(',').collect();
+    let numbers: Vec<f64> = parts
+        .iter()
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{}`: {e}", mouthpiece_export::asset::shown(text)))?;
+    match numbers[..] {
+        [x, y, z] if numbers.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!(
+            "`{}`: give three finite numbers x,y,z",
+            mouthpiece_export::asset::shown(text)
+        )),
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -230,6 +254,8 @@ fn bind(args: Args) -> anyhow::Result<()> {
     let mut options = mouthpiece_bind::BindOptions::new(args.model_up.into(), method);
     options.face_meshes = args.face_mesh;
     options.parent_bone = args.parent_bone;
+    options.jaw = !args.no_jaw;
+    options.jaw_hinge = args.jaw_hinge;
     let summary = mouthpiece_bind::bind(&rig, &mesh, &out, &options).map_err(bind_error)?;
     eprintln!(
         "face: {} ({} vertices after merging seams, {} triangles; {})",
