@@ -104,7 +104,12 @@ impl Instance {
         let (node, mesh) = self.names(root);
         let quoted = |n: Option<String>| n.map_or(String::new(), |n| format!(" \"{}\"", shown(&n)));
         match self.node {
-            Some(i) => format!("mesh {}{} (node {i}{})", self.mesh, quoted(mesh), quoted(node)),
+            Some(i) => format!(
+                "mesh {}{} (node {i}{})",
+                self.mesh,
+                quoted(mesh),
+                quoted(node)
+            ),
             None => format!("mesh {}{}", self.mesh, quoted(mesh)),
         }
     }
@@ -337,7 +342,10 @@ pub fn inverse_bind_matrices(
             values.len() / 16
         ));
     }
-    Ok(values.chunks_exact(16).map(Matrix4::from_column_slice).collect())
+    Ok(values
+        .chunks_exact(16)
+        .map(Matrix4::from_column_slice)
+        .collect())
 }
 
 /// A primitive's `JOINTS_n`/`WEIGHTS_n` pairs as (joint, weight) lists, one per vertex;
@@ -631,17 +639,11 @@ fn read_accessor(
         (Use::Matrices, Valid(Type::Mat4), Valid(G(C::F32))) => (16, C::F32),
         (Use::Joints, Valid(Type::Vec4), Valid(G(c @ (C::U8 | C::U16)))) => (4, c),
         (Use::Weights, Valid(Type::Vec4), Valid(G(C::F32))) => (4, C::F32),
-        (Use::Weights, Valid(Type::Vec4), Valid(G(c @ (C::U8 | C::U16)))) if a.normalized => {
-            (4, c)
-        }
+        (Use::Weights, Valid(Type::Vec4), Valid(G(c @ (C::U8 | C::U16)))) if a.normalized => (4, c),
         (Use::Matrices, ..) => return Err("must be MAT4 of FLOAT".into()),
-        (Use::Joints, ..) => {
-            return Err("must be VEC4 of UNSIGNED_BYTE or UNSIGNED_SHORT".into())
-        }
+        (Use::Joints, ..) => return Err("must be VEC4 of UNSIGNED_BYTE or UNSIGNED_SHORT".into()),
         (Use::Weights, ..) => {
-            return Err(
-                "must be VEC4 of FLOAT or normalised UNSIGNED_BYTE/UNSIGNED_SHORT".into(),
-            )
+            return Err("must be VEC4 of FLOAT or normalised UNSIGNED_BYTE/UNSIGNED_SHORT".into())
         }
         (Use::Positions, ..) => return Err("POSITION must be VEC3 of FLOAT (5126)".into()),
         (Use::Indices, ..) => {

@@ -89,9 +89,7 @@ pub fn jaw_errors(head: &Head, weights: &Weights, states: &[MouthState]) -> [f64
     let shares = jaw_shares(&rest, weights, &hinge);
     let chin: Vec<bool> = rest
         .iter()
-        .map(|p| {
-            jaw_mask(p, &hinge) >= 0.5 && points.iter().all(|q| (p - q).norm() > 0.3)
-        })
+        .map(|p| jaw_mask(p, &hinge) >= 0.5 && points.iter().all(|q| (p - q).norm() > 0.3))
         .collect();
     let mut sums = [0.0; 4];
     let mut counts = [0usize; 4];
@@ -106,7 +104,10 @@ pub fn jaw_errors(head: &Head, weights: &Weights, states: &[MouthState]) -> [f64
                 plain += row[j] * motion[j];
             }
             let jawed = skin_vertex(p, row, shares[v], &points, &motion, &hinge, &rotation);
-            let e = [(plain - truth).norm_squared(), (jawed - truth).norm_squared()];
+            let e = [
+                (plain - truth).norm_squared(),
+                (jawed - truth).norm_squared(),
+            ];
             for k in 0..2 {
                 sums[k] += e[k];
                 counts[k] += 1;
@@ -136,7 +137,8 @@ mod tests {
 
     #[test]
     fn at_rest_the_jaw_skin_is_the_input() {
-        let head = HeadParams::around_points(HeadParams::mouth_points(0.2, 0.2, 0.2), 0.0, 2).build();
+        let head =
+            HeadParams::around_points(HeadParams::mouth_points(0.2, 0.2, 0.2), 0.0, 2).build();
         let points = std::array::from_fn(|k| head.mesh.vertex(head.point_vertices[k]));
         let zero = [Vector3::zeros(); POINTS];
         let id = Rotation3::identity();
@@ -145,7 +147,15 @@ mod tests {
         row[2] = 0.2;
         row[ROOT] = 0.5;
         let v = Vector3::new(0.1, -0.4, 0.2);
-        let out = skin_vertex(&v, &row, 0.4, &points, &zero, &Vector3::new(0.0, 0.0, -1.0), &id);
+        let out = skin_vertex(
+            &v,
+            &row,
+            0.4,
+            &points,
+            &zero,
+            &Vector3::new(0.0, 0.0, -1.0),
+            &id,
+        );
         assert!((out - v).norm() < 1e-12);
     }
 }

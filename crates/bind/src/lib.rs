@@ -22,8 +22,8 @@
 mod error;
 pub mod eval;
 pub mod gltf_io;
-pub mod jaw;
 mod gltf_read;
+pub mod jaw;
 pub mod mesh;
 pub mod network;
 pub mod procedural;
@@ -225,8 +225,8 @@ pub fn bind(
         .map_err(|e| bad(format!("the mouth points from the file's nodes: {e}")))?;
     let rig = from_nodes.as_ref().unwrap_or(rig);
     let placement = file_placement(rig, options.model_up);
-    let face = select::face_instances(&loaded, rig, &placement, &options.face_meshes)
-        .map_err(bad)?;
+    let face =
+        select::face_instances(&loaded, rig, &placement, &options.face_meshes).map_err(bad)?;
     let sub = select::face_mesh(&loaded, &face);
     let (welded, to_welded) = gltf_io::weld(&sub.mesh);
     welded.check().map_err(|(_, problem)| {
@@ -252,7 +252,9 @@ pub fn bind(
                     "--jaw-hinge {model:?} is not finite"
                 )));
             }
-            let p = rig.placement().inverse_transform_point(&Point3::from(model));
+            let p = rig
+                .placement()
+                .inverse_transform_point(&Point3::from(model));
             if p.coords.norm() > 10.0 * width {
                 return Err(BindError::BadArgument(format!(
                     "--jaw-hinge {model:?} is {:.4} from the mouth, more than 10 mouth widths \
@@ -266,8 +268,9 @@ pub fn bind(
         None => rig.jaw_hinge(),
     };
     let jaw_shares: Vec<f64> = if options.jaw {
-        let positions: Vec<Vector3<f64>> =
-            (0..prepared.mesh.len()).map(|v| prepared.mesh.vertex(v)).collect();
+        let positions: Vec<Vector3<f64>> = (0..prepared.mesh.len())
+            .map(|v| prepared.mesh.vertex(v))
+            .collect();
         jaw::jaw_shares(
             &positions,
             &welded_weights,
@@ -276,7 +279,8 @@ pub fn bind(
     } else {
         vec![0.0; prepared.mesh.len()]
     };
-    let parent = select::parent_bone(&loaded, &face, options.parent_bone.as_deref()).map_err(bad)?;
+    let parent =
+        select::parent_bone(&loaded, &face, options.parent_bone.as_deref()).map_err(bad)?;
     let mut bindings = vec![skin_out::Binding::Keep; loaded.instances.len()];
     let mut parts = Vec::new();
     for (i, instance) in loaded.instances.iter().enumerate() {
@@ -338,9 +342,7 @@ pub fn bind(
         rig,
         placement,
         parent,
-        jaw: options
-            .jaw
-            .then(|| (hinge, jaw::LOWER_LIP.to_vec())),
+        jaw: options.jaw.then(|| (hinge, jaw::LOWER_LIP.to_vec())),
         generator: format!("mouthpiece bind {}", env!("CARGO_PKG_VERSION")),
     };
     skin_out::write_bound(out, &loaded, &plan, &bindings)?;

@@ -459,7 +459,11 @@ mod tests {
             positions: vec![[1.0; 3]; 3],
             triangles: vec![[0, 1, 2]],
         };
-        assert!(flat.validate().unwrap_err().to_string().contains("one point"));
+        assert!(flat
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("one point"));
         let mut m = quad();
         m.triangles.push([0, 1, 9]);
         assert!(m.validate().unwrap_err().to_string().contains("vertex 9"));

@@ -251,20 +251,19 @@ pub fn rig_from_nodes(
     let y = y.normalize();
     let z = x.cross(&y);
     let origin = 0.5 * (left + right);
-    let placement = MouthRig::placement_from_axes(
-        origin.into(),
-        x.into_inner().into(),
-        y.into(),
-        z.into(),
-    )
-    .map_err(|e| e.to_string())?;
+    let placement =
+        MouthRig::placement_from_axes(origin.into(), x.into_inner().into(), y.into(), z.into())
+            .map_err(|e| e.to_string())?;
     let points = rig
         .points()
         .iter()
         .zip(&model)
         .map(|(p, m)| mouthpiece_export::RigPoint {
             name: p.name.clone(),
-            rest: placement.inverse_transform_point(&Point3::from(*m)).coords.into(),
+            rest: placement
+                .inverse_transform_point(&Point3::from(*m))
+                .coords
+                .into(),
         })
         .collect();
     let mut new = MouthRig::new(rig.character().map(str::to_owned), points, placement)

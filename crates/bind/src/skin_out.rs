@@ -123,7 +123,11 @@ pub fn write_bound(
             Some((hinge, _)) if on_jaw(k) => (
                 nodes[&Target::Jaw],
                 jaw_world,
-                [p.rest[0] - hinge[0], p.rest[1] - hinge[1], p.rest[2] - hinge[2]],
+                [
+                    p.rest[0] - hinge[0],
+                    p.rest[1] - hinge[1],
+                    p.rest[2] - hinge[2],
+                ],
             ),
             _ => (mouth, mouth_world, p.rest),
         };
@@ -209,7 +213,8 @@ pub fn write_bound(
                 let first = match extended.get(&skin) {
                     Some(&f) => f,
                     None => {
-                        let f = ed.extend_skin(loaded, skin, &add_nodes, &add_worlds, &instance.bind)?;
+                        let f =
+                            ed.extend_skin(loaded, skin, &add_nodes, &add_worlds, &instance.bind)?;
                         extended.insert(skin, f);
                         f
                     }
@@ -252,7 +257,10 @@ pub fn write_bound(
         } else {
             instance.mesh
         };
-        let holder = match (skin_index, needs_moving(ed.doc, &loaded.document.parents, node)) {
+        let holder = match (
+            skin_index,
+            needs_moving(ed.doc, &loaded.document.parents, node),
+        ) {
             (Some(_), true) => ed.move_mesh(node, scene),
             _ => node,
         };
@@ -449,7 +457,10 @@ fn gather_buffers(doc: &mut Value, loaded: &LoadedMesh) -> Result<Vec<u8>, BindE
 /// A node's world transform at rest in the edited document: the input's, or for a node
 /// added here, its parents' times its own.
 fn world_of(d: &crate::gltf_read::Document, _doc: &Value, node: usize) -> Matrix4<f64> {
-    d.worlds.get(node).copied().unwrap_or_else(Matrix4::identity)
+    d.worlds
+        .get(node)
+        .copied()
+        .unwrap_or_else(Matrix4::identity)
 }
 
 fn inverse(m: &Matrix4<f64>) -> Matrix4<f64> {
@@ -461,11 +472,7 @@ fn inverse(m: &Matrix4<f64>) -> Matrix4<f64> {
 /// dropped.
 fn trs(m: &Matrix4<f64>) -> (([f32; 3], [f32; 4], [f32; 3]), Matrix4<f64>) {
     let a: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into();
-    let scale = Vector3::new(
-        a.column(0).norm(),
-        a.column(1).norm(),
-        a.column(2).norm(),
-    );
+    let scale = Vector3::new(a.column(0).norm(), a.column(1).norm(), a.column(2).norm());
     let r = Matrix3::from_columns(&[
         a.column(0) / scale.x,
         a.column(1) / scale.y,
@@ -562,7 +569,14 @@ impl Editor<'_> {
         self.push("bufferViews", v)
     }
 
-    fn accessor(&mut self, bytes: &[u8], count: usize, ty: &str, ct: u32, target: Option<u32>) -> usize {
+    fn accessor(
+        &mut self,
+        bytes: &[u8],
+        count: usize,
+        ty: &str,
+        ct: u32,
+        target: Option<u32>,
+    ) -> usize {
         let view = self.view(bytes, target);
         self.push(
             "accessors",

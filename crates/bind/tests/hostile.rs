@@ -318,3 +318,14 @@ fn the_size_caps_are_computed_as_built() {
     let err = Network::from_bytes(header, Path::new("big.bin")).unwrap_err();
     assert!(err.to_string().contains("big.bin"), "{err}");
 }
+
+#[test]
+fn a_skin_with_a_hundred_thousand_joints_is_refused_naming_the_node() {
+    let mut doc = square_doc(&data_uri(&square_bytes()));
+    doc["nodes"][0]["skin"] = json!(0);
+    doc["skins"] = json!([{ "joints": vec![0; 100_000] }]);
+    refused(&doc, &["node 0", "skin 0", "100000 joints", "4096"]);
+    // a joint past the nodes
+    doc["skins"] = json!([{ "joints": [0, 7] }]);
+    refused(&doc, &["node 0", "skin 0", "joint 1 is node 7"]);
+}

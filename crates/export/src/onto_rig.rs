@@ -244,11 +244,15 @@ pub fn animate_rig_bytes(
         });
     }
     let parents = node_parents(&root);
-    let rig_jaw = targets.iter().flatten().copied().find(|t| {
-        root.nodes[t.value()].name.as_deref() == Some("jaw")
-    });
+    let rig_jaw = targets
+        .iter()
+        .flatten()
+        .copied()
+        .find(|t| root.nodes[t.value()].name.as_deref() == Some("jaw"));
     let jaw_track = match rig_jaw {
-        Some(_) => Some(JawTrack::read(&take_root, &take.bin, animation).map_err(|p| take_bad(&p))?),
+        Some(_) => {
+            Some(JawTrack::read(&take_root, &take.bin, animation).map_err(|p| take_bad(&p))?)
+        }
         None => None,
     };
     let mut copy_accessor = |root: &mut json::Root,
@@ -312,10 +316,12 @@ pub fn animate_rig_bytes(
             let mouth_rest = [0, 1, 2].map(|k| jaw_rest[k] + here[k]);
             let offset = [0, 1, 2].map(|k| mouth_rest[k] - there[k]);
             let jaw_offset = [0, 1, 2].map(|k| jaw_rest[k] - track.rest[k]);
-            let times = read_f32s(&take_root, &take.bin, sampler.input, 1)
-                .map_err(|p| take_bad(&p))?;
-            into_jaw(&mut root, &mut bin, output, &times, track, offset, jaw_offset)
-                .map_err(|p| rig_error(take_glb, p))?;
+            let times =
+                read_f32s(&take_root, &take.bin, sampler.input, 1).map_err(|p| take_bad(&p))?;
+            into_jaw(
+                &mut root, &mut bin, output, &times, track, offset, jaw_offset,
+            )
+            .map_err(|p| rig_error(take_glb, p))?;
         } else if translation {
             let offset = [0, 1, 2].map(|k| here[k] - there[k]);
             if offset.iter().any(|&c| c != 0.0) {
@@ -420,11 +426,7 @@ struct JawTrack {
 }
 
 impl JawTrack {
-    fn read(
-        take: &json::Root,
-        bin: &[u8],
-        animation: &json::Animation,
-    ) -> Result<Self, String> {
+    fn read(take: &json::Root, bin: &[u8], animation: &json::Animation) -> Result<Self, String> {
         let jaw = take
             .nodes
             .iter()
@@ -451,7 +453,10 @@ impl JawTrack {
             return Err("the take's jaw rotation and translation keys do not match".into());
         }
         Ok(Self {
-            rotations: r.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect(),
+            rotations: r
+                .chunks_exact(4)
+                .map(|c| [c[0], c[1], c[2], c[3]])
+                .collect(),
             translations: t.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
             times,
             rest: take.nodes[jaw].translation.unwrap_or([0.0; 3]),
@@ -482,11 +487,8 @@ impl JawTrack {
             q[3], q[0], q[1], q[2],
         ));
         let (ta, tb) = (self.translations[a], self.translations[b]);
-        let translation = nalgebra::Vector3::new(
-            lerp(ta[0], tb[0]),
-            lerp(ta[1], tb[1]),
-            lerp(ta[2], tb[2]),
-        );
+        let translation =
+            nalgebra::Vector3::new(lerp(ta[0], tb[0]), lerp(ta[1], tb[1]), lerp(ta[2], tb[2]));
         (rotation, translation)
     }
 }
@@ -556,7 +558,10 @@ fn shift_vec3(
         .filter(|&e| e <= view.byte_offset.map_or(0, |o| o.0) + view.byte_length.0)
         .filter(|&e| e <= bin.len() as u64)
         .ok_or("a translation channel's keys run past their buffer view")?;
-    for (i, chunk) in bin[start as usize..end as usize].chunks_exact_mut(4).enumerate() {
+    for (i, chunk) in bin[start as usize..end as usize]
+        .chunks_exact_mut(4)
+        .enumerate()
+    {
         let v = f32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]) + offset[i % 3];
         chunk.copy_from_slice(&v.to_le_bytes());
     }

@@ -134,7 +134,10 @@ impl Glb {
         let view = &self.doc["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
         let start = view["byteOffset"].as_u64().unwrap_or(0) as usize
             + a["byteOffset"].as_u64().unwrap_or(0) as usize;
-        assert!(view.get("byteStride").is_none(), "strided views are not read here");
+        assert!(
+            view.get("byteStride").is_none(),
+            "strided views are not read here"
+        );
         let n = match a["type"].as_str().unwrap() {
             "SCALAR" => 1,
             "VEC3" => 3,
@@ -712,10 +715,16 @@ fn a_character_without_the_twelve_points_is_refused_naming_its_file() {
 /// Runs a Blender script headless; its stdout.
 fn blender(script: &str, args: &[&Path]) -> String {
     let mut cmd = Command::new("blender");
-    cmd.args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
-        .arg(repo().join("tests/blender").join(script))
-        .arg("--")
-        .args(args);
+    cmd.args([
+        "-b",
+        "--factory-startup",
+        "--python-exit-code",
+        "1",
+        "--python",
+    ])
+    .arg(repo().join("tests/blender").join(script))
+    .arg("--")
+    .args(args);
     let out = cmd
         .output()
         .expect("blender (Debian package `blender`, installed by scripts/test)");
@@ -809,11 +818,8 @@ fn a_blender_head_comes_back_with_everything_it_had_joined_to_its_skeleton() {
     for (m, mesh) in meshes.iter().enumerate() {
         for (p, prim) in mesh["primitives"].as_array().unwrap().iter().enumerate() {
             let out_prim = &output.doc["meshes"][m]["primitives"][p];
-            let mut accessors: Vec<(String, &Value, &Value)> = vec![(
-                "indices".into(),
-                &prim["indices"],
-                &out_prim["indices"],
-            )];
+            let mut accessors: Vec<(String, &Value, &Value)> =
+                vec![("indices".into(), &prim["indices"], &out_prim["indices"])];
             for (name, a) in prim["attributes"].as_object().unwrap() {
                 if !name.starts_with("JOINTS_") && !name.starts_with("WEIGHTS_") {
                     accessors.push((name.clone(), a, &out_prim["attributes"][name]));
@@ -847,7 +853,11 @@ fn a_blender_head_comes_back_with_everything_it_had_joined_to_its_skeleton() {
     assert_eq!(&joints[..old_joints.len()], &old_joints[..]);
     let names: Vec<&str> = joints[old_joints.len()..]
         .iter()
-        .map(|j| output.doc["nodes"][j.as_u64().unwrap() as usize]["name"].as_str().unwrap())
+        .map(|j| {
+            output.doc["nodes"][j.as_u64().unwrap() as usize]["name"]
+                .as_str()
+                .unwrap()
+        })
         .collect();
     let mut expected = vec!["mouth".to_owned(), "jaw".to_owned()];
     expected.extend((1..=12).map(|k| format!("P{k}")));
@@ -857,8 +867,13 @@ fn a_blender_head_comes_back_with_everything_it_had_joined_to_its_skeleton() {
     let jaw_children = output.doc["nodes"][jaw]["children"].as_array().unwrap();
     assert_eq!(jaw_children.len(), 5);
     for child in jaw_children {
-        let name = output.doc["nodes"][child.as_u64().unwrap() as usize]["name"].as_str().unwrap();
-        assert!(["P8", "P9", "P10", "P11", "P12"].contains(&name), "{name} on the jaw");
+        let name = output.doc["nodes"][child.as_u64().unwrap() as usize]["name"]
+            .as_str()
+            .unwrap();
+        assert!(
+            ["P8", "P9", "P10", "P11", "P12"].contains(&name),
+            "{name} on the jaw"
+        );
     }
     let mouth = node_named(&output.doc, "mouth");
     let head_bone = node_named(&output.doc, "head");
@@ -880,14 +895,20 @@ fn a_blender_head_comes_back_with_everything_it_had_joined_to_its_skeleton() {
         if mouth_weight == 0.0 {
             assert_eq!(joints_in[v], joints_out[v], "vertex {v}");
             for k in 0..4 {
-                assert!((weights_in[v][k] - weights_out[v][k]).abs() < 1e-6, "vertex {v}");
+                assert!(
+                    (weights_in[v][k] - weights_out[v][k]).abs() < 1e-6,
+                    "vertex {v}"
+                );
             }
             kept += 1;
         } else {
             changed += 1;
         }
     }
-    assert!(kept > 1000 && changed > 12, "kept {kept}, changed {changed}");
+    assert!(
+        kept > 1000 && changed > 12,
+        "kept {kept}, changed {changed}"
+    );
     // valid: no error, no warning the input did not have
     assert!(validator_codes(&bound, 0).is_empty());
     let new_warnings: Vec<String> = validator_codes(&bound, 1)
@@ -916,7 +937,13 @@ fn a_blender_head_comes_back_with_everything_it_had_joined_to_its_skeleton() {
     let p10 = rig.placement() * nalgebra::Point3::from(rig.points()[9].rest);
     let (t, _) = &take[15];
     let stdout = Command::new("blender")
-        .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
+        .args([
+            "-b",
+            "--factory-startup",
+            "--python-exit-code",
+            "1",
+            "--python",
+        ])
         .arg(repo().join("tests/blender/inspect_bound.py"))
         .arg("--")
         .arg(&animated)
@@ -931,9 +958,21 @@ fn a_blender_head_comes_back_with_everything_it_had_joined_to_its_skeleton() {
         .unwrap_or_else(|| panic!("no BOUND line from Blender:\n{stdout}"));
     let seen: Value = serde_json::from_str(line).unwrap();
     let head_mesh = &seen["meshes"]["Head"];
-    assert_eq!(head_mesh["uv_layers"], serde_json::json!(["UVMap"]), "{seen}");
-    assert_eq!(head_mesh["images"], serde_json::json!([["skin", 32, 32]]), "{seen}");
-    assert_eq!(head_mesh["shape_keys"], serde_json::json!(["Basis", "Puff"]), "{seen}");
+    assert_eq!(
+        head_mesh["uv_layers"],
+        serde_json::json!(["UVMap"]),
+        "{seen}"
+    );
+    assert_eq!(
+        head_mesh["images"],
+        serde_json::json!([["skin", 32, 32]]),
+        "{seen}"
+    );
+    assert_eq!(
+        head_mesh["shape_keys"],
+        serde_json::json!(["Basis", "Puff"]),
+        "{seen}"
+    );
     assert_eq!(head_mesh["armature"], true);
     for part in ["EyeL", "EyeR", "TeethUpper", "Tongue"] {
         assert!(seen["meshes"][part].is_object(), "{part} missing: {seen}");
@@ -1013,7 +1052,13 @@ fn mouth_points_come_from_the_files_nodes_named_like_them() {
     let mut toml = "name = \"human\"\nunits = \"m\"\n\n[points]\n".to_owned();
     for p in rig.points() {
         let r = p.rest;
-        toml.push_str(&format!("{} = [{:?}, {:?}, {:?}]\n", p.name, r[0], r[1] + 0.3, r[2]));
+        toml.push_str(&format!(
+            "{} = [{:?}, {:?}, {:?}]\n",
+            p.name,
+            r[0],
+            r[1] + 0.3,
+            r[2]
+        ));
     }
     let shifted = dir.path().join("shifted.toml");
     std::fs::write(&shifted, toml).unwrap();
@@ -1074,7 +1119,12 @@ fn mouth_points_come_from_the_files_nodes_named_like_them() {
             .map(|a| a.iter().map(|c| c.as_f64().unwrap()).collect())
             .unwrap_or(vec![0.0; 3]);
         for c in 0..3 {
-            assert!((t[c] - placed(k)[c]).abs() < 1e-6, "{}: {t:?} vs {:?}", p.name, placed(k));
+            assert!(
+                (t[c] - placed(k)[c]).abs() < 1e-6,
+                "{}: {t:?} vs {:?}",
+                p.name,
+                placed(k)
+            );
         }
     }
     // a take for the shifted character: each key moves by the joint's rest minus the take's
@@ -1106,7 +1156,11 @@ fn mouth_points_come_from_the_files_nodes_named_like_them() {
             &anim.doc["animations"][0]["samplers"][channel["sampler"].as_u64().unwrap() as usize];
         let first = &anim.accessor(sampler["output"].as_u64().unwrap() as usize)[0];
         let take_first = take[0].1[k];
-        let expected = [take_first[0], take_first[1] + placed(k)[1] - rig.points()[k].rest[1], take_first[2]];
+        let expected = [
+            take_first[0],
+            take_first[1] + placed(k)[1] - rig.points()[k].rest[1],
+            take_first[2],
+        ];
         for c in 0..3 {
             assert!(
                 (first[c] - expected[c]).abs() < 1e-5,
@@ -1206,7 +1260,11 @@ fn lower_lip_keys_on_the_jaw_land_on_the_takes_points() {
                 q[3], q[0], q[1], q[2],
             ));
             let world = r * nalgebra::Vector3::new(local[0], local[1], local[2])
-                + nalgebra::Vector3::new(translations[f][0], translations[f][1], translations[f][2]);
+                + nalgebra::Vector3::new(
+                    translations[f][0],
+                    translations[f][1],
+                    translations[f][2],
+                );
             let frame = take
                 .iter()
                 .position(|(tt, _)| (*tt as f32) == (*t as f32))
