@@ -23,6 +23,7 @@ mod error;
 pub mod eval;
 pub mod gltf_io;
 mod gltf_read;
+mod gltf_skin;
 pub mod jaw;
 pub mod mesh;
 pub mod network;

@@ -339,7 +339,7 @@ pub fn animate_rig_bytes(
             sampler: index,
             target: json::animation::Target {
                 node: target,
-                path: channel.target.path.clone(),
+                path: channel.target.path,
                 extensions: None,
                 extras: Default::default(),
             },
@@ -436,7 +436,7 @@ impl JawTrack {
             let channel = animation
                 .channels
                 .iter()
-                .find(|c| c.target.node.value() == jaw && c.target.path == Valid(path.clone()))
+                .find(|c| c.target.node.value() == jaw && c.target.path == Valid(path))
                 .ok_or("the take's jaw has no keys")?;
             let sampler = animation
                 .samplers
