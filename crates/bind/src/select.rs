@@ -235,7 +235,7 @@ pub fn rig_from_nodes(
         .collect();
     let (left, right) = (model[0], model[model.len() / 2]);
     let x = left - right;
-    if !(x.norm() > 0.0) {
+    if x.norm().is_nan() || x.norm() <= 0.0 {
         return Err(format!(
             "nodes {} and {} (the mouth's corners) are at the same place",
             rig.points()[0].name,
@@ -245,7 +245,7 @@ pub fn rig_from_nodes(
     let x = Unit::new_normalize(x);
     let up = rig.placement().rotation * Vector3::y();
     let y = up - x.into_inner() * x.dot(&up);
-    if !(y.norm() > 1e-6) {
+    if y.norm().is_nan() || y.norm() <= 1e-6 {
         return Err("the mouth's corners lie along the character's up axis".into());
     }
     let y = y.normalize();

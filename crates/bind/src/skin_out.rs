@@ -344,7 +344,7 @@ fn merge_existing(
 pub fn influences(row: &[(usize, f64)], k: usize) -> Vec<(usize, f32)> {
     let mut merged: Vec<(usize, f64)> = Vec::new();
     for &(j, w) in row {
-        if !(w > 0.0) {
+        if w.is_nan() || w <= 0.0 {
             continue;
         }
         match merged.iter_mut().find(|(m, _)| *m == j) {
@@ -467,10 +467,13 @@ fn inverse(m: &Matrix4<f64>) -> Matrix4<f64> {
     m.try_inverse().unwrap_or_else(Matrix4::identity)
 }
 
+/// A node's translation, rotation (x, y, z, w) and scale as glTF writes them.
+type Trs = ([f32; 3], [f32; 4], [f32; 3]);
+
 /// A node's local TRS (f32, as written) for a matrix, and the matrix those f32 numbers make.
 /// The rotation is the matrix's nearest; a shear (a parent scaled unevenly and turned) is
 /// dropped.
-fn trs(m: &Matrix4<f64>) -> (([f32; 3], [f32; 4], [f32; 3]), Matrix4<f64>) {
+fn trs(m: &Matrix4<f64>) -> (Trs, Matrix4<f64>) {
     let a: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into();
     let scale = Vector3::new(a.column(0).norm(), a.column(1).norm(), a.column(2).norm());
     let r = Matrix3::from_columns(&[
@@ -494,7 +497,7 @@ fn trs(m: &Matrix4<f64>) -> (([f32; 3], [f32; 4], [f32; 3]), Matrix4<f64>) {
     ((t, q32, s), made)
 }
 
-fn with_trs(mut node: Value, (t, q, s): &([f32; 3], [f32; 4], [f32; 3])) -> Value {
+fn with_trs(mut node: Value, (t, q, s): &Trs) -> Value {
     let o = node.as_object_mut().unwrap();
     if t.iter().any(|&c| c != 0.0) {
         o.insert("translation".into(), json!(t));
