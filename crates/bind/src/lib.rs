@@ -228,6 +228,11 @@ pub fn bind(
     let placement = file_placement(rig, options.model_up);
     let face =
         select::face_instances(&loaded, rig, &placement, &options.face_meshes).map_err(bad)?;
+    if face.iter().any(|&i| loaded.instances[i].node.is_none()) {
+        return Err(bad(
+            "the file has no scene: a skin needs the face's mesh on a node of one".into(),
+        ));
+    }
     let sub = select::face_mesh(&loaded, &face);
     let (welded, to_welded) = gltf_io::weld(&sub.mesh);
     welded.check().map_err(|(_, problem)| {
