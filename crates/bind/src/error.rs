@@ -30,7 +30,7 @@ pub enum BindError {
     Geometry(String),
     /// A mouth point lies far from every vertex of the mesh.
     #[error(
-        "{}mouth point {name} is {distance:.4} from the nearest vertex, more than {limit:.4} \
+        "{}mouth point {name} is {distance:.4} from the mesh's surface, more than {limit:.4} \
          ({fraction} of the mouth width): is the mesh in the character's model frame and units? \
          (the mesh spans {extent:.4}, the mouth is {width:.4} wide)",
         mesh.as_ref().map_or(String::new(), |p| format!("{}: ", p.display()))

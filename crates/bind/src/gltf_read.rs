@@ -7,6 +7,8 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use serde::Deserialize as _;
+
 use gltf_json as json;
 use json::validation::Checked::Valid;
 use nalgebra::{Matrix4, Point3};
@@ -14,6 +16,8 @@ use nalgebra::{Matrix4, Point3};
 use mouthpiece_export::asset::{self, shown};
 use mouthpiece_export::onto_rig::parse_glb;
 
+use crate::gltf_skin::skin_bind;
+pub use crate::gltf_skin::{inverse_bind_matrices, read_skin_weights, MAX_SKIN_JOINTS};
 use crate::mesh::{Mesh, MAX_VERTICES};
 use crate::BindError;
 
@@ -45,6 +49,72 @@ pub struct LoadedMesh {
     /// Where the original triangles come from, in order: (first triangle, description such
     /// as `mesh 0 primitive 1 (node 3)`).
     pub parts: Vec<(u32, String)>,
+    /// Each mesh instance read, in scene order, with its primitives' vertex ranges.
+    pub instances: Vec<Instance>,
+    /// The document as read, for the output to edit.
+    pub document: Document,
+}
+
+/// The file's glTF document and buffers, kept so the bound output is the input with a skin
+/// added ([`crate::skin_out`]).
+#[derive(Clone, Debug)]
+pub struct Document {
+    /// The JSON as read (every extension and extra, typed or not).
+    pub json: serde_json::Value,
+    /// The same, typed.
+    pub root: json::Root,
+    /// Each buffer's bytes (its `byteLength` of them).
+    pub buffers: Vec<Vec<u8>>,
+    /// The file's folder (images named by URI are looked up there).
+    pub folder: std::path::PathBuf,
+    /// Each node's world transform at rest (nodes outside the default scene: their own).
+    pub worlds: Vec<Matrix4<f64>>,
+    /// Each node's parent.
+    pub parents: Vec<Option<usize>>,
+}
+
+/// One node with a mesh, as read.
+#[derive(Clone, Debug)]
+pub struct Instance {
+    /// The node (none when the file has no scene and its meshes are read on their own).
+    pub node: Option<usize>,
+    pub mesh: usize,
+    /// The node's skin, when it has one.
+    pub skin: Option<usize>,
+    /// Mesh coordinates → the file's frame at rest: the node's world transform, or for a
+    /// skinned node its skin's bind (a joint's world transform times its inverse bind matrix;
+    /// glTF ignores a skinned node's own transform).
+    pub bind: Matrix4<f64>,
+    /// Its triangle primitives: (primitive index, first vertex, vertex count) in
+    /// [`LoadedMesh::original`].
+    pub primitives: Vec<(usize, u32, u32)>,
+}
+
+impl Instance {
+    /// The node's or mesh's name, for messages and `--face-mesh`.
+    pub fn names(&self, root: &json::Root) -> (Option<String>, Option<String>) {
+        let node = self
+            .node
+            .and_then(|n| root.nodes.get(n))
+            .and_then(|n| n.name.clone());
+        let mesh = root.meshes.get(self.mesh).and_then(|m| m.name.clone());
+        (node, mesh)
+    }
+
+    /// `mesh 2 "Head" (node 5 "Head")`.
+    pub fn describe(&self, root: &json::Root) -> String {
+        let (node, mesh) = self.names(root);
+        let quoted = |n: Option<String>| n.map_or(String::new(), |n| format!(" \"{}\"", shown(&n)));
+        match self.node {
+            Some(i) => format!(
+                "mesh {}{} (node {i}{})",
+                self.mesh,
+                quoted(mesh),
+                quoted(node)
+            ),
+            None => format!("mesh {}{}", self.mesh, quoted(mesh)),
+        }
+    }
 }
 
 impl LoadedMesh {
@@ -109,8 +179,10 @@ pub fn read_mesh_bytes(bytes: &[u8], path: &Path) -> Result<LoadedMesh, BindErro
     } else {
         (bytes.to_vec(), None)
     };
-    let root: json::Root =
+    let value: serde_json::Value =
         serde_json::from_slice(&json_bytes).map_err(|e| not_gltf(format!("JSON: {e}")))?;
+    let root: json::Root =
+        json::Root::deserialize(&value).map_err(|e| not_gltf(format!("JSON: {e}")))?;
     let folder = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -123,9 +195,31 @@ pub fn read_mesh_bytes(bytes: &[u8], path: &Path) -> Result<LoadedMesh, BindErro
         }
     }
     let mut out = Collect::default();
-    for (node_index, world) in scene_instances(&root).map_err(&bad)? {
+    let scene = scene_instances(&root).map_err(&bad)?;
+    let mut worlds: Vec<Matrix4<f64>> = Vec::with_capacity(root.nodes.len());
+    for (i, node) in root.nodes.iter().enumerate() {
+        worlds.push(node_matrix(node, i).map_err(&bad)?);
+    }
+    let mut parents = vec![None; root.nodes.len()];
+    for (i, node) in root.nodes.iter().enumerate() {
+        for child in node.children.iter().flatten() {
+            if let Some(p) = parents.get_mut(child.value()) {
+                *p = Some(i);
+            }
+        }
+    }
+    for (index, world) in &scene {
+        worlds[*index] = *world;
+    }
+    for (node_index, world) in scene {
         let node = &root.nodes[node_index];
         let Some(mesh) = node.mesh else { continue };
+        let skin = node.skin.map(|s| s.value());
+        let bind = match skin {
+            Some(s) => skin_bind(&root, &buffers, s, &worlds)
+                .map_err(|e| bad(format!("node {node_index}: skin {s}: {e}")))?,
+            None => world,
+        };
         out.instances += 1;
         if out.instances > MAX_INSTANCES {
             return Err(bad(format!(
@@ -138,15 +232,29 @@ pub fn read_mesh_bytes(bytes: &[u8], path: &Path) -> Result<LoadedMesh, BindErro
             &buffers,
             mesh.value(),
             Some(node_index),
-            &world,
+            &bind,
             &mut out,
         )
         .map_err(&bad)?;
+        out.records.push(Instance {
+            node: Some(node_index),
+            mesh: mesh.value(),
+            skin,
+            bind,
+            primitives: std::mem::take(&mut out.pending),
+        });
     }
     if out.instances == 0 {
         for m in 0..root.meshes.len() {
             read_primitives(&root, &buffers, m, None, &Matrix4::identity(), &mut out)
                 .map_err(&bad)?;
+            out.records.push(Instance {
+                node: None,
+                mesh: m,
+                skin: None,
+                bind: Matrix4::identity(),
+                primitives: std::mem::take(&mut out.pending),
+            });
         }
     }
     if out.triangles.is_empty() {
@@ -167,6 +275,15 @@ pub fn read_mesh_bytes(bytes: &[u8], path: &Path) -> Result<LoadedMesh, BindErro
         to_welded,
         welded_from,
         parts: out.parts,
+        instances: out.records,
+        document: Document {
+            json: value,
+            root,
+            buffers,
+            folder: folder.to_path_buf(),
+            worlds,
+            parents,
+        },
     })
 }
 
@@ -305,6 +422,9 @@ struct Collect {
     parts: Vec<(u32, String)>,
     instances: usize,
     primitives: usize,
+    records: Vec<Instance>,
+    /// The current instance's primitives.
+    pending: Vec<(usize, u32, u32)>,
 }
 
 fn read_primitives(
@@ -371,6 +491,7 @@ fn read_primitives(
             ));
         }
         out.parts.push((out.triangles.len() as u32, here.clone()));
+        out.pending.push((p, base, count as u32));
         for (k, t) in indices.chunks_exact(3).enumerate() {
             if let Some(&bad) = t.iter().find(|&&i| i as usize >= count) {
                 return Err(format!(
@@ -386,16 +507,22 @@ fn read_primitives(
 /// What an accessor is read as: positions must be `VEC3` of `FLOAT`, indices `SCALAR` of
 /// an unsigned integer type (glTF 2.0 §3.7.2.1, §3.7.2.2).
 #[derive(Clone, Copy, PartialEq)]
-enum Use {
+pub(crate) enum Use {
     Positions,
     Indices,
+    /// `MAT4` of `FLOAT` (inverse bind matrices).
+    Matrices,
+    /// `VEC4` of `UNSIGNED_BYTE` or `UNSIGNED_SHORT` (`JOINTS_n`).
+    Joints,
+    /// `VEC4` of `FLOAT` or normalised `UNSIGNED_BYTE`/`UNSIGNED_SHORT` (`WEIGHTS_n`).
+    Weights,
 }
 
 /// An accessor's components as f64, checked before anything is allocated: the element count
 /// at most `room` (positions: vertices; indices: indices), offsets, stride and count inside
 /// the buffer view and the view inside its buffer's bytes (all in checked arithmetic), and
 /// positions finite and within ±[`MAX_COORDINATE`].
-fn read_accessor(
+pub(crate) fn read_accessor(
     root: &json::Root,
     buffers: &[Vec<u8>],
     index: usize,
@@ -407,6 +534,15 @@ fn read_accessor(
     let (components, kind) = match (usage, a.type_, a.component_type) {
         (Use::Positions, Valid(Type::Vec3), Valid(G(C::F32))) => (3, C::F32),
         (Use::Indices, Valid(Type::Scalar), Valid(G(c @ (C::U8 | C::U16 | C::U32)))) => (1, c),
+        (Use::Matrices, Valid(Type::Mat4), Valid(G(C::F32))) => (16, C::F32),
+        (Use::Joints, Valid(Type::Vec4), Valid(G(c @ (C::U8 | C::U16)))) => (4, c),
+        (Use::Weights, Valid(Type::Vec4), Valid(G(C::F32))) => (4, C::F32),
+        (Use::Weights, Valid(Type::Vec4), Valid(G(c @ (C::U8 | C::U16)))) if a.normalized => (4, c),
+        (Use::Matrices, ..) => return Err("must be MAT4 of FLOAT".into()),
+        (Use::Joints, ..) => return Err("must be VEC4 of UNSIGNED_BYTE or UNSIGNED_SHORT".into()),
+        (Use::Weights, ..) => {
+            return Err("must be VEC4 of FLOAT or normalised UNSIGNED_BYTE/UNSIGNED_SHORT".into())
+        }
         (Use::Positions, ..) => return Err("POSITION must be VEC3 of FLOAT (5126)".into()),
         (Use::Indices, ..) => {
             return Err(
@@ -428,6 +564,7 @@ fn read_accessor(
             Use::Indices => format!(
                 "claims {count} indices; a mesh may have at most {MAX_TRIANGLES} triangles in all"
             ),
+            _ => format!("claims {count} elements, more than the {room} expected"),
         });
     }
     if a.sparse.is_some() {
@@ -496,8 +633,14 @@ fn read_accessor(
                 C::U16 => u16::from_le_bytes([b[0], b[1]]) as f64,
                 _ => b[0] as f64,
             };
+            let v = match (usage, kind) {
+                (Use::Weights, C::U8) => v / 255.0,
+                (Use::Weights, C::U16) => v / 65535.0,
+                _ => v,
+            };
             // NaN fails every comparison: `is_finite` first says so plainly.
-            if usage == Use::Positions && (!v.is_finite() || v.abs() > MAX_COORDINATE) {
+            let checked = matches!(usage, Use::Positions | Use::Matrices | Use::Weights);
+            if checked && (!v.is_finite() || v.abs() > MAX_COORDINATE) {
                 return Err(format!(
                     "element {e} holds {v}: not a finite number within ±{MAX_COORDINATE} \
                      (wrong units?)"

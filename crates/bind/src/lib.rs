@@ -23,10 +23,14 @@ mod error;
 pub mod eval;
 pub mod gltf_io;
 mod gltf_read;
+mod gltf_skin;
+pub mod jaw;
 pub mod mesh;
 pub mod network;
 pub mod procedural;
 pub mod reference;
+mod select;
+pub mod skin_out;
 pub mod training;
 pub mod weights;
 
@@ -42,11 +46,15 @@ pub use mesh::Mesh;
 pub use network::Network;
 pub use weights::Weights;
 
-/// A mouth point may lie at most this far (mouth widths) from the nearest vertex.
+/// A mouth point may lie at most this far (mouth widths) from the mesh's surface.
 pub const POINT_DISTANCE_LIMIT: f64 = 0.1;
 
 /// The trained network shipped with mouthpiece (`mouthpiece bind train`, see docs/bind.md).
 pub const SHIPPED_NETWORK: &[u8] = include_bytes!("../model/network.bin");
+
+/// Separate parts whose node or mesh name holds one of these (any case) follow the jaw; the
+/// others the head.
+pub const JAW_PARTS: [&str; 4] = ["tongue", "jaw", "lower", "chin"];
 
 /// How to compute the weights.
 #[derive(Clone, Copy, Debug)]
@@ -105,8 +113,11 @@ pub fn prepare(rig: &MouthRig, model_up: ModelUp, welded: &Mesh) -> Result<Prepa
         std::array::from_fn(|k| rig.points()[k].rest.map(|c| c / width));
     for (k, p) in points.iter().enumerate() {
         let p = Vector3::from(*p);
-        let nearest = (0..mesh.len())
-            .map(|v| (mesh.vertex(v) - p).norm())
+        // the surface, not only its vertices: a rigger places points between vertices
+        let nearest = mesh
+            .triangles
+            .iter()
+            .map(|t| mesh::point_triangle_distance(&p, &t.map(|i| mesh.vertex(i as usize))))
             .fold(f64::INFINITY, f64::min);
         if nearest > POINT_DISTANCE_LIMIT {
             return Err(BindError::PointFarFromMesh {
@@ -155,56 +166,211 @@ pub struct BindSummary {
     pub triangles: usize,
     /// Vertices with a weight of at least 1 % on some mouth point.
     pub moving_vertices: usize,
+    /// The face's surface: shells, non-manifold edges, holes.
+    pub topology: mesh::Topology,
+    /// The meshes bound as the face.
+    pub face: Vec<String>,
+    /// The other meshes and the joint each follows rigidly (`head`, `jaw`), or `kept` (it
+    /// had a skin of its own).
+    pub parts: Vec<(String, &'static str)>,
+    /// The node the mouth's joints hang under (none: a new `root`).
+    pub parent: Option<String>,
+    /// The mouth points came from the file's nodes named like them.
+    pub points_from_nodes: bool,
 }
 
-/// Binds the mesh file to the character's mouth and writes the skinned GLB.
+/// How to bind, besides the character and the files.
+#[derive(Clone, Debug)]
+pub struct BindOptions<'a> {
+    pub model_up: ModelUp,
+    pub method: Method<'a>,
+    /// Names of the meshes (or of their nodes) that are the face; empty: the meshes nearest
+    /// to the mouth points.
+    pub face_meshes: Vec<String>,
+    /// The node the mouth's joints hang under; none: a joint named like `head` when there is
+    /// one, else a new `root` node.
+    pub parent_bone: Option<String>,
+    /// Add a jaw joint (carrying the chin and the lower lip's joints).
+    pub jaw: bool,
+    /// The jaw's hinge, model frame; none: the character's (`[rig] jaw_pivot`, else the
+    /// rig's default behind and above the mouth), where a take's jaw turns.
+    pub jaw_hinge: Option<[f64; 3]>,
+}
+
+impl<'a> BindOptions<'a> {
+    pub fn new(model_up: ModelUp, method: Method<'a>) -> Self {
+        Self {
+            model_up,
+            method,
+            face_meshes: Vec::new(),
+            parent_bone: None,
+            jaw: true,
+            jaw_hinge: None,
+        }
+    }
+}
+
+/// Binds the mesh file to the character's mouth and writes the input with a skin added.
 pub fn bind(
     rig: &MouthRig,
     mesh_path: &Path,
     out: &Path,
-    model_up: ModelUp,
-    method: Method,
+    options: &BindOptions,
 ) -> Result<BindSummary, BindError> {
     let loaded = gltf_io::read_mesh(mesh_path)?;
-    loaded.check(mesh_path)?;
-    let prepared = prepare(rig, model_up, &loaded.welded).map_err(|mut e| {
+    let bad = |problem: String| BindError::BadMesh {
+        path: mesh_path.to_path_buf(),
+        problem,
+    };
+    let from_nodes = select::rig_from_nodes(&loaded, rig, options.model_up)
+        .map_err(|e| bad(format!("the mouth points from the file's nodes: {e}")))?;
+    let rig = from_nodes.as_ref().unwrap_or(rig);
+    let placement = file_placement(rig, options.model_up);
+    let face =
+        select::face_instances(&loaded, rig, &placement, &options.face_meshes).map_err(bad)?;
+    if face.iter().any(|&i| loaded.instances[i].node.is_none()) {
+        return Err(bad(
+            "the file has no scene: a skin needs the face's mesh on a node of one".into(),
+        ));
+    }
+    let sub = select::face_mesh(&loaded, &face);
+    let (welded, to_welded) = gltf_io::weld(&sub.mesh);
+    welded.check().map_err(|(_, problem)| {
+        bad(format!(
+            "the face ({}) cannot be bound: {problem}",
+            sub.names.join(", ")
+        ))
+    })?;
+    let topology = welded.topology();
+    let prepared = prepare(rig, options.model_up, &welded).map_err(|mut e| {
         if let BindError::PointFarFromMesh { mesh, .. } = &mut e {
             *mesh = Some(mesh_path.to_path_buf());
         }
         e
     })?;
-    let welded_weights = compute_weights(&prepared, method);
-    let welded_normals = loaded.welded.normals();
-    let weights = Weights {
-        rows: loaded
-            .to_welded
-            .iter()
-            .map(|&w| welded_weights.rows[w as usize])
-            .collect(),
+    let welded_weights = compute_weights(&prepared, options.method);
+    // the jaw's hinge in the mouth frame (character units), and each welded vertex's share
+    let width = rig.mouth_width();
+    let hinge = match options.jaw_hinge {
+        Some(model) => {
+            if !model.iter().all(|c| c.is_finite()) {
+                return Err(BindError::BadArgument(format!(
+                    "--jaw-hinge {model:?} is not finite"
+                )));
+            }
+            let p = rig
+                .placement()
+                .inverse_transform_point(&Point3::from(model));
+            if p.coords.norm() > 10.0 * width {
+                return Err(BindError::BadArgument(format!(
+                    "--jaw-hinge {model:?} is {:.4} from the mouth, more than 10 mouth widths \
+                     ({:.4}): is it in the character's model frame and units?",
+                    p.coords.norm(),
+                    10.0 * width
+                )));
+            }
+            [p.x, p.y, p.z]
+        }
+        None => rig.jaw_hinge(),
     };
-    let normals: Vec<[f64; 3]> = loaded
-        .to_welded
-        .iter()
-        .map(|&w| welded_normals[w as usize].into())
-        .collect();
-    gltf_io::write_skinned_glb(
-        out,
-        &loaded.original,
-        &normals,
-        &weights,
+    let jaw_shares: Vec<f64> = if options.jaw {
+        let positions: Vec<Vector3<f64>> = (0..prepared.mesh.len())
+            .map(|v| prepared.mesh.vertex(v))
+            .collect();
+        jaw::jaw_shares(
+            &positions,
+            &welded_weights,
+            &Vector3::from(hinge.map(|c| c / width)),
+        )
+    } else {
+        vec![0.0; prepared.mesh.len()]
+    };
+    let parent =
+        select::parent_bone(&loaded, &face, options.parent_bone.as_deref()).map_err(bad)?;
+    let mut bindings = vec![skin_out::Binding::Keep; loaded.instances.len()];
+    let mut parts = Vec::new();
+    for (i, instance) in loaded.instances.iter().enumerate() {
+        let root = &loaded.document.root;
+        if let Some(at) = face.iter().position(|&f| f == i) {
+            let rows = sub.ranges[at]
+                .iter()
+                .map(|range| {
+                    range
+                        .clone()
+                        .map(|v| {
+                            let row = &welded_weights.rows[to_welded[v] as usize];
+                            let mut out: Vec<(skin_out::Target, f64)> = (0..procedural::POINTS)
+                                .filter(|&j| row[j] > 0.0)
+                                .map(|j| (skin_out::Target::Point(j), row[j]))
+                                .collect();
+                            let jaw = jaw_shares[to_welded[v] as usize];
+                            if jaw > 0.0 {
+                                out.push((skin_out::Target::Jaw, jaw));
+                            }
+                            out.push((skin_out::Target::Parent, row[weights::ROOT] - jaw));
+                            out
+                        })
+                        .collect()
+                })
+                .collect();
+            bindings[i] = skin_out::Binding::Face(rows);
+        } else if let Some(node) = instance.node {
+            // a part with a skin of its own, or under the head in the hierarchy, already
+            // follows the head
+            let under_parent = parent.is_some_and(|p| {
+                // bounded: a hostile file's hierarchy may loop outside the scene
+                std::iter::successors(Some(node), |&n| loaded.document.parents[n])
+                    .take(root.nodes.len())
+                    .any(|n| n == p)
+            });
+            let kept = instance.skin.is_some() || under_parent;
+            let (node_name, mesh_name) = instance.names(root);
+            let on_jaw = options.jaw
+                && [node_name, mesh_name].iter().flatten().any(|n| {
+                    let n = n.to_ascii_lowercase();
+                    JAW_PARTS.iter().any(|part| n.contains(part))
+                });
+            let joint = match (kept, on_jaw) {
+                (_, true) => {
+                    bindings[i] = skin_out::Binding::Rigid(skin_out::Target::Jaw);
+                    "jaw"
+                }
+                (true, false) => "kept",
+                (false, false) => {
+                    bindings[i] = skin_out::Binding::Rigid(skin_out::Target::Parent);
+                    "head"
+                }
+            };
+            parts.push((instance.describe(root), joint));
+        }
+    }
+    let plan = skin_out::RigPlan {
         rig,
-        &file_placement(rig, model_up),
-        &format!("mouthpiece bind {}", env!("CARGO_PKG_VERSION")),
-    )?;
+        placement,
+        parent,
+        jaw: options.jaw.then(|| (hinge, jaw::LOWER_LIP.to_vec())),
+        generator: format!("mouthpiece bind {}", env!("CARGO_PKG_VERSION")),
+    };
+    skin_out::write_bound(out, &loaded, &plan, &bindings)?;
     Ok(BindSummary {
         vertices: loaded.original.len(),
-        welded_vertices: loaded.welded.len(),
-        triangles: loaded.original.triangles.len(),
+        welded_vertices: welded.len(),
+        triangles: welded.triangles.len(),
         moving_vertices: welded_weights
             .rows
             .iter()
             .filter(|r| r[..procedural::POINTS].iter().any(|&w| w >= 0.01))
             .count(),
+        topology,
+        face: sub.names,
+        parts,
+        points_from_nodes: from_nodes.is_some(),
+        parent: parent.map(|p| {
+            loaded.document.root.nodes[p]
+                .name
+                .clone()
+                .unwrap_or_else(|| format!("node {p}"))
+        }),
     })
 }
 

@@ -19,9 +19,9 @@ pub struct Mesh {
 
 impl Mesh {
     /// Checks that the mesh can be bound: at least one triangle, indices in range, finite
-    /// positions, no degenerate (repeated-index) triangles, at most [`MAX_VERTICES`], and
-    /// every edge shared by at most two triangles (a non-manifold edge has no well-defined
-    /// surface around it, so neither heat diffusion nor graph neighbours are meaningful).
+    /// positions, no degenerate (repeated-index) triangles, at most [`MAX_VERTICES`].
+    /// Non-manifold edges, holes and separate shells are no error: the binders work on the
+    /// vertex graph and on a Laplacian that need no manifold ([`Mesh::topology`] reports them).
     pub fn validate(&self) -> Result<(), BindError> {
         self.check()
             .map_err(|(_, problem)| BindError::Geometry(problem))
@@ -47,7 +47,6 @@ impl Mesh {
         {
             return Err((None, format!("vertex {i} has a non-finite coordinate")));
         }
-        let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 2);
         for (t, tri) in self.triangles.iter().enumerate() {
             if let Some(&bad) = tri.iter().find(|&&i| i as usize >= n) {
                 return Err((
@@ -58,24 +57,61 @@ impl Mesh {
             if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
                 return Err((Some(t), format!("triangle {t} repeats a vertex ({tri:?})")));
             }
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                let count = edges.entry((a.min(b), a.max(b))).or_insert(0);
-                *count += 1;
-                if *count > 2 {
-                    let (a, b) = (a.min(b), a.max(b));
-                    return Err((
-                        Some(t),
-                        format!(
-                            "non-manifold: the edge between vertices {a} and {b} (at {:?} and \
-                             {:?}) belongs to more than two triangles (triangle {t} is the third)",
-                            self.positions[a as usize], self.positions[b as usize]
-                        ),
-                    ));
-                }
-            }
+        }
+        if self.extent() <= 0.0 {
+            return Err((None, "all its vertices are at one point".into()));
         }
         Ok(())
+    }
+
+    /// What the surface is made of: separate shells, edges shared by more than two
+    /// triangles (welded seams, fins), and holes (loops of edges with one triangle).
+    pub fn topology(&self) -> Topology {
+        let n = self.len();
+        let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 2);
+        let mut shells = UnionFind::new(n);
+        for tri in &self.triangles {
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+                shells.union(a as usize, b as usize);
+            }
+        }
+        let mut used = vec![false; n];
+        for tri in &self.triangles {
+            for &v in tri {
+                used[v as usize] = true;
+            }
+        }
+        let mut roots = std::collections::HashSet::new();
+        for v in 0..n {
+            if used[v] {
+                roots.insert(shells.find(v));
+            }
+        }
+        let mut holes = UnionFind::new(n);
+        let mut boundary = 0;
+        let mut non_manifold = 0;
+        for (&(a, b), &count) in &edges {
+            if count == 1 {
+                boundary += 1;
+                holes.union(a as usize, b as usize);
+            } else if count > 2 {
+                non_manifold += 1;
+            }
+        }
+        let mut loops = std::collections::HashSet::new();
+        for (&(a, _), &count) in &edges {
+            if count == 1 {
+                loops.insert(holes.find(a as usize));
+            }
+        }
+        Topology {
+            shells: roots.len(),
+            non_manifold_edges: non_manifold,
+            boundary_edges: boundary,
+            holes: loops.len(),
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -193,6 +229,107 @@ impl Mesh {
     }
 }
 
+/// Distance from `p` to the triangle `t` (its closest point: inside, on an edge or a corner;
+/// Ericson, Real-Time Collision Detection, 5.1.5).
+pub fn point_triangle_distance(p: &Vector3<f64>, t: &[Vector3<f64>; 3]) -> f64 {
+    let [a, b, c] = *t;
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(&ap), ac.dot(&ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return ap.norm();
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(&bp), ac.dot(&bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return bp.norm();
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (p - (a + ab * v)).norm();
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(&cp), ac.dot(&cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return cp.norm();
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (p - (a + ac * w)).norm();
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (p - (b + (c - b) * w)).norm();
+    }
+    let denom = va + vb + vc;
+    if denom.abs() < f64::MIN_POSITIVE {
+        return ap.norm().min(bp.norm()).min(cp.norm());
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    (p - (a + ab * v + ac * w)).norm()
+}
+
+/// What a mesh's surface is made of ([`Mesh::topology`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Topology {
+    /// Connected pieces (a head with separate eyes and teeth has several).
+    pub shells: usize,
+    /// Edges shared by more than two triangles.
+    pub non_manifold_edges: usize,
+    /// Edges with one triangle.
+    pub boundary_edges: usize,
+    /// Connected loops of boundary edges (the neck's opening counts as one).
+    pub holes: usize,
+}
+
+impl std::fmt::Display for Topology {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        write!(
+            f,
+            "{} shell(s), {} non-manifold edge(s), {} hole(s) ({} open edges)",
+            self.shells, self.non_manifold_edges, self.holes, self.boundary_edges
+        )
+    }
+}
+
+/// Disjoint sets over 0..n (path halving, union by size).
+struct UnionFind {
+    parent: Vec<u32>,
+    size: Vec<u32>,
+}
+
+impl UnionFind {
+    fn new(n: usize) -> Self {
+        Self {
+            parent: (0..n as u32).collect(),
+            size: vec![1; n],
+        }
+    }
+
+    fn find(&mut self, mut v: usize) -> usize {
+        while self.parent[v] as usize != v {
+            let up = self.parent[self.parent[v] as usize];
+            self.parent[v] = up;
+            v = up as usize;
+        }
+        v
+    }
+
+    fn union(&mut self, a: usize, b: usize) {
+        let (mut a, mut b) = (self.find(a), self.find(b));
+        if a == b {
+            return;
+        }
+        if self.size[a] < self.size[b] {
+            std::mem::swap(&mut a, &mut b);
+        }
+        self.parent[b] = a as u32;
+        self.size[a] += self.size[b];
+    }
+}
+
 /// A symmetric sparse matrix: the diagonal and each row's off-diagonal entries.
 #[derive(Clone, Debug)]
 pub struct SparseSym {
@@ -296,7 +433,7 @@ mod tests {
     }
 
     #[test]
-    fn no_triangles_and_non_manifold_edges_are_refused() {
+    fn no_triangles_are_refused_and_non_manifold_edges_reported() {
         let mut m = quad();
         m.triangles.clear();
         assert!(m
@@ -307,14 +444,40 @@ mod tests {
         let mut m = quad();
         m.positions.push([0.5, 0.5, 1.0]);
         m.triangles.push([0, 2, 4]);
-        let err = m.validate().unwrap_err().to_string();
-        assert!(
-            err.contains("non-manifold") && err.contains("vertices 0 and 2"),
-            "{err}"
-        );
+        m.validate().unwrap();
+        let t = m.topology();
+        assert_eq!(t.non_manifold_edges, 1, "{t}");
+        assert_eq!(t.shells, 1);
+        // a second, separate shell with a hole
+        let base = m.positions.len() as u32;
+        m.positions
+            .extend([[5.0, 0.0, 0.0], [6.0, 0.0, 0.0], [5.0, 1.0, 0.0]]);
+        m.triangles.push([base, base + 1, base + 2]);
+        let t = m.topology();
+        assert_eq!((t.shells, t.holes), (2, 2), "{t}");
+        let flat = Mesh {
+            positions: vec![[1.0; 3]; 3],
+            triangles: vec![[0, 1, 2]],
+        };
+        assert!(flat
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("one point"));
         let mut m = quad();
         m.triangles.push([0, 1, 9]);
         assert!(m.validate().unwrap_err().to_string().contains("vertex 9"));
+    }
+
+    #[test]
+    fn point_triangle_distance_inside_on_edges_and_corners() {
+        let t = [Vector3::zeros(), Vector3::x(), Vector3::y()];
+        let d = |x: f64, y: f64, z: f64| point_triangle_distance(&Vector3::new(x, y, z), &t);
+        assert!((d(0.2, 0.2, 0.5) - 0.5).abs() < 1e-12);
+        assert!((d(0.5, -1.0, 0.0) - 1.0).abs() < 1e-12);
+        assert!((d(-3.0, -4.0, 0.0) - 5.0).abs() < 1e-12);
+        assert!((d(1.0, 1.0, 0.0) - 0.5f64.sqrt()).abs() < 1e-12);
+        assert!((d(2.0, 0.0, 0.0) - 1.0).abs() < 1e-12);
     }
 
     #[test]

@@ -21,7 +21,7 @@ use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
 use serde_json::Value;
 
-use mouthpiece_retarget::rig::{RigSettings, CURVES, CURVE_NAMES};
+use mouthpiece_retarget::rig::{CURVES, CURVE_NAMES};
 
 use crate::output::{parent_dir, PendingFile};
 use crate::reduce::{Key, Reducer};

@@ -186,8 +186,18 @@ pub fn animate_rig_bytes(
         .map_err(|e| rig_error(take_glb, format!("glTF JSON: {e}")))?;
     let take_bad = |problem: &str| rig_error(take_glb, problem);
     let mut bin = rig.bin;
+    // the skin with the mouth's joints (a rigger's file may have others)
+    let mouth_skin = root
+        .skins
+        .iter()
+        .position(|s| {
+            s.joints
+                .iter()
+                .any(|j| root.nodes[j.value()].name.as_deref() == Some("mouth"))
+        })
+        .unwrap_or(0);
     let joint_by_name = |name: &str| -> Result<json::Index<json::Node>, ExportError> {
-        let joints = &root.skins[0].joints;
+        let joints = &root.skins[mouth_skin].joints;
         let found: Vec<_> = joints
             .iter()
             .filter(|j| root.nodes[j.value()].name.as_deref() == Some(name))
@@ -226,8 +236,25 @@ pub fn animate_rig_bytes(
             .name
             .clone()
             .unwrap_or_default();
-        targets.push(joint_by_name(&name)?);
+        // The take's rig nodes a bound mesh has no joints for; the jaw when it has none.
+        targets.push(match name.as_str() {
+            "blendshapes" | "lip_upper" | "lip_lower" => None,
+            "jaw" => joint_by_name(&name).ok(),
+            _ => Some(joint_by_name(&name)?),
+        });
     }
+    let parents = node_parents(&root);
+    let rig_jaw = targets
+        .iter()
+        .flatten()
+        .copied()
+        .find(|t| root.nodes[t.value()].name.as_deref() == Some("jaw"));
+    let jaw_track = match rig_jaw {
+        Some(_) => {
+            Some(JawTrack::read(&take_root, &take.bin, animation).map_err(|p| take_bad(&p))?)
+        }
+        None => None,
+    };
     let mut copy_accessor = |root: &mut json::Root,
                              bin: &mut Vec<u8>,
                              index: json::Index<json::Accessor>|
@@ -268,12 +295,40 @@ pub fn animate_rig_bytes(
         Ok(new)
     };
     for (channel, target) in animation.channels.iter().zip(targets) {
+        let Some(target) = target else { continue };
         let sampler = animation
             .samplers
             .get(channel.sampler.value())
             .ok_or_else(|| take_bad("a channel names a sampler that does not exist"))?;
         let input = copy_accessor(&mut root, &mut bin, sampler.input)?;
         let output = copy_accessor(&mut root, &mut bin, sampler.output)?;
+        // A joint placed elsewhere than the take's point (a rigger's own mouth points) keeps
+        // the take's motion from its own rest: every key moves by the difference.
+        let rest = |n: Option<&json::Node>| n.and_then(|n| n.translation).unwrap_or([0.0; 3]);
+        let here = rest(root.nodes.get(target.value()));
+        let there = rest(take_root.nodes.get(channel.target.node.value()));
+        let on_jaw = rig_jaw.is_some() && parents[target.value()] == rig_jaw.map(|j| j.value());
+        let translation = channel.target.path == Valid(json::animation::Property::Translation);
+        if let (true, true, Some(jaw), Some(track)) = (on_jaw, translation, rig_jaw, &jaw_track) {
+            // A lower-lip joint rides on the jaw: its key, a position in the mouth frame, is
+            // taken into the jaw's frame at the same time.
+            let jaw_rest = rest(root.nodes.get(jaw.value()));
+            let mouth_rest = [0, 1, 2].map(|k| jaw_rest[k] + here[k]);
+            let offset = [0, 1, 2].map(|k| mouth_rest[k] - there[k]);
+            let jaw_offset = [0, 1, 2].map(|k| jaw_rest[k] - track.rest[k]);
+            let times =
+                read_f32s(&take_root, &take.bin, sampler.input, 1).map_err(|p| take_bad(&p))?;
+            into_jaw(
+                &mut root, &mut bin, output, &times, track, offset, jaw_offset,
+            )
+            .map_err(|p| rig_error(take_glb, p))?;
+        } else if translation {
+            let offset = [0, 1, 2].map(|k| here[k] - there[k]);
+            if offset.iter().any(|&c| c != 0.0) {
+                shift_vec3(&mut root, &mut bin, output, offset)
+                    .map_err(|p| rig_error(take_glb, p))?;
+            }
+        }
         let index = json::Index::new(samplers_out.len() as u32);
         samplers_out.push(json::animation::Sampler {
             input,
@@ -284,7 +339,7 @@ pub fn animate_rig_bytes(
             sampler: index,
             target: json::animation::Target {
                 node: target,
-                path: Valid(json::animation::Property::Translation),
+                path: channel.target.path,
                 extensions: None,
                 extras: Default::default(),
             },
@@ -310,6 +365,209 @@ pub fn animate_rig_bytes(
         bin,
         channels,
     })
+}
+
+/// Each node's parent.
+fn node_parents(root: &json::Root) -> Vec<Option<usize>> {
+    let mut parents = vec![None; root.nodes.len()];
+    for (i, n) in root.nodes.iter().enumerate() {
+        for c in n.children.iter().flatten() {
+            if let Some(p) = parents.get_mut(c.value()) {
+                *p = Some(i);
+            }
+        }
+    }
+    parents
+}
+
+/// A tightly packed `FLOAT` accessor of `width` components from a GLB's binary chunk.
+fn read_f32s(
+    root: &json::Root,
+    bin: &[u8],
+    accessor: json::Index<json::Accessor>,
+    width: usize,
+) -> Result<Vec<f32>, String> {
+    use json::accessor::{ComponentType as C, GenericComponentType as G};
+    let a = root
+        .accessors
+        .get(accessor.value())
+        .ok_or("an accessor does not exist")?;
+    if !matches!(a.component_type, Valid(G(C::F32))) {
+        return Err("a key accessor is not FLOAT".into());
+    }
+    let view = a
+        .buffer_view
+        .and_then(|v| root.buffer_views.get(v.value()))
+        .ok_or("a key accessor has no buffer view")?;
+    if view.byte_stride.is_some_and(|s| s.0 != 4 * width) {
+        return Err("a key accessor is interleaved".into());
+    }
+    let start = view.byte_offset.map_or(0, |o| o.0) + a.byte_offset.map_or(0, |o| o.0);
+    let end = a
+        .count
+        .0
+        .checked_mul(4 * width as u64)
+        .and_then(|n| n.checked_add(start))
+        .filter(|&e| e <= view.byte_offset.map_or(0, |o| o.0) + view.byte_length.0)
+        .filter(|&e| e <= bin.len() as u64)
+        .ok_or("a key accessor runs past its buffer view")?;
+    Ok(bin[start as usize..end as usize]
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect())
+}
+
+/// The take's jaw: its rotation and translation keys, and its node's rest translation.
+struct JawTrack {
+    times: Vec<f32>,
+    rotations: Vec<[f32; 4]>,
+    translations: Vec<[f32; 3]>,
+    rest: [f32; 3],
+}
+
+impl JawTrack {
+    fn read(take: &json::Root, bin: &[u8], animation: &json::Animation) -> Result<Self, String> {
+        let jaw = take
+            .nodes
+            .iter()
+            .position(|n| n.name.as_deref() == Some("jaw"))
+            .ok_or("the take has no jaw")?;
+        let keys = |path: json::animation::Property, width: usize| -> Result<_, String> {
+            let channel = animation
+                .channels
+                .iter()
+                .find(|c| c.target.node.value() == jaw && c.target.path == Valid(path))
+                .ok_or("the take's jaw has no keys")?;
+            let sampler = animation
+                .samplers
+                .get(channel.sampler.value())
+                .ok_or("a channel names a sampler that does not exist")?;
+            Ok((
+                read_f32s(take, bin, sampler.input, 1)?,
+                read_f32s(take, bin, sampler.output, width)?,
+            ))
+        };
+        let (times, r) = keys(json::animation::Property::Rotation, 4)?;
+        let (t_times, t) = keys(json::animation::Property::Translation, 3)?;
+        if times != t_times || r.len() != 4 * times.len() || t.len() != 3 * times.len() {
+            return Err("the take's jaw rotation and translation keys do not match".into());
+        }
+        Ok(Self {
+            rotations: r
+                .chunks_exact(4)
+                .map(|c| [c[0], c[1], c[2], c[3]])
+                .collect(),
+            translations: t.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            times,
+            rest: take.nodes[jaw].translation.unwrap_or([0.0; 3]),
+        })
+    }
+
+    /// The jaw at time `t`: its rotation and translation, interpolated between its keys
+    /// (linear, the rotation normalised), held before the first and after the last.
+    fn at(&self, t: f32) -> (nalgebra::UnitQuaternion<f64>, nalgebra::Vector3<f64>) {
+        let n = self.times.len();
+        let i = self.times.partition_point(|&k| k <= t);
+        let (a, b, f) = match i {
+            0 => (0, 0, 0.0),
+            i if i >= n => (n - 1, n - 1, 0.0),
+            i => {
+                let (t0, t1) = (self.times[i - 1], self.times[i]);
+                let f = if t1 > t0 { (t - t0) / (t1 - t0) } else { 0.0 };
+                (i - 1, i, f as f64)
+            }
+        };
+        let lerp = |x: f32, y: f32| x as f64 + f * (y as f64 - x as f64);
+        let (qa, mut qb) = (self.rotations[a], self.rotations[b]);
+        if qa.iter().zip(&qb).map(|(x, y)| x * y).sum::<f32>() < 0.0 {
+            qb = qb.map(|c| -c);
+        }
+        let q: [f64; 4] = std::array::from_fn(|k| lerp(qa[k], qb[k]));
+        let rotation = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            q[3], q[0], q[1], q[2],
+        ));
+        let (ta, tb) = (self.translations[a], self.translations[b]);
+        let translation =
+            nalgebra::Vector3::new(lerp(ta[0], tb[0]), lerp(ta[1], tb[1]), lerp(ta[2], tb[2]));
+        (rotation, translation)
+    }
+}
+
+/// Takes a lower-lip joint's copied keys (mouth-frame positions, moved by `offset`) into the
+/// frame of the rig's jaw at each key's time (the take's jaw moved by `jaw_offset`).
+fn into_jaw(
+    root: &mut json::Root,
+    bin: &mut [u8],
+    accessor: json::Index<json::Accessor>,
+    times: &[f32],
+    jaw: &JawTrack,
+    offset: [f32; 3],
+    jaw_offset: [f32; 3],
+) -> Result<(), String> {
+    let keys = read_f32s(root, bin, accessor, 3)?;
+    if keys.len() != 3 * times.len() {
+        return Err("a lip's keys and times differ in number".into());
+    }
+    let mut out = Vec::with_capacity(keys.len());
+    for (k, &t) in times.iter().enumerate() {
+        let (r, tr) = jaw.at(t);
+        let p = nalgebra::Vector3::from(std::array::from_fn(|c| {
+            keys[3 * k + c] as f64 + offset[c] as f64
+        }));
+        let jaw_at = tr + nalgebra::Vector3::from(jaw_offset.map(f64::from));
+        let local = r.inverse() * (p - jaw_at);
+        out.extend(local.iter().map(|&c| c as f32));
+    }
+    let a = &mut root.accessors[accessor.value()];
+    let view = &root.buffer_views[a.buffer_view.expect("read above").value()];
+    let start = (view.byte_offset.map_or(0, |o| o.0) + a.byte_offset.map_or(0, |o| o.0)) as usize;
+    for (i, v) in out.iter().enumerate() {
+        bin[start + 4 * i..start + 4 * i + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    a.min = None;
+    a.max = None;
+    Ok(())
+}
+
+/// Adds `offset` to every element of a copied, tightly packed `VEC3` of `FLOAT` accessor
+/// (its bytes are this document's own copy), dropping its bounds.
+fn shift_vec3(
+    root: &mut json::Root,
+    bin: &mut [u8],
+    accessor: json::Index<json::Accessor>,
+    offset: [f32; 3],
+) -> Result<(), String> {
+    use json::accessor::{ComponentType as C, GenericComponentType as G, Type};
+    let a = &mut root.accessors[accessor.value()];
+    if a.type_ != Valid(Type::Vec3) || !matches!(a.component_type, Valid(G(C::F32))) {
+        return Err("a translation channel's keys are not VEC3 of FLOAT".into());
+    }
+    let view = a
+        .buffer_view
+        .and_then(|v| root.buffer_views.get(v.value()))
+        .ok_or("a translation channel's keys have no buffer view")?;
+    if view.byte_stride.is_some_and(|s| s.0 != 12) {
+        return Err("a translation channel's keys are interleaved".into());
+    }
+    let start = view.byte_offset.map_or(0, |o| o.0) + a.byte_offset.map_or(0, |o| o.0);
+    let end = a
+        .count
+        .0
+        .checked_mul(12)
+        .and_then(|n| n.checked_add(start))
+        .filter(|&e| e <= view.byte_offset.map_or(0, |o| o.0) + view.byte_length.0)
+        .filter(|&e| e <= bin.len() as u64)
+        .ok_or("a translation channel's keys run past their buffer view")?;
+    for (i, chunk) in bin[start as usize..end as usize]
+        .chunks_exact_mut(4)
+        .enumerate()
+    {
+        let v = f32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]) + offset[i % 3];
+        chunk.copy_from_slice(&v.to_le_bytes());
+    }
+    a.min = None;
+    a.max = None;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -112,6 +112,19 @@ impl MouthRig {
         self.jaw_pivot
     }
 
+    /// Where the jaw hinges, mouth frame (character units): the character's `[rig] jaw_pivot`,
+    /// else `hinge_up` mouth widths above and `hinge_back` behind the mouth centre (the rig's
+    /// defaults, with the character's own mouth width). The take's `jaw` node and
+    /// `mouthpiece bind`'s `jaw` joint both sit here.
+    pub fn jaw_hinge(&self) -> [f64; 3] {
+        if let Some(p) = self.jaw_pivot {
+            return p;
+        }
+        let settings = mouthpiece_retarget::rig::RigSettings::default();
+        let w = self.mouth_width();
+        [0.0, settings.hinge_up * w, -settings.hinge_back * w]
+    }
+
     /// Gives the rig a head (from the character's `[head]`).
     pub fn with_head(mut self, head: RigHead) -> Result<Self, ExportError> {
         let finite = [head.pivot, head.eye_left, head.eye_right]

@@ -330,7 +330,8 @@ fn glb_seeds() {
     gltf_io::write_plain_glb(&head_path, &head, "head").unwrap();
     put("gltf_mesh", "head.glb", &std::fs::read(&head_path).unwrap());
     let rigged = dir.join("rig.glb");
-    mouthpiece_bind::bind(&rig, &head_path, &rigged, ModelUp::Y, Method::Distance).unwrap();
+    let options = mouthpiece_bind::BindOptions::new(ModelUp::Y, Method::Distance);
+    mouthpiece_bind::bind(&rig, &head_path, &rigged, &options).unwrap();
     put("gltf_rig", "rig.glb", &std::fs::read(&rigged).unwrap());
     let _ = std::fs::remove_dir_all(&dir);
     // Praat's UTF-16 TextGrid (little-endian, with its byte order mark).

@@ -429,12 +429,7 @@ impl GltfWriter {
 /// widths above and `hinge_back` behind the mouth centre, with the character's own mouth
 /// width (the performer's `[rig]` hinge describes the performer's head, not the character's).
 pub(super) fn jaw_pivot(rig: &MouthRig) -> [f64; 3] {
-    if let Some(p) = rig.jaw_pivot() {
-        return p;
-    }
-    let settings = RigSettings::default();
-    let w = rig.mouth_width();
-    [0.0, settings.hinge_up * w, -settings.hinge_back * w]
+    rig.jaw_hinge()
 }
 
 /// How far below the mouth centre the `blendshapes` meter sits, in mouth widths.

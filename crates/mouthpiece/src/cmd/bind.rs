@@ -37,6 +37,38 @@ pub struct Args {
     /// file then holds it in glTF's axes, as Blender's glTF exporter writes it).
     #[arg(long, value_enum, default_value = "y")]
     pub model_up: UpArg,
+    /// A mesh (or its node) that is the face, by name (repeat for several); by default the
+    /// meshes nearest to the mouth points. Other meshes (eyes, teeth) follow the head rigidly.
+    #[arg(long = "face-mesh")]
+    pub face_mesh: Vec<String>,
+    /// The node (usually a bone of the file's skeleton) the mouth's joints hang under; by
+    /// default a joint named like `head`, else a new `root` node.
+    #[arg(long)]
+    pub parent_bone: Option<String>,
+    /// The jaw's hinge `x,y,z` in the character's model frame and units; by default the
+    /// character's `[rig] jaw_pivot`, else the rig's default behind and above the mouth.
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+    pub jaw_hinge: Option<[f64; 3]>,
+    /// No jaw joint: the chin stays with the head.
+    #[arg(long)]
+    pub no_jaw: bool,
+}
+
+/// `x,y,z`: three finite numbers.
+fn parse_point(text: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = text.split(',').collect();
+    let numbers: Vec<f64> = parts
+        .iter()
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{}`: {e}", mouthpiece_export::asset::shown(text)))?;
+    match numbers[..] {
+        [x, y, z] if numbers.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!(
+            "`{}`: give three finite numbers x,y,z",
+            mouthpiece_export::asset::shown(text)
+        )),
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -219,14 +251,30 @@ fn bind(args: Args) -> anyhow::Result<()> {
         _ => Method::Distance,
     };
     let start = Instant::now();
-    let summary = mouthpiece_bind::bind(&rig, &mesh, &out, args.model_up.into(), method)
-        .map_err(bind_error)?;
+    let mut options = mouthpiece_bind::BindOptions::new(args.model_up.into(), method);
+    options.face_meshes = args.face_mesh;
+    options.parent_bone = args.parent_bone;
+    options.jaw = !args.no_jaw;
+    options.jaw_hinge = args.jaw_hinge;
+    let summary = mouthpiece_bind::bind(&rig, &mesh, &out, &options).map_err(bind_error)?;
     eprintln!(
-        "wrote {}: {} vertices ({} after merging seams), {} triangles, {} follow the mouth; {:?} weights in {:.2} s",
-        out.display(),
-        summary.vertices,
+        "face: {} ({} vertices after merging seams, {} triangles; {})",
+        summary.face.join(", "),
         summary.welded_vertices,
         summary.triangles,
+        summary.topology
+    );
+    if summary.points_from_nodes {
+        eprintln!("mouth points: the file's nodes named like the character's points");
+    }
+    for (part, joint) in &summary.parts {
+        eprintln!("part: {part} follows {joint}");
+    }
+    eprintln!(
+        "wrote {}: the input with a skin added, the mouth under {}; {} vertices in the file, {} follow the mouth; {:?} weights in {:.2} s",
+        out.display(),
+        summary.parent.as_deref().unwrap_or("a new root"),
+        summary.vertices,
         summary.moving_vertices,
         args.method,
         start.elapsed().as_secs_f64()

@@ -224,10 +224,10 @@ fn export_animation(args: Args) -> anyhow::Result<()> {
                 reduce: args.reduce,
                 curve: args.curve,
                 markers: !args.no_markers && args.rig.is_none(),
-                // A bound mesh has no head joints to carry the head's keys, nor a jaw joint
-                // and blend shapes for the rig's.
+                // A bound mesh has no head joints to carry the head's keys; its `jaw` joint
+                // takes the rig's jaw keys (the blend shapes and lips are left out there).
                 head: args.rig.is_none(),
-                rig: args.rig.is_none(),
+                rig: true,
             };
             let dir = spool_dir(&args.out);
             // With --rig the take goes to a temporary GLB first, then onto the rig.
