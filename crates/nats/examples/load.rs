@@ -111,6 +111,7 @@ fn demo_frame() -> StreamFrame {
         curve: Some((0..12).map(|i| [i as f32 * 0.01, 0.0, 0.0]).collect()),
         rig: Some(RigState::default()),
         head: None,
+        source: Default::default(),
     };
     StreamFrame {
         characters: vec![character("human"), character("wolf")],

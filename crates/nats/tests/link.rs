@@ -40,6 +40,7 @@ fn hub() -> Hub {
                 ControlCommand::RecordStop => Ok(json!({"stopped": true})),
                 ControlCommand::Calibrate { .. } => Err(ControlFailure::new("no performer seen")),
                 ControlCommand::LookAt { .. } => Ok(json!({})),
+                ControlCommand::TuneColours { .. } => Err(ControlFailure::new("no frames")),
             };
             request.reply(outcome);
         }
