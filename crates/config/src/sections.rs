@@ -36,8 +36,16 @@ pub struct SourceSpec(pub String);
 impl SourceSpec {
     pub const SCHEMES: [&'static str; 3] = ["replay:", "openni2:", "v4l2:"];
 
+    /// `none`: no camera at all (a booth driven by speech alone; docs/daemon.md).
+    pub const NONE: &'static str = "none";
+
     pub fn as_str(&self) -> &str {
         &self.0
+    }
+
+    /// True for `none`: the daemon opens no camera.
+    pub fn is_none(&self) -> bool {
+        self.0 == Self::NONE
     }
 
     /// The file of a `replay:` spec, without its query.
@@ -50,9 +58,12 @@ impl SourceSpec {
 impl TryFrom<String> for SourceSpec {
     type Error = String;
     fn try_from(s: String) -> Result<Self, String> {
+        if s == Self::NONE {
+            return Ok(SourceSpec(s));
+        }
         if !Self::SCHEMES.iter().any(|scheme| s.starts_with(scheme)) {
             return Err(format!(
-                "expected a source spec starting with replay:, openni2: or v4l2:, got {s:?}"
+                "expected none or a source spec starting with replay:, openni2: or v4l2:, got {s:?}"
             ));
         }
         if s.starts_with("replay:") && SourceSpec(s.clone()).replay_path() == Some("") {

@@ -20,6 +20,9 @@ pub fn opener(spec: &str, stall_timeout: Duration) -> Opener {
 
 /// The source spec parses (the file or device may still be absent: that is retried).
 pub fn check_spec(config: &Config) -> Result<(), CheckError> {
+    if config.source.spec.is_none() {
+        return Ok(());
+    }
     SourceSpec::parse(config.source.spec.as_str())
         .map(|_| ())
         .map_err(|e| CheckError::Invalid {

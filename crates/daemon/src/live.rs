@@ -83,7 +83,29 @@ pub fn setup(config: &Config) -> Result<Setup, CheckError> {
                 blend_s: f64::from(o.speech_blend_ms) / 1e3,
             }
         })
-        .collect();
+        .collect::<Vec<HandoverSettings>>();
+    // No camera: speech is the only thing that can move a mouth.
+    if config.source.spec.is_none() {
+        if config.audio.is_none() {
+            return Err(invalid(
+                "source.spec",
+                "spec = \"none\" (no camera) needs an [audio] table: speech is all that drives the characters".into(),
+            ));
+        }
+        if let Some(c) = characters
+            .iter()
+            .zip(&speech)
+            .find(|(_, s)| s.mode != SpeechMode::Always)
+        {
+            return Err(invalid(
+                "source.spec",
+                format!(
+                    "spec = \"none\" (no camera) needs speech = \"always\" for every character; {:?} has not",
+                    c.0.name
+                ),
+            ));
+        }
+    }
     Ok(Setup {
         characters,
         config: pipeline,
@@ -143,6 +165,8 @@ pub struct LiveProcessor {
     audio: Option<AudioSubscription>,
     /// A character step mixed with speech (reused).
     mixed: Option<mouthpiece_retarget::CharacterStep>,
+    /// Host time of the last camera frame that stepped the characters (calibrated).
+    camera_at: Option<Instant>,
 }
 
 impl LiveProcessor {
@@ -156,6 +180,7 @@ impl LiveProcessor {
             bus: None,
             audio: None,
             mixed: None,
+            camera_at: None,
             pipeline,
             config: setup.config,
             dot_names,
@@ -201,6 +226,23 @@ impl LiveProcessor {
     }
 }
 
+impl LiveProcessor {
+    /// Feeds the sound that came since the last call to the speech driver.
+    fn drain_audio(&mut self) {
+        if let (Some(driver), Some(audio)) = (&mut self.speech, &self.audio) {
+            while let Ok(event) = audio.events.try_recv() {
+                if let mouthpiece_frame::AudioEvent::Block(block) = event {
+                    if let Err(e) = driver.push_audio(&block) {
+                        if let Some(held_back) = self.errors.allow(Instant::now()) {
+                            tracing::warn!(held_back, "live lip sync: {e}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// The speech driver for the characters whose `speech` is not `off` (`None` when none is).
 fn speech_driver(
     config: &PipelineConfig,
@@ -238,17 +280,7 @@ impl Processor for LiveProcessor {
     }
 
     fn process(&mut self, frame: &Frame, out: &mut Output) {
-        if let (Some(driver), Some(audio)) = (&mut self.speech, &self.audio) {
-            while let Ok(event) = audio.events.try_recv() {
-                if let mouthpiece_frame::AudioEvent::Block(block) = event {
-                    if let Err(e) = driver.push_audio(&block) {
-                        if let Some(held_back) = self.errors.allow(Instant::now()) {
-                            tracing::warn!(held_back, "live lip sync: {e}");
-                        }
-                    }
-                }
-            }
-        }
+        self.drain_audio();
         if let Err(e) = self.pipeline.step(frame) {
             if let Some(held_back) = self.errors.allow(Instant::now()) {
                 tracing::warn!(
@@ -302,6 +334,7 @@ impl Processor for LiveProcessor {
             self.at_rest(out);
             return;
         };
+        self.camera_at = Some(frame.host_rx);
         let stream = &mut out.stream;
         stream.head.pose.rotation = stab.head.quaternion_wxyz();
         stream.head.pose.translation = [
@@ -356,6 +389,58 @@ impl Processor for LiveProcessor {
             slot.rig = rig.map(|r| crate::rig::rig_state_for(r, &bound.character().rig_ranges));
             slot.head = Some(crate::head::wire(&result.head));
         }
+    }
+
+    fn speech_step(&mut self, out: &mut Output) -> Option<Instant> {
+        self.drain_audio();
+        let driver = self.speech.as_mut()?;
+        let step = loop {
+            let step = driver.pop_alone()?;
+            // A calibrated camera is timing the steps: the sound mixes into those.
+            let camera = self.camera_at.is_some_and(|c| {
+                step.heard_at.saturating_duration_since(c)
+                    <= mouthpiece_pipeline::speech::SPEECH_STALE
+            });
+            if !camera {
+                break step;
+            }
+        };
+        out.flags = Default::default();
+        out.performer_camera.clear();
+        let stream = &mut out.stream;
+        stream.head = Default::default();
+        stream.performer = None;
+        let characters = self.pipeline.characters();
+        stream
+            .characters
+            .resize_with(characters.len(), CharacterFrame::default);
+        for (k, (c, slot)) in characters
+            .iter()
+            .zip(stream.characters.iter_mut())
+            .enumerate()
+        {
+            if slot.name != c.name {
+                slot.name.clone_from(&c.name);
+            }
+            let Some(result) = driver.mouth_alone(k, step.t, &step.weights) else {
+                continue;
+            };
+            slot.source = MouthSource::Speech;
+            slot.points.clear();
+            slot.points.extend(result.points.iter().map(to_f32));
+            slot.confidence.clear();
+            slot.confidence.resize(result.points.len(), 1.0);
+            if result.curve.is_empty() {
+                slot.curve = None;
+            } else {
+                let curve = slot.curve.get_or_insert_with(Vec::new);
+                curve.clear();
+                curve.extend(result.curve.iter().map(to_f32));
+            }
+            slot.rig = None;
+            slot.head = Some(crate::head::wire(&result.head));
+        }
+        Some(step.heard_at)
     }
 
     fn calibrate(&mut self, duration: Option<Duration>) {

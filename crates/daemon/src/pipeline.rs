@@ -70,6 +70,13 @@ pub trait Processor: Send {
     /// mouths from speech subscribes to it. Default: nothing.
     fn set_audio(&mut self, _bus: &std::sync::Arc<mouthpiece_frame::AudioBus>) {}
 
+    /// With speech alone driving every character and no calibrated camera timing the
+    /// steps: fills `out` with the next step taken from the sound and returns the host time
+    /// of that sound (`None`: no step due). Default: never.
+    fn speech_step(&mut self, _out: &mut Output) -> Option<Instant> {
+        None
+    }
+
     /// Characters, point names and frame rate for `hello`.
     fn stream_info(&self, frame_rate: f64, source: &str) -> StreamInfo;
 
@@ -317,6 +324,17 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                 }
             }
             Taken::Closed => break,
+        }
+        // A booth without camera steps: the sound's own clock times them.
+        while let Some(heard_at) = processor.speech_step(&mut out) {
+            let wall = SystemTime::now() - heard_at.elapsed();
+            out.stream.t = heard_at.saturating_duration_since(ctx.epoch).as_secs_f64();
+            out.stream.capture_us = 0;
+            out.stream.wall_us = Some(mouthpiece_takes::unix_us(wall));
+            out.stream.processing = None;
+            ctx.hub.publish(&out.stream);
+            ctx.osc.offer(&out.stream);
+            frames += 1;
         }
         let generation = ctx.source.generation();
         if generation != seen_generation && !stalled {

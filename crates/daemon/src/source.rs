@@ -90,6 +90,14 @@ pub fn spawn(
     std::thread::Builder::new()
         .name("mouthpiece-source".into())
         .spawn(move || {
+            if spec == mouthpiece_config::SourceSpec::NONE {
+                // No camera: nothing to open; the thread only waits to be stopped.
+                tracing::info!("no camera (source spec none)");
+                while !shared.is_stopping() {
+                    sleep_unless_stopped(&shared, Duration::from_secs(1));
+                }
+                return;
+            }
             let mut open_failures = Throttle::new(throttle_interval);
             while !shared.is_stopping() {
                 // A panic in a source (a library bug, arithmetic on a crafted file) is a

@@ -3,6 +3,7 @@
 //! into the camera's step (docs/daemon.md, "Speech"). The caller steps it with each output
 //! step's time and the host time of that step (both injected: no clock is read here).
 
+use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use mouthpiece_frame::audio::AudioBlock;
@@ -13,10 +14,29 @@ use mouthpiece_output::MouthSource;
 use mouthpiece_retarget::smooth::smooth_closed;
 use mouthpiece_retarget::{Character, CharacterSettings, CharacterStep, Vec3};
 
-use crate::handover::{mix_points, Handover, HandoverSettings};
+use crate::handover::{mix_points, Handover, HandoverSettings, SpeechMode};
 
 /// Speech counts as coming in while its newest step is at most this old.
 pub const SPEECH_STALE: Duration = Duration::from_millis(250);
+
+/// Steps per second of sound when speech alone drives every character (no camera timing
+/// the steps): the analyser's steps taken at this rate by the sound's own sample clock.
+pub const SPEECH_ALONE_RATE_HZ: f64 = 50.0;
+
+/// Speech-alone steps held until the caller takes them (2 s at the rate above); beyond
+/// this the oldest is dropped.
+const ALONE_QUEUE: usize = 100;
+
+/// One step of sound for a booth driven by speech alone.
+#[derive(Debug, Clone)]
+pub struct AloneStep {
+    /// Stream time of the sound, seconds since the sound stream's first sample.
+    pub t: f64,
+    /// Host time at which that sound was captured.
+    pub heard_at: Instant,
+    /// The mouth's key-pose weights.
+    pub weights: Vec<f64>,
+}
 
 struct Mouth {
     mouth: LiveMouth,
@@ -32,6 +52,11 @@ pub struct SpeechDriver {
     steps: Vec<LiveStep>,
     /// The newest step's weights and the host time of its sound.
     latest: Option<(Vec<f64>, Instant)>,
+    /// Every character is `always`: steps are also queued at [`SPEECH_ALONE_RATE_HZ`].
+    alone: bool,
+    queued: VecDeque<AloneStep>,
+    /// Stream time of the next speech-alone step.
+    next_alone: f64,
 }
 
 /// A character that cannot be driven by the shipped poses, or damaged shipped tables.
@@ -83,6 +108,10 @@ impl SpeechDriver {
             mouths,
             steps: Vec::new(),
             latest: None,
+            alone: !characters.is_empty()
+                && characters.iter().all(|(_, h)| h.mode == SpeechMode::Always),
+            queued: VecDeque::new(),
+            next_alone: 0.0,
         })
     }
 
@@ -99,7 +128,44 @@ impl SpeechDriver {
                 None => self.latest = Some((s.weights.clone(), s.heard_at)),
             }
         }
+        if self.alone {
+            for s in &self.steps {
+                // A stream that started again (its clock back at zero) starts the ticks again.
+                if s.t + 1.0 < self.next_alone {
+                    self.next_alone = 0.0;
+                }
+                if s.t < self.next_alone {
+                    continue;
+                }
+                self.next_alone =
+                    ((s.t * SPEECH_ALONE_RATE_HZ).floor() + 1.0) / SPEECH_ALONE_RATE_HZ;
+                if self.queued.len() == ALONE_QUEUE {
+                    self.queued.pop_front();
+                }
+                self.queued.push_back(AloneStep {
+                    t: s.t,
+                    heard_at: s.heard_at,
+                    weights: s.weights.clone(),
+                });
+            }
+        }
         Ok(())
+    }
+
+    /// True when every character is `always` (speech alone may time the steps).
+    pub fn is_alone(&self) -> bool {
+        self.alone
+    }
+
+    /// The oldest speech-alone step not yet taken (only when [`Self::is_alone`]).
+    pub fn pop_alone(&mut self) -> Option<AloneStep> {
+        self.queued.pop_front()
+    }
+
+    /// Character `k`'s mouth from speech alone at stream time `t` (no camera step to mix).
+    pub fn mouth_alone(&mut self, k: usize, t: f64, weights: &[f64]) -> Option<&CharacterStep> {
+        let m = self.mouths.get_mut(k)?;
+        Some(m.mouth.step(&self.tables, t, weights))
     }
 
     /// The class heard last (the class table's index), if any sound came.
