@@ -73,6 +73,14 @@ fn bad_value_names_key_and_expectation() {
 
     let err = parse("[source]\nspec = \"camera0\"\n").unwrap_err();
     assert_eq!(err.key(), Some("source.spec"), "{err}");
+    // `none`: a booth without a camera (speech alone); `nonesuch` is still refused.
+    assert!(parse("[source]\nspec = \"none\"\n")
+        .unwrap()
+        .source
+        .spec
+        .is_none());
+    let err = parse("[source]\nspec = \"nonesuch\"\n").unwrap_err();
+    assert_eq!(err.key(), Some("source.spec"), "{err}");
 
     let err = parse("[takes]\nslate = \"../etc\"\n").unwrap_err();
     assert_eq!(err.key(), Some("takes.slate"), "{err}");
