@@ -115,7 +115,10 @@ fn without_a_camera_the_sound_times_the_steps_and_moves_the_mouth() {
 fn no_camera_needs_sound_and_speech_always() {
     let path = Path::new("/etc/mouthpiece/test.toml");
     let config = Config::parse("[source]\nspec = \"none\"\n", path).unwrap();
-    let err = setup(&config).err().expect("no [audio]").to_string();
+    let Err(err) = setup(&config) else {
+        panic!("spec none without [audio] accepted")
+    };
+    let err = err.to_string();
     assert!(
         err.contains("source.spec") && err.contains("[audio]"),
         "{err}"
@@ -125,7 +128,10 @@ fn no_camera_needs_sound_and_speech_always() {
         path,
     )
     .unwrap();
-    let err = setup(&config).err().expect("not always").to_string();
+    let Err(err) = setup(&config) else {
+        panic!("spec none with speech fallback accepted")
+    };
+    let err = err.to_string();
     assert!(
         err.contains("source.spec") && err.contains("always"),
         "{err}"
