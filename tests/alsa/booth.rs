@@ -122,7 +122,23 @@ impl Booth {
 
     /// Kills the jackd under the booth: the device's clock stops, as when a microphone is
     /// pulled out.
+    ///
+    /// jackd is asked to stop (SIGTERM) so it leaves JACK's shared server registry: a killed
+    /// jackd keeps its slot there, and after a handful of those no jackd on the machine can
+    /// start ("Too many servers already active"). SIGKILL only if it has not stopped in 10 s.
     pub fn pull_the_plug(&mut self) {
+        if matches!(self.jack.try_wait(), Ok(Some(_))) {
+            return;
+        }
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.jack.id().to_string()])
+            .status();
+        for _ in 0..100 {
+            if matches!(self.jack.try_wait(), Ok(Some(_))) {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
         let _ = self.jack.kill();
         let _ = self.jack.wait();
     }

@@ -101,7 +101,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .input
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
-    let wav = if is_mcap && args.onto.is_none() && args.rig.is_none() {
+    // Without --character the animation's own checks refuse the recording first.
+    let wav = if is_mcap && args.onto.is_none() && args.rig.is_none() && args.character.is_some() {
         crate::cmd::export_audio::prepare(&args.input, &args.out)?
     } else {
         None

@@ -39,7 +39,8 @@ fn recording_error(err: mouthpiece_recording::RecordingError) -> anyhow::Error {
 
 /// The WAV of `recording`'s sound for an export to `out`; `None` when it has no sound.
 pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWav>> {
-    let mut audio = AudioReader::open(recording).map_err(recording_error)?;
+    // The input named on the command line cannot be opened: the user's to fix (exit 2).
+    let mut audio = AudioReader::open(recording).map_err(|e| bad_input(anyhow::Error::new(e)))?;
     let Some(first_audio) = audio.next_audio().map_err(recording_error)? else {
         return Ok(None);
     };
