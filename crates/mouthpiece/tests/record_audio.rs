@@ -82,7 +82,9 @@ fn a_recording_holds_the_booths_sound_bit_exact_and_where_it_stopped() {
         std::fs::metadata(&out).map_or(0, |m| m.len()) > 30_000_000
     });
     booth.pull_the_plug();
-    wait_until("the sound reported lost", || read_log().contains("sound lost"));
+    wait_until("the sound reported lost", || {
+        read_log().contains("sound lost")
+    });
     // Video goes on after the loss.
     let size_at_loss = std::fs::metadata(&out).unwrap().len();
     wait_until("video after the loss", || {
@@ -107,7 +109,10 @@ fn a_recording_holds_the_booths_sound_bit_exact_and_where_it_stopped() {
     let found: Value = serde_json::from_slice(&checked.stdout).unwrap();
     eprintln!("{found}");
     assert!(found["blocks"].as_u64().unwrap() >= 1, "{found}");
-    assert_eq!(found["exact"], true, "the sound is the booth's, bit for bit: {found}");
+    assert_eq!(
+        found["exact"], true,
+        "the sound is the booth's, bit for bit: {found}"
+    );
     let stopped = found["events"]
         .as_array()
         .unwrap()
@@ -115,8 +120,14 @@ fn a_recording_holds_the_booths_sound_bit_exact_and_where_it_stopped() {
         .find(|e| e["event"] == "stopped")
         .unwrap_or_else(|| panic!("no stop event: {found}"));
     let stopped_ns = stopped["wall_us"].as_u64().unwrap() * 1000;
-    assert!(found["last_frame"].as_u64().unwrap() > stopped_ns, "{found}");
-    assert!(found["first_audio"].as_u64().unwrap() < stopped_ns, "{found}");
+    assert!(
+        found["last_frame"].as_u64().unwrap() > stopped_ns,
+        "{found}"
+    );
+    assert!(
+        found["first_audio"].as_u64().unwrap() < stopped_ns,
+        "{found}"
+    );
     assert_eq!(
         found["audio_meta"]["stopped_unix_us"],
         stopped["wall_us"].to_string(),
