@@ -50,7 +50,9 @@ impl AudioRecorder {
     /// Starts reading `source` on its own thread.
     pub fn start(mut source: Box<dyn AudioSource>) -> std::io::Result<AudioRecorder> {
         let info = source.info().clone();
-        let (tx, rx) = crossbeam_channel::unbounded();
+        // Ten minutes of 10 ms blocks: a writer that falls further behind makes the device
+        // overrun, which shows as a gap.
+        let (tx, rx) = crossbeam_channel::bounded(60_000);
         let stop = Arc::new(AtomicBool::new(false));
         let stopping = stop.clone();
         let thread = std::thread::Builder::new()
@@ -145,6 +147,11 @@ impl AudioRecorder {
     pub fn finish(mut self, writer: &mut SessionWriter) -> Result<Option<String>, RecordingError> {
         self.stop.store(true, Ordering::Release);
         if let Some(thread) = self.thread.take() {
+            // Drained meanwhile, so that a thread waiting on a full channel can end.
+            while !thread.is_finished() {
+                self.drain(writer)?;
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
             let _ = thread.join();
         }
         self.drain(writer)?;
