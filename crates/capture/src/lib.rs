@@ -54,6 +54,8 @@ pub mod oni_write;
 #[cfg(feature = "openni2")]
 pub mod openni;
 pub mod record;
+#[cfg(feature = "mcap")]
+pub mod record_audio;
 #[cfg(feature = "v4l2")]
 pub mod v4l2;
 

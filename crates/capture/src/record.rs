@@ -56,6 +56,8 @@ pub struct RecordSummary {
     pub oni_fixed_nodes: usize,
     /// The source was lost mid-recording; the file holds what came before.
     pub lost: Option<String>,
+    /// The sound (`--audio`) stopped before the end: why (the file says where).
+    pub sound_lost: Option<String>,
 }
 
 /// Output formats, from the file name.
@@ -86,7 +88,7 @@ impl OutputFormat {
 fn pump(
     source: &mut dyn FrameSource,
     limits: &RecordLimits,
-    mut write: impl FnMut(&Frame) -> Result<(), RecordError>,
+    mut write: impl FnMut(&mut Frame) -> Result<(), RecordError>,
 ) -> Result<(u64, f64, Option<String>), RecordError> {
     let mut frames = 0u64;
     let mut first_ts = None;
@@ -96,7 +98,7 @@ fn pump(
             tracing::info!("stop requested; closing the recording");
             break;
         }
-        let frame = match source.next_frame() {
+        let mut frame = match source.next_frame() {
             Ok(Some(f)) => f,
             Ok(None) => break,
             Err(err @ SourceError::Disconnected { .. }) => {
@@ -113,7 +115,7 @@ fn pump(
             }
         }
         last_ts = frame.device_ts_us;
-        write(&frame)?;
+        write(&mut frame)?;
         frames += 1;
     }
     Ok((
@@ -133,21 +135,69 @@ pub fn record_mcap(
     limits: &RecordLimits,
     on_frame: impl FnMut(&Frame),
 ) -> Result<RecordSummary, RecordError> {
+    record_mcap_with_audio(spec, config, out, options, limits, None, on_frame)
+}
+
+/// [`record_mcap`] with the sound of `audio` (already open) read on its own thread and
+/// written to `/audio`; frames and sound are then both stamped on the host's wall clock
+/// (see [`crate::record_audio`]).
+#[cfg(feature = "mcap")]
+pub fn record_mcap_with_audio(
+    spec: &SourceSpec,
+    config: &CaptureConfig,
+    out: &Path,
+    options: mouthpiece_recording::WriterOptions,
+    limits: &RecordLimits,
+    audio: Option<Box<dyn mouthpiece_frame::AudioSource>>,
+    on_frame: impl FnMut(&Frame),
+) -> Result<RecordSummary, RecordError> {
+    use crate::record_audio::AudioRecorder;
     let failed = |e: mouthpiece_recording::RecordingError| RecordError::Write {
         path: out.to_path_buf(),
         source: Box::new(e),
     };
     let source = crate::open_parsed(spec, config)?;
-    let writer = mouthpiece_recording::SessionWriter::create(out, options).map_err(failed)?;
-    tracing::info!(source = %spec, file = %out.display(), "recording MCAP session");
-    record_with(
+    let mut writer = mouthpiece_recording::SessionWriter::create(out, options).map_err(failed)?;
+    let recorder = match audio {
+        None => None,
+        Some(audio) => {
+            let mut recorder = AudioRecorder::start(audio).map_err(|e| RecordError::Write {
+                path: out.to_path_buf(),
+                source: Box::new(e),
+            })?;
+            recorder.begin(&mut writer).map_err(failed)?;
+            Some(recorder)
+        }
+    };
+    let with_sound = recorder.is_some();
+    tracing::info!(source = %spec, file = %out.display(), with_sound, "recording MCAP session");
+    let mut sound_lost = None;
+    let mut summary = record_with(
         source,
         limits,
-        writer,
-        |writer, f| writer.write_frame(f).map(drop).map_err(failed),
-        |writer| writer.finish().map(drop).map_err(failed),
+        (writer, recorder),
+        |(writer, recorder), f| {
+            if let Some(recorder) = recorder {
+                // One clock for frames and sound: the wall clock at the frame's receipt.
+                f.wall_clock = Some(std::time::SystemTime::now() - f.host_rx.elapsed());
+                recorder.drain(writer).map_err(failed)?;
+            }
+            writer.write_frame(f).map(drop).map_err(failed)
+        },
+        |(mut writer, recorder)| {
+            if let Some(recorder) = recorder {
+                let written = recorder.finish(&mut writer);
+                if let Ok(lost) = &written {
+                    sound_lost.clone_from(lost);
+                }
+                written.map(drop).map_err(failed)?;
+            }
+            writer.finish().map(drop).map_err(failed)
+        },
         on_frame,
-    )
+    )?;
+    summary.sound_lost = sound_lost;
+    Ok(summary)
 }
 
 #[cfg(not(feature = "mcap"))]
@@ -200,6 +250,7 @@ pub fn record_oni(
         skipped,
         oni_fixed_nodes: fix.cropping_added.len().max(fix.fov_added.len()),
         lost,
+        sound_lost: None,
     })
 }
 
@@ -256,7 +307,7 @@ fn record_with<W>(
     mut source: Box<dyn FrameSource>,
     limits: &RecordLimits,
     mut sink: W,
-    mut write: impl FnMut(&mut W, &Frame) -> Result<(), RecordError>,
+    mut write: impl FnMut(&mut W, &mut Frame) -> Result<(), RecordError>,
     finish: impl FnOnce(W) -> Result<(), RecordError>,
     mut on_frame: impl FnMut(&Frame),
 ) -> Result<RecordSummary, RecordError> {
@@ -276,6 +327,7 @@ fn record_with<W>(
         skipped,
         oni_fixed_nodes: 0,
         lost,
+        sound_lost: None,
     })
 }
 

@@ -27,6 +27,62 @@ pub struct Args {
     /// or jpeg[:QUALITY].
     #[arg(long, default_value = "raw")]
     pub color: String,
+    /// Also record the sound of this ALSA capture device (PCM name, e.g. `default` or
+    /// `hw:1,0`) to `/audio` (MCAP only); frames and sound are then stamped on the host clock.
+    #[arg(long)]
+    pub audio: Option<String>,
+    /// The sample rate to ask the --audio device for (it may agree to another: the file
+    /// holds what it delivered).
+    #[arg(long, default_value_t = 48_000, requires = "audio")]
+    pub audio_rate: u32,
+    /// The channels to ask the --audio device for, 1 to 32.
+    #[arg(long, default_value_t = 1, requires = "audio")]
+    pub audio_channels: u16,
+}
+
+/// Opens the `--audio` device before anything is recorded: a device that cannot be opened is
+/// bad input (exit 2) and no file is written.
+fn open_audio(args: &Args) -> anyhow::Result<Option<Box<dyn mouthpiece_frame::AudioSource>>> {
+    let Some(device) = &args.audio else {
+        return Ok(None);
+    };
+    if !(8_000..=192_000).contains(&args.audio_rate) {
+        return Err(bad_input(anyhow::anyhow!(
+            "--audio-rate {}: expected 8000 to 192000 Hz",
+            args.audio_rate
+        )));
+    }
+    if !(1..=32).contains(&args.audio_channels) {
+        return Err(bad_input(anyhow::anyhow!(
+            "--audio-channels {}: expected 1 to 32",
+            args.audio_channels
+        )));
+    }
+    let request = mouthpiece_capture::alsa::AlsaRequest {
+        device: device.clone(),
+        sample_rate: args.audio_rate,
+        channels: args.audio_channels,
+        // 10 ms periods, 200 ms of buffer, as the daemon's defaults.
+        period_frames: (args.audio_rate / 100).max(1),
+        buffer_frames: (args.audio_rate / 5).max(2),
+        stall_timeout: std::time::Duration::from_secs(2),
+    };
+    let source = mouthpiece_capture::alsa::AlsaSource::open(&request).map_err(|e| {
+        bad_input(anyhow::Error::new(e).context(format!(
+            "--audio {}: cannot record from this ALSA device",
+            cut(device)
+        )))
+    })?;
+    Ok(Some(Box::new(source)))
+}
+
+/// `s` cut to about 80 characters for an error message.
+fn cut(s: &str) -> String {
+    if s.chars().count() <= 80 {
+        s.to_owned()
+    } else {
+        format!("{}…", s.chars().take(80).collect::<String>())
+    }
 }
 
 fn parse_color(s: &str) -> anyhow::Result<ColorEncoding> {
@@ -61,6 +117,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             )));
         }
     }
+    if args.audio.is_some() && format != OutputFormat::Mcap {
+        return Err(bad_input(anyhow::anyhow!(
+            "--audio needs an .mcap --out ({} cannot hold sound)",
+            args.out.display()
+        )));
+    }
+    let audio = open_audio(&args)?;
     let limits = RecordLimits {
         seconds: args.seconds,
         ..Default::default()
@@ -86,7 +149,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 color,
                 ..Default::default()
             };
-            record::record_mcap(&spec, &config, &args.out, options, &limits, progress)
+            record::record_mcap_with_audio(
+                &spec, &config, &args.out, options, &limits, audio, progress,
+            )
         }
         OutputFormat::Oni => record::record_oni(&spec, &config, &args.out, &limits, progress),
     };
@@ -116,6 +181,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             String::new()
         }
     );
+    if let Some(reason) = &summary.sound_lost {
+        eprintln!(
+            "the sound stopped before the end (the file keeps the video and says where, on /audio/events): {reason}"
+        );
+    }
     if let Some(lost) = summary.lost {
         anyhow::bail!(
             "the source was lost while recording (the file keeps what came before): {lost}"
