@@ -8,26 +8,18 @@
 //! A device lost mid-recording ends the sound only: the video goes on and the session says
 //! where the sound stopped.
 
-use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::time::SystemTime;
 
 use crossbeam_channel::{Receiver, Sender};
-use mouthpiece_frame::{AudioBlock, AudioFormat, AudioSource, AudioSourceInfo};
-use mouthpiece_recording::{RecordingError, SessionWriter, TOPIC_AUDIO_EVENTS};
-use serde_json::json;
+use mouthpiece_frame::{AudioBlock, AudioSource, AudioSourceInfo};
+use mouthpiece_recording::{AudioTrack, RecordingError, SessionWriter};
 
 enum Event {
     Block(AudioBlock),
     Stopped { reason: String, at: SystemTime },
-}
-
-/// Wall-clock ns since the Unix epoch, at microsecond resolution (as takes stamp sound).
-fn ns(t: SystemTime) -> u64 {
-    t.duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_micros() as u64 * 1000)
 }
 
 /// The audio thread and what it has delivered so far.
@@ -36,14 +28,8 @@ pub struct AudioRecorder {
     rx: Receiver<Event>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
-    format: Option<AudioFormat>,
-    blocks: u64,
-    sample_frames: u64,
-    expected_frame: u64,
-    gaps: u64,
-    first_ns: Option<u64>,
-    end_ns: Option<u64>,
-    stopped: Option<(u64, String)>,
+    /// What was written, as a take's sound is (counters, events, the summary).
+    track: AudioTrack,
 }
 
 impl AudioRecorder {
@@ -63,83 +49,27 @@ impl AudioRecorder {
             rx,
             stop,
             thread: Some(thread),
-            format: None,
-            blocks: 0,
-            sample_frames: 0,
-            expected_frame: 0,
-            gaps: 0,
-            first_ns: None,
-            end_ns: None,
-            stopped: None,
+            track: AudioTrack::default(),
         })
     }
 
     /// Writes the `started` event (at the recording's start).
     pub fn begin(&mut self, writer: &mut SessionWriter) -> Result<(), RecordingError> {
-        let now = ns(SystemTime::now());
-        writer.write_json(
-            TOPIC_AUDIO_EVENTS,
-            now,
-            &json!({
-                "event": "started",
-                "wall_us": now / 1000,
-                "device": self.info.spec,
-                "description": self.info.description,
-                "sample_rate": self.info.format.sample_rate,
-                "channels": self.info.format.channels,
-            }),
-        )
+        self.track.started(writer, &self.info)
     }
 
     /// Writes what the thread delivered since the last call.
     pub fn drain(&mut self, writer: &mut SessionWriter) -> Result<(), RecordingError> {
         while let Ok(event) = self.rx.try_recv() {
-            self.write(writer, event)?;
+            match event {
+                Event::Block(block) => self.track.block(writer, &block)?,
+                Event::Stopped { reason, at } => {
+                    let frames = self.track.device_frames();
+                    self.track.stopped(writer, &reason, at, frames)?
+                }
+            }
         }
         Ok(())
-    }
-
-    fn write(&mut self, writer: &mut SessionWriter, event: Event) -> Result<(), RecordingError> {
-        match event {
-            Event::Block(block) => {
-                let log_time = ns(block.wall_clock.unwrap_or_else(SystemTime::now));
-                if block.first_frame > self.expected_frame {
-                    self.gaps += 1;
-                    writer.write_json(
-                        TOPIC_AUDIO_EVENTS,
-                        log_time,
-                        &json!({
-                            "event": "gap",
-                            "wall_us": log_time / 1000,
-                            "missing_frames": block.first_frame - self.expected_frame,
-                        }),
-                    )?;
-                }
-                self.format.get_or_insert(block.format);
-                self.first_ns.get_or_insert(log_time);
-                writer.write_audio(log_time, block.format, &block.samples)?;
-                self.blocks += 1;
-                self.sample_frames += block.frames();
-                self.expected_frame = block.first_frame + block.frames();
-                self.end_ns =
-                    Some(log_time + block.format.duration_of(block.frames()).as_nanos() as u64);
-                Ok(())
-            }
-            Event::Stopped { reason, at } => {
-                let at = ns(at);
-                self.stopped = Some((at, reason.clone()));
-                writer.write_json(
-                    TOPIC_AUDIO_EVENTS,
-                    at,
-                    &json!({
-                        "event": "stopped",
-                        "wall_us": at / 1000,
-                        "reason": reason,
-                        "device_frames": self.expected_frame,
-                    }),
-                )
-            }
-        }
     }
 
     /// Stops the thread, writes what is left and the `mouthpiece.audio` summary. Returns why
@@ -155,30 +85,8 @@ impl AudioRecorder {
             let _ = thread.join();
         }
         self.drain(writer)?;
-        let mut m = BTreeMap::new();
-        let mut put = |k: &str, v: String| {
-            m.insert(k.to_owned(), v);
-        };
-        put("device", self.info.spec.clone());
-        let format = self.format.unwrap_or(self.info.format);
-        put("sample_rate", format.sample_rate.to_string());
-        put("channels", format.channels.to_string());
-        put("blocks", self.blocks.to_string());
-        put("sample_frames", self.sample_frames.to_string());
-        put("dropped_blocks", "0".to_owned());
-        put("gaps", self.gaps.to_string());
-        if let Some(first) = self.first_ns {
-            put("first_unix_us", (first / 1000).to_string());
-        }
-        if let Some(end) = self.end_ns {
-            put("end_unix_us", (end / 1000).to_string());
-        }
-        if let Some((at, reason)) = &self.stopped {
-            put("stopped_unix_us", (at / 1000).to_string());
-            put("stop_reason", reason.clone());
-        }
-        writer.write_metadata("mouthpiece.audio", m)?;
-        Ok(self.stopped.take().map(|s| s.1))
+        self.track.finish(writer, 0)?;
+        Ok(self.track.stop_reason().map(str::to_owned))
     }
 }
 

@@ -332,9 +332,22 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
             out.stream.capture_us = 0;
             out.stream.wall_us = Some(mouthpiece_takes::unix_us(wall));
             out.stream.processing = None;
-            ctx.hub.publish(&out.stream);
+            let seq = ctx.hub.publish(&out.stream);
             ctx.osc.offer(&out.stream);
             frames += 1;
+            if ctx.takes.is_recording() {
+                let info = ctx.hub.info();
+                let wall_us = out.stream.wall_us.unwrap_or_default();
+                let derived = derive(
+                    processor.performer_names(),
+                    &info,
+                    &out,
+                    seq,
+                    wall_us,
+                    ctx.timecode_rate,
+                );
+                ctx.takes.push_step(Box::new(derived));
+            }
         }
         let generation = ctx.source.generation();
         if generation != seen_generation && !stalled {

@@ -161,6 +161,8 @@ fn read_chunk(
     let mut image_bytes = 0usize;
     let mut audio: Option<AudioGather> = None;
     let mut raw_colour_noted = false;
+    let mut seen_colour = false;
+    let mut no_camera_noted = false;
     let mut ended_early = false;
     // Where the chunk ends (earlier when the images reach their cap), and whether a picture
     // past it was seen (else the take ends in this chunk).
@@ -186,6 +188,7 @@ fn read_chunk(
                 }
             }
             mouthpiece_recording::TOPIC_COLOR => {
+                seen_colour = true;
                 let first = *first_ns.get_or_insert(msg.log_time);
                 let t = t(first);
                 if t < from_s {
@@ -221,6 +224,19 @@ fn read_chunk(
                     dots: Vec::new(),
                 });
                 last_frame_ns = Some(msg.log_time);
+            }
+            // A take from a booth without a camera: no pictures, its steps keep the time.
+            topic if topic.starts_with("/character/") && !seen_colour => {
+                let first = *first_ns.get_or_insert(msg.log_time);
+                if t(first) >= end_s {
+                    past_end = true;
+                }
+                if !no_camera_noted {
+                    chunk.notes.push(
+                        "this take has no camera: the characters were driven by its sound".into(),
+                    );
+                    no_camera_noted = true;
+                }
             }
             TOPIC_POINTS if last_frame_ns == Some(msg.log_time) => {
                 if let (Some(k), Some(frame)) = (&calibration, chunk.frames.last_mut()) {

@@ -3,8 +3,10 @@
 //! from the sound alone, timed by its sample clock: every step says `speech`, and the mouth
 //! moves (each of the default characters, human and wolf). Needs Debian `festival` + `festvox-kallpc16k`.
 
+#[path = "../../../tests/speech/festival.rs"]
+mod festival;
+
 use std::path::Path;
-use std::process::Command;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -15,28 +17,7 @@ use mouthpiece_frame::audio::{AudioBlock, AudioFormat};
 use mouthpiece_frame::{AudioBus, AudioEvent};
 use mouthpiece_output::MouthSource;
 
-fn speak(text: &str) -> (u32, Vec<i16>) {
-    let dir = tempfile::tempdir().unwrap();
-    let wav = dir.path().join("line.wav");
-    let scm = dir.path().join("line.scm");
-    std::fs::write(
-        &scm,
-        format!(
-            "(set! u (Utterance Text \"{text}\"))\n(utt.synth u)\n(utt.save.wave u \"{}\" 'riff)\n",
-            wav.display()
-        ),
-    )
-    .unwrap();
-    let out = Command::new("festival")
-        .arg("-b")
-        .arg(&scm)
-        .output()
-        .expect("festival");
-    assert!(out.status.success());
-    let mut r = hound::WavReader::open(&wav).unwrap();
-    let rate = r.spec().sample_rate;
-    (rate, r.samples::<i16>().map(Result::unwrap).collect())
-}
+use festival::speak;
 
 const BOOTH: &str = "[source]\nspec = \"none\"\n[audio]\n\
     [characters.settings.human]\nspeech = \"always\"\n\

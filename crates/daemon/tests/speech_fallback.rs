@@ -6,8 +6,10 @@
 //! it, and the mouth hands back to the camera without a step larger than the two sources'
 //! own motion plus the blend's. Needs Debian `festival` + `festvox-kallpc16k`.
 
+#[path = "../../../tests/speech/festival.rs"]
+mod festival;
+
 use std::path::Path;
-use std::process::Command;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -19,28 +21,7 @@ use mouthpiece_frame::{AudioBus, AudioEvent};
 use mouthpiece_output::MouthSource;
 use mouthpiece_synth::{Synth, SynthConfig};
 
-fn speak(text: &str) -> (u32, Vec<i16>) {
-    let dir = tempfile::tempdir().unwrap();
-    let wav = dir.path().join("line.wav");
-    let scm = dir.path().join("line.scm");
-    std::fs::write(
-        &scm,
-        format!(
-            "(set! u (Utterance Text \"{text}\"))\n(utt.synth u)\n(utt.save.wave u \"{}\" 'riff)\n",
-            wav.display()
-        ),
-    )
-    .unwrap();
-    let out = Command::new("festival")
-        .arg("-b")
-        .arg(&scm)
-        .output()
-        .expect("festival");
-    assert!(out.status.success());
-    let mut r = hound::WavReader::open(&wav).unwrap();
-    let rate = r.spec().sample_rate;
-    (rate, r.samples::<i16>().map(Result::unwrap).collect())
-}
+use festival::speak;
 
 fn step_size(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
     a.iter()

@@ -4,6 +4,8 @@
 
 #[path = "../../../tests/alsa/booth.rs"]
 mod booth;
+#[path = "../../../tests/alsa/read_back.rs"]
+mod read_back;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -11,9 +13,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-fn python() -> String {
-    std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into())
-}
+use read_back::python;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -172,19 +172,7 @@ fn a_take_from_the_booth_holds_its_sound_and_where_it_stopped_and_exports_a_broa
     let wav = dir.path().join("booth.wav");
     assert!(wav.exists(), "the WAV beside the CSV");
 
-    let checked = Command::new(python())
-        .arg(repo().join("tests/python/check_take_audio.py"))
-        .arg(take)
-        .arg(&booth.s16)
-        .arg(&wav)
-        .output()
-        .expect("running Python (set MOUTHPIECE_PYTHON)");
-    assert!(
-        checked.status.success(),
-        "{}",
-        String::from_utf8_lossy(&checked.stderr)
-    );
-    let found: Value = serde_json::from_slice(&checked.stdout).unwrap();
+    let found = read_back::check_take_audio(take, &booth.s16, Some(&wav));
     eprintln!("{found}");
     assert!(found["blocks"].as_u64().unwrap() >= 50, "{found}");
     assert_eq!(
@@ -257,18 +245,7 @@ fn a_take_from_the_booth_holds_its_sound_and_where_it_stopped_and_exports_a_broa
         .unwrap()
         .map(|e| e.unwrap().path())
         .collect();
-    let checked = Command::new(python())
-        .arg(repo().join("tests/python/check_take_audio.py"))
-        .arg(&again[0])
-        .arg(&booth.s16)
-        .output()
-        .unwrap();
-    assert!(
-        checked.status.success(),
-        "{}",
-        String::from_utf8_lossy(&checked.stderr)
-    );
-    let found: Value = serde_json::from_slice(&checked.stdout).unwrap();
+    let found = read_back::check_take_audio(&again[0], &booth.s16, None);
     assert!(found["blocks"].as_u64().unwrap() >= 20, "{found}");
     assert_eq!(
         found["exact"], true,

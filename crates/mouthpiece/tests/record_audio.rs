@@ -4,6 +4,8 @@
 
 #[path = "../../../tests/alsa/booth.rs"]
 mod booth;
+#[path = "../../../tests/alsa/read_back.rs"]
+mod read_back;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -11,9 +13,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-fn python() -> String {
-    std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into())
-}
+use read_back::python;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -95,18 +95,7 @@ fn a_recording_holds_the_booths_sound_bit_exact_and_where_it_stopped() {
     let status = child.wait().unwrap();
     assert!(status.success(), "{}", read_log());
 
-    let checked = Command::new(python())
-        .arg(repo().join("tests/python/check_take_audio.py"))
-        .arg(&out)
-        .arg(&booth.s16)
-        .output()
-        .expect("running Python (set MOUTHPIECE_PYTHON)");
-    assert!(
-        checked.status.success(),
-        "{}",
-        String::from_utf8_lossy(&checked.stderr)
-    );
-    let found: Value = serde_json::from_slice(&checked.stdout).unwrap();
+    let found = read_back::check_take_audio(&out, &booth.s16, None);
     eprintln!("{found}");
     assert!(found["blocks"].as_u64().unwrap() >= 1, "{found}");
     assert_eq!(

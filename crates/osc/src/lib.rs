@@ -18,7 +18,9 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
-use mouthpiece_output::{CurveNaming, RigCurves, RigVisemes, StreamFrame, Throttle, VisemeNaming};
+use mouthpiece_output::{
+    CurveNaming, MouthSource, RigCurves, RigVisemes, StreamFrame, Throttle, VisemeNaming,
+};
 use mouthpiece_server::{OscCounters, OscTargetCounters};
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion};
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
@@ -43,6 +45,9 @@ pub mod address {
     pub const BLEND_VAL: &str = "/VMC/Ext/Blend/Val";
     /// No arguments: apply the values sent since the last one.
     pub const BLEND_APPLY: &str = "/VMC/Ext/Blend/Apply";
+    /// `(string) camera | speech | blend`: what drove the character's mouth in this frame
+    /// (mouthpiece's own address, outside VMC: receivers ignore what they do not know).
+    pub const SOURCE: &str = "/mouthpiece/Source";
 }
 
 /// Most characters sent over OSC at once (each target gets one).
@@ -95,6 +100,8 @@ pub struct VmcFrame {
     /// Eye rotations relative to the head, `[w, x, y, z]`.
     pub eye_left: [f32; 4],
     pub eye_right: [f32; 4],
+    /// What drove the mouth (the WebSocket frame's `characters[].source`).
+    pub source: MouthSource,
 }
 
 impl VmcFrame {
@@ -110,6 +117,7 @@ impl VmcFrame {
             head: head.rotation,
             eye_left: head.eye_left,
             eye_right: head.eye_right,
+            source: c.source,
         })
     }
 }
@@ -217,6 +225,10 @@ impl VmcPacket {
                 vec![OscType::String((*name).to_owned()), OscType::Float(0.0)],
             ));
         }
+        content.push(message(
+            address::SOURCE,
+            vec![OscType::String(MouthSource::Camera.as_str().to_owned())],
+        ));
         content.push(message(address::BLEND_APPLY, Vec::new()));
         // "Immediately" (OSC 1.0): the receiver applies the values when they arrive.
         let bundle = |content| {
@@ -287,6 +299,13 @@ impl VmcPacket {
         for v in curves.0.iter().chain(visemes) {
             if let Some(m) = messages.next() {
                 m.args[1] = OscType::Float(*v);
+            }
+        }
+        if let Some(m) = messages.next() {
+            let source = frame.source.as_str();
+            // Replaced only when the source changes: a handover, not every frame, allocates.
+            if !matches!(&m.args[0], OscType::String(s) if s == source) {
+                m.args[0] = OscType::String(source.to_owned());
             }
         }
     }

@@ -80,7 +80,7 @@ fn a_frame_encodes_as_vmc_bundles_that_decode_to_the_same_values() {
         address::BONE,
     ];
     expected.extend([address::BLEND_VAL; CURVES]);
-    expected.push(address::BLEND_APPLY);
+    expected.extend([address::SOURCE, address::BLEND_APPLY]);
     assert_eq!(addrs, expected);
     assert_eq!(got[1].args, [OscType::Float(2.5)]);
     // Head: the model's turn about +y (towards its left) is a turn about Unity's −y.
@@ -104,7 +104,31 @@ fn a_frame_encodes_as_vmc_bundles_that_decode_to_the_same_values() {
             ]
         );
     }
-    assert!(got[5 + CURVES].args.is_empty());
+    assert_eq!(got[5 + CURVES].args, [OscType::String("camera".into())]);
+    assert!(got[6 + CURVES].args.is_empty());
+}
+
+/// Each frame says which source drove the mouth, as the WebSocket frame's
+/// `characters[].source` does.
+#[test]
+fn the_source_of_each_frame_goes_out() {
+    let mut packet = VmcPacket::new(false, false, CurveNaming::Arkit, VisemeNaming::None);
+    for source in [
+        MouthSource::Speech,
+        MouthSource::Blend,
+        MouthSource::Camera,
+        MouthSource::Speech,
+    ] {
+        let mut stream = frame_with(1.0, None, [1.0, 0.0, 0.0, 0.0]);
+        stream.characters[1].source = source;
+        let frame = VmcFrame::from_stream(&stream, "wolf").unwrap();
+        assert_eq!(frame.source, source);
+        packet.fill(&frame, &UnitQuaternion::identity());
+        let got = sent_messages(&packet);
+        let sent: Vec<_> = got.iter().filter(|m| m.addr == address::SOURCE).collect();
+        assert_eq!(sent.len(), 1);
+        assert_eq!(sent[0].args, [OscType::String(source.as_str().into())]);
+    }
 }
 
 /// `names = "arkit-pascal"` names the curves in PascalCase; `visemes` adds the rig's visemes

@@ -5,7 +5,9 @@
 //! than the two sources' own motion at either handover. Needs Debian `festival` +
 //! `festvox-kallpc16k` (scripts/test installs them).
 
-use std::process::Command;
+#[path = "../../../tests/speech/festival.rs"]
+mod festival;
+
 use std::time::{Duration, Instant};
 
 use mouthpiece_frame::audio::{AudioBlock, AudioFormat};
@@ -14,28 +16,7 @@ use mouthpiece_pipeline::handover::{HandoverSettings, SpeechMode};
 use mouthpiece_pipeline::speech::SpeechDriver;
 use mouthpiece_retarget::{Character, CharacterSettings, CharacterStep, ShapeSmoothing, Vec3};
 
-fn speak(text: &str) -> (u32, Vec<i16>) {
-    let dir = tempfile::tempdir().unwrap();
-    let wav = dir.path().join("line.wav");
-    let scm = dir.path().join("line.scm");
-    std::fs::write(
-        &scm,
-        format!(
-            "(set! u (Utterance Text \"{text}\"))\n(utt.synth u)\n(utt.save.wave u \"{}\" 'riff)\n",
-            wav.display()
-        ),
-    )
-    .unwrap();
-    let out = Command::new("festival")
-        .arg("-b")
-        .arg(&scm)
-        .output()
-        .expect("festival");
-    assert!(out.status.success());
-    let mut r = hound::WavReader::open(&wav).unwrap();
-    let rate = r.spec().sample_rate;
-    (rate, r.samples::<i16>().map(Result::unwrap).collect())
-}
+use festival::speak;
 
 fn human() -> Character {
     let text = include_str!("../../../config/characters/human.toml");

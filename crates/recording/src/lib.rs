@@ -26,11 +26,13 @@
 //! capture time (1 s by default) and flushes it to the OS, so a writer killed with SIGKILL
 //! leaves a file readable up to its last second.
 
+mod audio_track;
 pub mod cdr;
 mod ground_truth;
 mod reader;
 mod writer;
 
+pub use audio_track::{wall_ns, AudioSink, AudioTrack};
 pub use ground_truth::{GroundTruth, HeadPose, MouthTruth};
 pub use reader::{
     AudioMessage, AudioReader, MessageReader, RawMessage, SessionFrame, SessionReader,

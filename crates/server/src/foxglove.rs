@@ -167,9 +167,14 @@ fn schema(kind: &ChannelKind) -> (String, Value) {
                 "name": {"type": "string"},
                 "points": {"type": "array", "items": point_schema(true)},
                 "curve": {"type": "array", "items": point_schema(false)},
-                "head": crate::head::foxglove_schema()
+                "head": crate::head::foxglove_schema(),
+                "source": {
+                    "type": "string",
+                    "enum": ["camera", "speech", "blend"],
+                    "description": "what drove the mouth: the camera's dots, the microphone's speech, or a blend of the two during a handover"
+                }
             }),
-            vec!["name", "points"],
+            vec!["name", "points", "source"],
         ),
         ChannelKind::Rig(_) => (
             "mouthpiece.Rig",
@@ -245,6 +250,7 @@ fn payload(
             let mut v = json!({
                 "name": c.name,
                 "points": points_with_confidence(&c.points, &c.confidence),
+                "source": c.source.as_str(),
             });
             if let Some(curve) = &c.curve {
                 v["curve"] = curve.iter().map(xyz).collect();

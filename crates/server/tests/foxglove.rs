@@ -130,6 +130,22 @@ async fn foxglove_clients_list_subscribe_and_receive_channels() {
         .unwrap();
     assert_eq!(wolf["payload"]["points"].as_array().unwrap().len(), 12);
     assert!(wolf["payload"]["points"][0]["x"].is_number());
+    // Which source drove the mouth, as the frame says, and the schema requires it.
+    let mut frame = mouthpiece_server::StreamFrame::default();
+    mouthpiece_server::loadgen::synthetic_frame(
+        wolf["payload"]["seq"].as_u64().unwrap(),
+        60.0,
+        &mut frame,
+    );
+    assert_eq!(
+        wolf["payload"]["source"],
+        frame.characters[1].source.as_str(),
+        "{wolf}"
+    );
+    assert!(wolf["schema"]["required"]
+        .as_array()
+        .unwrap()
+        .contains(&json!("source")));
     // The rig channel carries the published frame's rig: jaw and every curve by name.
     let rig_schema = &schemas[&id_of("/rig/wolf").to_string()];
     let curve_names = rig_schema["properties"]["curves"]["required"]

@@ -44,6 +44,8 @@ pub(crate) struct TakeFile {
     max_bytes_s: Option<f64>,
     created: Instant,
     written: u64,
+    /// Bytes the disk has room for (tests: a disk that fills up mid-take); `None`: the disk's.
+    space: Option<u64>,
 }
 
 impl TakeFile {
@@ -53,12 +55,33 @@ impl TakeFile {
             max_bytes_s,
             created: Instant::now(),
             written: 0,
+            space: None,
+        }
+    }
+
+    /// A file on a disk with room for `space` bytes: beyond them a write fails with ENOSPC,
+    /// after writing what fits, as a full disk does.
+    #[cfg(test)]
+    pub(crate) fn with_space(file: std::fs::File, space: u64) -> Self {
+        TakeFile {
+            space: Some(space),
+            ..TakeFile::new(file, None)
         }
     }
 }
 
 impl std::io::Write for TakeFile {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let buf = match self.space {
+            Some(space) if self.written + buf.len() as u64 > space => {
+                let room = space.saturating_sub(self.written) as usize;
+                if room == 0 {
+                    return Err(std::io::Error::from_raw_os_error(28)); // ENOSPC
+                }
+                &buf[..room]
+            }
+            _ => buf,
+        };
         let n = self.file.write(buf)?;
         self.written += n as u64;
         if let Some(rate) = self.max_bytes_s {

@@ -7,7 +7,9 @@
 //! neutral mouth frame), `/head`, and `/character/<name>` per character (its points, curve,
 //! head and, once the neutral pose is taken, the rig: docs/rig.md). Every derived message
 //! carries `seq`, `t`, `wall_us` and the SMPTE `timecode`; the file's metadata record
-//! `mouthpiece.take` names slate, take, timecode rate and start timecode.
+//! `mouthpiece.take` names slate, take, timecode rate and start timecode. On a booth without
+//! a camera ([`Takes::push_step`]) a take has no camera channels: each speech-driven step
+//! writes the derived channels alone, logged at its wall clock.
 //!
 //! The processing thread never writes: it hands [`TakeItem`]s to a writer thread through a
 //! bounded queue (`[takes] queue_frames`); when the queue is full the item is dropped from
@@ -36,7 +38,6 @@ use mouthpiece_output::{CharacterHead, HeadPose, RigState, Throttle};
 
 use crate::writer::WriterJob;
 
-mod audio;
 mod file;
 mod writer;
 
@@ -122,6 +123,9 @@ pub enum TakeItem {
         frame: Arc<Frame>,
         derived: Box<Derived>,
     },
+    /// A step without a camera frame (a booth without a camera: speech alone drives the
+    /// characters): only the derived channels, logged at the step's wall clock.
+    Step { derived: Box<Derived> },
 }
 
 /// What is recording now (for status and replies).
@@ -307,8 +311,18 @@ impl Takes {
 
     /// Hands one frame and its derived data to the writer; never blocks.
     pub fn push(&mut self, frame: Arc<Frame>, derived: Box<Derived>) {
+        self.send(TakeItem::Frame { frame, derived });
+    }
+
+    /// Hands one step without a camera frame (speech alone, no camera) to the writer; its
+    /// messages are logged at `derived.wall_us`. Never blocks.
+    pub fn push_step(&mut self, derived: Box<Derived>) {
+        self.send(TakeItem::Step { derived });
+    }
+
+    fn send(&mut self, item: TakeItem) {
         let Some(active) = &self.active else { return };
-        match active.queue.try_send(TakeItem::Frame { frame, derived }) {
+        match active.queue.try_send(item) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
                 let total = active.dropped.fetch_add(1, Ordering::Relaxed) + 1;

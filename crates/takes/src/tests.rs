@@ -293,6 +293,40 @@ fn a_take_holds_raw_frames_and_every_derived_channel() {
     assert!(err.contains("no take is recording"), "{err}");
 }
 
+/// A booth without a camera: steps without a frame hold the derived channels alone, logged
+/// at each step's wall clock, and count as the take's frames.
+#[test]
+fn a_take_of_steps_without_a_camera_holds_the_derived_channels_at_their_wall_clock() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut takes = Takes::new(settings(dir.path()));
+    let info = start_wait(&mut takes, "nocam", None).unwrap();
+    for seq in 0..10 {
+        takes.push_step(derived(seq));
+    }
+    let ended = stop_wait(&mut takes).unwrap();
+    assert_eq!((ended.frames, ended.dropped, ended.error), (10, 0, None));
+    let (topics, _) = topics(&info.path);
+    for topic in ["/performer/points", "/head", "/character/wolf"] {
+        assert_eq!(topics.get(topic), Some(&10), "{topic}: {topics:?}");
+    }
+    assert!(
+        !topics.keys().any(|t| t.starts_with("/camera/")),
+        "{topics:?}"
+    );
+    let mut reader = mouthpiece_recording::MessageReader::open(&info.path).unwrap();
+    let mut wolf = Vec::new();
+    while let Some(m) = reader.next_message().unwrap() {
+        if &*m.topic == "/character/wolf" {
+            wolf.push((m.log_time, serde_json::from_slice::<serde_json::Value>(&m.data).unwrap()));
+        }
+    }
+    for (seq, (log_time, message)) in wolf.iter().enumerate() {
+        assert_eq!(*log_time, (1_795_316_645_000_000 + seq as u64 * 33_333) * 1000);
+        assert_eq!(message["seq"], seq);
+    }
+    assert_eq!(wolf[7].1["source"], "speech");
+}
+
 #[test]
 fn a_take_killed_mid_way_is_readable_up_to_its_last_flush() {
     let dir = tempfile::tempdir().unwrap();
@@ -578,4 +612,85 @@ fn a_take_records_the_sound_and_where_it_stopped() {
     assert_eq!(audio["stopped_unix_us"], "1795316645100000");
     assert_eq!(audio["blocks"], "9");
     assert!(audio["stop_reason"].contains("unplugged"));
+}
+
+/// Frames and sound written until a disk with room for `space` bytes (`None`: room for all)
+/// fills: the writer's result, and the file.
+fn take_with_sound_on_a_disk(dir: &Path, space: Option<u64>) -> (crate::writer::WriterResult, std::path::PathBuf) {
+    use mouthpiece_frame::AudioBus;
+    let path = dir.join(format!("take-{}.mcap", space.unwrap_or(0)));
+    let file = std::fs::File::create(&path).unwrap();
+    let file = match space {
+        Some(space) => TakeFile::with_space(file, space),
+        None => TakeFile::new(file, None),
+    };
+    let writer = SessionWriter::new(
+        std::io::BufWriter::new(file),
+        path.display().to_string(),
+        WriterOptions {
+            flush_interval: Duration::from_millis(100),
+            ..WriterOptions::default()
+        },
+    )
+    .unwrap();
+    let bus = AudioBus::new();
+    let audio = bus.subscribe(1000);
+    let (queue, items) = crossbeam_channel::bounded(1000);
+    let t0 = UNIX_EPOCH + Duration::from_micros(1_795_316_645_000_000);
+    // Two seconds: 60 frames and 200 blocks of 10 ms, on the frames' wall clock.
+    for seq in 0..60 {
+        queue
+            .send(TakeItem::Frame {
+                frame: frame(seq),
+                derived: derived(seq),
+            })
+            .unwrap();
+    }
+    for i in 0..200u64 {
+        bus.publish(sound(i * 480, 480, i as i16, t0 + Duration::from_millis(i * 10)));
+    }
+    drop(queue);
+    let failed = AtomicBool::new(false);
+    let result = write_take(writer, items, Some(audio), &settings(dir), &failed);
+    assert_eq!(failed.load(Ordering::Acquire), result.error.is_some());
+    (result, path)
+}
+
+#[test]
+fn a_disk_that_fills_while_sound_is_recorded_stops_the_take_and_keeps_frames_and_sound() {
+    let dir = tempfile::tempdir().unwrap();
+    let (whole, path) = take_with_sound_on_a_disk(dir.path(), None);
+    assert_eq!((whole.frames, whole.error), (60, None));
+    let size = std::fs::metadata(&path).unwrap().len();
+    // The same take on a disk with room for half of it.
+    let (result, path) = take_with_sound_on_a_disk(dir.path(), Some(size / 2));
+    let error = result.error.expect("the take stopped");
+    assert!(error.contains("No space left on device"), "{error}");
+    // What reached the disk reads back, up to its last complete chunk: frames whole, and the
+    // sound bit for bit at the wall clock of its first sample.
+    let mut frames = mouthpiece_recording::SessionReader::open(&path).unwrap();
+    let mut kept = 0u64;
+    while let Some(f) = frames.next_frame().unwrap() {
+        assert_eq!(f.frame.device_ts_us, kept * 33_333, "in order, none missing");
+        assert_eq!(f.frame.color.width, 64);
+        kept += 1;
+    }
+    let mut reader = mouthpiece_recording::AudioReader::open(&path).unwrap();
+    let mut blocks = Vec::new();
+    while let Some(m) = reader.next_audio().unwrap() {
+        blocks.push(m);
+    }
+    blocks.sort_by_key(|b| b.log_time);
+    eprintln!("{kept} frames and {} blocks of sound kept of 60 and 200", blocks.len());
+    assert!(kept > 0 && kept < 60, "{kept} frames kept");
+    assert!(!blocks.is_empty() && blocks.len() < 200, "{} blocks kept", blocks.len());
+    for (i, b) in blocks.iter().enumerate() {
+        assert_eq!(b.samples, vec![i as i16; 480], "block {i} is the sound sent");
+        assert_eq!(b.log_time, 1_795_316_645_000_000_000 + i as u64 * 10_000_000);
+    }
+    // The frames' derived channels came through with them (the last frame's may be in the
+    // chunk the disk had no room for: a chunk can close right after a frame's images).
+    let (topics, _) = topics(&path);
+    let derived = topics.get("/character/wolf").copied().unwrap_or(0) as u64;
+    assert!((kept - 1..=kept).contains(&derived), "{kept} frames: {topics:?}");
 }

@@ -6,11 +6,10 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
 use crossbeam_channel::Receiver;
-use mouthpiece_frame::{AudioSubscription, Frame};
+use mouthpiece_frame::AudioSubscription;
 use mouthpiece_output::error_chain;
-use mouthpiece_recording::{SessionWriter, WriterOptions};
+use mouthpiece_recording::{AudioTrack, SessionWriter, WriterOptions};
 
-use crate::audio::AudioTrack;
 use crate::file::{
     create_new_take_file, file_name, free_mb, next_take, sync_take, unix_us, TakeFile,
 };
@@ -208,8 +207,16 @@ pub(crate) fn write_take(
                 continue;
             }
         };
-        let TakeItem::Frame { frame, derived } = item;
-        if let Err(e) = write_one(&mut writer, &frame, &derived) {
+        let written = match item {
+            TakeItem::Frame { frame, derived } => writer
+                .write_frame(&frame)
+                .and_then(|log_time| write_derived(&mut writer, log_time, &derived)),
+            TakeItem::Step { derived } => {
+                let log_time = u64::try_from(derived.wall_us).unwrap_or(0) * 1000;
+                write_derived(&mut writer, log_time, &derived)
+            }
+        };
+        if let Err(e) = written {
             error = Some(error_chain(&e));
             break;
         }
@@ -262,13 +269,13 @@ pub(crate) fn write_take(
     }
 }
 
-fn write_one(
+/// The derived channels of one frame or step, logged at `log_time` (ns).
+fn write_derived(
     writer: &mut TakeWriter,
-    frame: &Frame,
+    log_time: u64,
     derived: &Derived,
 ) -> Result<(), mouthpiece_recording::RecordingError> {
     use serde_json::{json, Map, Value};
-    let log_time = writer.write_frame(frame)?;
     // Every derived message starts with the same stamp, so each channel lines up on its own.
     let stamped = |body: Value| -> Value {
         let mut message = Map::new();

@@ -191,3 +191,44 @@ fn only_take_files_in_the_folder_are_opened() {
         Err(TakeChunkError::BadName(_))
     ));
 }
+
+/// A take from a booth without a camera: no pictures, its steps keep the time and its sound
+/// plays.
+#[test]
+fn a_take_without_a_camera_plays_its_sound_on_its_steps_clock() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("nocam_T001_20260101T000000Z.mcap");
+    let mut writer = SessionWriter::create(&path, WriterOptions::default()).unwrap();
+    let first = 1_795_316_645_000_000_000u64;
+    let format = mouthpiece_frame::AudioFormat {
+        sample_rate: 48000,
+        channels: 1,
+    };
+    // Two seconds: a step every 20 ms, a block of 20 ms of sound with each.
+    for i in 0..100u64 {
+        let at = first + i * 20_000_000;
+        writer
+            .write_json(
+                "/character/human",
+                at,
+                &serde_json::json!({"seq": i, "points": {"P1": [0.0, 0.0, 0.0]}, "source": "speech"}),
+            )
+            .unwrap();
+        writer.write_audio(at, format, &[i as i16; 960]).unwrap();
+    }
+    writer.finish().unwrap();
+    let chunk = read_chunk(&path, 0.5, 1.0, MAX_CHUNK_BYTES).unwrap();
+    assert!(chunk.frames.is_empty());
+    assert!(!chunk.end, "the take goes on past the chunk");
+    assert!(
+        chunk.notes.iter().any(|n| n.contains("no camera")),
+        "{:?}",
+        chunk.notes
+    );
+    let a = chunk.audio.as_ref().expect("the sound plays");
+    assert!((a.start_s - 0.5).abs() < 1e-6, "{}", a.start_s);
+    assert_eq!(a.pcm_s16le.len(), 50 * 960 * 2);
+    assert_eq!(i16::from_le_bytes([a.pcm_s16le[0], a.pcm_s16le[1]]), 25);
+    let last = read_chunk(&path, 1.5, 4.0, MAX_CHUNK_BYTES).unwrap();
+    assert!(last.end);
+}

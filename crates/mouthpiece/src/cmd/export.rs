@@ -3,7 +3,7 @@
 //! `mouthpiece process`.
 
 use std::fs::File;
-use std::io::{self, BufRead, BufReader, BufWriter, Seek, SeekFrom};
+use std::io::{self, BufRead, BufReader, BufWriter, Seek, SeekFrom, Write as _};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -424,6 +424,29 @@ fn take_from_recording(args: &Args) -> anyhow::Result<TakeInput> {
     let dir = spool_dir(&args.out);
     let mut file = tempfile::tempfile_in(&dir)
         .with_context(|| format!("cannot create a temporary take in {}", dir.display()))?;
+    let is_mcap = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if is_mcap && crate::cmd::speech_take::is_speech_only(path)? {
+        // A booth without a camera: the character's recorded speech-driven steps.
+        let name = crate::cmd::process::load_character(character)?.name;
+        let mut out = BufWriter::new(&mut file);
+        let steps = crate::cmd::speech_take::write_lines(path, &name, &mut out)?;
+        out.flush().context("cannot write the temporary take")?;
+        drop(out);
+        eprintln!(
+            "{}: no camera frames; {steps} recorded speech-driven steps of {name}",
+            path.display()
+        );
+        file.seek(SeekFrom::Start(0))
+            .context("cannot read back the temporary take")?;
+        let len = file.metadata().ok().map(|m| m.len());
+        return Ok(TakeInput {
+            name: format!("{} (recorded steps)", path.display()),
+            reader: Box::new(BufReader::with_capacity(256 * 1024, file)),
+            len,
+        });
+    }
     let setup = ProcessSetup {
         input: path,
         character,

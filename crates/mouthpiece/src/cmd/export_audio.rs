@@ -46,13 +46,26 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
     };
     // The frames' times (no image is decoded) and the take's metadata.
     let mut messages = MessageReader::open(recording).map_err(recording_error)?;
+    // A take from a booth without a camera has no images: its frames are the steps of
+    // its (first) character.
     let (mut first_frame, mut last_frame, mut frames) = (None, 0u64, 0u64);
+    let mut steps: (Option<u64>, u64, u64) = (None, 0, 0);
+    let mut step_topic: Option<String> = None;
     while let Some(m) = messages.next_message().map_err(recording_error)? {
         if &*m.topic == TOPIC_COLOR {
             first_frame.get_or_insert(m.log_time);
             last_frame = last_frame.max(m.log_time);
             frames += 1;
+        } else if m.topic.starts_with("/character/")
+            && step_topic.get_or_insert_with(|| m.topic.to_string()) == &*m.topic
+        {
+            steps.0.get_or_insert(m.log_time);
+            steps.1 = steps.1.max(m.log_time);
+            steps.2 += 1;
         }
+    }
+    if first_frame.is_none() {
+        (first_frame, last_frame, frames) = steps;
     }
     let Some(start) = first_frame else {
         return Err(bad_input(anyhow!("{}: no frames", recording.display())));

@@ -15,6 +15,7 @@ pub mod record;
 pub mod recorded_heads;
 pub mod retarget;
 pub mod run;
+pub mod speech_take;
 pub mod synth;
 pub mod takes;
 pub mod tune_colours;

@@ -136,5 +136,7 @@ fn vmc_frame(frame: &mouthpiece_export::TakeFrame) -> VmcFrame {
         head: f32s(head.head),
         eye_left: f32s(head.eye_left),
         eye_right: f32s(head.eye_right),
+        // A take line does not say what drove it live.
+        source: mouthpiece_output::MouthSource::Camera,
     }
 }
