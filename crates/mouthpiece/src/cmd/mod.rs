@@ -16,5 +16,6 @@ pub mod recorded_heads;
 pub mod retarget;
 pub mod run;
 pub mod synth;
+pub mod synth_speech;
 pub mod takes;
 pub mod tune_colours;
