@@ -182,7 +182,15 @@ fn speech_text_says_the_line_with_its_sound_and_an_open_mouth_on_its_vowels() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("line.mcap");
     let output = mouthpiece()
-        .args(["synth", "--seconds", "4.5", "--seed", "3", "--size", "160x120"])
+        .args([
+            "synth",
+            "--seconds",
+            "4.5",
+            "--seed",
+            "3",
+            "--size",
+            "160x120",
+        ])
         .args(["--head-motion", "none", "--speech-text", line, "--out"])
         .arg(&out)
         .output()
@@ -227,7 +235,10 @@ fn speech_text_says_the_line_with_its_sound_and_an_open_mouth_on_its_vowels() {
         .collect();
     let start = sessions[0].log_time;
     let lead = first.unwrap() - start;
-    assert!(lead.abs_diff(1_500_000_000) < 1_000_000, "sound at {lead} ns");
+    assert!(
+        lead.abs_diff(1_500_000_000) < 1_000_000,
+        "sound at {lead} ns"
+    );
 
     // The mouth: the jaw at each frame, by the frame's time after the lead-in.
     let jaw_at = |t: f64| -> f64 {
@@ -278,11 +289,7 @@ fn speech_text_without_festival_exits_2_saying_what_to_install() {
     );
     assert!(!out.exists());
     // A line with a control character is refused naming it.
-    synth_refuses(
-        "c.mcap",
-        &["--speech-text", "Hello\u{1b} there."],
-        "U+001B",
-    );
+    synth_refuses("c.mcap", &["--speech-text", "Hello\u{1b} there."], "U+001B");
     // And .oni sessions hold no sound.
     synth_refuses("s.oni", &["--speech-text", "Hello."], "--speech-text");
 }

@@ -77,7 +77,6 @@ pub const LEARNING: [&str; 40] = [
     "Mesh wire keeps chicks inside.",
 ];
 
-
 pub fn table() -> ClassTable {
     ClassTable::from_toml_str(DEFAULT_CLASSES, DEFAULT_CLASSES_NAME).unwrap()
 }

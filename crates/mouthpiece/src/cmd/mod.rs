@@ -8,6 +8,7 @@ pub mod evaluate_rig;
 pub mod export;
 pub mod export_audio;
 pub mod lipsync;
+pub mod lipsync_learn;
 pub mod lipsync_poses;
 pub mod play;
 pub mod process;

@@ -17,7 +17,8 @@ use crate::exit::bad_input;
 pub const MAX_SPEECH_TEXT_CHARS: usize = 4_000;
 
 /// What to install when Festival is missing.
-const INSTALL: &str = "install Festival and its voice (Debian: apt-get install festival festvox-kallpc16k)";
+const INSTALL: &str =
+    "install Festival and its voice (Debian: apt-get install festival festvox-kallpc16k)";
 
 /// Festival's rendering of a line: its WAV (kept in a temporary directory) and phones.
 pub struct SpokenLine {
@@ -98,9 +99,8 @@ fn festival(text: &str, festival: &Path) -> anyhow::Result<(tempfile::TempDir, P
     let stderr = String::from_utf8_lossy(&out.stderr);
     if !out.status.success() || !wav.exists() || !segs.exists() {
         let last: Vec<&str> = stderr.lines().rev().take(3).collect();
-        let said = mouthpiece_lipsync::input::cut(
-            &last.into_iter().rev().collect::<Vec<_>>().join(" / "),
-        );
+        let said =
+            mouthpiece_lipsync::input::cut(&last.into_iter().rev().collect::<Vec<_>>().join(" / "));
         return Err(bad_input(anyhow::anyhow!(
             "--speech-text: Festival did not speak the line ({}; it said: {said}); {INSTALL}",
             out.status
@@ -122,8 +122,8 @@ pub fn speak(
     // The tables are checked before Festival runs.
     let tables = load_tables(None, poses, None)?;
     let (dir, wav, labels) = festival(text, festival_bin)?;
-    let phones = phones::read(&labels, PhoneFormat::Label, "Festival's phone labels")
-        .map_err(bad_input)?;
+    let phones =
+        phones::read(&labels, PhoneFormat::Label, "Festival's phone labels").map_err(bad_input)?;
     let weights = mouthpiece_lipsync::weights_for_phones(
         &phones,
         "Festival's phone labels",
@@ -189,6 +189,9 @@ mod tests {
             .unwrap();
         assert!(e.chain().any(|c| c.is::<crate::exit::BadInput>()), "{e:#}");
         let e = format!("{e:#}");
-        assert!(e.contains("festvox-kallpc16k") && e.contains("apt-get"), "{e}");
+        assert!(
+            e.contains("festvox-kallpc16k") && e.contains("apt-get"),
+            "{e}"
+        );
     }
 }
