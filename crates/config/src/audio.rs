@@ -31,6 +31,9 @@ pub struct AudioConfig {
     /// Blocks held for each consumer (takes, the live speech analyser); beyond this the
     /// oldest is dropped and counted.
     pub queue_blocks: u32,
+    /// Live lip-sync profiles learned from this booth's own voice (`mouthpiece lipsync
+    /// learn`) instead of the shipped ones; relative to the config file.
+    pub speech_profiles: Option<PathBuf>,
 }
 
 impl Default for AudioConfig {
@@ -42,6 +45,7 @@ impl Default for AudioConfig {
             period_frames: 480,
             buffer_frames: 4_800,
             queue_blocks: 200,
+            speech_profiles: None,
         }
     }
 }

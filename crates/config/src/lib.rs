@@ -439,6 +439,9 @@ impl Config {
             }
         };
         self.characters.files.iter_mut().for_each(join);
+        if let Some(p) = self.audio.as_mut().and_then(|a| a.speech_profiles.as_mut()) {
+            join(p);
+        }
         join(&mut self.takes.folder);
         for token in [&mut self.server.read_token, &mut self.server.control_token]
             .into_iter()

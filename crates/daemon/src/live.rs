@@ -29,6 +29,8 @@ pub struct Setup {
     pub config: PipelineConfig,
     /// Per character (same order): whether speech may drive its mouth.
     pub speech: Vec<HandoverSettings>,
+    /// `[audio] speech_profiles`: the booth's own live lip-sync profiles (else the shipped).
+    pub speech_profiles: Option<mouthpiece_pipeline::speech::LiveProfiles>,
 }
 
 /// Loads and validates characters, `[detect]`, `[track]` and `[retarget]`.
@@ -106,10 +108,22 @@ pub fn setup(config: &Config) -> Result<Setup, CheckError> {
             ));
         }
     }
+    let speech_profiles = match config
+        .audio
+        .as_ref()
+        .and_then(|a| a.speech_profiles.as_ref())
+    {
+        Some(path) => Some(
+            mouthpiece_pipeline::speech::load_profiles(path)
+                .map_err(|e| invalid("audio.speech_profiles", e))?,
+        ),
+        None => None,
+    };
     Ok(Setup {
         characters,
         config: pipeline,
         speech,
+        speech_profiles,
     })
 }
 
@@ -174,7 +188,12 @@ impl LiveProcessor {
         let pipeline = Pipeline::for_characters(setup.config.clone(), setup.characters)
             .map_err(|e| crate::source::error_chain(&e))?;
         let dot_names = TrackedFrame::names(pipeline.tracker().layout());
-        let speech = speech_driver(&setup.config, pipeline.characters(), &setup.speech)?;
+        let speech = speech_driver(
+            &setup.config,
+            pipeline.characters(),
+            &setup.speech,
+            setup.speech_profiles.as_ref(),
+        )?;
         Ok(LiveProcessor {
             speech,
             bus: None,
@@ -248,6 +267,7 @@ fn speech_driver(
     config: &PipelineConfig,
     characters: &[Character],
     speech: &[HandoverSettings],
+    profiles: Option<&mouthpiece_pipeline::speech::LiveProfiles>,
 ) -> Result<Option<SpeechDriver>, String> {
     if speech.iter().all(|s| s.mode == SpeechMode::Off) {
         return Ok(None);
@@ -257,7 +277,8 @@ fn speech_driver(
         .cloned()
         .zip(speech.iter().copied())
         .collect();
-    SpeechDriver::new(&pairs, config.retarget.character_settings())
+    let settings = config.retarget.character_settings();
+    SpeechDriver::with_profiles(&pairs, settings, profiles)
         .map(Some)
         .map_err(|e| crate::source::error_chain(&e))
 }
@@ -549,7 +570,12 @@ impl Processor for LiveProcessor {
     }
 
     fn reload(&mut self, setup: Setup) -> Result<(), String> {
-        let speech = speech_driver(&setup.config, &setup.characters, &setup.speech)?;
+        let speech = speech_driver(
+            &setup.config,
+            &setup.characters,
+            &setup.speech,
+            setup.speech_profiles.as_ref(),
+        )?;
         if setup.config.detect != self.config.detect || setup.config.track != self.config.track {
             // New colour ranges or tracking settings: a new pipeline, which calibrates afresh.
             self.pipeline = Pipeline::for_characters(setup.config.clone(), setup.characters)

@@ -28,8 +28,8 @@ fn main() {
     if args.iter().any(|a| a == "--tune") {
         let (fit, held) = learning.split_at(30);
         let profiles = learn(&table, fit, "tuning");
-        for score_tau in [0.0, 0.01] {
-            for mouth in [0.005, 0.010, 0.015, 0.025] {
+        for score_tau in [0.0, 0.005, 0.01] {
+            for mouth in [0.002, 0.003, 0.005, 0.007, 0.010] {
                 let settings = LiveSettings {
                     score_tau_s: score_tau,
                     mouth_tau_s: mouth,
@@ -42,10 +42,13 @@ fn main() {
                     measure(&table, &line.phones, &steps, &mut m);
                 }
                 println!(
-                    "score_tau {score_tau:.3} mouth_tau {mouth:.3}: class {:.1} % shape {:.1} % boundary median {:.1} ms",
+                    "score_tau {score_tau:.3} mouth_tau {mouth:.3}: class {:.1} % shape {:.1} % boundary median {:.1} ms onset lag median {:.1} p95 {:.1} ms, + mouth halfway {:.1} ms",
                     100.0 * m.class_share(),
                     100.0 * m.shape_share(),
-                    1e3 * m.boundary(0.5)
+                    1e3 * m.boundary(0.5),
+                    1e3 * m.lag(0.5),
+                    1e3 * m.lag(0.95),
+                    1e3 * (m.lag(0.95) + mouth * std::f64::consts::LN_2),
                 );
             }
         }

@@ -82,6 +82,35 @@ fn held_out_sentences_keep_the_accuracy_floor_at_16_and_48_khz() {
     }
 }
 
+/// Sound → points p95 on the eight evaluation sentences at a microphone's 48 kHz in 10 ms
+/// blocks, by the stream's own clock (nothing of this machine's timing): the onset lag p95,
+/// the wait for a block, and the mouth's time to halfway toward a new class, within the
+/// 150 ms target less 1 ms for processing (measured: microseconds a block). Festival and
+/// the analyser are deterministic, so the figure is the same on every run.
+#[test]
+fn sound_to_points_p95_is_within_150_ms_on_the_evaluation_sentences() {
+    let dir = tempfile::tempdir().unwrap();
+    let table = table();
+    let shipped = Profiles::from_toml_str(SHIPPED_PROFILES, "shipped").unwrap();
+    let mut m = Measures::default();
+    for (n, t) in EVALUATION {
+        let line = speak(t, dir.path(), n);
+        let mut a = analyser(&shipped, LiveSettings::default());
+        let (steps, _) = analyse(&mut a, &upsample(&line.samples, 3), 48_000, 480);
+        measure(&table, &line.phones, &steps, &mut m);
+    }
+    let halfway = LiveSettings::default().mouth_tau_s * std::f64::consts::LN_2;
+    let budget = m.lag(0.95) + 0.010 + halfway;
+    eprintln!(
+        "class {:.3} onset lag p95 {:.4} sound to points p95 {budget:.4}",
+        m.class_share(),
+        m.lag(0.95)
+    );
+    assert!(budget <= 0.149, "sound to points p95 {budget}");
+    // Not bought with accuracy: the class share of the docs' table (64.1 %).
+    assert!(m.class_share() >= 0.64, "class {}", m.class_share());
+}
+
 /// Frames of the right class on SA1 + SA2 (measured 0.678 at both rates; the most frequent
 /// class alone, silence, covers about a fifth).
 const FLOOR_CLASS: f64 = 0.6;

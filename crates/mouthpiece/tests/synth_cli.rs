@@ -170,3 +170,126 @@ fn a_hinge_or_a_jaw_slide_out_of_range_exits_2() {
     assert_eq!(output.status.code(), Some(2), "{err}");
     assert!(err.contains("--hinge"), "{err}");
 }
+
+/// `synth --speech-text`: Festival says the line; the session holds its sound on `/audio`
+/// from the end of the neutral lead-in, and its mouth, driven by Festival's own phone timing,
+/// is open on the line's vowels and closed on its `m`/`b`/`p` and in the lead-in.
+#[test]
+fn speech_text_says_the_line_with_its_sound_and_an_open_mouth_on_its_vowels() {
+    use mouthpiece_lipsync::phones::{self, PhoneFormat};
+    use mouthpiece_recording::AudioReader;
+    let line = "Bob ate a big bowl of apple pie.";
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("line.mcap");
+    let output = mouthpiece()
+        .args([
+            "synth",
+            "--seconds",
+            "4.5",
+            "--seed",
+            "3",
+            "--size",
+            "160x120",
+        ])
+        .args(["--head-motion", "none", "--speech-text", line, "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    // Festival again, for the line's phones and length (its synthesis is deterministic).
+    let scm = dir.path().join("t.scm");
+    std::fs::write(
+        &scm,
+        format!(
+            "(set! u (Utterance Text \"{line}\"))\n(utt.synth u)\n(utt.save.wave u \"{0}/t.wav\" 'riff)\n(utt.save.segs u \"{0}/t.segs\")\n",
+            dir.path().display()
+        ),
+    )
+    .unwrap();
+    let status = Command::new("festival")
+        .arg("-b")
+        .arg(&scm)
+        .status()
+        .expect("festival (Debian festival + festvox-kallpc16k)");
+    assert!(status.success());
+    let segs = std::fs::read_to_string(dir.path().join("t.segs")).unwrap();
+    let phones = phones::read(&segs, PhoneFormat::Label, "t.segs").unwrap();
+    let wav = hound::WavReader::open(dir.path().join("t.wav")).unwrap();
+    let wav_frames = u64::from(wav.duration());
+
+    // The sound: all of the line, its first sample at the end of the 1.5 s lead-in.
+    let mut audio = AudioReader::open(&out).unwrap();
+    let (mut first, mut frames) = (None, 0);
+    while let Some(m) = audio.next_audio().unwrap() {
+        first.get_or_insert(m.log_time);
+        frames += m.frames();
+    }
+    assert_eq!(frames, wav_frames, "the line's samples on /audio");
+    let sessions: Vec<_> = SessionReader::open(&out)
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    let start = sessions[0].log_time;
+    let lead = first.unwrap() - start;
+    assert!(
+        lead.abs_diff(1_500_000_000) < 1_000_000,
+        "sound at {lead} ns"
+    );
+
+    // The mouth: the jaw at each frame, by the frame's time after the lead-in.
+    let jaw_at = |t: f64| -> f64 {
+        let f = sessions
+            .iter()
+            .min_by_key(|f| (f.log_time - start).abs_diff(((t + 1.5) * 1e9) as u64))
+            .unwrap();
+        f.ground_truth.as_ref().unwrap().mouth.unwrap().jaw
+    };
+    let centres = |set: &[&str]| -> Vec<f64> {
+        phones
+            .iter()
+            .filter(|p| set.contains(&p.phone.as_str()) && p.end - p.start >= 0.05)
+            .map(|p| jaw_at(0.5 * (p.start + p.end)))
+            .collect()
+    };
+    let vowels = centres(&["aa", "ae", "ah", "ao", "aw", "ay", "eh", "ey", "ih", "ow"]);
+    let closed = centres(&["m", "b", "p"]);
+    eprintln!("jaw on vowels {vowels:?}, on m/b/p {closed:?}");
+    assert!(vowels.len() >= 5 && closed.len() >= 3, "{phones:?}");
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert!(mean(&vowels) > 0.08, "vowels {vowels:?}");
+    assert!(mean(&vowels) > 3.0 * mean(&closed), "{vowels:?} {closed:?}");
+    for f in &sessions {
+        if f.log_time - start < 1_400_000_000 {
+            assert_eq!(f.ground_truth.as_ref().unwrap().mouth.unwrap().jaw, 0.0);
+        }
+    }
+}
+
+/// Without Festival, `--speech-text` is bad input saying what to install, and leaves no file.
+#[test]
+fn speech_text_without_festival_exits_2_saying_what_to_install() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("line.mcap");
+    let output = mouthpiece()
+        .env("PATH", dir.path())
+        .args(["synth", "--seconds", "1", "--seed", "1", "--size", "64x48"])
+        .args(["--speech-text", "Hello there.", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("Festival") && err.contains("festvox-kallpc16k"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    // A line with a control character is refused naming it.
+    synth_refuses("c.mcap", &["--speech-text", "Hello\u{1b} there."], "U+001B");
+    // And .oni sessions hold no sound.
+    synth_refuses("s.oni", &["--speech-text", "Hello."], "--speech-text");
+}

@@ -16,6 +16,9 @@ use mouthpiece_retarget::{Character, CharacterSettings, CharacterStep, Vec3};
 
 use crate::handover::{mix_points, Handover, HandoverSettings, SpeechMode};
 
+/// Live lip-sync profiles (the analyser's per-class statistics).
+pub use mouthpiece_lipsync::live::Profiles as LiveProfiles;
+
 /// Speech counts as coming in while its newest step is at most this old.
 pub const SPEECH_STALE: Duration = Duration::from_millis(250);
 
@@ -59,6 +62,31 @@ pub struct SpeechDriver {
     next_alone: f64,
 }
 
+/// Reads a profile file (`mouthpiece lipsync learn`) and checks it against the shipped class
+/// table: a missing, oversized or malformed file, or a class the table lacks, is an error
+/// naming the file.
+pub fn load_profiles(path: &std::path::Path) -> Result<Profiles, String> {
+    use mouthpiece_lipsync::live::profiles::MAX_PROFILE_BYTES;
+    use std::io::Read;
+    let name = path.display().to_string();
+    let mut text = String::new();
+    std::fs::File::open(path)
+        .and_then(|f| {
+            f.take(MAX_PROFILE_BYTES as u64 + 1)
+                .read_to_string(&mut text)
+        })
+        .map_err(|e| format!("cannot read live lip-sync profiles {name}: {e}"))?;
+    let profiles = Profiles::from_toml_str(&text, &name).map_err(|e| e.to_string())?;
+    let table =
+        mouthpiece_lipsync::ClassTable::from_toml_str(DEFAULT_CLASSES, DEFAULT_CLASSES_NAME)
+            .map_err(|e| e.to_string())?;
+    profiles.bind(&table, &name).map_err(|e| e.to_string())?;
+    if profiles.classes.is_empty() {
+        return Err(format!("{name}: no class has a profile"));
+    }
+    Ok(profiles)
+}
+
 /// A character that cannot be driven by the shipped poses, or damaged shipped tables.
 #[derive(Debug, thiserror::Error)]
 pub enum SpeechError {
@@ -75,6 +103,16 @@ impl SpeechDriver {
         characters: &[(Character, HandoverSettings)],
         output: CharacterSettings,
     ) -> Result<Self, SpeechError> {
+        Self::with_profiles(characters, output, None)
+    }
+
+    /// As [`SpeechDriver::new`], with the analyser's profiles given (a booth's own, from
+    /// [`load_profiles`]) instead of the shipped ones when `profiles` is `Some`.
+    pub fn with_profiles(
+        characters: &[(Character, HandoverSettings)],
+        output: CharacterSettings,
+        profiles: Option<&Profiles>,
+    ) -> Result<Self, SpeechError> {
         let tables = Tables::parse(
             Source {
                 text: DEFAULT_CLASSES,
@@ -86,12 +124,19 @@ impl SpeechDriver {
             },
             None,
         )?;
-        let profiles = Profiles::from_toml_str(
-            mouthpiece_lipsync::live::SHIPPED_PROFILES,
-            "config/lipsync/live_profiles.toml",
-        )?;
+        let shipped;
+        let profiles = match profiles {
+            Some(p) => p,
+            None => {
+                shipped = Profiles::from_toml_str(
+                    mouthpiece_lipsync::live::SHIPPED_PROFILES,
+                    "config/lipsync/live_profiles.toml",
+                )?;
+                &shipped
+            }
+        };
         let analyser =
-            LiveAnalyser::new(tables.classes.clone(), &profiles, LiveSettings::default())?;
+            LiveAnalyser::new(tables.classes.clone(), profiles, LiveSettings::default())?;
         let mouths = characters
             .iter()
             .map(|(c, h)| {

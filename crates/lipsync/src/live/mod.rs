@@ -10,12 +10,14 @@
 //! describes the window that ends with the newest sample.
 
 pub mod features;
+pub mod learn;
 pub mod mouth;
 pub mod profiles;
 
 use mouthpiece_frame::audio::AudioBlock;
 
 pub use features::{Feature, FeatureExtractor, FEATURES, HOP_S, SAMPLE_RATES, WINDOW_S};
+pub use learn::{learn_from_recordings, Recording};
 pub use mouth::LiveMouth;
 pub use profiles::{Bound, Profiles};
 
@@ -43,7 +45,7 @@ impl Default for LiveSettings {
             gate_db: -50.0,
             relative_gate_db: -35.0,
             score_tau_s: 0.0,
-            mouth_tau_s: 0.010,
+            mouth_tau_s: 0.005,
         }
     }
 }

@@ -10,7 +10,9 @@ use std::process::Command;
 use std::time::Instant;
 
 use mouthpiece_frame::audio::{AudioBlock, AudioFormat};
-use mouthpiece_lipsync::live::{FeatureExtractor, LiveAnalyser, LiveSettings, LiveStep, Profiles};
+use mouthpiece_lipsync::live::{
+    learn_from_recordings, LiveAnalyser, LiveSettings, LiveStep, Profiles, Recording,
+};
 use mouthpiece_lipsync::phones::{self, PhoneFormat};
 use mouthpiece_lipsync::take::{DEFAULT_CLASSES, DEFAULT_CLASSES_NAME};
 use mouthpiece_lipsync::{ClassTable, PhoneSpan};
@@ -75,9 +77,6 @@ pub const LEARNING: [&str; 40] = [
     "Mesh wire keeps chicks inside.",
 ];
 
-/// Minimum frames for a class to get a profile.
-pub const MIN_FRAMES: u64 = 20;
-
 pub fn table() -> ClassTable {
     ClassTable::from_toml_str(DEFAULT_CLASSES, DEFAULT_CLASSES_NAME).unwrap()
 }
@@ -140,18 +139,16 @@ pub fn truth_class(table: &ClassTable, phones: &[PhoneSpan], t: f64) -> usize {
 
 /// Profiles learned from `lines` (features labelled with the class at the window's centre).
 pub fn learn(table: &ClassTable, lines: &[Spoken], learned_on: &str) -> Profiles {
-    let mut labelled = Vec::new();
-    for line in lines {
-        let mut fx = FeatureExtractor::new(line.rate);
-        let half = fx.window_len() as f64 / 2.0;
-        for (i, s) in line.samples.iter().enumerate() {
-            if let Some(f) = fx.push(*s) {
-                let centre = (i as f64 + 1.0 - half) / f64::from(line.rate);
-                labelled.push((f, truth_class(table, &line.phones, centre)));
-            }
-        }
-    }
-    Profiles::learn(table, &labelled, MIN_FRAMES, learned_on)
+    let recordings: Vec<Recording> = lines
+        .iter()
+        .map(|l| Recording {
+            samples: &l.samples,
+            rate: l.rate,
+            phones: &l.phones,
+            name: "festival",
+        })
+        .collect();
+    learn_from_recordings(table, &recordings, learned_on).unwrap()
 }
 
 /// `samples` at `rate` upsampled by an integer factor (linear interpolation; the content

@@ -87,6 +87,9 @@ pub enum Action {
     /// Capture a booth's own basic poses from a recorded session in which the actor holds
     /// each pose (marked by time ranges).
     Poses(crate::cmd::lipsync_poses::PosesArgs),
+    /// Learn live lip-sync profiles from the booth's own recordings with known phone timing
+    /// (for the daemon's `[audio] speech_profiles`).
+    Learn(crate::cmd::lipsync_learn::LearnArgs),
 }
 
 /// Largest phone file read (a TIMIT file of 10 minutes is 100 KB).
@@ -278,8 +281,10 @@ fn create_file(path: &Path) -> anyhow::Result<mouthpiece_export::PendingFile> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if let Some(Action::Poses(poses)) = args.action {
-        return crate::cmd::lipsync_poses::run(poses);
+    match args.action {
+        Some(Action::Poses(poses)) => return crate::cmd::lipsync_poses::run(poses),
+        Some(Action::Learn(learn)) => return crate::cmd::lipsync_learn::run(learn),
+        None => {}
     }
     let (Some(character), Some(out)) = (&args.character, &args.out) else {
         return Err(bad_input(anyhow::anyhow!(

@@ -77,10 +77,16 @@ pub struct Args {
     /// Drive the mouth from a lip-sync weights CSV (`mouthpiece lipsync --weights`) instead
     /// of the seed's speech: each sample's mouth is Σ wᵢ · (pose i's mouth state), after the
     /// neutral lead-in.
-    #[arg(long)]
+    #[arg(long, group = "speech_source")]
     pub speech: Option<PathBuf>,
-    /// The basic poses whose mouth states `--speech` blends (default: the shipped ones).
-    #[arg(long, requires = "speech")]
+    /// Festival says this line: its sound goes on `/audio` and its own phone timing drives
+    /// the mouth (through the shipped lip-sync classes and the basic poses), both after the
+    /// neutral lead-in. Needs Festival (`festival`, `festvox-kallpc16k`). MCAP output only.
+    #[arg(long, group = "speech_source", value_name = "LINE")]
+    pub speech_text: Option<String>,
+    /// The basic poses whose mouth states `--speech`/`--speech-text` blend (default: the
+    /// shipped ones).
+    #[arg(long, requires = "speech_source")]
     pub poses: Option<PathBuf>,
     /// The lips' own colour under the paint, R,G,B (0–255), e.g. 200,102,102 for saturated
     /// red lips (OpenCV saturation ≈ 125). Default: a muted red. Overrides the layout file's
@@ -390,21 +396,39 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let calibration = config.calibration();
     let neutral_seconds = config.neutral_seconds;
     let mut synth = Synth::new(config).map_err(bad_input)?;
-    if let Some(path) = &args.speech {
-        synth.set_speech(speech_keys(path, args.poses.as_deref(), neutral_seconds)?);
-    }
-    let started = Instant::now();
-    let total = synth.frame_count();
     let is_oni = args
         .out
         .extension()
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("oni"));
-    if is_oni && args.speech_audio.is_some() {
+    if is_oni && (args.speech_audio.is_some() || args.speech_text.is_some()) {
         return Err(bad_input(anyhow::anyhow!(
-            "--speech-audio needs an MCAP session (--out NAME.mcap): .oni files hold no sound"
+            "--speech-audio and --speech-text need an MCAP session (--out NAME.mcap): .oni files hold no sound"
         )));
     }
+    if let Some(path) = &args.speech {
+        synth.set_speech(speech_keys(path, args.poses.as_deref(), neutral_seconds)?);
+    }
+    // Festival's line: its mouth keys now, its WAV read as `--speech-audio`'s below.
+    let spoken = match &args.speech_text {
+        Some(text) => {
+            let line = crate::cmd::synth_speech::speak(
+                text,
+                args.poses.as_deref(),
+                neutral_seconds,
+                std::path::Path::new("festival"),
+            )?;
+            synth.set_speech(line.keys.clone());
+            Some(line)
+        }
+        None => None,
+    };
+    let speech_wav = args
+        .speech_audio
+        .as_deref()
+        .or(spoken.as_ref().map(|l| l.wav.as_path()));
+    let started = Instant::now();
+    let total = synth.frame_count();
     let frames = if is_oni {
         let oni_error = |e: OniWriteError| bad_input_if(e.is_bad_input(), e);
         let mut writer = OniFrameWriter::create(&args.out, &calibration, args.fps)
@@ -426,7 +450,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             },
             ..WriterOptions::default()
         };
-        let mut sound = match &args.speech_audio {
+        let mut sound = match speech_wav {
             Some(path) => Some(SpeechAudio::read(path, neutral_seconds)?),
             None => None,
         };
