@@ -17,6 +17,7 @@ jaw hinge):
 import json
 import math
 import os
+import re
 import sys
 
 import bmesh
@@ -76,7 +77,7 @@ bpy.ops.wm.read_factory_settings(use_empty=True)
 
 # --- (a) decimated generator heads
 for name in sorted(os.listdir(out_dir)):
-    if not (name.startswith("base") and name.endswith(".obj")):
+    if not re.fullmatch(r"base[0-9]+\.obj", name):
         continue
     stem = name[:-4]
     meta = json.load(open(os.path.join(out_dir, stem + ".json")))
@@ -114,9 +115,10 @@ def sculpt_mouth(obj, centre_y, upper, lower, protrusion, slit, open_mouth):
             f
             for f in bm.faces
             if f.calc_center_median().z > 0
-            and abs(f.calc_center_median().y - centre_y) < 0.035
+            and abs(f.calc_center_median().y - centre_y) < 0.045
             and abs(f.calc_center_median().x) < 0.4
         ]
+        print("cut", len(doomed), "faces")
         bmesh.ops.delete(bm, geom=doomed, context="FACES")
     bm.to_mesh(obj.data)
     obj.data.update()
@@ -153,41 +155,50 @@ def uv_head(name, radius, scale, segments, rings):
     return obj
 
 
-# a round head, wide mouth (0.38 of the head's width), open mouth
-obj = uv_head("sphere_wide", 1.3, (1.0, 1.25, 0.9), 160, 120)
-pts = sculpt_mouth(obj, -0.45, 0.16, 0.2, 0.12, 0.05, True)
-finish(obj, "sphere_wide", pts, 1.0)
-bpy.data.objects.remove(obj)
+# each head twice: the mouth cut open (a slit through the surface) and closed (a groove,
+# the lips one surface): the feature the default's rule reads (docs/bind.md)
+for open_mouth in (True, False):
+    suffix = "open" if open_mouth else "closed"
+    # a round head, wide mouth (0.38 of the head's width)
+    obj = uv_head("sphere_wide", 1.3, (1.0, 1.25, 0.9), 160, 120)
+    pts = sculpt_mouth(obj, -0.45, 0.16, 0.2, 0.12, 0.05, open_mouth)
+    finish(obj, "sphere_wide_" + suffix, pts, 1.0)
+    bpy.data.objects.remove(obj)
+    # a long narrow head, narrow mouth (0.25 of the head's width), deep face
+    obj = uv_head("sphere_narrow", 2.0, (1.0, 1.3, 1.4), 192, 128)
+    pts = sculpt_mouth(obj, -0.9, 0.12, 0.15, 0.08, 0.06, open_mouth)
+    finish(obj, "sphere_narrow_" + suffix, pts, 1.2)
+    bpy.data.objects.remove(obj)
 
-# a long narrow head, narrow mouth (0.25 of the head's width), deep face, closed slit
-obj = uv_head("sphere_narrow", 2.0, (1.0, 1.3, 1.4), 192, 128)
-pts = sculpt_mouth(obj, -0.9, 0.12, 0.15, 0.08, 0.06, False)
-finish(obj, "sphere_narrow", pts, 1.2)
-bpy.data.objects.remove(obj)
-
-# a metaball head: cranium and a muzzle, the mouth on the muzzle's front, open
-mb = bpy.data.metaballs.new("meta")
-mb.resolution = 0.07
-mb.render_resolution = 0.07
-e = mb.elements.new()
-e.co = (0.0, 0.9, -1.6)
-e.radius = 2.0
-e = mb.elements.new(type="ELLIPSOID")
-e.co = (0.0, -0.1, -0.3)
-e.radius = 1.4
-e.size_x, e.size_y, e.size_z = 1.0, 0.7, 1.2
-mobj = bpy.data.objects.new("meta", mb)
-bpy.context.scene.collection.objects.link(mobj)
-bpy.ops.object.select_all(action="DESELECT")
-mobj.select_set(True)
-bpy.context.view_layer.objects.active = mobj
-bpy.ops.object.convert(target="MESH")
-obj = bpy.context.active_object
-obj.name = "metaball_muzzle"
-# the muzzle's front as z = 0 side up: move the front to positive z
-front = max(v.co.z for v in obj.data.vertices)
-for v in obj.data.vertices:
-    v.co.z -= front - 0.5
-obj.data.update()
-pts = sculpt_mouth(obj, -0.15, 0.14, 0.18, 0.1, 0.05, True)
-finish(obj, "metaball_muzzle", pts, 1.4)
+# a metaball head: cranium and a muzzle, the mouth on the muzzle's front
+for open_mouth in (True, False):
+    mb = bpy.data.metaballs.new("meta")
+    mb.resolution = 0.07
+    mb.render_resolution = 0.07
+    e = mb.elements.new()
+    e.co = (0.0, 0.9, -1.6)
+    e.radius = 2.0
+    e = mb.elements.new(type="ELLIPSOID")
+    e.co = (0.0, -0.1, -0.3)
+    e.radius = 1.4
+    e.size_x, e.size_y, e.size_z = 1.0, 0.7, 1.2
+    mobj = bpy.data.objects.new("meta", mb)
+    bpy.context.scene.collection.objects.link(mobj)
+    bpy.ops.object.select_all(action="DESELECT")
+    mobj.select_set(True)
+    bpy.context.view_layer.objects.active = mobj
+    bpy.ops.object.convert(target="MESH")
+    obj = bpy.context.active_object
+    obj.name = "metaball_muzzle"
+    # the muzzle's front as z = 0 side up: move the front to positive z
+    front = max(v.co.z for v in obj.data.vertices)
+    for v in obj.data.vertices:
+        v.co.z -= front - 0.5
+    obj.data.update()
+    pts = sculpt_mouth(obj, -0.15, 0.14, 0.18, 0.1, 0.05, open_mouth)
+    finish(obj, "metaball_" + ("open" if open_mouth else "closed"), pts, 1.4)
+    bpy.data.objects.remove(obj)
+    try:
+        bpy.data.objects.remove(mobj)
+    except ReferenceError:  # the conversion may have removed it already
+        pass

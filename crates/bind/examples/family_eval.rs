@@ -2,7 +2,7 @@
 //! the generator"). Run through `bench/bind_families.py`, which calls
 //!
 //!     family_eval bases DIR      # writes held-out generator heads (OBJ + JSON) for Blender
-//!     family_eval eval DIR [--large]
+//!     family_eval eval DIR [--large] [--ratios]   # --ratios: only each mesh's lip path ratio
 //!
 //! `eval` builds families (a) subdivided, (b) shells and (c) seams from the held-out heads
 //! itself, reads (a) decimated and (d) Blender-modelled heads from DIR (written by
@@ -18,6 +18,7 @@ use mouthpiece_bind::families::{
     with_shells, write_obj, Part, Subject,
 };
 use mouthpiece_bind::procedural::{HeadParams, MouthState};
+use mouthpiece_bind::select::{default_method, lip_path_ratio, DefaultMethod};
 use mouthpiece_bind::training::EVAL_STATES;
 use rand::SeedableRng;
 
@@ -26,7 +27,7 @@ const HELD_OUT_SEED: u64 = 1_319_952;
 /// Held-out heads each family is made from.
 const HEADS: usize = 3;
 /// The best-fit reference is computed up to this many vertices (its cost is per vertex).
-const REFERENCE_LIMIT: usize = 20_000;
+const REFERENCE_LIMIT: usize = 30_000;
 
 fn held_out() -> Vec<mouthpiece_bind::procedural::Head> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(HELD_OUT_SEED);
@@ -40,7 +41,11 @@ fn main() {
     let dir = PathBuf::from(args.get(1).expect("usage: family_eval bases|eval DIR"));
     match args[0].as_str() {
         "bases" => bases(&dir),
-        "eval" => eval(&dir, args.iter().any(|a| a == "--large")),
+        "eval" => eval(
+            &dir,
+            args.iter().any(|a| a == "--large"),
+            args.iter().any(|a| a == "--ratios"),
+        ),
         other => panic!("unknown action {other}"),
     }
 }
@@ -67,7 +72,7 @@ fn bases(dir: &Path) {
     }
 }
 
-fn eval(dir: &Path, large: bool) {
+fn eval(dir: &Path, large: bool, ratios_only: bool) {
     let network = mouthpiece_bind::shipped_network().unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0xe7a1);
     let states = MouthState::set(EVAL_STATES, &mut rng);
@@ -132,20 +137,32 @@ fn eval(dir: &Path, large: bool) {
         subjects.push(("(c) fins and holes".into(), fins_and_holes(&format!("h{i}"), head)));
     }
     // per family: vertices range, and per method the sums of (all, region)
-    let methods = ["network", "heat", "distance", "reference"];
-    let mut families: Vec<(String, usize, usize, usize, [[f64; 2]; 4], [usize; 4])> = Vec::new();
-    println!("| family | mesh | vertices | shells | method | RMS all | RMS chin/lips |");
-    println!("|---|---|---:|---:|---|---:|---:|");
+    let methods = ["network", "heat", "distance", "rule", "reference"];
+    let mut families: Vec<(String, usize, usize, usize, [[f64; 2]; 5], [usize; 5])> = Vec::new();
+    eprintln!("| family | mesh | vertices | shells | lip path ratio | method | RMS all | RMS chin/lips |");
+    eprintln!("|---|---|---:|---:|---:|---|---:|---:|");
     for (family, subject) in &subjects {
+        if ratios_only {
+            let ratio = lip_path_ratio(&subject.mesh, &subject.points);
+            println!("{family} {} {} {ratio:.2}", subject.name, subject.mesh.len());
+            continue;
+        }
         let t = truth(subject, &states);
         let mut all = method_weights(subject, &network).to_vec();
+        let ratio = lip_path_ratio(&subject.mesh, &subject.points);
+        let pick = match default_method(ratio) {
+            DefaultMethod::Network => 0,
+            DefaultMethod::Heat => 1,
+        };
+        let picked = all[pick].1.clone();
+        all.push(("rule", picked));
         if subject.mesh.len() <= REFERENCE_LIMIT {
             all.push(("reference", reference(&t, subject.mesh.len())));
         }
         let at = match families.iter().position(|f| &f.0 == family) {
             Some(at) => at,
             None => {
-                families.push((family.clone(), 0, usize::MAX, 0, [[0.0; 2]; 4], [0; 4]));
+                families.push((family.clone(), 0, usize::MAX, 0, [[0.0; 2]; 5], [0; 5]));
                 families.len() - 1
             }
         };
@@ -161,12 +178,14 @@ fn eval(dir: &Path, large: bool) {
             f.4[k][1] += region;
             f.5[k] += 1;
             eprintln!(
-                "| {family} | {} | {} | {shells} | {m} | {rms:.2} | {region:.2} |",
+                "| {family} | {} | {} | {shells} | {ratio:.2} | {m} | {rms:.2} | {region:.2} |",
                 subject.name,
                 subject.mesh.len()
             );
         }
     }
+    println!("| family | meshes | vertices | method | RMS all | RMS chin/lips |");
+    println!("|---|---:|---:|---|---:|---:|");
     for (family, count, lo, hi, sums, counts) in &families {
         for (k, m) in methods.iter().enumerate() {
             if counts[k] == 0 {
@@ -179,7 +198,7 @@ fn eval(dir: &Path, large: bool) {
                 format!("{lo}–{hi}")
             };
             println!(
-                "| {family} | {count} meshes | {vertices} | | {m} | {:.2} | {:.2} |",
+                "| {family} | {count} | {vertices} | {m} | {:.2} | {:.2} |",
                 sums[k][0] / n,
                 sums[k][1] / n
             );

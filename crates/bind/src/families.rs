@@ -335,8 +335,16 @@ pub fn with_shells(name: &str, head: &Head) -> Subject {
 /// Family (c): the lips' inner edges welded (the slit ring's upper and lower vertices merged
 /// at their midpoint, so the mouth is closed by one seam), as a rigger's closed-mouth mesh.
 pub fn lips_welded(name: &str, head: &Head) -> Subject {
-    let m = head.params.around;
-    let mut mesh = head.mesh.clone();
+    let mut s = Subject::from_head(name, head);
+    s.mesh = weld_lips(&head.mesh, head.params.around);
+    s
+}
+
+/// A generator head's mesh (its first ring the slit, `around` vertices) with the slit's
+/// upper and lower vertices merged at their midpoints: the mouth closed by one seam.
+pub fn weld_lips(mesh: &Mesh, around: usize) -> Mesh {
+    let m = around;
+    let mut mesh = mesh.clone();
     let mut map: Vec<u32> = (0..mesh.len() as u32).collect();
     for i in m / 2 + 1..m {
         let partner = m - i;
@@ -349,38 +357,53 @@ pub fn lips_welded(name: &str, head: &Head) -> Subject {
     }
     mesh.triangles
         .retain(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2]);
-    let mut s = Subject::from_head(name, head);
-    s.mesh = mesh;
-    s
+    mesh
 }
 
 /// Family (c): fins (extra triangles on existing edges of the chin and the cheeks, so those
 /// edges have three) and holes (the triangles within 0.12 mouth widths of a cheek point and
-/// of a point above the upper lip removed).
+/// of a point 0.6 mouth widths above the mouth removed).
 pub fn fins_and_holes(name: &str, head: &Head) -> Subject {
     let mut s = Subject::from_head(name, head);
     let mesh = &mut s.mesh;
     let centroid = |m: &Mesh, t: &[u32; 3]| {
         (m.vertex(t[0] as usize) + m.vertex(t[1] as usize) + m.vertex(t[2] as usize)) / 3.0
     };
+    // the face's vertex nearest to (x, y) seen from the front
     let nearest_vertex = |m: &Mesh, at: Vector3<f64>| {
+        let score = |v: usize| {
+            let p = m.vertex(v);
+            (p.x - at.x).powi(2) + (p.y - at.y).powi(2) - 1e-3 * p.z
+        };
         (0..m.len())
-            .min_by(|&a, &b| {
-                (m.vertex(a) - at)
-                    .norm()
-                    .total_cmp(&(m.vertex(b) - at).norm())
-            })
+            .min_by(|&a, &b| score(a).total_cmp(&score(b)))
             .unwrap_or(0)
     };
-    let holes: Vec<Vector3<f64>> = [[0.9, 0.25], [0.0, 0.45]]
+    let holes: Vec<Vector3<f64>> = [[0.9, 0.25], [0.0, 0.6]]
         .iter()
         .map(|&[x, y]| mesh.vertex(nearest_vertex(mesh, Vector3::new(x, y, 1.0))))
         .collect();
-    let kept: Vec<[u32; 3]> = mesh
-        .triangles
+    // each hole: the triangle nearest its point, and any within 0.12 of it
+    let nearest_triangles: Vec<usize> = holes
         .iter()
-        .copied()
-        .filter(|t| holes.iter().all(|h| (centroid(mesh, t) - h).norm() > 0.12))
+        .map(|h| {
+            (0..mesh.triangles.len())
+                .min_by(|&a, &b| {
+                    (centroid(mesh, &mesh.triangles[a]) - h)
+                        .norm()
+                        .total_cmp(&(centroid(mesh, &mesh.triangles[b]) - h).norm())
+                })
+                .unwrap_or(0)
+        })
+        .collect();
+    let kept: Vec<[u32; 3]> = (0..mesh.triangles.len())
+        .filter(|t| {
+            !nearest_triangles.contains(t)
+                && holes
+                    .iter()
+                    .all(|h| (centroid(mesh, &mesh.triangles[*t]) - h).norm() > 0.12)
+        })
+        .map(|t| mesh.triangles[t])
         .collect();
     mesh.triangles = kept;
     let normals = mesh.normals();
@@ -464,10 +487,28 @@ mod tests {
         };
         for &v in &head.point_vertices {
             let (_, d) = field.nearest(&head.mesh.vertex(v));
-            assert!(d < 1e-6, "a point is {d} from the lip line");
+            assert!(d < 1e-4, "a point is {d} from the lip line");
             let e = (field.displacement(&head.mesh.vertex(v), &s) - head.displacement(v, &s)).norm();
-            assert!(e < 1e-6, "vertex {v}: {e}");
+            assert!(e < 1e-4, "vertex {v}: {e}");
         }
+    }
+
+    #[test]
+    fn the_default_is_the_network_for_an_open_mouth_and_heat_for_a_closed_one() {
+        use crate::select::{default_method, lip_path_ratio, DefaultMethod, OPEN_MOUTH_RATIO};
+        let head =
+            HeadParams::around_points(HeadParams::mouth_points(0.2, 0.25, 0.3), 0.3, 3).build();
+        let open = lip_path_ratio(&head.mesh, &head.params.points);
+        let closed = lip_path_ratio(
+            &weld_lips(&head.mesh, head.params.around),
+            &head.params.points,
+        );
+        assert!(open > 1.5 * OPEN_MOUTH_RATIO, "open mouth: ratio {open}");
+        assert!(closed < 0.8 * OPEN_MOUTH_RATIO, "closed mouth: ratio {closed}");
+        assert_eq!(default_method(open), DefaultMethod::Network);
+        assert_eq!(default_method(closed), DefaultMethod::Heat);
+        assert_eq!(default_method(f64::INFINITY), DefaultMethod::Network);
+        assert_eq!(default_method(OPEN_MOUTH_RATIO), DefaultMethod::Heat);
     }
 
     #[test]

@@ -282,3 +282,76 @@ pub fn rig_from_nodes(
     }
     Ok(Some(new))
 }
+
+/// How far apart the upper and the lower lip are over the surface: the shortest path along
+/// the mesh's edges from the vertex nearest the upper lip's middle (P4) to the one nearest
+/// the lower lip's middle (P10), over their straight distance. An open mouth (the lips apart,
+/// a slit or a mouth bag between them) makes the path go round the corners or through the
+/// bag (about 2 and more); a closed one (the lips one surface, welded or a groove) lets it
+/// cross (about 1). Infinite when no path joins them. Mouth frame, any units.
+pub fn lip_path_ratio(mesh: &Mesh, points: &[[f64; 3]; crate::procedural::POINTS]) -> f64 {
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
+    let neighbours = mesh.neighbours();
+    // vertices on some triangle only: an unused vertex joins nothing
+    let nearest = |p: [f64; 3]| {
+        let p = nalgebra::Vector3::from(p);
+        (0..mesh.len())
+            .filter(|&v| !neighbours[v].is_empty())
+            .min_by(|&a, &b| {
+                (mesh.vertex(a) - p)
+                    .norm_squared()
+                    .total_cmp(&(mesh.vertex(b) - p).norm_squared())
+            })
+            .unwrap_or(0)
+    };
+    let (from, to) = (nearest(points[3]), nearest(points[9]));
+    let straight = (mesh.vertex(from) - mesh.vertex(to)).norm();
+    if from == to || straight <= 0.0 {
+        return 1.0;
+    }
+    let mut best = vec![f64::INFINITY; mesh.len()];
+    let mut heap = BinaryHeap::new();
+    best[from] = 0.0;
+    // distances as ordered bits: non-negative finite f64s order like their bit patterns
+    heap.push(Reverse((0u64, from)));
+    while let Some(Reverse((bits, v))) = heap.pop() {
+        let d = f64::from_bits(bits);
+        if v == to {
+            return d / straight;
+        }
+        if d > best[v] {
+            continue;
+        }
+        for &u in &neighbours[v] {
+            let u = u as usize;
+            let next = d + (mesh.vertex(u) - mesh.vertex(v)).norm();
+            if next < best[u] {
+                best[u] = next;
+                heap.push(Reverse((next.to_bits(), u)));
+            }
+        }
+    }
+    f64::INFINITY
+}
+
+/// Above this [`lip_path_ratio`] a mouth is open (docs/bind.md, "The default method").
+pub const OPEN_MOUTH_RATIO: f64 = 1.6;
+
+/// The method `bind` uses without `--method`: the network for an open mouth, heat diffusion
+/// for a closed one (the lips one surface), where the network, trained on open mouths only,
+/// loses to it (docs/bind.md, "The default method").
+pub fn default_method(lip_path_ratio: f64) -> DefaultMethod {
+    if lip_path_ratio > OPEN_MOUTH_RATIO {
+        DefaultMethod::Network
+    } else {
+        DefaultMethod::Heat
+    }
+}
+
+/// What [`default_method`] picks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DefaultMethod {
+    Network,
+    Heat,
+}

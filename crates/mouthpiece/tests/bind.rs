@@ -1282,3 +1282,54 @@ fn lower_lip_keys_on_the_jaw_land_on_the_takes_points() {
     }
     assert!(checked >= 3, "only {checked} keys checked");
 }
+
+/// `bind` without `--method` follows the default's rule (docs/bind.md, "The default
+/// method"): the network for an open mouth (the shipped human head, its lips apart), heat
+/// diffusion for a closed one (the same head with the lips welded into one surface); the
+/// output is byte for byte what that `--method` writes.
+#[test]
+fn bind_without_a_method_picks_the_network_for_an_open_mouth_and_heat_for_a_closed_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let human = character("human");
+    let rig = MouthRig::load_character(&human).unwrap();
+    let head = mouthpiece_bind::character_head(&rig, ModelUp::Y, 0.0, 3).unwrap();
+    let closed = mouthpiece_bind::families::weld_lips(&head, 36);
+    let open_path = dir.path().join("open.glb");
+    let closed_path = dir.path().join("closed.glb");
+    write_mesh(&open_path, head.positions, head.triangles);
+    write_mesh(&closed_path, closed.positions, closed.triangles);
+    for (mesh, want) in [(&open_path, "network"), (&closed_path, "heat")] {
+        let default_out = dir.path().join("default.glb");
+        let report = ok(&[
+            "bind",
+            "--character",
+            s(&human),
+            "--mesh",
+            s(mesh),
+            "--out",
+            s(&default_out),
+        ]);
+        assert!(
+            report.contains(&format!("method: {want} (the default")),
+            "{}: {report}",
+            mesh.display()
+        );
+        let explicit_out = dir.path().join(format!("{want}.glb"));
+        ok(&[
+            "bind",
+            "--character",
+            s(&human),
+            "--mesh",
+            s(mesh),
+            "--out",
+            s(&explicit_out),
+            "--method",
+            want,
+        ]);
+        assert!(
+            std::fs::read(&default_out).unwrap() == std::fs::read(&explicit_out).unwrap(),
+            "{}: the default's output is not --method {want}'s",
+            mesh.display()
+        );
+    }
+}

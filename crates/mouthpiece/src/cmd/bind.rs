@@ -27,9 +27,10 @@ pub struct Args {
     /// Output: the skinned mesh as GLB.
     #[arg(long, required = true)]
     pub out: Option<PathBuf>,
-    /// How to compute the skin weights.
-    #[arg(long, value_enum, default_value = "network")]
-    pub method: MethodArg,
+    /// How to compute the skin weights; by default the network for an open mouth and heat
+    /// diffusion for a closed one (lips welded into one surface; docs/bind.md).
+    #[arg(long, value_enum)]
+    pub method: Option<MethodArg>,
     /// Network weights (from `bind train`); the shipped network by default.
     #[arg(long)]
     pub model: Option<PathBuf>,
@@ -242,12 +243,13 @@ fn bind(args: Args) -> anyhow::Result<()> {
     };
     let rig = load_rig(&character)?;
     let network = match args.method {
-        MethodArg::Network => Some(load_network(args.model.as_deref())?),
+        None | Some(MethodArg::Network) => Some(load_network(args.model.as_deref())?),
         _ => None,
     };
     let method = match (&network, args.method) {
+        (Some(network), None) => Method::Default(network),
         (Some(network), _) => Method::Network(network),
-        (None, MethodArg::Heat) => Method::Heat,
+        (None, Some(MethodArg::Heat)) => Method::Heat,
         _ => Method::Distance,
     };
     let start = Instant::now();
@@ -270,13 +272,21 @@ fn bind(args: Args) -> anyhow::Result<()> {
     for (part, joint) in &summary.parts {
         eprintln!("part: {part} follows {joint}");
     }
+    if args.method.is_none() {
+        eprintln!(
+            "method: {} (the default: the mouth is {}, lip path ratio {:.2})",
+            summary.method,
+            if summary.method == "heat" { "closed" } else { "open" },
+            summary.lip_path_ratio
+        );
+    }
     eprintln!(
-        "wrote {}: the input with a skin added, the mouth under {}; {} vertices in the file, {} follow the mouth; {:?} weights in {:.2} s",
+        "wrote {}: the input with a skin added, the mouth under {}; {} vertices in the file, {} follow the mouth; {} weights in {:.2} s",
         out.display(),
         summary.parent.as_deref().unwrap_or("a new root"),
         summary.vertices,
         summary.moving_vertices,
-        args.method,
+        summary.method,
         start.elapsed().as_secs_f64()
     );
     Ok(())
