@@ -14,11 +14,10 @@
 use std::path::{Path, PathBuf};
 
 use mouthpiece_bind::families::{
-    errors, fins_and_holes, lips_welded, method_weights, read_obj, reference, subdivide, truth,
+    errors, fins_and_holes, lip_path_ratio, lips_welded, method_weights, read_obj, reference, subdivide, truth,
     with_shells, write_obj, Part, Subject,
 };
 use mouthpiece_bind::procedural::{HeadParams, MouthState};
-use mouthpiece_bind::select::{default_method, lip_path_ratio, DefaultMethod};
 use mouthpiece_bind::training::EVAL_STATES;
 use rand::SeedableRng;
 
@@ -137,8 +136,8 @@ fn eval(dir: &Path, large: bool, ratios_only: bool) {
         subjects.push(("(c) fins and holes".into(), fins_and_holes(&format!("h{i}"), head)));
     }
     // per family: vertices range, and per method the sums of (all, region)
-    let methods = ["network", "heat", "distance", "rule", "reference"];
-    let mut families: Vec<(String, usize, usize, usize, [[f64; 2]; 5], [usize; 5])> = Vec::new();
+    let methods = ["network", "heat", "distance", "reference"];
+    let mut families: Vec<(String, usize, usize, usize, [[f64; 2]; 4], [usize; 4])> = Vec::new();
     eprintln!("| family | mesh | vertices | shells | lip path ratio | method | RMS all | RMS chin/lips |");
     eprintln!("|---|---|---:|---:|---:|---|---:|---:|");
     for (family, subject) in &subjects {
@@ -150,19 +149,13 @@ fn eval(dir: &Path, large: bool, ratios_only: bool) {
         let t = truth(subject, &states);
         let mut all = method_weights(subject, &network).to_vec();
         let ratio = lip_path_ratio(&subject.mesh, &subject.points);
-        let pick = match default_method(ratio) {
-            DefaultMethod::Network => 0,
-            DefaultMethod::Heat => 1,
-        };
-        let picked = all[pick].1.clone();
-        all.push(("rule", picked));
         if subject.mesh.len() <= REFERENCE_LIMIT {
             all.push(("reference", reference(&t, subject.mesh.len())));
         }
         let at = match families.iter().position(|f| &f.0 == family) {
             Some(at) => at,
             None => {
-                families.push((family.clone(), 0, usize::MAX, 0, [[0.0; 2]; 5], [0; 5]));
+                families.push((family.clone(), 0, usize::MAX, 0, [[0.0; 2]; 4], [0; 4]));
                 families.len() - 1
             }
         };

@@ -30,7 +30,7 @@ pub mod mesh;
 pub mod network;
 pub mod procedural;
 pub mod reference;
-pub mod select;
+mod select;
 pub mod skin_out;
 pub mod training;
 pub mod weights;
@@ -63,36 +63,6 @@ pub enum Method<'a> {
     Network(&'a Network),
     Heat,
     Distance,
-    /// `bind` without `--method`: the network for an open mouth, heat diffusion for a closed
-    /// one ([`select::default_method`], docs/bind.md "The default method").
-    Default(&'a Network),
-}
-
-impl<'a> Method<'a> {
-    /// The method used on this mesh: [`Method::Default`] resolved by the mouth's shape, the
-    /// others as they are.
-    pub fn resolve(self, prepared: &Prepared) -> Method<'a> {
-        match self {
-            Method::Default(network) => {
-                let ratio = select::lip_path_ratio(&prepared.mesh, &prepared.points);
-                match select::default_method(ratio) {
-                    select::DefaultMethod::Network => Method::Network(network),
-                    select::DefaultMethod::Heat => Method::Heat,
-                }
-            }
-            other => other,
-        }
-    }
-
-    /// `network`, `heat`, `distance` or `default`.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Method::Network(_) => "network",
-            Method::Heat => "heat",
-            Method::Distance => "distance",
-            Method::Default(_) => "default",
-        }
-    }
 }
 
 /// Where the mouth frame sits in the mesh file's coordinates: the character's placement,
@@ -172,7 +142,7 @@ pub fn prepare(rig: &MouthRig, model_up: ModelUp, welded: &Mesh) -> Result<Prepa
 /// Skin weights of a prepared mesh (one row per welded vertex, at most four influences).
 pub fn compute_weights(prepared: &Prepared, method: Method) -> Weights {
     let points = prepared.points.map(Vector3::from);
-    let mut weights = match method.resolve(prepared) {
+    let mut weights = match method {
         Method::Distance => {
             weights::distance_weights(&weights::joint_distances(&prepared.mesh, &points), 1.0)
         }
@@ -181,7 +151,7 @@ pub fn compute_weights(prepared: &Prepared, method: Method) -> Weights {
             &weights::joint_distances(&prepared.mesh, &points),
             1.0,
         ),
-        Method::Network(network) | Method::Default(network) => {
+        Method::Network(network) => {
             network.predict(&network::Graph::new(&prepared.mesh, &prepared.points))
         }
     };
@@ -208,10 +178,6 @@ pub struct BindSummary {
     pub parent: Option<String>,
     /// The mouth points came from the file's nodes named like them.
     pub points_from_nodes: bool,
-    /// The method the weights came from (`Default` resolved) and the mouth's
-    /// [`select::lip_path_ratio`] the default's rule reads.
-    pub method: &'static str,
-    pub lip_path_ratio: f64,
 }
 
 /// How to bind, besides the character and the files.
@@ -283,8 +249,7 @@ pub fn bind(
         }
         e
     })?;
-    let method = options.method.resolve(&prepared);
-    let welded_weights = compute_weights(&prepared, method);
+    let welded_weights = compute_weights(&prepared, options.method);
     // the jaw's hinge in the mouth frame (character units), and each welded vertex's share
     let width = rig.mouth_width();
     let hinge = match options.jaw_hinge {
@@ -401,8 +366,6 @@ pub fn bind(
         face: sub.names,
         parts,
         points_from_nodes: from_nodes.is_some(),
-        method: method.name(),
-        lip_path_ratio: select::lip_path_ratio(&prepared.mesh, &prepared.points),
         parent: parent.map(|p| {
             loaded.document.root.nodes[p]
                 .name

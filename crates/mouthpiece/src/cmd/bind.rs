@@ -27,10 +27,10 @@ pub struct Args {
     /// Output: the skinned mesh as GLB.
     #[arg(long, required = true)]
     pub out: Option<PathBuf>,
-    /// How to compute the skin weights; by default the network for an open mouth and heat
-    /// diffusion for a closed one (lips welded into one surface; docs/bind.md).
-    #[arg(long, value_enum)]
-    pub method: Option<MethodArg>,
+    /// How to compute the skin weights; the network by default, whatever the mesh (it
+    /// wins on the mouth region of every family measured, docs/bind.md).
+    #[arg(long, value_enum, default_value = "network")]
+    pub method: MethodArg,
     /// Network weights (from `bind train`); the shipped network by default.
     #[arg(long)]
     pub model: Option<PathBuf>,
@@ -243,13 +243,12 @@ fn bind(args: Args) -> anyhow::Result<()> {
     };
     let rig = load_rig(&character)?;
     let network = match args.method {
-        None | Some(MethodArg::Network) => Some(load_network(args.model.as_deref())?),
+        MethodArg::Network => Some(load_network(args.model.as_deref())?),
         _ => None,
     };
     let method = match (&network, args.method) {
-        (Some(network), None) => Method::Default(network),
         (Some(network), _) => Method::Network(network),
-        (None, Some(MethodArg::Heat)) => Method::Heat,
+        (None, MethodArg::Heat) => Method::Heat,
         _ => Method::Distance,
     };
     let start = Instant::now();
@@ -272,21 +271,13 @@ fn bind(args: Args) -> anyhow::Result<()> {
     for (part, joint) in &summary.parts {
         eprintln!("part: {part} follows {joint}");
     }
-    if args.method.is_none() {
-        eprintln!(
-            "method: {} (the default: the mouth is {}, lip path ratio {:.2})",
-            summary.method,
-            if summary.method == "heat" { "closed" } else { "open" },
-            summary.lip_path_ratio
-        );
-    }
     eprintln!(
-        "wrote {}: the input with a skin added, the mouth under {}; {} vertices in the file, {} follow the mouth; {} weights in {:.2} s",
+        "wrote {}: the input with a skin added, the mouth under {}; {} vertices in the file, {} follow the mouth; {:?} weights in {:.2} s",
         out.display(),
         summary.parent.as_deref().unwrap_or("a new root"),
         summary.vertices,
         summary.moving_vertices,
-        summary.method,
+        args.method,
         start.elapsed().as_secs_f64()
     );
     Ok(())
