@@ -14,8 +14,8 @@
 use std::path::{Path, PathBuf};
 
 use mouthpiece_bind::families::{
-    errors, fins_and_holes, lip_path_ratio, lips_welded, method_weights, read_obj, reference, subdivide, truth,
-    with_shells, write_obj, Part, Subject,
+    errors, fins_and_holes, lip_path_ratio, lips_welded, method_weights, read_obj, reference,
+    subdivide, truth, with_shells, write_obj, Part, Subject,
 };
 use mouthpiece_bind::procedural::{HeadParams, MouthState};
 use mouthpiece_bind::training::EVAL_STATES;
@@ -78,7 +78,10 @@ fn eval(dir: &Path, large: bool, ratios_only: bool) {
     let heads = held_out();
     let mut subjects: Vec<(String, Subject)> = Vec::new();
     for (i, head) in heads.iter().enumerate() {
-        subjects.push(("generator (control)".into(), Subject::from_head(&format!("h{i}"), head)));
+        subjects.push((
+            "generator (control)".into(),
+            Subject::from_head(&format!("h{i}"), head),
+        ));
     }
     for (i, head) in heads.iter().enumerate() {
         let base = Subject::from_head(&format!("h{i}"), head);
@@ -129,21 +132,36 @@ fn eval(dir: &Path, large: bool, ratios_only: bool) {
         ));
     }
     for (i, head) in heads.iter().enumerate() {
-        subjects.push(("(b) eye, teeth, tongue shells".into(), with_shells(&format!("h{i}"), head)));
+        subjects.push((
+            "(b) eye, teeth, tongue shells".into(),
+            with_shells(&format!("h{i}"), head),
+        ));
     }
     for (i, head) in heads.iter().enumerate() {
-        subjects.push(("(c) lips welded".into(), lips_welded(&format!("h{i}"), head)));
-        subjects.push(("(c) fins and holes".into(), fins_and_holes(&format!("h{i}"), head)));
+        subjects.push((
+            "(c) lips welded".into(),
+            lips_welded(&format!("h{i}"), head),
+        ));
+        subjects.push((
+            "(c) fins and holes".into(),
+            fins_and_holes(&format!("h{i}"), head),
+        ));
     }
     // per family: vertices range, and per method the sums of (all, region)
     let methods = ["network", "heat", "distance", "reference"];
     let mut families: Vec<(String, usize, usize, usize, [[f64; 2]; 4], [usize; 4])> = Vec::new();
-    eprintln!("| family | mesh | vertices | shells | lip path ratio | method | RMS all | RMS chin/lips |");
+    eprintln!(
+        "| family | mesh | vertices | shells | lip path ratio | method | RMS all | RMS chin/lips |"
+    );
     eprintln!("|---|---|---:|---:|---:|---|---:|---:|");
     for (family, subject) in &subjects {
         if ratios_only {
             let ratio = lip_path_ratio(&subject.mesh, &subject.points);
-            println!("{family} {} {} {ratio:.2}", subject.name, subject.mesh.len());
+            println!(
+                "{family} {} {} {ratio:.2}",
+                subject.name,
+                subject.mesh.len()
+            );
             continue;
         }
         let t = truth(subject, &states);

@@ -61,7 +61,10 @@ impl LipField {
             .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
         // golden-section search between the neighbouring samples
         let at = |a: f64| (Vector3::from(catmull_rom_loop(&self.points, a)) - p).norm();
-        let (mut lo, mut hi) = (Self::alpha(best as f64 - 1.0), Self::alpha(best as f64 + 1.0));
+        let (mut lo, mut hi) = (
+            Self::alpha(best as f64 - 1.0),
+            Self::alpha(best as f64 + 1.0),
+        );
         let g = 0.5 * (5f64.sqrt() - 1.0);
         for _ in 0..40 {
             let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
@@ -171,7 +174,10 @@ pub fn method_weights(subject: &Subject, network: &Network) -> [(&'static str, W
     let points = subject.points.map(Vector3::from);
     let d = joint_distances(&subject.mesh, &points);
     let mut out = [
-        ("network", network.predict(&Graph::new(&subject.mesh, &subject.points))),
+        (
+            "network",
+            network.predict(&Graph::new(&subject.mesh, &subject.points)),
+        ),
         ("heat", heat_weights(&subject.mesh, &d, 1.0)),
         ("distance", distance_weights(&d, 1.0)),
     ];
@@ -288,7 +294,12 @@ fn add_ellipsoid(
 /// the teeth and the tongue behind the lips).
 pub fn with_shells(name: &str, head: &Head) -> Subject {
     let mut s = Subject::from_head(name, head);
-    let z = head.params.points.iter().map(|p| p[2]).fold(f64::INFINITY, f64::min);
+    let z = head
+        .params
+        .points
+        .iter()
+        .map(|p| p[2])
+        .fold(f64::INFINITY, f64::min);
     let eye_y = 0.75 * head.params.aspect;
     for x in [-0.55, 0.55] {
         // the face's front at the eye: the nearest vertex in x, y
@@ -409,7 +420,12 @@ pub fn fins_and_holes(name: &str, head: &Head) -> Subject {
     let normals = mesh.normals();
     for [x, y] in [[0.0, -0.6], [-0.8, -0.1], [0.8, -0.1]] {
         let v = nearest_vertex(mesh, Vector3::new(x, y, 1.0));
-        let Some(t) = mesh.triangles.iter().find(|t| t.contains(&(v as u32))).copied() else {
+        let Some(t) = mesh
+            .triangles
+            .iter()
+            .find(|t| t.contains(&(v as u32)))
+            .copied()
+        else {
             continue;
         };
         let (a, b) = (t[0] as usize, t[1] as usize);
@@ -487,12 +503,22 @@ pub fn read_obj(path: &Path) -> Result<Mesh, String> {
         let bad = || format!("{}:{}: cannot read `{line:.80}`", path.display(), n + 1);
         match words.next() {
             Some("v") => {
-                let c: Vec<f64> = words.take(3).map(str::parse).collect::<Result<_, _>>().map_err(|_| bad())?;
+                let c: Vec<f64> = words
+                    .take(3)
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()
+                    .map_err(|_| bad())?;
                 mesh.positions.push(c.try_into().map_err(|_| bad())?);
             }
             Some("f") => {
                 let ids: Vec<u32> = words
-                    .map(|w| w.split('/').next().unwrap_or("").parse::<u32>().map(|i| i - 1))
+                    .map(|w| {
+                        w.split('/')
+                            .next()
+                            .unwrap_or("")
+                            .parse::<u32>()
+                            .map(|i| i - 1)
+                    })
                     .collect::<Result<_, _>>()
                     .map_err(|_| bad())?;
                 for k in 1..ids.len().saturating_sub(1) {
@@ -502,7 +528,8 @@ pub fn read_obj(path: &Path) -> Result<Mesh, String> {
             _ => {}
         }
     }
-    mesh.check().map_err(|(_, e)| format!("{}: {e}", path.display()))?;
+    mesh.check()
+        .map_err(|(_, e)| format!("{}: {e}", path.display()))?;
     Ok(mesh)
 }
 
@@ -540,7 +567,8 @@ mod tests {
         for &v in &head.point_vertices {
             let (_, d) = field.nearest(&head.mesh.vertex(v));
             assert!(d < 1e-4, "a point is {d} from the lip line");
-            let e = (field.displacement(&head.mesh.vertex(v), &s) - head.displacement(v, &s)).norm();
+            let e =
+                (field.displacement(&head.mesh.vertex(v), &s) - head.displacement(v, &s)).norm();
             assert!(e < 1e-4, "vertex {v}: {e}");
         }
     }
@@ -584,6 +612,9 @@ mod tests {
         let fins = fins_and_holes("f", &head);
         fins.mesh.validate().unwrap();
         let t = fins.mesh.topology();
-        assert!(t.non_manifold_edges >= 3 && t.holes >= base.holes + 2, "{t}");
+        assert!(
+            t.non_manifold_edges >= 3 && t.holes >= base.holes + 2,
+            "{t}"
+        );
     }
 }

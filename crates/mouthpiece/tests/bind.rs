@@ -1300,7 +1300,9 @@ fn bind_without_a_method_uses_the_network_on_open_and_closed_mouths() {
     write_mesh(&closed_path, closed.positions, closed.triangles);
     for mesh in [&open_path, &closed_path] {
         let bound = |method: Option<&str>| {
-            let out = dir.path().join(format!("{}.glb", method.unwrap_or("default")));
+            let out = dir
+                .path()
+                .join(format!("{}.glb", method.unwrap_or("default")));
             let mut args = vec![
                 "bind",
                 "--character",
