@@ -21,6 +21,7 @@
 
 mod error;
 pub mod eval;
+pub mod families;
 pub mod gltf_io;
 mod gltf_read;
 mod gltf_skin;

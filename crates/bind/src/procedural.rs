@@ -271,8 +271,8 @@ impl HeadParams {
     }
 }
 
-/// The closed Catmull–Rom curve through the points at parameters kπ/6.
-fn catmull_rom_loop(points: &[[f64; 3]; POINTS], alpha: f64) -> [f64; 3] {
+/// The closed Catmull–Rom curve through the points at parameters kπ/6 (the lip line).
+pub fn catmull_rom_loop(points: &[[f64; 3]; POINTS], alpha: f64) -> [f64; 3] {
     let u = alpha.rem_euclid(2.0 * PI) / (2.0 * PI) * POINTS as f64;
     let i = (u.floor() as usize) % POINTS;
     let t = u - u.floor();
@@ -296,38 +296,61 @@ fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
 impl Head {
     /// Displacement of vertex `v` in mouth state `s` (mouth-width units).
     pub fn displacement(&self, v: usize, s: &MouthState) -> Vector3<f64> {
-        let p = self.mesh.vertex(v);
-        let a = self.alpha[v];
-        let d = self.from_lips[v];
-        let lips = (-(d / 0.35).powi(2)).exp();
-        let mut out = Vector3::zeros();
-        // jaw: the lower half turns about the hinge; the corners and the cheeks stay
-        let hinge = Vector3::from(self.hinge);
-        let lower = smoothstep(0.0, 0.35, -a.sin());
-        let in_front = smoothstep(hinge.z - 0.1, hinge.z + 0.4, p.z);
-        let side = (-(((p.x.abs() - 0.6).max(0.0)) / 0.3).powi(2)).exp();
-        let member = lower * in_front * side;
-        if s.jaw != 0.0 && member > 0.0 {
-            let rot = Rotation3::from_axis_angle(&Vector3::x_axis(), 0.35 * s.jaw * member);
-            out += rot * (p - hinge) + hinge - p;
-        }
-        // smile: the corners out, up and back
-        let to_corner = a.sin().abs().asin().abs();
-        let corner = (-(to_corner / 0.5).powi(2)).exp() * lips;
-        let sign = a.cos().signum();
-        out += s.smile * corner * Vector3::new(0.12 * sign, 0.06, -0.04);
-        // pucker: the lips in towards the middle and forward
-        out += s.pucker * lips * Vector3::new(-0.3 * p.x, 0.0, 0.12);
-        // raise: the upper lip up
-        let upper = smoothstep(0.0, 0.3, a.sin()) * (-(d / 0.25).powi(2)).exp();
-        out += s.raise * upper * (1.0 - 0.5 * corner) * Vector3::new(0.0, 0.08, 0.0);
-        out
+        field(
+            &self.mesh.vertex(v),
+            self.alpha[v],
+            self.from_lips[v],
+            &Vector3::from(self.hinge),
+            s,
+        )
     }
 
     /// The motions of the mouth points (the joints) in state `s`.
     pub fn joint_motion(&self, s: &MouthState) -> [Vector3<f64>; POINTS] {
         std::array::from_fn(|k| self.displacement(self.point_vertices[k], s))
     }
+}
+
+/// How much the jaw turns the point at `p` at angle `a` round the mouth (0…1): the lower
+/// half, in front of the hinge, within about a mouth width of the middle.
+pub fn jaw_member(p: &Vector3<f64>, a: f64, hinge: &Vector3<f64>) -> f64 {
+    let lower = smoothstep(0.0, 0.35, -a.sin());
+    let in_front = smoothstep(hinge.z - 0.1, hinge.z + 0.4, p.z);
+    let side = (-(((p.x.abs() - 0.6).max(0.0)) / 0.3).powi(2)).exp();
+    lower * in_front * side
+}
+
+/// The analytic motion at `p` in state `s`, given its angle round the mouth `a` (0 at P1,
+/// π/2 mid upper lip) and its distance from the lip line `d` (mouth widths), with the jaw
+/// turning about an x-parallel axis through `hinge`.
+pub fn field(
+    p: &Vector3<f64>,
+    a: f64,
+    d: f64,
+    hinge: &Vector3<f64>,
+    s: &MouthState,
+) -> Vector3<f64> {
+    let p = *p;
+    let hinge = *hinge;
+    let lips = (-(d / 0.35).powi(2)).exp();
+    let mut out = Vector3::zeros();
+    // jaw: the lower half turns about the hinge; the corners and the cheeks stay
+    let member = jaw_member(&p, a, &hinge);
+    if s.jaw != 0.0 && member > 0.0 {
+        let rot = Rotation3::from_axis_angle(&Vector3::x_axis(), 0.35 * s.jaw * member);
+        out += rot * (p - hinge) + hinge - p;
+    }
+    // smile: the corners out, up and back
+    let to_corner = a.sin().abs().asin().abs();
+    let corner = (-(to_corner / 0.5).powi(2)).exp() * lips;
+    let sign = a.cos().signum();
+    out += s.smile * corner * Vector3::new(0.12 * sign, 0.06, -0.04);
+    // pucker: the lips in towards the middle and forward
+    out += s.pucker * lips * Vector3::new(-0.3 * p.x, 0.0, 0.12);
+    // raise: the upper lip up
+    let upper = smoothstep(0.0, 0.3, a.sin()) * (-(d / 0.25).powi(2)).exp();
+    out += s.raise * upper * (1.0 - 0.5 * corner) * Vector3::new(0.0, 0.08, 0.0);
+    out
 }
 
 #[cfg(test)]

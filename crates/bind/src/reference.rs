@@ -90,8 +90,20 @@ pub fn fit_states() -> Vec<MouthState> {
 pub fn reference_weights(head: &Head, states: &[MouthState]) -> Weights {
     let motions: Vec<[Vector3<f64>; POINTS]> =
         states.iter().map(|s| head.joint_motion(s)).collect();
+    fit_weights(&motions, head.mesh.len(), |v, s| {
+        head.displacement(v, &states[s])
+    })
+}
+
+/// The best four-influence skin of `vertices` vertices whose motion in state `s` is
+/// `displacement(v, s)`, the joints moving by `motions[s]` (any mesh, any reference motion).
+pub fn fit_weights(
+    motions: &[[Vector3<f64>; POINTS]],
+    vertices: usize,
+    displacement: impl Fn(usize, usize) -> Vector3<f64>,
+) -> Weights {
     // A: rows (state, axis), columns joints; the root's column is zero.
-    let rows = 3 * states.len();
+    let rows = 3 * motions.len();
     let a = DMatrix::from_fn(rows, JOINTS, |r, j| {
         if j == ROOT {
             0.0
@@ -101,9 +113,10 @@ pub fn reference_weights(head: &Head, states: &[MouthState]) -> Weights {
     });
     let g = a.transpose() * &a;
     let all: Vec<usize> = (0..JOINTS).collect();
-    let rows = (0..head.mesh.len())
+    let rows = (0..vertices)
         .map(|v| {
-            let u = DVector::from_fn(rows, |r, _| head.displacement(v, &states[r / 3])[r % 3]);
+            let moves: Vec<Vector3<f64>> = (0..motions.len()).map(|s| displacement(v, s)).collect();
+            let u = DVector::from_fn(rows, |r, _| moves[r / 3][r % 3]);
             let h = a.transpose() * u;
             let w = simplex_least_squares(&g, &h, &all);
             let mut order = all.clone();

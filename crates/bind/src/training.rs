@@ -11,6 +11,14 @@ use crate::reference::{fit_states, reference_weights};
 use crate::weights::{distance_weights, heat_weights, joint_distances, Weights};
 use crate::BindError;
 
+/// The held-out heads' seed: `bind train` refuses it, `bind evaluate` draws from it.
+pub const HELD_OUT_SEED: u64 = 1_319_952;
+
+/// `bind train`'s defaults, with which the shipped network was trained (`--seed 1`).
+pub const DEFAULT_HEADS: usize = 16;
+pub const DEFAULT_EPOCHS: usize = 150;
+pub const DEFAULT_RATE: f32 = 3e-3;
+
 /// Random mouth states the evaluation measures over (a seed of their own, not the fit's).
 pub const EVAL_STATES: usize = 60;
 
@@ -60,6 +68,17 @@ pub struct TrainOptions {
 pub fn train(
     cases: &[Case],
     options: TrainOptions,
+    progress: impl FnMut(usize, f64),
+) -> Result<Network, BindError> {
+    train_prefix(cases, options, options.epochs, progress)
+}
+
+/// The first `run` epochs of [`train`] with `options` (the same schedule: the rate halves
+/// at two thirds of `options.epochs`), so a test can check a run's deterministic start.
+pub fn train_prefix(
+    cases: &[Case],
+    options: TrainOptions,
+    run: usize,
     mut progress: impl FnMut(usize, f64),
 ) -> Result<Network, BindError> {
     if cases.is_empty() || options.epochs == 0 {
@@ -72,7 +91,7 @@ pub fn train(
     let mut adam = Adam::new(&net, options.rate);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(options.seed ^ 0x7a11);
     let mut order: Vec<usize> = (0..cases.len()).collect();
-    for epoch in 0..options.epochs {
+    for epoch in 0..options.epochs.min(run) {
         if epoch == 2 * options.epochs / 3 {
             adam = Adam::new(&net, options.rate / 2.0);
         }

@@ -1282,3 +1282,52 @@ fn lower_lip_keys_on_the_jaw_land_on_the_takes_points() {
     }
     assert!(checked >= 3, "only {checked} keys checked");
 }
+
+/// `bind` without `--method` follows the default's rule (docs/bind.md, "The default
+/// method": the network, whatever the mouth): on an open mouth (the human head, its lips
+/// apart) and a closed one (the same head with the lips welded into one surface) the output
+/// is byte for byte what `--method network` writes, and not what heat diffusion writes.
+#[test]
+fn bind_without_a_method_uses_the_network_on_open_and_closed_mouths() {
+    let dir = tempfile::tempdir().unwrap();
+    let human = character("human");
+    let rig = MouthRig::load_character(&human).unwrap();
+    let head = mouthpiece_bind::character_head(&rig, ModelUp::Y, 0.0, 3).unwrap();
+    let closed = mouthpiece_bind::families::weld_lips(&head, 36);
+    let open_path = dir.path().join("open.glb");
+    let closed_path = dir.path().join("closed.glb");
+    write_mesh(&open_path, head.positions, head.triangles);
+    write_mesh(&closed_path, closed.positions, closed.triangles);
+    for mesh in [&open_path, &closed_path] {
+        let bound = |method: Option<&str>| {
+            let out = dir
+                .path()
+                .join(format!("{}.glb", method.unwrap_or("default")));
+            let mut args = vec![
+                "bind",
+                "--character",
+                s(&human),
+                "--mesh",
+                s(mesh),
+                "--out",
+                s(&out),
+            ];
+            if let Some(m) = method {
+                args.extend(["--method", m]);
+            }
+            ok(&args);
+            std::fs::read(&out).unwrap()
+        };
+        let default = bound(None);
+        assert!(
+            default == bound(Some("network")),
+            "{}: the default's output is not --method network's",
+            mesh.display()
+        );
+        assert!(
+            default != bound(Some("heat")),
+            "{}: heat and the network wrote the same file",
+            mesh.display()
+        );
+    }
+}

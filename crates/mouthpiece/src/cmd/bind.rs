@@ -27,7 +27,8 @@ pub struct Args {
     /// Output: the skinned mesh as GLB.
     #[arg(long, required = true)]
     pub out: Option<PathBuf>,
-    /// How to compute the skin weights.
+    /// How to compute the skin weights; the network by default, whatever the mesh (it
+    /// wins on the mouth region of every family measured, docs/bind.md).
     #[arg(long, value_enum, default_value = "network")]
     pub method: MethodArg,
     /// Network weights (from `bind train`); the shipped network by default.
@@ -133,12 +134,12 @@ pub struct TrainArgs {
     #[arg(long)]
     pub seed: u64,
     /// Procedural heads to train on.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = training::DEFAULT_HEADS)]
     pub heads: usize,
-    #[arg(long, default_value_t = 150)]
+    #[arg(long, default_value_t = training::DEFAULT_EPOCHS)]
     pub epochs: usize,
     /// Adam's learning rate (halved for the last third of the epochs).
-    #[arg(long, default_value_t = 3e-3)]
+    #[arg(long, default_value_t = training::DEFAULT_RATE)]
     pub rate: f32,
     /// Layer widths: `paper` (first layer 64, concatenation 576), `small` (32, 160; the
     /// shipped network), `tiny` (for tests).
@@ -169,8 +170,8 @@ pub struct EvaluateArgs {
     pub snout: Vec<f64>,
 }
 
-/// Held-out random heads come from this seed stream; training seeds must differ.
-const HELD_OUT_SEED: u64 = 1_319_952;
+// Held-out random heads come from this seed stream; training seeds must differ.
+use mouthpiece_bind::training::HELD_OUT_SEED;
 
 /// Largest network weights file read (the `paper` network is 650 kB).
 const MAX_MODEL_BYTES: u64 = 64 * 1024 * 1024;
