@@ -177,7 +177,11 @@ mod tests {
             .collect();
         let pass = scene.pass(&rest, &cands);
         let (first, names) = scene.run_after_first_pass(&ShiftAcrossLip, &pass, &mut cands);
-        assert!((7..12).all(|i| first.get(i).is_none()), "{:?}", named(&first));
+        assert!(
+            (7..12).all(|i| first.get(i).is_none()),
+            "{:?}",
+            named(&first)
+        );
         assert_eq!(named(&names), identity(), "ghosts at {ghosts:?}");
     }
 }
