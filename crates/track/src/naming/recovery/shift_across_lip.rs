@@ -1,10 +1,12 @@
 //! A common shift across the lip: lip dots between the corners still missing are looked for
-//! with one shift of all their predictions across the lip line (a jaw's motion), the shift
-//! that lands the most of them on free candidates: at least two with both corners named;
-//! with a corner unseen, all of them but one and at least three (measured: at least two
-//! finds a few more dots but names more of them wrongly; all of them finds fewer). Shifts
-//! along the lip line are not tried: a shift of one dot spacing along the lip would land
-//! each prediction on its neighbour.
+//! with one shift of all their predictions across the lip line (a jaw's motion). Every shift
+//! from a missing dot's prediction to a free candidate that lands enough of them on free
+//! candidates is proposed (at least two with both corners named; with a corner unseen, all
+//! of them but one and at least three: without both corners the lip line is less sure, and
+//! two dots agree by chance too often), and the one score ([`score::score`]) picks among the
+//! proposals and the names without any: a shift onto the lip's paint beats one onto its
+//! motion-blur ghosts. Shifts along the lip line are not tried: a shift of one dot spacing
+//! along the lip would land each prediction on its neighbour.
 
 use mouthpiece_detect::DotRole;
 
@@ -63,10 +65,19 @@ impl Step for ShiftAcrossLip {
         let lands = |g: &labels::Prediction, c: &Candidate, shift: [f64; 2]| {
             let d2 = (c.pixel[0] - g.pixel[0] - shift[0]).powi(2)
                 + (c.pixel[1] - g.pixel[1] - shift[1]).powi(2);
-            (d2 < g.gate_px * g.gate_px && (c.point.z - g.z).abs() <= g.z_gate).then_some(d2)
+            d2 < g.gate_px * g.gate_px && (c.point.z - g.z).abs() <= g.z_gate
         };
-        // (dots landed, summed squared residual, shift)
-        let mut best: Option<(usize, f64, [f64; 2])> = None;
+        let enough = |count: usize| {
+            if corners_seen {
+                count >= MIN_LANDED_WITH_CORNERS
+            } else {
+                count >= MIN_LANDED_WITHOUT_CORNERS && count + 1 >= missing.len()
+            }
+        };
+        // Every shift from a missing dot's prediction to a free candidate that lands enough
+        // of the missing dots is proposed: the missing dots named at their predictions so
+        // shifted. The one score picks among the proposals and the names without any.
+        let mut best: Option<(f64, NameSet, [f64; 2])> = None;
         for &i in &missing {
             for &j in &free {
                 let g = &gates[i];
@@ -75,41 +86,36 @@ impl Step for ShiftAcrossLip {
                 if line.runs_along(&shift, n, MAX_ALONG_SHARE) {
                     continue;
                 }
-                let (mut count, mut residual) = (0, 0.0);
-                for &m in &missing {
-                    let nearest = free
-                        .iter()
-                        .filter_map(|&f| lands(&gates[m], &list[f], shift))
-                        .fold(f64::INFINITY, f64::min);
-                    if nearest.is_finite() {
-                        count += 1;
-                        residual += nearest;
-                    }
+                let count = missing
+                    .iter()
+                    .filter(|&&m| free.iter().any(|&f| lands(&gates[m], &list[f], shift)))
+                    .count();
+                if !enough(count) {
+                    continue;
                 }
-                if best.is_none_or(|(c, r, _)| count > c || (count == c && residual < r)) {
-                    best = Some((count, residual, shift));
+                let moved: Small<(usize, [f64; 2])> = missing
+                    .iter()
+                    .map(|&m| (m, [preds[m][0] + shift[0], preds[m][1] + shift[1]]))
+                    .collect();
+                let mut proposal = names.clone();
+                if !name_moved(ctx, pass, &mut proposal, cands, &mut scratch.solver, &moved) {
+                    continue;
+                }
+                let total = score::score(ctx, preds, &pass.head, &proposal, cands).total();
+                if best.as_ref().is_none_or(|(b, _, _)| total > *b) {
+                    best = Some((total, proposal, shift));
                 }
             }
         }
-        let enough = |count: usize| {
-            if corners_seen {
-                count >= MIN_LANDED_WITH_CORNERS
-            } else {
-                count >= MIN_LANDED_WITHOUT_CORNERS && count + 1 >= missing.len()
-            }
-        };
-        let Some((count, _, shift)) = best.filter(|b| enough(b.0)) else {
+        let Some((total, proposal, shift)) = best else {
             return false;
         };
-        let moved: Small<(usize, [f64; 2])> = missing
-            .iter()
-            .map(|&i| (i, [preds[i][0] + shift[0], preds[i][1] + shift[1]]))
-            .collect();
-        let found = name_moved(ctx, pass, names, cands, &mut scratch.solver, &moved);
-        if found {
-            tracing::debug!(count, shift_px = ?shift, "lip dots found moved together");
+        if total <= score::score(ctx, preds, &pass.head, names, cands).total() {
+            return false;
         }
-        found
+        *names = proposal;
+        tracing::debug!(shift_px = ?shift, "lip dots found moved together");
+        true
     }
 }
 
@@ -147,5 +153,35 @@ mod tests {
         let pass = scene.pass(&rest, &cands);
         let (first, names) = scene.run_after_first_pass(&ShiftAcrossLip, &pass, &mut cands);
         assert_eq!(named(&names), named(&first));
+    }
+
+    /// The lower lip dropped 7 px onto its paint (each dot 0.4 px to one side or the other)
+    /// and left faint ghosts exactly 7 px above its predictions: both shifts land all five
+    /// missing dots, the ghosts' with no residual at all. The score's paint term picks the
+    /// paint.
+    #[test]
+    fn of_two_shifts_landing_as_many_dots_the_score_picks_the_one_on_paint() {
+        let mut scene = Scene::calibrated();
+        let rest = scene.rest_pixels();
+        let mut truth = lower_lip_moved(&rest, [0.0, 7.0]);
+        for (k, p) in truth[7..12].iter_mut().enumerate() {
+            p[0] += if k % 2 == 0 { 0.4 } else { -0.4 };
+        }
+        let mut cands = scene.candidates_at(&truth);
+        let face = neutral_face();
+        let ghosts: Vec<usize> = (7..12)
+            .map(|i| {
+                let at = [rest[i][0], rest[i][1] - 7.0];
+                scene.push(&mut cands, at, face[i].z, DotRole::Lip, 0.4)
+            })
+            .collect();
+        let pass = scene.pass(&rest, &cands);
+        let (first, names) = scene.run_after_first_pass(&ShiftAcrossLip, &pass, &mut cands);
+        assert!(
+            (7..12).all(|i| first.get(i).is_none()),
+            "{:?}",
+            named(&first)
+        );
+        assert_eq!(named(&names), identity(), "ghosts at {ghosts:?}");
     }
 }
