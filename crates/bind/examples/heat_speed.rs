@@ -28,7 +28,10 @@ fn main() {
     }
     let start = Instant::now();
     let slow = heat_weights_iterative(&head.mesh, &d, 1.0);
-    println!("conjugate gradients: {:.2} s", start.elapsed().as_secs_f64());
+    println!(
+        "conjugate gradients: {:.2} s",
+        start.elapsed().as_secs_f64()
+    );
     let worst = fast
         .rows
         .iter()

@@ -336,8 +336,12 @@ mod tests {
         .build();
         let mut mesh = head.mesh.clone();
         let base = mesh.positions.len() as u32;
-        mesh.positions
-            .extend([[0.0, 0.0, -0.5], [0.1, 0.0, -0.5], [0.0, 0.1, -0.5], [9.0; 3]]);
+        mesh.positions.extend([
+            [0.0, 0.0, -0.5],
+            [0.1, 0.0, -0.5],
+            [0.0, 0.1, -0.5],
+            [9.0; 3],
+        ]);
         mesh.triangles.push([base, base + 1, base + 2]);
         let points = std::array::from_fn(|k| mesh.vertex(head.point_vertices[k]));
         let d = joint_distances(&mesh, &points);
@@ -351,8 +355,14 @@ mod tests {
             }
         }
         assert!(worst < 1e-4, "largest difference {worst}");
-        assert!(fast.rows.iter().all(|r| (r.iter().sum::<f64>() - 1.0).abs() < 1e-12));
-        assert_eq!(fast.rows[base as usize + 3][nearest[base as usize + 3]], 1.0);
+        assert!(fast
+            .rows
+            .iter()
+            .all(|r| (r.iter().sum::<f64>() - 1.0).abs() < 1e-12));
+        assert_eq!(
+            fast.rows[base as usize + 3][nearest[base as usize + 3]],
+            1.0
+        );
         // heat reaches the lips: some vertex follows each point most
         for j in 0..POINTS {
             assert!(fast.rows.iter().any(|r| r[j] > 0.5), "point {j}");
