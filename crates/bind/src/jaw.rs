@@ -8,6 +8,7 @@
 
 use nalgebra::{Rotation3, Vector3};
 
+use crate::mesh::Mesh;
 use crate::procedural::{Head, MouthState, POINTS};
 use crate::weights::{Weights, ROOT};
 
@@ -40,6 +41,24 @@ pub fn jaw_shares(positions: &[Vector3<f64>], weights: &Weights, hinge: &Vector3
         .zip(&weights.rows)
         .map(|(p, row)| row[ROOT] * jaw_mask(p, hinge))
         .collect()
+}
+
+/// Where the jaw hinges, read from the face (mouth frame, mouth widths), for a character that
+/// gives no hinge: at the mouth's level, `0.42 + 0.6 D` mouth widths behind the mouth, where
+/// `D` is the lower face's depth: how far behind the mouth the surface below it reaches (the
+/// back-most vertex with `|x| ≤ 0.25`, `y ≤ −0.25`: the chin, the jaw's underside, a muzzle).
+/// The constants are the procedural heads' own hinge (0.6 behind the face plus 0.6 of the
+/// muzzle's length, with the face 0.3 deep). None when the lower face reaches less than 0.2
+/// mouth widths back (a mask cut off at the chin: no depth to read); the result is kept
+/// between 0.6 and 4 mouth widths behind the mouth.
+pub fn hinge_from_mesh(mesh: &Mesh) -> Option<Vector3<f64>> {
+    let depth = mesh
+        .positions
+        .iter()
+        .filter(|p| p[0].abs() <= 0.25 && p[1] <= -0.25)
+        .map(|p| -p[2])
+        .fold(f64::NEG_INFINITY, f64::max);
+    (depth >= 0.2).then(|| Vector3::new(0.0, 0.0, -(0.42 + 0.6 * depth).clamp(0.6, 4.0)))
 }
 
 /// The jaw's angle in a mouth state of the procedural motion (radians; 0.35 at full opening,
@@ -82,14 +101,27 @@ pub fn skin_vertex(
 /// than 0.3 mouth widths from every point): `(all without, all with, chin without, chin
 /// with)`, each RMS in % of the mouth width.
 pub fn jaw_errors(head: &Head, weights: &Weights, states: &[MouthState]) -> [f64; 4] {
-    let hinge = Vector3::from(head.hinge);
+    jaw_errors_at(head, weights, states, &Vector3::from(head.hinge))
+}
+
+/// [`jaw_errors`] with the skin's jaw at `hinge` (its mask and its turn; a binding that
+/// guessed the hinge), the motion still turning about the head's own; the chin is the same
+/// vertices as in [`jaw_errors`].
+pub fn jaw_errors_at(
+    head: &Head,
+    weights: &Weights,
+    states: &[MouthState],
+    hinge: &Vector3<f64>,
+) -> [f64; 4] {
+    let own = Vector3::from(head.hinge);
+    let hinge = *hinge;
     let rest: Vec<Vector3<f64>> = (0..head.mesh.len()).map(|v| head.mesh.vertex(v)).collect();
     let points: [Vector3<f64>; POINTS] =
         std::array::from_fn(|k| head.mesh.vertex(head.point_vertices[k]));
     let shares = jaw_shares(&rest, weights, &hinge);
     let chin: Vec<bool> = rest
         .iter()
-        .map(|p| jaw_mask(p, &hinge) >= 0.5 && points.iter().all(|q| (p - q).norm() > 0.3))
+        .map(|p| jaw_mask(p, &own) >= 0.5 && points.iter().all(|q| (p - q).norm() > 0.3))
         .collect();
     let mut sums = [0.0; 4];
     let mut counts = [0usize; 4];
@@ -157,5 +189,64 @@ mod tests {
             &id,
         );
         assert!((out - v).norm() < 1e-12);
+    }
+
+    #[test]
+    fn the_hinge_read_from_the_mesh_is_near_the_generators_own() {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x6a77);
+        let mut heads: Vec<HeadParams> = (0..12).map(|_| HeadParams::random(&mut rng)).collect();
+        // the two ends of the family: a flat human face and a long muzzle
+        for snout in [0.0, 1.0] {
+            heads.push(HeadParams::around_points(
+                HeadParams::mouth_points(0.2, 0.2, 0.3),
+                snout,
+                3,
+            ));
+        }
+        let mut depths = Vec::new();
+        for params in &heads {
+            let head = params.build();
+            let own = Vector3::from(head.hinge);
+            let found = hinge_from_mesh(&head.mesh).expect("a procedural head has an underside");
+            assert!(
+                (found - own).norm() <= 0.15,
+                "snout {:.2}, face depth {:.2}: found {found:?}, own {own:?}",
+                params.snout,
+                params.face_depth
+            );
+            depths.push(found.z);
+        }
+        // it follows the head: short faces and long muzzles get different hinges
+        let (lo, hi) = depths
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &z| {
+                (a.min(z), b.max(z))
+            });
+        assert!(hi - lo > 0.8, "hinges from {lo} to {hi}");
+    }
+
+    #[test]
+    fn a_face_without_an_underside_has_no_hinge_read_from_it() {
+        // a flat mask facing +z, cut off at the chin
+        let mut positions = Vec::new();
+        for i in 0..5 {
+            for j in 0..5 {
+                positions.push([i as f64 * 0.5 - 1.0, j as f64 * 0.5 - 1.0, 0.0]);
+            }
+        }
+        let mut triangles = Vec::new();
+        for i in 0..4u32 {
+            for j in 0..4u32 {
+                let a = i * 5 + j;
+                triangles.push([a, a + 5, a + 1]);
+                triangles.push([a + 1, a + 5, a + 6]);
+            }
+        }
+        let mask = Mesh {
+            positions,
+            triangles,
+        };
+        assert_eq!(hinge_from_mesh(&mask), None);
     }
 }

@@ -193,8 +193,9 @@ pub struct BindOptions<'a> {
     pub parent_bone: Option<String>,
     /// Add a jaw joint (carrying the chin and the lower lip's joints).
     pub jaw: bool,
-    /// The jaw's hinge, model frame; none: the character's (`[rig] jaw_pivot`, else the
-    /// rig's default behind and above the mouth), where a take's jaw turns.
+    /// The jaw's hinge, model frame; none: the character's (`[rig] jaw_pivot`), else read
+    /// from the face ([`jaw::hinge_from_mesh`]), else the rig's default behind and above the
+    /// mouth; where a take's jaw turns.
     pub jaw_hinge: Option<[f64; 3]>,
 }
 
@@ -272,7 +273,12 @@ pub fn bind(
             }
             [p.x, p.y, p.z]
         }
-        None => rig.jaw_hinge(),
+        // the character's, else read from the face, else the rig's default
+        None => rig.jaw_pivot().unwrap_or_else(|| {
+            jaw::hinge_from_mesh(&prepared.mesh)
+                .map(|h| [h.x * width, h.y * width, h.z * width])
+                .unwrap_or_else(|| rig.jaw_hinge())
+        }),
     };
     let jaw_shares: Vec<f64> = if options.jaw {
         let positions: Vec<Vector3<f64>> = (0..prepared.mesh.len())

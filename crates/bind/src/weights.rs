@@ -6,7 +6,7 @@
 
 use nalgebra::Vector3;
 
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, SparseSym};
 use crate::procedural::POINTS;
 
 /// Columns: the twelve mouth points, then the root.
@@ -156,12 +156,32 @@ pub fn heat_weights(mesh: &Mesh, distances: &[[f64; POINTS]], mouth_width: f64) 
 }
 
 /// [`heat_weights`] with another root distance (`bench`'s sweep of it).
+///
+/// The matrix `L + M H` is the same for every joint, so it is factorised once (a sparse
+/// Cholesky with a fill-reducing ordering, `faer`) and the thirteen right-hand sides are
+/// solved with that one factor.
 pub fn heat_weights_with(
     mesh: &Mesh,
     distances: &[[f64; POINTS]],
     mouth_width: f64,
     root_distance: f64,
 ) -> Weights {
+    let (laplacian, heat, nearest) = heat_system(mesh, distances, mouth_width, root_distance);
+    match heat_solve_cholesky(&laplacian, &heat, &nearest) {
+        Some(rows) => normalise_heat(rows),
+        // not expected (the matrix is symmetric positive definite): the iterative solve
+        None => heat_solve_cg(&laplacian, &heat, &nearest),
+    }
+}
+
+/// The heat system: the cotangent Laplacian, each vertex's heat `M H` (unit-free), and the
+/// joint each vertex is nearest to (the root when no point is nearer than `root_distance`).
+fn heat_system(
+    mesh: &Mesh,
+    distances: &[[f64; POINTS]],
+    mouth_width: f64,
+    root_distance: f64,
+) -> (SparseSym, Vec<f64>, Vec<usize>) {
     let n = mesh.len();
     let (laplacian, area) = mesh.cotangent_laplacian();
     let mut nearest = vec![ROOT; n];
@@ -180,6 +200,67 @@ pub fn heat_weights_with(
     }
     // The Laplacian's cotangent weights are scale-free; the areas carry units², removed
     // above so the balance between diffusion and heat does not depend on the units.
+    (laplacian, heat, nearest)
+}
+
+/// Solves `(L + M H) w_j = M H p_j` for every joint with one sparse Cholesky factor. A
+/// vertex in no triangle (an empty row) keeps its nearest joint, as the iterative solve's
+/// first guess leaves it. None when the factorisation fails.
+fn heat_solve_cholesky(
+    laplacian: &SparseSym,
+    heat: &[f64],
+    nearest: &[usize],
+) -> Option<Vec<[f64; JOINTS]>> {
+    use faer::linalg::solvers::Solve;
+    use faer::sparse::{SparseColMat, Triplet};
+
+    let n = heat.len();
+    let mut entries = Vec::with_capacity(n + laplacian.off.iter().map(Vec::len).sum::<usize>());
+    let mut rhs = faer::Mat::<f64>::zeros(n, JOINTS);
+    for v in 0..n {
+        let d = laplacian.diag[v] + heat[v];
+        if d > 0.0 {
+            entries.push(Triplet::new(v, v, d));
+            rhs[(v, nearest[v])] = heat[v];
+        } else {
+            entries.push(Triplet::new(v, v, 1.0));
+            rhs[(v, nearest[v])] = 1.0;
+        }
+        entries.extend(
+            laplacian.off[v]
+                .iter()
+                .filter(|&&(u, _)| (u as usize) > v)
+                .map(|&(u, w)| Triplet::new(u as usize, v, w)),
+        );
+    }
+    let matrix = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &entries).ok()?;
+    drop(entries);
+    let llt = matrix.sp_cholesky(faer::Side::Lower).ok()?;
+    drop(matrix);
+    llt.solve_in_place(rhs.as_mut());
+    let rows = (0..n)
+        .map(|v| std::array::from_fn(|j| rhs[(v, j)]))
+        .collect::<Vec<[f64; JOINTS]>>();
+    rows.iter()
+        .all(|r| r.iter().all(|w| w.is_finite()))
+        .then_some(rows)
+}
+
+/// [`heat_weights`] solved as before the shared factorisation: conjugate gradients, one joint at
+/// a time (`examples/heat_speed.rs` times both; the unit tests compare them).
+pub fn heat_weights_iterative(
+    mesh: &Mesh,
+    distances: &[[f64; POINTS]],
+    mouth_width: f64,
+) -> Weights {
+    let (laplacian, heat, nearest) = heat_system(mesh, distances, mouth_width, ROOT_DISTANCE);
+    heat_solve_cg(&laplacian, &heat, &nearest)
+}
+
+/// The heat solve by conjugate gradients (Jacobi preconditioner, relative residual 1e-6), one
+/// joint at a time: the reference the factorised solve is checked against.
+fn heat_solve_cg(laplacian: &SparseSym, heat: &[f64], nearest: &[usize]) -> Weights {
+    let n = heat.len();
     let mut rows = vec![[0.0; JOINTS]; n];
     let mut x = vec![0.0; n];
     for j in 0..JOINTS {
@@ -189,12 +270,20 @@ pub fn heat_weights_with(
         for v in 0..n {
             x[v] = if nearest[v] == j { 1.0 } else { 0.0 };
         }
-        laplacian.solve_cg(&heat, &b, &mut x, 1e-6, 4 * n.max(100));
+        laplacian.solve_cg(heat, &b, &mut x, 1e-6, 4 * n.max(100));
         for v in 0..n {
-            rows[v][j] = x[v].max(0.0);
+            rows[v][j] = x[v];
         }
     }
+    normalise_heat(rows)
+}
+
+/// Negative weights (round-off) to zero, rows to sum 1 (a row of zeros to the root).
+fn normalise_heat(mut rows: Vec<[f64; JOINTS]>) -> Weights {
     for row in &mut rows {
+        for w in row.iter_mut() {
+            *w = w.max(0.0);
+        }
         let sum: f64 = row.iter().sum();
         if sum > 0.0 {
             for w in row.iter_mut() {
@@ -234,5 +323,49 @@ mod tests {
         let w = distance_weights(&[near, far], 1.0);
         assert!(w.rows[0][4] > 0.99);
         assert!(w.rows[1][ROOT] > 0.99);
+    }
+
+    #[test]
+    fn the_factorised_heat_solve_matches_the_iterative_one() {
+        // a procedural head with a separate shell and a vertex in no triangle
+        let head = crate::procedural::HeadParams::around_points(
+            crate::procedural::HeadParams::mouth_points(0.3, 0.2, 0.4),
+            0.5,
+            3,
+        )
+        .build();
+        let mut mesh = head.mesh.clone();
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend([
+            [0.0, 0.0, -0.5],
+            [0.1, 0.0, -0.5],
+            [0.0, 0.1, -0.5],
+            [9.0; 3],
+        ]);
+        mesh.triangles.push([base, base + 1, base + 2]);
+        let points = std::array::from_fn(|k| mesh.vertex(head.point_vertices[k]));
+        let d = joint_distances(&mesh, &points);
+        let nearest = heat_system(&mesh, &d, 1.0, ROOT_DISTANCE).2;
+        let fast = heat_weights(&mesh, &d, 1.0);
+        let reference = heat_weights_iterative(&mesh, &d, 1.0);
+        let mut worst: f64 = 0.0;
+        for (a, b) in fast.rows.iter().zip(&reference.rows) {
+            for j in 0..JOINTS {
+                worst = worst.max((a[j] - b[j]).abs());
+            }
+        }
+        assert!(worst < 1e-4, "largest difference {worst}");
+        assert!(fast
+            .rows
+            .iter()
+            .all(|r| (r.iter().sum::<f64>() - 1.0).abs() < 1e-12));
+        assert_eq!(
+            fast.rows[base as usize + 3][nearest[base as usize + 3]],
+            1.0
+        );
+        // heat reaches the lips: some vertex follows each point most
+        for j in 0..POINTS {
+            assert!(fast.rows.iter().any(|r| r[j] > 0.5), "point {j}");
+        }
     }
 }

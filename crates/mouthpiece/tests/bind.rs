@@ -244,7 +244,13 @@ fn human_and_wolf_bind_with_every_method_into_valid_skinned_glbs() {
                 let world = match k {
                     0 => nalgebra::Matrix4::identity(),
                     1 => placement,
-                    2 => placement * nalgebra::Matrix4::new_translation(&rig.jaw_hinge().into()),
+                    2 => {
+                        // the jaw's node: where `bind` put the hinge (read from the face
+                        // for the human, the character's pivot for the wolf)
+                        let t = &glb.doc["nodes"][node_named(&glb.doc, "jaw")]["translation"];
+                        let hinge = nalgebra::Vector3::from_fn(|k, _| t[k].as_f64().unwrap());
+                        placement * nalgebra::Matrix4::new_translation(&hinge)
+                    }
                     _ => {
                         let r = rig.points()[k - 3].rest;
                         placement * nalgebra::Matrix4::new_translation(&r.into())
@@ -1330,4 +1336,63 @@ fn bind_without_a_method_uses_the_network_on_open_and_closed_mouths() {
             mesh.display()
         );
     }
+}
+
+/// The jaw's hinge: read from the face when the character gives none (the human), the
+/// character's `[rig] jaw_pivot` when it does (the wolf), and `--jaw-hinge` over both.
+#[test]
+fn the_jaw_hinge_comes_from_the_flag_the_character_or_the_face() {
+    let dir = tempfile::tempdir().unwrap();
+    let jaw_at = |name: &str, up: &str, extra: &[&str]| {
+        let out = dir.path().join(format!("{name}-{}.glb", extra.len()));
+        let (file, mesh) = (character(name), shipped_head(name));
+        let mut args = vec![
+            "bind",
+            "--character",
+            s(&file),
+            "--mesh",
+            s(&mesh),
+            "--out",
+            s(&out),
+            "--method",
+            "distance",
+            "--model-up",
+            up,
+        ];
+        args.extend(extra);
+        ok(&args);
+        let glb = Glb::read(&out);
+        let jaw = node_named(&glb.doc, "jaw");
+        let t = &glb.doc["nodes"][jaw]["translation"];
+        nalgebra::Vector3::from_fn(|k, _| t[k].as_f64().unwrap_or(0.0))
+    };
+    let human = MouthRig::load_character(&character("human")).unwrap();
+    assert!(human.jaw_pivot().is_none());
+    let w = human.mouth_width();
+    let found = jaw_at("human", "y", &[]);
+    let default = nalgebra::Vector3::from(human.jaw_hinge());
+    // at the mouth's level, behind it, and not the rig's default (0.5 up, 1.6 back)
+    assert!(found.y.abs() < 1e-6 * w, "{found:?}");
+    assert!(
+        found.z <= -0.6 * w + 1e-6 && found.z >= -4.0 * w,
+        "{found:?}"
+    );
+    assert!(
+        (found - default).norm() > 0.1 * w,
+        "{found:?} is the default"
+    );
+    // the flag wins over the face
+    let flag = "0,-0.02,-0.06";
+    let placement = mouthpiece_bind::file_placement(&human, ModelUp::Y);
+    let want = placement.inverse_transform_point(&nalgebra::Point3::new(0.0, -0.02, -0.06));
+    let given = jaw_at("human", "y", &["--jaw-hinge", flag]);
+    assert!(
+        (given - want.coords).norm() < 1e-6,
+        "{given:?} against {want:?}"
+    );
+    // the character's pivot wins over the face
+    let wolf = MouthRig::load_character(&character("wolf")).unwrap();
+    let pivot = nalgebra::Vector3::from(wolf.jaw_pivot().unwrap());
+    let at = jaw_at("wolf", "z", &[]);
+    assert!((at - pivot).norm() < 1e-6, "{at:?} against {pivot:?}");
 }

@@ -47,7 +47,8 @@ pub struct Args {
     #[arg(long)]
     pub parent_bone: Option<String>,
     /// The jaw's hinge `x,y,z` in the character's model frame and units; by default the
-    /// character's `[rig] jaw_pivot`, else the rig's default behind and above the mouth.
+    /// character's `[rig] jaw_pivot`, else read from the face's depth below the mouth
+    /// (docs/bind.md), else the rig's default behind and above the mouth.
     #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     pub jaw_hinge: Option<[f64; 3]>,
     /// No jaw joint: the chin stays with the head.
