@@ -28,6 +28,17 @@ const HEADS: usize = 3;
 /// The best-fit reference is computed up to this many vertices (its cost is per vertex).
 const REFERENCE_LIMIT: usize = 30_000;
 
+/// One family's meshes: how many, their vertex range, and per method the sums of the
+/// (all, chin/lips) RMS and how many meshes were scored.
+struct Family {
+    name: String,
+    count: usize,
+    lo: usize,
+    hi: usize,
+    sums: [[f64; 2]; 4],
+    counts: [usize; 4],
+}
+
 fn held_out() -> Vec<mouthpiece_bind::procedural::Head> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(HELD_OUT_SEED);
     (0..HEADS)
@@ -149,7 +160,7 @@ fn eval(dir: &Path, large: bool, ratios_only: bool) {
     }
     // per family: vertices range, and per method the sums of (all, region)
     let methods = ["network", "heat", "distance", "reference"];
-    let mut families: Vec<(String, usize, usize, usize, [[f64; 2]; 4], [usize; 4])> = Vec::new();
+    let mut families: Vec<Family> = Vec::new();
     eprintln!(
         "| family | mesh | vertices | shells | lip path ratio | method | RMS all | RMS chin/lips |"
     );
@@ -170,24 +181,31 @@ fn eval(dir: &Path, large: bool, ratios_only: bool) {
         if subject.mesh.len() <= REFERENCE_LIMIT {
             all.push(("reference", reference(&t, subject.mesh.len())));
         }
-        let at = match families.iter().position(|f| &f.0 == family) {
+        let at = match families.iter().position(|f| &f.name == family) {
             Some(at) => at,
             None => {
-                families.push((family.clone(), 0, usize::MAX, 0, [[0.0; 2]; 4], [0; 4]));
+                families.push(Family {
+                    name: family.clone(),
+                    count: 0,
+                    lo: usize::MAX,
+                    hi: 0,
+                    sums: [[0.0; 2]; 4],
+                    counts: [0; 4],
+                });
                 families.len() - 1
             }
         };
         let f = &mut families[at];
-        f.1 += 1;
-        f.2 = f.2.min(subject.mesh.len());
-        f.3 = f.3.max(subject.mesh.len());
+        f.count += 1;
+        f.lo = f.lo.min(subject.mesh.len());
+        f.hi = f.hi.max(subject.mesh.len());
         let shells = subject.mesh.topology().shells;
         for (m, w) in &all {
             let (rms, region) = errors(subject, w, &t);
             let k = methods.iter().position(|x| x == m).unwrap();
-            f.4[k][0] += rms;
-            f.4[k][1] += region;
-            f.5[k] += 1;
+            f.sums[k][0] += rms;
+            f.sums[k][1] += region;
+            f.counts[k] += 1;
             eprintln!(
                 "| {family} | {} | {} | {shells} | {ratio:.2} | {m} | {rms:.2} | {region:.2} |",
                 subject.name,
@@ -197,7 +215,15 @@ fn eval(dir: &Path, large: bool, ratios_only: bool) {
     }
     println!("| family | meshes | vertices | method | RMS all | RMS chin/lips |");
     println!("|---|---:|---:|---|---:|---:|");
-    for (family, count, lo, hi, sums, counts) in &families {
+    for Family {
+        name: family,
+        count,
+        lo,
+        hi,
+        sums,
+        counts,
+    } in &families
+    {
         for (k, m) in methods.iter().enumerate() {
             if counts[k] == 0 {
                 continue;

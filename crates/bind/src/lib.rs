@@ -15,6 +15,8 @@
 //! - [`reference`]: reference weights (least squares over the probability simplex).
 //! - [`eval`]: KL divergence and skinned-deformation error.
 //! - [`training`]: data sets of procedural heads, training and the evaluation table.
+//! - [`families`]: meshes the generator did not make, scored against the procedural motion
+//!   as a function of position (docs/bind.md, "Meshes from outside the generator").
 
 // Numerical code over vertices × joints: index loops read like the formulas they implement.
 #![allow(clippy::needless_range_loop)]
