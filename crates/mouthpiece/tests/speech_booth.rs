@@ -60,11 +60,22 @@ fn start_daemon(dir: &Path, config: &str, booth: &booth::Booth) -> Daemon {
     Daemon(command.spawn().unwrap())
 }
 
+/// A `mouthpiece.v1` client subscribed to the frames.
 async fn connect(port: u16) -> Client {
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
-        if let Ok((ws, _)) = tokio_tungstenite::connect_async(format!("ws://127.0.0.1:{port}/")).await
-        {
+        let mut request = format!("ws://127.0.0.1:{port}/")
+            .into_client_request()
+            .unwrap();
+        request.headers_mut().insert(
+            "Sec-WebSocket-Protocol",
+            tokio_tungstenite::tungstenite::http::HeaderValue::from_static("mouthpiece.v1"),
+        );
+        if let Ok((mut ws, _)) = tokio_tungstenite::connect_async(request).await {
+            ws.send(Message::Text(json!({"type": "subscribe"}).to_string().into()))
+                .await
+                .unwrap();
             return ws;
         }
         assert!(Instant::now() < deadline, "the daemon never listened");
@@ -186,11 +197,16 @@ async fn a_take_on_a_booth_without_a_camera_holds_the_speech_driven_steps_and_th
     )
     .await;
     assert_eq!(started["type"], "result", "{started}\n{}", log());
-    let take = PathBuf::from(started["detail"]["file"].as_str().unwrap());
+    // The file as the daemon names it, relative to its working directory.
+    let take = dir
+        .path()
+        .join(started["detail"]["file"].as_str().unwrap());
     // Four seconds of steps (50 a second) published while the take records: a line's worth
     // of speech and a pause.
     let mut published = 0;
+    let deadline = Instant::now() + Duration::from_secs(120);
     while published < 200 {
+        assert!(Instant::now() < deadline, "no 200 frames in 2 minutes\n{}", log());
         let v = next_json(&mut ws).await;
         if v["type"] == "frame" {
             let human = v["characters"]
@@ -385,7 +401,9 @@ async fn covered_lips_on_a_replayed_session_hand_the_mouth_to_the_booths_speech_
     // by the session's own clock (the replay's device time, `capture_us`, less its passes).
     let mut rows: Vec<(f64, String, Value)> = Vec::new();
     let mut first_pass = None;
+    let deadline = Instant::now() + Duration::from_secs(180);
     loop {
+        assert!(Instant::now() < deadline, "no whole pass in 3 minutes\n{}", log());
         let v = next_json(&mut ws).await;
         if v["type"] != "frame" {
             continue;

@@ -82,7 +82,11 @@ pub fn write_lines(path: &Path, character: &str, out: &mut dyn Write) -> anyhow:
             "confidence": field("confidence"),
             "head": {"rotation": pose["rotation"], "translation": pose["translation"]},
             "head_lost": pose["lost"].as_bool().unwrap_or(false),
-            "curve": field("curve"),
+            // The take holds the curve's points; the line format names how it was made.
+            "curve": match field("curve") {
+                Value::Null => Value::Null,
+                points => json!({"method": "recorded", "closed": true, "points": points}),
+            },
             "source": field("source"),
         });
         for (from, to) in [("rig", "rig"), ("head", "character_head")] {
