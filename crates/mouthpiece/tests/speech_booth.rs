@@ -60,11 +60,24 @@ fn start_daemon(dir: &Path, config: &str, booth: &booth::Booth) -> Daemon {
     Daemon(command.spawn().unwrap())
 }
 
+/// A `mouthpiece.v1` client subscribed to the frames.
 async fn connect(port: u16) -> Client {
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
-        if let Ok((ws, _)) = tokio_tungstenite::connect_async(format!("ws://127.0.0.1:{port}/")).await
-        {
+        let mut request = format!("ws://127.0.0.1:{port}/")
+            .into_client_request()
+            .unwrap();
+        request.headers_mut().insert(
+            "Sec-WebSocket-Protocol",
+            tokio_tungstenite::tungstenite::http::HeaderValue::from_static("mouthpiece.v1"),
+        );
+        if let Ok((mut ws, _)) = tokio_tungstenite::connect_async(request).await {
+            ws.send(Message::Text(
+                json!({"type": "subscribe"}).to_string().into(),
+            ))
+            .await
+            .unwrap();
             return ws;
         }
         assert!(Instant::now() < deadline, "the daemon never listened");
@@ -186,11 +199,18 @@ async fn a_take_on_a_booth_without_a_camera_holds_the_speech_driven_steps_and_th
     )
     .await;
     assert_eq!(started["type"], "result", "{started}\n{}", log());
-    let take = PathBuf::from(started["detail"]["file"].as_str().unwrap());
+    // The file as the daemon names it, relative to its working directory.
+    let take = dir.path().join(started["detail"]["file"].as_str().unwrap());
     // Four seconds of steps (50 a second) published while the take records: a line's worth
     // of speech and a pause.
     let mut published = 0;
+    let deadline = Instant::now() + Duration::from_secs(120);
     while published < 200 {
+        assert!(
+            Instant::now() < deadline,
+            "no 200 frames in 2 minutes\n{}",
+            log()
+        );
         let v = next_json(&mut ws).await;
         if v["type"] == "frame" {
             let human = v["characters"]
@@ -204,7 +224,11 @@ async fn a_take_on_a_booth_without_a_camera_holds_the_speech_driven_steps_and_th
             published += 1;
         }
     }
-    let stopped = request(&mut ws, json!({"type": "record", "id": 2, "action": "stop"})).await;
+    let stopped = request(
+        &mut ws,
+        json!({"type": "record", "id": 2, "action": "stop"}),
+    )
+    .await;
     assert_eq!(stopped["type"], "result", "{stopped}\n{}", log());
     let frames = stopped["detail"]["frames"].as_u64().unwrap();
     // SAFETY: kill(2) on our own child with SIGTERM.
@@ -235,7 +259,10 @@ async fn a_take_on_a_booth_without_a_camera_holds_the_speech_driven_steps_and_th
     let levels = sound_levels(&take);
     assert!(levels.len() >= 150, "{} sound blocks", levels.len());
     let (first_step, last_step) = (steps[0].0, steps.last().unwrap().0);
-    assert!(levels[0].0 <= first_step + 100_000_000 && levels.last().unwrap().0 + 100_000_000 >= last_step);
+    assert!(
+        levels[0].0 <= first_step + 100_000_000
+            && levels.last().unwrap().0 + 100_000_000 >= last_step
+    );
 
     // The mouth moves with the sound: its distance from the quietest step's pose follows the
     // sound's level around each step (the loudness over the 100 ms before it).
@@ -261,7 +288,10 @@ async fn a_take_on_a_booth_without_a_camera_holds_the_speech_driven_steps_and_th
         .collect();
     let r = pearson(&loudness, &moved);
     let max_moved = moved.iter().copied().fold(0.0, f64::max);
-    eprintln!("{} steps, mouth vs sound r = {r:.2}, largest move {max_moved:.4}", steps.len());
+    eprintln!(
+        "{} steps, mouth vs sound r = {r:.2}, largest move {max_moved:.4}",
+        steps.len()
+    );
     assert!(max_moved > 1e-3, "the mouth never moved");
     assert!(r > 0.3, "the mouth does not follow the sound: r = {r:.2}");
 
@@ -282,7 +312,10 @@ async fn a_take_on_a_booth_without_a_camera_holds_the_speech_driven_steps_and_th
     let csv = std::fs::read_to_string(&out).unwrap();
     let rows = csv.lines().filter(|l| !l.starts_with('#')).count() as u64;
     assert!(rows >= frames, "{rows} CSV lines for {frames} steps");
-    assert!(dir.path().join("nocam.wav").exists(), "the WAV beside the CSV");
+    assert!(
+        dir.path().join("nocam.wav").exists(),
+        "the WAV beside the CSV"
+    );
 }
 
 /// Paints the lip dots' part of the colour image with the skin beside the mouth: a hand over
@@ -385,7 +418,13 @@ async fn covered_lips_on_a_replayed_session_hand_the_mouth_to_the_booths_speech_
     // by the session's own clock (the replay's device time, `capture_us`, less its passes).
     let mut rows: Vec<(f64, String, Value)> = Vec::new();
     let mut first_pass = None;
+    let deadline = Instant::now() + Duration::from_secs(180);
     loop {
+        assert!(
+            Instant::now() < deadline,
+            "no whole pass in 3 minutes\n{}",
+            log()
+        );
         let v = next_json(&mut ws).await;
         if v["type"] != "frame" {
             continue;
@@ -423,13 +462,21 @@ async fn covered_lips_on_a_replayed_session_hand_the_mouth_to_the_booths_speech_
         }
     }
     let summary: Vec<&str> = runs.iter().copied().filter(|s| *s != "blend").collect();
-    assert_eq!(summary, ["camera", "speech", "camera"], "{runs:?}\n{}", log());
+    assert_eq!(
+        summary,
+        ["camera", "speech", "camera"],
+        "{runs:?}\n{}",
+        log()
+    );
     let speech: Vec<&(f64, String, Value)> = rows.iter().filter(|r| r.1 == "speech").collect();
     let (speech_from, speech_to) = (speech[0].0, speech.last().unwrap().0);
     eprintln!("speech from {speech_from:.2} to {speech_to:.2} s of the session");
     // Within the cover, after the hold (300 ms), and back to the camera soon after it.
     assert!(speech_from >= covered_from + 0.2 && speech_to < covered_to + 0.5);
-    assert!(speech_to - speech_from > 1.0, "speech drove {speech_from}..{speech_to}");
+    assert!(
+        speech_to - speech_from > 1.0,
+        "speech drove {speech_from}..{speech_to}"
+    );
     // The mouth moves from the sound while the lips are covered.
     let openings: Vec<f64> = speech.iter().map(|r| step_size(&r.2, &rows[0].2)).collect();
     let (lo, hi) = openings

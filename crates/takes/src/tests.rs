@@ -317,11 +317,17 @@ fn a_take_of_steps_without_a_camera_holds_the_derived_channels_at_their_wall_clo
     let mut wolf = Vec::new();
     while let Some(m) = reader.next_message().unwrap() {
         if &*m.topic == "/character/wolf" {
-            wolf.push((m.log_time, serde_json::from_slice::<serde_json::Value>(&m.data).unwrap()));
+            wolf.push((
+                m.log_time,
+                serde_json::from_slice::<serde_json::Value>(&m.data).unwrap(),
+            ));
         }
     }
     for (seq, (log_time, message)) in wolf.iter().enumerate() {
-        assert_eq!(*log_time, (1_795_316_645_000_000 + seq as u64 * 33_333) * 1000);
+        assert_eq!(
+            *log_time,
+            (1_795_316_645_000_000 + seq as u64 * 33_333) * 1000
+        );
         assert_eq!(message["seq"], seq);
     }
     assert_eq!(wolf[7].1["source"], "speech");
@@ -616,7 +622,10 @@ fn a_take_records_the_sound_and_where_it_stopped() {
 
 /// Frames and sound written until a disk with room for `space` bytes (`None`: room for all)
 /// fills: the writer's result, and the file.
-fn take_with_sound_on_a_disk(dir: &Path, space: Option<u64>) -> (crate::writer::WriterResult, std::path::PathBuf) {
+fn take_with_sound_on_a_disk(
+    dir: &Path,
+    space: Option<u64>,
+) -> (crate::writer::WriterResult, std::path::PathBuf) {
     use mouthpiece_frame::AudioBus;
     let path = dir.join(format!("take-{}.mcap", space.unwrap_or(0)));
     let file = std::fs::File::create(&path).unwrap();
@@ -647,7 +656,12 @@ fn take_with_sound_on_a_disk(dir: &Path, space: Option<u64>) -> (crate::writer::
             .unwrap();
     }
     for i in 0..200u64 {
-        bus.publish(sound(i * 480, 480, i as i16, t0 + Duration::from_millis(i * 10)));
+        bus.publish(sound(
+            i * 480,
+            480,
+            i as i16,
+            t0 + Duration::from_millis(i * 10),
+        ));
     }
     drop(queue);
     let failed = AtomicBool::new(false);
@@ -671,7 +685,11 @@ fn a_disk_that_fills_while_sound_is_recorded_stops_the_take_and_keeps_frames_and
     let mut frames = mouthpiece_recording::SessionReader::open(&path).unwrap();
     let mut kept = 0u64;
     while let Some(f) = frames.next_frame().unwrap() {
-        assert_eq!(f.frame.device_ts_us, kept * 33_333, "in order, none missing");
+        assert_eq!(
+            f.frame.device_ts_us,
+            kept * 33_333,
+            "in order, none missing"
+        );
         assert_eq!(f.frame.color.width, 64);
         kept += 1;
     }
@@ -681,16 +699,33 @@ fn a_disk_that_fills_while_sound_is_recorded_stops_the_take_and_keeps_frames_and
         blocks.push(m);
     }
     blocks.sort_by_key(|b| b.log_time);
-    eprintln!("{kept} frames and {} blocks of sound kept of 60 and 200", blocks.len());
+    eprintln!(
+        "{kept} frames and {} blocks of sound kept of 60 and 200",
+        blocks.len()
+    );
     assert!(kept > 0 && kept < 60, "{kept} frames kept");
-    assert!(!blocks.is_empty() && blocks.len() < 200, "{} blocks kept", blocks.len());
+    assert!(
+        !blocks.is_empty() && blocks.len() < 200,
+        "{} blocks kept",
+        blocks.len()
+    );
     for (i, b) in blocks.iter().enumerate() {
-        assert_eq!(b.samples, vec![i as i16; 480], "block {i} is the sound sent");
-        assert_eq!(b.log_time, 1_795_316_645_000_000_000 + i as u64 * 10_000_000);
+        assert_eq!(
+            b.samples,
+            vec![i as i16; 480],
+            "block {i} is the sound sent"
+        );
+        assert_eq!(
+            b.log_time,
+            1_795_316_645_000_000_000 + i as u64 * 10_000_000
+        );
     }
     // The frames' derived channels came through with them (the last frame's may be in the
     // chunk the disk had no room for: a chunk can close right after a frame's images).
     let (topics, _) = topics(&path);
     let derived = topics.get("/character/wolf").copied().unwrap_or(0) as u64;
-    assert!((kept - 1..=kept).contains(&derived), "{kept} frames: {topics:?}");
+    assert!(
+        (kept - 1..=kept).contains(&derived),
+        "{kept} frames: {topics:?}"
+    );
 }

@@ -53,7 +53,14 @@ pub fn write_lines(path: &Path, character: &str, out: &mut dyn Write) -> anyhow:
         if !is_head && *m.topic != *topic {
             continue;
         }
-        let where_ = || format!("{}: {} at log time {} ns", path.display(), m.topic, m.log_time);
+        let where_ = || {
+            format!(
+                "{}: {} at log time {} ns",
+                path.display(),
+                m.topic,
+                m.log_time
+            )
+        };
         if m.data.len() > MAX_MESSAGE {
             return Err(bad_input(anyhow!(
                 "{}: a message of {} bytes (at most {MAX_MESSAGE})",
@@ -72,7 +79,9 @@ pub fn write_lines(path: &Path, character: &str, out: &mut dyn Write) -> anyhow:
         let field = |k: &str| message.get(k).cloned().unwrap_or(Value::Null);
         let pose = match &head {
             Some((t, pose)) if *t == m.log_time => pose.clone(),
-            _ => json!({"rotation": [1.0, 0.0, 0.0, 0.0], "translation": [0.0, 0.0, 0.0], "lost": false}),
+            _ => {
+                json!({"rotation": [1.0, 0.0, 0.0, 0.0], "translation": [0.0, 0.0, 0.0], "lost": false})
+            }
         };
         let mut line = json!({
             "t": m.log_time.saturating_sub(first) as f64 / 1e9,
@@ -82,7 +91,11 @@ pub fn write_lines(path: &Path, character: &str, out: &mut dyn Write) -> anyhow:
             "confidence": field("confidence"),
             "head": {"rotation": pose["rotation"], "translation": pose["translation"]},
             "head_lost": pose["lost"].as_bool().unwrap_or(false),
-            "curve": field("curve"),
+            // The take holds the curve's points; the line format names how it was made.
+            "curve": match field("curve") {
+                Value::Null => Value::Null,
+                points => json!({"method": "recorded", "closed": true, "points": points}),
+            },
             "source": field("source"),
         });
         for (from, to) in [("rig", "rig"), ("head", "character_head")] {
