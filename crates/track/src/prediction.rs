@@ -35,6 +35,19 @@ const FULL_FRAME_DIVISOR: i64 = 2;
 /// The search region's margin doubles per frame with dots missing, up to 2^this times.
 const SEARCH_GROWTH_MAX_DOUBLINGS: u32 = 4;
 
+/// *Search margin by motion*: over the last this many frames with every dot seen ...
+pub(crate) const SEARCH_MOTION_FRAMES: usize = 8;
+/// ... the dots' largest displacement in one frame, times this, carried forward by the step
+/// ratio, is the search region's margin (the prediction moves a dot on at its last velocity,
+/// so its error is a change of velocity, at most the displacement itself plus half again) ...
+pub(crate) const SEARCH_MOTION_FACTOR: f64 = 1.5;
+/// ... but at least this many dot spacings: a lip starting from rest, which the measured
+/// motion does not know yet, moves up to 1.4 spacings in its first frame (a jaw dropping),
+/// and its paint reaches 0.2 spacings round its centre. At most
+/// [`TrackConfig::roi_margin_spacings`], which is also the margin until the window is full
+/// and while dots are missing.
+pub(crate) const SEARCH_FLOOR_SPACINGS: f64 = 1.6;
+
 /// One dot's track.
 #[derive(Debug, Clone)]
 pub(crate) struct DotTrack {
@@ -327,6 +340,12 @@ pub(crate) struct Tracks {
     pub(crate) frames_with_missing: u32,
     /// Frames in a row with a lip blob left unnamed between two named neighbours.
     pub(crate) frames_with_blob_between: u32,
+    /// The dots' largest displacement (pixels) in each of the last frames with every dot
+    /// seen in it and the one before, a ring indexed by `motion_frames` (*search margin by
+    /// motion*).
+    pub(crate) recent_motion_px: [f64; SEARCH_MOTION_FRAMES],
+    /// Frames measured into `recent_motion_px` since the names began or a dot went missing.
+    pub(crate) motion_frames: usize,
 }
 
 /// *Slipped names*: after this many frames in a row with a lip blob left unnamed between two
@@ -345,6 +364,7 @@ impl Tracks {
         self.frames_without_names = 0;
         self.frames_with_missing = 0;
         self.frames_with_blob_between = 0;
+        self.motion_frames = 0;
     }
 
     /// Counts the frames in a row with a lip blob left between two named neighbours; true
@@ -363,10 +383,11 @@ impl Tracks {
         DotSpacing::of_rest(&self.rest, fx)
     }
 
-    /// Where to look: around the predicted dots plus [`TrackConfig::roi_margin_spacings`]
-    /// dot spacings at the lips' mean last depth (camera focal length `fx`, pixels), the
-    /// margin growing while some are missing; the full frame (`None`) when nothing is named,
-    /// every few frames while dots are missing, or without a spacing.
+    /// Where to look: around the predicted dots plus a margin at the lips' mean last depth
+    /// (camera focal length `fx`, pixels): [`Self::margin_spacings`] dot spacings, growing
+    /// from [`TrackConfig::roi_margin_spacings`] while some are missing; the full frame
+    /// (`None`) when nothing is named, every few frames while dots are missing, or without a
+    /// spacing.
     pub(crate) fn search_region(
         &self,
         config: &TrackConfig,
@@ -386,10 +407,35 @@ impl Tracks {
         let grow = (1u32 << self.frames_with_missing.min(SEARCH_GROWTH_MAX_DOUBLINGS)) as f64;
         let lips = &tracks[..self.rest.len().min(tracks.len())];
         let z = lips.iter().map(|t| t.depth).sum::<f64>() / lips.len().max(1) as f64;
-        let margin = config.roi_margin_spacings * spacing.px(z) * grow;
+        let spacing_px = spacing.px(z);
+        let margin = self.margin_spacings(config, step_ratio, spacing_px) * spacing_px * grow;
         let rect = PixelRect::around(tracks.iter().map(|t| t.predicted_pixel(step_ratio)), margin)?;
         let full = image[0] as i64 * image[1] as i64;
         (rect.area() < full / FULL_FRAME_DIVISOR).then_some(rect)
+    }
+
+    /// *Search margin by motion*, in dot spacings (`spacing_px` pixels each): the dots'
+    /// largest displacement in a frame over the last [`SEARCH_MOTION_FRAMES`] frames, carried
+    /// `step_ratio` frame intervals on, times [`SEARCH_MOTION_FACTOR`], between
+    /// [`SEARCH_FLOOR_SPACINGS`] and [`TrackConfig::roi_margin_spacings`]; the latter while
+    /// dots are missing or fewer frames have been measured since (the region grows back).
+    pub(crate) fn margin_spacings(
+        &self,
+        config: &TrackConfig,
+        step_ratio: f64,
+        spacing_px: f64,
+    ) -> f64 {
+        let most = config.roi_margin_spacings;
+        if self.frames_with_missing > 0 || self.motion_frames < SEARCH_MOTION_FRAMES {
+            return most;
+        }
+        let moved_px = self.recent_motion_px.iter().copied().fold(0.0, f64::max);
+        let wanted = SEARCH_MOTION_FACTOR * moved_px * step_ratio.max(1.0) / spacing_px;
+        if wanted.is_finite() {
+            wanted.clamp(SEARCH_FLOOR_SPACINGS.min(most), most)
+        } else {
+            most
+        }
     }
 
     /// Counts the frame's names (for the search region and for losing the names).
@@ -459,6 +505,7 @@ impl Tracks {
                     })
                     .collect(),
             );
+            self.motion_frames = 0;
             tracing::info!("all dots named from geometry; tracking");
             return;
         }
@@ -473,6 +520,23 @@ impl Tracks {
         self.head = self.reference(layout).now(names, cands);
         let inverse = self.head.inverse();
         let tracks = self.dots.as_mut().expect("checked");
+        // The frame's largest displacement, when every dot was seen now and a frame before.
+        let moved = tracks
+            .iter()
+            .zip(names)
+            .try_fold(0.0f64, |most, (track, name)| {
+                let c = &cands[(*name)?];
+                (track.missing == 0).then(|| {
+                    most.max((c.pixel[0] - track.pixel[0]).hypot(c.pixel[1] - track.pixel[1]))
+                })
+            });
+        match moved {
+            Some(px) => {
+                self.recent_motion_px[self.motion_frames % SEARCH_MOTION_FRAMES] = px;
+                self.motion_frames = self.motion_frames.saturating_add(1);
+            }
+            None => self.motion_frames = 0,
+        }
         for (track, name) in tracks.iter_mut().zip(names) {
             match name {
                 Some(c) => {
@@ -583,6 +647,83 @@ mod tests {
         // The dots' box is the same; the margin on each side doubled (to the pixel).
         let grown = (hd.width - vga.width) as f64 / 2.0;
         assert!((grown - margin).abs() <= 1.0, "{grown} against {margin}");
+    }
+
+    /// *Search margin by motion*: the margin is the configured 2.2 spacings until eight
+    /// frames of motion are measured; lips moving 0.2 spacings a frame then search within
+    /// the floor of 1.6 spacings (the region narrower by 0.6 spacings a side), a frame
+    /// moving 1.2 spacings widens it to 1.8, and a dot going missing brings back 2.2 (twice
+    /// it while missing) until eight frames are measured again.
+    #[test]
+    fn the_search_margin_follows_the_dots_measured_motion() {
+        let mut scene = Scene::calibrated();
+        let config = scene.config.clone();
+        let layout = scene.layout;
+        let rest = scene.rest_pixels();
+        let fx = scene.k.fx;
+        let spacing = DotSpacing::of_rest(&scene.rest, fx).unwrap().px(0.6);
+        let mut tracks = Tracks {
+            dots: Some(scene.tracks.clone()),
+            rest: scene.rest.clone(),
+            reference_forehead: scene.forehead.clone(),
+            ..Tracks::default()
+        };
+        // One frame: the lip dots `shift` spacings right of rest, dot `hidden` unseen.
+        let mut frame = |tracks: &mut Tracks, shift: f64, hidden: Option<usize>| {
+            let pixels: Vec<[f64; 2]> = rest
+                .iter()
+                .enumerate()
+                .map(|(i, p)| match i < layout.lip_dots {
+                    true => [p[0] + shift * spacing, p[1]],
+                    false => *p,
+                })
+                .collect();
+            let cands = match hidden {
+                Some(h) => scene.candidates_hiding(&pixels, h),
+                None => scene.candidates_at(&pixels),
+            };
+            let names: Vec<Option<usize>> = (0..pixels.len())
+                .map(|i| match hidden {
+                    Some(h) if i == h => None,
+                    Some(h) if i > h => Some(i - 1),
+                    _ => Some(i),
+                })
+                .collect();
+            tracks.count(&names);
+            tracks.update(&config, layout, &names, &cands.list, None);
+        };
+        let margin = |tracks: &Tracks| tracks.margin_spacings(&config, 1.0, spacing);
+        let most = config.roi_margin_spacings;
+        assert_eq!(margin(&tracks), most, "nothing measured yet");
+        for k in 0..SEARCH_MOTION_FRAMES {
+            assert_eq!(margin(&tracks), most, "{k} frames measured");
+            frame(&mut tracks, 0.2 * (k % 2) as f64, None);
+        }
+        assert!((margin(&tracks) - SEARCH_FLOOR_SPACINGS).abs() < 1e-9);
+        // The lips move sideways only: the dots' box is as tall each time.
+        let height = |tracks: &Tracks| {
+            let r = tracks.search_region(&config, 1.0, [4000, 4000], fx);
+            r.unwrap().height as f64
+        };
+        let slow = height(&tracks);
+        frame(&mut tracks, 1.4, None);
+        assert!((margin(&tracks) - 1.8).abs() < 1e-6, "{}", margin(&tracks));
+        frame(&mut tracks, 1.4, Some(3));
+        assert_eq!(margin(&tracks), most, "a dot missing");
+        let missing = height(&tracks);
+        frame(&mut tracks, 1.4, None);
+        assert_eq!(margin(&tracks), most, "the dot found again");
+        let found = height(&tracks);
+        // The margins a side differ by 0.6 spacings, then by 2.2 (the margin doubled).
+        let side = |a: f64, b: f64| (a - b) / 2.0 / spacing;
+        assert!(
+            (side(found, slow) - 0.6).abs() < 0.15,
+            "{found} against {slow}"
+        );
+        assert!(
+            (side(missing, found) - most).abs() < 0.15,
+            "{missing} against {found}"
+        );
     }
 
     /// *Corners a line apart*: corners 5 px apart are a line where the dots are 4 px apart,
