@@ -5,7 +5,7 @@ exists, then checks what arrived and compares it with the WebSocket frames the t
 (--stream, one JSON object per line: {"t", "rig", "head"} of the character sent over OSC):
 
 - every frame is a run of messages ending in /VMC/Ext/Blend/Apply (in one or more bundles),
-  and holds /VMC/Ext/T, the Head bone (and LeftEye/RightEye with --eyes) and one
+  and holds /VMC/Ext/T, /mouthpiece/Source (camera, speech or blend), the Head bone (and LeftEye/RightEye with --eyes) and one
   /VMC/Ext/Blend/Val for each of the 27 curve names (ARKit's, or in PascalCase with --names
   arkit-pascal) and of the five visemes (VRM 0.x's A I U E O with --visemes vrm0, VRM 1.0's
   aa ih ou ee oh with vrm1, none with none) before its Apply;
@@ -90,12 +90,18 @@ def frames_of(messages, bones, expected, problems):
                 frame["curves"][name] = value
             elif a == "/VMC/Ext/Bone/Pos":
                 frame["bones"][v[0]] = v[1:]
+            elif a == "/mouthpiece/Source":
+                if len(v) != 1 or v[0] not in ("camera", "speech", "blend"):
+                    problems.append(f"/mouthpiece/Source {v}: expected camera, speech or blend")
+                frame["source"] = v[0] if v else None
             elif a != "/VMC/Ext/OK":
                 problems.append(f"unexpected address {a}")
         if sorted(frame["curves"]) != sorted(expected):
             problems.append(f"Apply after curves {sorted(frame['curves'])}")
         if frame["t"] is None:
             problems.append("a frame without /VMC/Ext/T")
+        if "source" not in frame:
+            problems.append("a frame without /mouthpiece/Source")
         if sorted(frame["bones"]) != sorted(bones):
             problems.append(f"bones {sorted(frame['bones'])}, expected {sorted(bones)}")
         for name, value in frame["curves"].items():
