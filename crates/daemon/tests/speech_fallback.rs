@@ -6,6 +6,8 @@
 //! it, and the mouth hands back to the camera without a step larger than the two sources'
 //! own motion plus the blend's. Needs Debian `festival` + `festvox-kallpc16k`.
 
+#[path = "../../../tests/speech/cover_mouth.rs"]
+mod cover_mouth;
 #[path = "../../../tests/speech/festival.rs"]
 mod festival;
 
@@ -21,6 +23,7 @@ use mouthpiece_frame::{AudioBus, AudioEvent};
 use mouthpiece_output::MouthSource;
 use mouthpiece_synth::{Synth, SynthConfig};
 
+use cover_mouth::cover_mouth;
 use festival::speak;
 
 fn step_size(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
@@ -138,43 +141,5 @@ fn covered_lips_hand_the_mouth_to_speech_and_back_without_a_jump() {
             biggest <= normal + blend_move,
             "handover at {from}: a step of {biggest} beyond {normal} + {blend_move}"
         );
-    }
-}
-
-/// Paints the lip dots' part of the colour image with the skin beside the mouth.
-fn cover_mouth(frame: &mut mouthpiece_frame::Frame, truth: &mouthpiece_recording::GroundTruth) {
-    let c = &frame.calibration.color;
-    let pixels: Vec<(f64, f64)> = truth
-        .points
-        .iter()
-        .filter(|(n, _)| n.starts_with('D'))
-        .map(|(_, p)| (c.fx * p[0] / p[2] + c.cx, c.fy * p[1] / p[2] + c.cy))
-        .collect();
-    let (u0, u1) = pixels
-        .iter()
-        .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
-    let (v0, v1) = pixels
-        .iter()
-        .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
-    let img = &mut frame.color;
-    let w = img.width as i64;
-    let at = |u: i64, v: i64| ((v * w + u) * 3) as usize;
-    let (left, top, right, bottom) = (
-        u0 as i64 - 25,
-        v0 as i64 - 15,
-        u1 as i64 + 25,
-        v1 as i64 + 15,
-    );
-    let skin_at = at(left - 10, (top + bottom) / 2);
-    let skin = [
-        img.data[skin_at],
-        img.data[skin_at + 1],
-        img.data[skin_at + 2],
-    ];
-    for v in top.max(0)..bottom.min(img.height as i64) {
-        for u in left.max(0)..right.min(w) {
-            let i = at(u, v);
-            img.data[i..i + 3].copy_from_slice(&skin);
-        }
     }
 }
