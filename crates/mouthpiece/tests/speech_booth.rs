@@ -15,7 +15,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
-use mouthpiece_recording::{AudioReader, GroundTruth, MessageReader, SessionWriter, WriterOptions};
+use mouthpiece_recording::{AudioReader, MessageReader, SessionWriter, WriterOptions};
 use mouthpiece_synth::{Synth, SynthConfig};
 use serde_json::{json, Value};
 use tokio_tungstenite::tungstenite::Message;
