@@ -38,7 +38,7 @@ mod text;
 mod tokens;
 
 pub use audio::*;
-pub(crate) use locate::{invalid, line_col, span_of_key, state_directory};
+pub(crate) use locate::{invalid, key_location, line_col, span_of_key, state_directory};
 pub use locate::{read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
 pub use nats::{subject_safe, NatsConfig, NatsSecrets, MAX_NATS_QUEUE_FRAMES, MAX_NATS_SERVERS};
 pub use sections::*;
@@ -503,15 +503,8 @@ impl Config {
         };
         read_bounded(path, 64 * 1024).map(|_| ()).map_err(|source| {
             let key = "nats.credentials_file";
-            let span = span_of_key(text, key);
-            let (line, column) = span.map_or((0, 0), |s| line_col(text, s.start));
             ConfigError::Token {
-                location: Location {
-                    file: file.to_owned(),
-                    line,
-                    column,
-                    key: Some(key.to_owned()),
-                },
+                location: key_location(text, file, key),
                 key: key.to_owned(),
                 source: TokenError::File {
                     path: path.clone(),
@@ -607,19 +600,10 @@ fn read_token(
     token: &Option<TokenRef>,
 ) -> Result<Option<Secret>, ConfigError> {
     let Some(token) = token else { return Ok(None) };
-    token.read().map(Some).map_err(|source| {
-        let span = span_of_key(text, key);
-        let (line, column) = span.map_or((0, 0), |s| line_col(text, s.start));
-        ConfigError::Token {
-            location: Location {
-                file: file.to_owned(),
-                line,
-                column,
-                key: Some(key.to_owned()),
-            },
-            key: key.to_owned(),
-            source,
-        }
+    token.read().map(Some).map_err(|source| ConfigError::Token {
+        location: key_location(text, file, key),
+        key: key.to_owned(),
+        source,
     })
 }
 

@@ -52,6 +52,18 @@ pub(crate) fn invalid(
     }
 }
 
+/// Where a dotted key stands in the file, for errors about the value it names (line 0 when
+/// the key is not written in the file).
+pub(crate) fn key_location(text: &str, file: &str, key: &str) -> Location {
+    let (line, column) = span_of_key(text, key).map_or((0, 0), |s| line_col(text, s.start));
+    Location {
+        file: file.to_owned(),
+        line,
+        column,
+        key: Some(key.to_owned()),
+    }
+}
+
 /// 1-based line and column of a byte offset.
 pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let offset = offset.min(text.len());
