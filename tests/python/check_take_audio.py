@@ -84,11 +84,25 @@ if wav_path:
     at = raw.index(b"bext") + 8
     low, high = struct.unpack_from("<II", raw, at + 338)
     period = (frames[-1] - frames[0]) / (len(frames) - 1)
-    # Where the first block after the first frame must sit in the WAV if sample 0 is the
-    # first frame (sound from before it is cut).
-    first_log, _, _, first_samples = next(b for b in blocks if b[0] >= frames[0])
-    offset = round((first_log - frames[0]) * 48000 / 1e9)
-    placed = data[offset : offset + len(first_samples)] if offset >= 0 else None
+    # The WAV laid out again here by the documented rule: sample 0 at the first frame (sound
+    # before it cut); a block within 40 ms of where the one before it ended continues it,
+    # any other starts at the sample nearest its time (rounded half away from zero).
+    def nearest_sample(log_time):
+        off = (log_time - frames[0]) * 48000
+        q = (abs(off) + 500_000_000) // 10**9
+        return q if off >= 0 else -q
+
+    tolerance = 40 * 48000 // 1000
+    expected = np.zeros(length, dtype="<i2")
+    end, worst = None, 0
+    for log_time, _, _, samples in blocks:
+        at = nearest_sample(log_time)
+        first = end if end is not None and abs(at - end) <= tolerance else at
+        worst = max(worst, abs(first - at))
+        end = first + len(samples)
+        lo, hi = max(first, 0), min(end, length)
+        if lo < hi:
+            expected[lo:hi] = samples[lo - first : hi - first]
     out["wav"] = {
         "rate": rate,
         "channels": channels,
@@ -97,8 +111,7 @@ if wav_path:
         "expected_length": int(np.ceil((frames[-1] - frames[0] + period) * 48000 / 1e9)),
         "time_reference": (high << 32) | low,
         "expected_time_reference": (frames[0] // 1000 % 86_400_000_000) * 48000 // 1_000_000,
-        "first_block_offset": offset,
-        "first_block_in_place": bool(
-            placed is not None and np.array_equal(placed, first_samples)),
+        "laid_out_as_documented": bool(np.array_equal(data, expected)),
+        "max_placement_error_ms": worst / 48.0,
     }
 print(json.dumps(out))

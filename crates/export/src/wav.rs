@@ -84,13 +84,25 @@ pub fn write_bwf<W: Write>(
     out.flush()
 }
 
+/// How far a block's time may be from the end of the block before it and still continue it
+/// (the same 40 ms as GStreamer's `alignment-threshold`). A capture source stamps each block
+/// from the host clock and refines that estimate as it learns the device's delivery latency,
+/// so the times of blocks read back to back wobble by a few milliseconds; laying each at its
+/// own time would overwrite or silence samples at every wobble. Farther than this is a real
+/// gap (an overrun, the device reopened) and the block goes where its time says.
+pub const CONTINUITY_TOLERANCE_NS: u64 = 40_000_000;
+
 /// Lays timed blocks of sound on one timeline: sample 0 at `start_ns`, `len` sample frames;
-/// gaps stay silent, sound before the start or past the end is cut.
+/// gaps stay silent, sound before the start or past the end is cut. A block within
+/// [`CONTINUITY_TOLERANCE_NS`] of where the previous one ended continues it sample for sample;
+/// any other block starts at the sample nearest its time.
 #[derive(Debug)]
 pub struct Timeline {
     pub sample_rate: u32,
     pub channels: u16,
     start_ns: u64,
+    /// The sample frame after the last placed block (may be before 0: cut sound).
+    next: Option<i128>,
     pub samples: Vec<i16>,
 }
 
@@ -102,16 +114,26 @@ impl Timeline {
             sample_rate,
             channels,
             start_ns,
+            next: None,
             samples: vec![0; (len * u64::from(channels)) as usize],
         }
     }
 
-    /// Places a block whose first sample was at `at_ns`.
-    pub fn place(&mut self, at_ns: u64, samples: &[i16]) {
+    /// Places a block whose first sample was at `at_ns`; returns the sample frame it went to
+    /// (negative: before the start, cut).
+    pub fn place(&mut self, at_ns: u64, samples: &[i16]) -> i128 {
         let ch = i128::from(self.channels);
-        let offset = (i128::from(at_ns) - i128::from(self.start_ns)) * i128::from(self.sample_rate);
+        let rate = i128::from(self.sample_rate);
+        let offset = (i128::from(at_ns) - i128::from(self.start_ns)) * rate;
         // Nearest sample frame.
-        let first = (offset + offset.signum() * 500_000_000) / 1_000_000_000;
+        let by_time = (offset + offset.signum() * 500_000_000) / 1_000_000_000;
+        let tolerance = i128::from(CONTINUITY_TOLERANCE_NS) * rate / 1_000_000_000;
+        let first = match self.next {
+            Some(next) if (by_time - next).abs() <= tolerance => next,
+            _ => by_time,
+        };
+        let frames = samples.len() / self.channels as usize;
+        self.next = Some(first + frames as i128);
         for (i, frame) in samples.chunks_exact(self.channels as usize).enumerate() {
             let at = first + i as i128;
             if at < 0 {
@@ -123,6 +145,7 @@ impl Timeline {
             }
             self.samples[at..at + frame.len()].copy_from_slice(frame);
         }
+        first
     }
 }
 
@@ -132,13 +155,18 @@ mod tests {
 
     #[test]
     fn blocks_land_on_the_sample_their_time_says_and_the_header_is_broadcast_wave() {
-        // 1 kHz: a block at +5 ms starts at sample 5; one before the start is cut.
-        let mut t = Timeline::new(1000, 1, 1_000_000_000, 20);
-        t.place(1_005_000_000, &[1, 2, 3]);
-        t.place(999_000_000, &[9, 8]);
-        t.place(1_018_000_000, &[7, 7, 7, 7]);
-        assert_eq!(t.samples[..10], [8, 0, 0, 0, 0, 1, 2, 3, 0, 0]);
-        assert_eq!(t.samples[18..], [7, 7]);
+        // 1 kHz (the tolerance is 40 samples): a block at +50 ms starts at sample 50; one
+        // before the start is cut; one 45 ms after the last one ended is a gap.
+        let mut t = Timeline::new(1000, 1, 1_000_000_000, 110);
+        assert_eq!(t.place(999_000_000, &[9, 8]), -1);
+        assert_eq!(t.place(1_050_000_000, &[1, 2, 3]), 50);
+        assert_eq!(
+            t.place(1_098_000_000, &[7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7]),
+            98
+        );
+        assert_eq!(t.samples[..3], [8, 0, 0]);
+        assert_eq!(t.samples[49..54], [0, 1, 2, 3, 0]);
+        assert_eq!(t.samples[97..], [0, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7, 7]);
         let mut file = Vec::new();
         let bext = BextInfo {
             description: "take".into(),
@@ -163,6 +191,22 @@ mod tests {
             u32::from_le_bytes(file[body + 342..body + 346].try_into().unwrap()),
             1
         );
-        assert_eq!(&file[file.len() - 40 - 8..file.len() - 40 - 4], b"data");
+        assert_eq!(&file[file.len() - 220 - 8..file.len() - 220 - 4], b"data");
+    }
+
+    #[test]
+    fn blocks_stamped_a_little_early_or_late_continue_the_sound_sample_for_sample() {
+        // 1 kHz, 10-sample blocks whose times wobble by up to 6 ms as a source refines its
+        // latency estimate: laid back to back, no sample overwritten or silenced.
+        let mut t = Timeline::new(1000, 1, 1_000_000_000, 60);
+        let wobble_ms = [0i64, -6, 4, -3, 5];
+        for (k, w) in wobble_ms.iter().enumerate() {
+            let at = 1_000_000_000 + (k as i64 * 10 + w) * 1_000_000;
+            let block: Vec<i16> = (0..10).map(|i| (k * 10 + i) as i16 + 1).collect();
+            assert_eq!(t.place(at as u64, &block), k as i128 * 10);
+        }
+        let expected: Vec<i16> = (1..=50).collect();
+        assert_eq!(t.samples[..50], expected[..]);
+        assert_eq!(t.samples[50..], [0; 10]);
     }
 }

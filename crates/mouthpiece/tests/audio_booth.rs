@@ -197,8 +197,9 @@ fn a_take_from_the_booth_holds_its_sound_and_where_it_stopped_and_exports_a_broa
         "{found}"
     );
     // The WAV: 48 kHz mono 16-bit, as long as the exported frames, sample 0 at the first
-    // frame (the first block of sound sits where its time says), the bext time reference
-    // that instant as samples since midnight.
+    // frame, every sample where the documented layout puts it (laid out again in Python: each
+    // block where its time says, or continuing the one before when within 40 ms of its end),
+    // the bext time reference that instant as samples since midnight.
     let w = &found["wav"];
     assert_eq!(
         (
@@ -211,7 +212,7 @@ fn a_take_from_the_booth_holds_its_sound_and_where_it_stopped_and_exports_a_broa
     );
     assert_eq!(w["length"], w["expected_length"], "{w}");
     assert_eq!(w["time_reference"], w["expected_time_reference"], "{w}");
-    assert_eq!(w["first_block_in_place"], true, "{w}");
+    assert_eq!(w["laid_out_as_documented"], true, "{w}");
 
     // The take replayed: its sound takes the microphone's path (state `replay`) and a take of
     // the replay holds it again, bit for bit.
