@@ -8,9 +8,9 @@
 //! Definitions (frames from `skip_s` seconds on):
 //! - *found & named*: over visible ground-truth dots, the share the tracker reports under
 //!   their own name, at a pixel whose nearest projected true dot is their own (within
-//!   [`NAMING_RADIUS_PX`]);
+//!   [`NAMING_RADIUS_SPACINGS`] dot spacings);
 //! - *wrong*: dots the tracker reports at a pixel whose nearest projected true dot is another
-//!   one (or none within [`NAMING_RADIUS_PX`]); hidden dots reported are counted apart
+//!   one (or none within [`NAMING_RADIUS_SPACINGS`]); hidden dots reported are counted apart
 //!   (*named hidden*);
 //! - *3D RMS*: over correctly named visible dots, distance to the true centre;
 //! - *head RMS*: angle between the tracked head rotation and the true one (both relative to
@@ -39,8 +39,24 @@ pub use measures::{CharacterError, DotStats, HeadError, Naming};
 pub use steps::{StepFigures, StepStats};
 
 /// A reported dot is the dot whose projected true centre is nearest its pixel, if within
-/// this many pixels (a dot's paint is 2–4 px across at 0.6 m; a neighbour is 6–12 px away).
-pub const NAMING_RADIUS_PX: f64 = 8.0;
+/// this many dot spacings (the performer's lip dots' mean distance to their neighbours at
+/// rest, seen at the true dot's depth): 8 px at 640x480 and 0.6 m, where the spacing is
+/// 9.2 px, the same share of the face at any resolution and distance.
+pub const NAMING_RADIUS_SPACINGS: f64 = 8.0 / 9.2;
+
+/// The synthetic performer's lip dots' mean distance to their neighbours at rest, metres.
+pub fn rest_spacing_m(layout: &mouthpiece_synth::DotLayout) -> f64 {
+    let (lips, _) =
+        mouthpiece_synth::dot_positions(layout, &mouthpiece_synth::MouthState::default());
+    let n = lips.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (lips[i], lips[(i + 1) % n]);
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+        })
+        .sum::<f64>()
+        / n.max(1) as f64
+}
 
 /// What can go wrong.
 #[derive(Debug, thiserror::Error)]
@@ -78,6 +94,9 @@ pub struct FrameView<'a> {
     /// Per dot: its true centre (camera frame, metres) and projected pixel.
     pub true_points: &'a [nalgebra::Vector3<f64>],
     pub true_pixels: &'a [Option<[f64; 2]>],
+    /// The lip dots' spacing at rest (metres) times the colour camera's focal length
+    /// (pixels): a spacing's pixels at 1 m.
+    pub spacing_px_at_1m: f64,
     /// Whether the frame counts (from `skip_s` on).
     pub counted: bool,
 }
@@ -95,10 +114,11 @@ impl FrameView<'_> {
     }
 
     /// Whether dot `dot` reported at `px` is the right blob: its own true dot is the nearest,
-    /// within [`NAMING_RADIUS_PX`].
+    /// within [`NAMING_RADIUS_SPACINGS`] at its true depth.
     pub fn names_right(&self, dot: usize, px: [f64; 2]) -> bool {
+        let radius = NAMING_RADIUS_SPACINGS * self.spacing_px_at_1m / self.true_points[dot].z;
         self.nearest_dot(px)
-            .is_some_and(|(nearest, d)| nearest == dot && d <= NAMING_RADIUS_PX)
+            .is_some_and(|(nearest, d)| nearest == dot && d <= radius)
     }
 }
 
@@ -204,6 +224,7 @@ pub fn evaluate_with(
         .map(PerformerLayout::lip_name)
         .chain((0..layout.forehead_dots).map(PerformerLayout::forehead_name))
         .collect();
+    let spacing_m = rest_spacing_m(&synth.layout);
     let mut synth = Synth::new(synth)?;
     let mut naming = Naming::new(names.len());
     let mut head = HeadError::new(config.track.calibration_s);
@@ -238,6 +259,7 @@ pub fn evaluate_with(
             names: &names,
             true_points: &true_points,
             true_pixels: &true_pixels,
+            spacing_px_at_1m: spacing_m * frame.calibration.color.fx,
             counted: t >= skip_s,
         };
         let mut measures: Vec<&mut dyn Measure> =

@@ -36,6 +36,19 @@ fn session_holds_with(
     m
 }
 
+/// The naming radius is 8 px where the tables were first judged (640x480, 0.6 m: the dot
+/// spacing 9.2 px), twice that at 1280x720, and shrinks with the distance.
+#[test]
+fn the_naming_radius_is_a_share_of_the_dot_spacing() {
+    let vga_session = session(1, 1.0, HeadMotion::Mild, NoiseModel::Kinect);
+    let at_1m = rest_spacing_m(&vga_session.layout);
+    let vga = vga_session.camera.fx;
+    let radius = |fx: f64, z: f64| NAMING_RADIUS_SPACINGS * at_1m * fx / z;
+    assert!((radius(vga, 0.6) - 8.0).abs() < 0.3, "{}", radius(vga, 0.6));
+    assert!((radius(2.0 * vga, 0.6) - 16.0).abs() < 0.6);
+    assert!((radius(vga, 0.8) - 6.0).abs() < 0.3);
+}
+
 fn session(seed: u64, seconds: f64, head_motion: HeadMotion, noise: NoiseModel) -> SynthConfig {
     SynthConfig {
         seed,
