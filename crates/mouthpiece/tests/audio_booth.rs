@@ -4,27 +4,22 @@
 
 #[path = "../../../tests/alsa/booth.rs"]
 mod booth;
+#[path = "../../../tests/daemon/run.rs"]
+mod daemon;
 #[path = "../../../tests/alsa/read_back.rs"]
 mod read_back;
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
+use daemon::{free_port, run_command, Daemon};
 use serde_json::Value;
 
 use read_back::python;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 /// `GET path` on the daemon's port: the body (empty when it cannot connect).
@@ -62,15 +57,6 @@ fn wait_until(what: &str, mut check: impl FnMut() -> bool) {
     }
 }
 
-struct Daemon(Child);
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 fn mouthpiece(dir: &Path, args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
         .args(args)
@@ -96,19 +82,15 @@ fn a_take_from_the_booth_holds_its_sound_and_where_it_stopped_and_exports_a_broa
         demo.display()
     );
     std::fs::write(dir.path().join("mouthpiece.toml"), config).unwrap();
-    let mut command = Command::new(env!("CARGO_BIN_EXE_mouthpiece"));
+    let mut command = run_command(dir.path(), Path::new("mouthpiece.toml"));
     command
-        .args(["run", "--config", "mouthpiece.toml", "--record", "booth"])
-        .current_dir(dir.path())
+        .args(["--record", "booth"])
         .env("RUST_LOG", "info")
-        .env_remove("NOTIFY_SOCKET")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
         .stderr(std::fs::File::create(dir.path().join("stderr.log")).unwrap());
     for (k, v) in booth.env() {
         command.env(k, v);
     }
-    let mut daemon = Daemon(command.spawn().unwrap());
+    let mut daemon = Daemon::spawn(&mut command);
     let log = || std::fs::read_to_string(dir.path().join("stderr.log")).unwrap_or_default();
 
     wait_until("the microphone live in /healthz", || {
@@ -138,9 +120,7 @@ fn a_take_from_the_booth_holds_its_sound_and_where_it_stopped_and_exports_a_broa
         metric(port, "mouthpiece_audio_open_attempts_total") >= 2,
         "retried"
     );
-    // SAFETY: kill(2) on our own child with SIGTERM.
-    unsafe { libc::kill(daemon.0.id() as i32, libc::SIGTERM) };
-    let status = daemon.0.wait().unwrap();
+    let status = daemon.terminate();
     assert!(status.success(), "{}", log());
 
     let takes: Vec<PathBuf> = std::fs::read_dir(dir.path().join("takes"))
@@ -222,26 +202,15 @@ fn a_take_from_the_booth_holds_its_sound_and_where_it_stopped_and_exports_a_broa
         take.display()
     );
     std::fs::write(dir.path().join("again.toml"), config).unwrap();
-    let mut daemon = Daemon(
-        Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-            .args(["run", "--config", "again.toml", "--record", "again"])
-            .current_dir(dir.path())
-            .env_remove("NOTIFY_SOCKET")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
+    let mut daemon =
+        Daemon::spawn(run_command(dir.path(), Path::new("again.toml")).args(["--record", "again"]));
     wait_until("the recording's sound as the microphone", || {
         http_body(port, "/healthz").contains("\"state\":\"replay\"")
     });
     wait_until("replayed sound", || {
         metric(port, "mouthpiece_audio_blocks_total") >= 50
     });
-    // SAFETY: kill(2) on our own child with SIGTERM.
-    unsafe { libc::kill(daemon.0.id() as i32, libc::SIGTERM) };
-    assert!(daemon.0.wait().unwrap().success());
+    assert!(daemon.terminate().success());
     let again: Vec<PathBuf> = std::fs::read_dir(dir.path().join("again"))
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -308,23 +277,13 @@ fn a_synthetic_speech_session_keeps_sound_and_picture_within_a_frame_through_the
         ),
     )
     .unwrap();
-    let mut daemon = Daemon(
-        Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-            .args(["run", "--config", "replay.toml", "--record", "speech"])
-            .current_dir(dir.path())
-            .env_remove("NOTIFY_SOCKET")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
+    let mut daemon = Daemon::spawn(
+        run_command(dir.path(), Path::new("replay.toml")).args(["--record", "speech"]),
     );
     wait_until("the session's sound", || {
         metric(port, "mouthpiece_audio_blocks_total") >= 150
     });
-    // SAFETY: kill(2) on our own child with SIGTERM.
-    unsafe { libc::kill(daemon.0.id() as i32, libc::SIGTERM) };
-    assert!(daemon.0.wait().unwrap().success());
+    assert!(daemon.terminate().success());
     let take = std::fs::read_dir(dir.path().join("takes"))
         .unwrap()
         .next()

@@ -5,69 +5,35 @@
 //! reads back), a read-only token hides the controls, and the page comes back by itself
 //! when the daemon restarts.
 
+#[path = "../../../tests/daemon/run.rs"]
+mod daemon;
 #[path = "../../server/tests/webdriver/mod.rs"]
 #[allow(dead_code)]
 mod webdriver;
 
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
+use daemon::{free_port, run_command, Daemon};
 use serde_json::Value;
 use webdriver::WebDriver;
 
 const CONTROL: &str = "console-control-token-0123";
 const READ: &str = "console-read-token-012345";
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-struct Daemon {
-    child: Child,
-}
-
-impl Daemon {
-    fn start(dir: &Path, port: u16) -> Daemon {
-        let stderr = std::fs::File::create(dir.join(format!("stderr-{port}.log"))).unwrap();
-        let child = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-            .arg("run")
-            .arg("--config")
-            .arg(dir.join("mouthpiece.toml"))
-            .current_dir(dir)
+/// `mouthpiece run` on `dir/mouthpiece.toml` with the test's tokens, until it listens on
+/// `port`; its log in `dir/stderr-PORT.log`.
+fn start_daemon(dir: &Path, port: u16) -> Daemon {
+    let stderr = std::fs::File::create(dir.join(format!("stderr-{port}.log"))).unwrap();
+    Daemon::listening(
+        run_command(dir, &dir.join("mouthpiece.toml"))
             .env("RUST_LOG", "info")
             .env("MP_TEST_CONTROL", CONTROL)
             .env("MP_TEST_READ", READ)
-            .env_remove("NOTIFY_SOCKET")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(stderr)
-            .spawn()
-            .unwrap();
-        let deadline = Instant::now() + Duration::from_secs(30);
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(Instant::now() < deadline, "the daemon did not listen");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        Daemon { child }
-    }
-
-    fn stop(mut self) {
-        // SAFETY: kill(2) on our own child with SIGTERM.
-        unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+            .stderr(stderr),
+        port,
+    )
 }
 
 /// Polls `js` (which returns a value or null) until `done` accepts it.
@@ -138,7 +104,7 @@ fn the_console_shows_the_camera_with_dots_calibrates_records_and_recovers() {
         ),
     )
     .unwrap();
-    let daemon = Daemon::start(dir.path(), port);
+    let mut daemon = start_daemon(dir.path(), port);
 
     let profile = tempfile::tempdir().unwrap();
     let driver = webdriver::open_page(
@@ -289,7 +255,7 @@ fn the_console_shows_the_camera_with_dots_calibrates_records_and_recovers() {
     drop(reader_page);
 
     // The daemon restarts: the page reconnects and the image flows again.
-    daemon.stop();
+    daemon.terminate();
     wait_until(
         &driver,
         "disconnected",
@@ -298,7 +264,7 @@ fn the_console_shows_the_camera_with_dots_calibrates_records_and_recovers() {
         |v| v["connected"] == false,
     );
     let before = driver.script(STATE)["images"].as_u64().unwrap();
-    let _daemon = Daemon::start(dir.path(), port);
+    let _daemon = start_daemon(dir.path(), port);
     wait_until(
         &driver,
         "reconnected",

@@ -6,15 +6,18 @@
 //! sound, all of it, on the same clock. `/take` serves nothing but the takes in the takes
 //! folder, and only with a token.
 
+#[path = "../../../tests/daemon/run.rs"]
+mod daemon;
 #[path = "../../server/tests/webdriver/mod.rs"]
 #[allow(dead_code)]
 mod webdriver;
 
 use std::io::{Read, Write};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
+use daemon::{free_port, run_command, Daemon};
 use mouthpiece_recording::{SessionReader, SessionWriter, WriterOptions};
 use serde_json::json;
 
@@ -22,23 +25,6 @@ const CONTROL: &str = "player-control-token-0123";
 const READ: &str = "player-read-token-0123456";
 const TAKE: &str = "play_T001_20260101T000000Z.mcap";
 const RATE: u32 = 48_000;
-
-struct Daemon(Child);
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 /// 20 ms of a 440 Hz tone starting at sample `first`.
 fn tone(first: u64) -> Vec<i16> {
@@ -136,26 +122,13 @@ fn a_take_plays_in_the_page_with_its_dots_and_its_sound() {
     )
     .unwrap();
     let stderr = std::fs::File::create(dir.path().join("stderr.log")).unwrap();
-    let _daemon = Daemon(
-        Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-            .arg("run")
-            .arg("--config")
-            .arg(dir.path().join("mouthpiece.toml"))
-            .current_dir(dir.path())
+    let _daemon = Daemon::listening(
+        run_command(dir.path(), &dir.path().join("mouthpiece.toml"))
             .env("MP_TEST_CONTROL", CONTROL)
             .env("MP_TEST_READ", READ)
-            .env_remove("NOTIFY_SOCKET")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(stderr)
-            .spawn()
-            .unwrap(),
+            .stderr(stderr),
+        port,
     );
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(Instant::now() < deadline, "the daemon did not listen");
-        std::thread::sleep(Duration::from_millis(50));
-    }
 
     // The door: a token, a take's name, nothing outside the folder.
     let ok = format!("/take?file={TAKE}&token={READ}&seconds=1");

@@ -5,35 +5,21 @@
 //! ranges in use cannot see: the proposal is offered, **Apply** writes it into the
 //! configuration file (the rest of the file kept) and the daemon reloads it.
 
+#[path = "../../../tests/daemon/run.rs"]
+mod daemon;
 #[path = "../../server/tests/webdriver/mod.rs"]
 #[allow(dead_code)]
 mod webdriver;
 
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
+use daemon::{free_port, run_command, Daemon};
 use serde_json::Value;
 use webdriver::WebDriver;
 
 const CONTROL: &str = "tune-control-token-012345";
-
-struct Daemon(Child);
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
 
 fn synth(dir: &Path, name: &str, layout: &str, extra: &[&str]) -> std::path::PathBuf {
     let out = dir.join(format!("{name}.mcap"));
@@ -67,27 +53,13 @@ fn daemon(dir: &Path, name: &str, session: &Path) -> (Daemon, String) {
     )
     .unwrap();
     let stderr = std::fs::File::create(dir.join(format!("{name}.log"))).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-        .arg("run")
-        .arg("--config")
-        .arg(&config)
-        .current_dir(dir)
-        .env("MP_TEST_CONTROL", CONTROL)
-        .env_remove("NOTIFY_SOCKET")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(stderr)
-        .spawn()
-        .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(Instant::now() < deadline, "the daemon did not listen");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    (
-        Daemon(child),
-        format!("http://127.0.0.1:{port}/?token={CONTROL}"),
-    )
+    let daemon = Daemon::listening(
+        run_command(dir, &config)
+            .env("MP_TEST_CONTROL", CONTROL)
+            .stderr(stderr),
+        port,
+    );
+    (daemon, format!("http://127.0.0.1:{port}/?token={CONTROL}"))
 }
 
 const TUNE: &str = "const m = window.mouthpiece; if (!m) return null; \

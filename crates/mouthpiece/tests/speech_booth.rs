@@ -9,9 +9,11 @@
 mod booth;
 #[path = "../../../tests/speech/cover_mouth.rs"]
 mod cover_mouth;
+#[path = "../../../tests/daemon/run.rs"]
+mod daemon;
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
@@ -21,6 +23,7 @@ use serde_json::{json, Value};
 use tokio_tungstenite::tungstenite::Message;
 
 use cover_mouth::cover_mouth;
+use daemon::{free_port, run_command, Daemon};
 
 type Client =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
@@ -29,39 +32,17 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-struct Daemon(Child);
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 /// `mouthpiece run` on `config` in `dir`, its microphone the booth's PCM.
 fn start_daemon(dir: &Path, config: &str, booth: &booth::Booth) -> Daemon {
     std::fs::write(dir.join("mouthpiece.toml"), config).unwrap();
-    let mut command = Command::new(env!("CARGO_BIN_EXE_mouthpiece"));
+    let mut command = run_command(dir, Path::new("mouthpiece.toml"));
     command
-        .args(["run", "--config", "mouthpiece.toml"])
-        .current_dir(dir)
         .env("RUST_LOG", "info")
-        .env_remove("NOTIFY_SOCKET")
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
         .stderr(std::fs::File::create(dir.join("stderr.log")).unwrap());
     for (k, v) in booth.env() {
         command.env(k, v);
     }
-    Daemon(command.spawn().unwrap())
+    Daemon::spawn(&mut command)
 }
 
 /// A `mouthpiece.v1` client subscribed to the frames.
@@ -235,9 +216,7 @@ async fn a_take_on_a_booth_without_a_camera_holds_the_speech_driven_steps_and_th
     .await;
     assert_eq!(stopped["type"], "result", "{stopped}\n{}", log());
     let frames = stopped["detail"]["frames"].as_u64().unwrap();
-    // SAFETY: kill(2) on our own child with SIGTERM.
-    unsafe { libc::kill(daemon.0.id() as i32, libc::SIGTERM) };
-    assert!(daemon.0.wait().unwrap().success(), "{}", log());
+    assert!(daemon.terminate().success(), "{}", log());
 
     // The take's frames: the character's steps, every one driven by speech, no camera.
     let steps = json_messages(&take, "/character/human");
