@@ -30,6 +30,7 @@
 //! - [`oni_writer`]: pure-Rust `.oni` writer (uncompressed depth + RGB888 colour), for
 //!   recordings made without a device (the synthetic performer).
 
+mod recorder_thread;
 mod runtime;
 
 pub mod oni_check;
@@ -578,11 +579,17 @@ pub struct Recorder {
     finished: bool,
     path: std::path::PathBuf,
     attached: usize,
+    /// The recorder's own thread(s), as found when it was created.
+    threads: Vec<u32>,
 }
 
 /// How long [`Recorder::start`] waits for OpenNI2's recorder thread to take its start
 /// message before calling it a failure (a loaded machine takes milliseconds, not seconds).
 const RECORDER_START_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// How long [`Recorder::start`] waits for the recorder's thread to run on after its start
+/// (it spins, so it is charged CPU time within milliseconds even on a loaded machine).
+const RECORDER_RUN_ON_TIMEOUT: Duration = Duration::from_secs(5);
 
 impl Recorder {
     /// Creates the file (truncating it) and the recorder.
@@ -592,12 +599,13 @@ impl Recorder {
         })?;
         let c = CString::new(s)
             .map_err(|_| Error::InvalidArgument(format!("path {s:?} contains a NUL byte")))?;
-        let id = runtime::get()?.call(move |st| st.create_recorder(c))??;
+        let (id, threads) = runtime::get()?.call(move |st| st.create_recorder(c))??;
         Ok(Recorder {
             id,
             finished: false,
             path: path.to_path_buf(),
             attached: 0,
+            threads,
         })
     }
 
@@ -615,10 +623,15 @@ impl Recorder {
     ///
     /// `oniRecorderStart` only queues a message for the recorder's own thread, which then
     /// writes each attached node's `NODE_STATE_READY` and `NODE_DATA_BEGIN` records and
-    /// sets its started flag. Waiting for those records in the file (the recorder writes
-    /// with plain `write` calls, no buffering) makes the start independent of how soon that
-    /// thread runs; the flag is set a few instructions after the last record, which the
-    /// short pause after it covers.
+    /// sets its started flag; until the flag is set, frames are dropped. Waiting for those
+    /// records in the file (the recorder writes with plain `write` calls, no buffering)
+    /// makes the start independent of how soon that thread runs. The flag is set a few
+    /// instructions after the last record, but a loaded machine can preempt the thread right
+    /// there for longer than a frame (it happened: a depth stream shifted by one frame
+    /// against colour). So the wait ends only once the thread has also run on: it spins
+    /// without blocking, and [`recorder_thread::ran_on`] waits for the scheduler to charge
+    /// it CPU time twice after the records were seen, millions of instructions later. It
+    /// measures the thread's progress, not the clock.
     pub fn start(&self) -> Result<()> {
         let id = self.id;
         runtime::get()?.call(move |s| s.start_recorder(id))??;
@@ -633,7 +646,10 @@ impl Recorder {
                 })
                 .unwrap_or(0);
             if begun >= self.attached {
-                std::thread::sleep(Duration::from_millis(5));
+                if !recorder_thread::ran_on(&self.threads, RECORDER_RUN_ON_TIMEOUT) {
+                    tracing::warn!(file = %self.path.display(), "cannot see OpenNI2's recorder thread run on after its start; a stream's first frame may be missed");
+                    std::thread::sleep(Duration::from_millis(5));
+                }
                 return Ok(());
             }
             if Instant::now() > deadline {

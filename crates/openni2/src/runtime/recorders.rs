@@ -11,12 +11,19 @@ use super::{check, RecorderEntry, State, TEARDOWN_PAUSE};
 use crate::{Error, Result, Status};
 
 impl State {
-    pub(crate) fn create_recorder(&mut self, path: CString) -> Result<u64> {
+    /// Creates a recorder; returns its id and the threads OpenNI2 started for it (see
+    /// [`crate::recorder_thread`]).
+    pub(crate) fn create_recorder(&mut self, path: CString) -> Result<(u64, Vec<u32>)> {
         let mut handle: sys::OniRecorderHandle = ptr::null_mut();
+        let before = crate::recorder_thread::threads_named_like_this_one();
         // SAFETY: NUL-terminated path outliving the call; `handle` is an out-pointer.
         check("oniCreateRecorder", unsafe {
             sys::oniCreateRecorder(path.as_ptr(), &mut handle)
         })?;
+        let threads: Vec<u32> = crate::recorder_thread::threads_named_like_this_one()
+            .into_iter()
+            .filter(|t| !before.contains(t))
+            .collect();
         let handle = NonNull::new(handle).ok_or_else(|| Error::Call {
             call: "oniCreateRecorder",
             status: Status(sys::OniStatus::ONI_STATUS_ERROR.0),
@@ -30,7 +37,7 @@ impl State {
                 streams: Vec::new(),
             },
         );
-        Ok(id)
+        Ok((id, threads))
     }
 
     pub(crate) fn attach_to_recorder(
