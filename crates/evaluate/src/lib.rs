@@ -48,14 +48,8 @@ pub const NAMING_RADIUS_SPACINGS: f64 = 8.0 / 9.2;
 pub fn rest_spacing_m(layout: &mouthpiece_synth::DotLayout) -> f64 {
     let (lips, _) =
         mouthpiece_synth::dot_positions(layout, &mouthpiece_synth::MouthState::default());
-    let n = lips.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (lips[i], lips[(i + 1) % n]);
-            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-        })
-        .sum::<f64>()
-        / n.max(1) as f64
+    let lips: Vec<nalgebra::Vector3<f64>> = lips.iter().map(|p| (*p).into()).collect();
+    mouthpiece_track::mean_neighbour_distance(&lips).unwrap_or(0.0)
 }
 
 /// What can go wrong.

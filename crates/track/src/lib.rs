@@ -50,6 +50,7 @@ pub use calibration::{same_performer, SAME_PERFORMER_TOLERANCE_M};
 pub use config::TrackConfig;
 pub use lip_depth::LIP_PATCH_NEIGHBOUR_FRACTION;
 pub use output::{DotName, Status, StepEvent, TrackedFrame};
+pub use prediction::mean_neighbour_distance;
 
 use labels::{Candidate, Small};
 

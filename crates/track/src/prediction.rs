@@ -199,7 +199,7 @@ pub(crate) fn lips_depth(ctx: &Context) -> f64 {
 
 /// The mean distance between neighbouring points of a closed loop (the lip dots around the
 /// mouth); `None` with fewer than two points.
-pub(crate) fn mean_neighbour_distance(points: &[Vec3]) -> Option<f64> {
+pub fn mean_neighbour_distance(points: &[Vec3]) -> Option<f64> {
     let n = points.len();
     (n >= 2).then(|| {
         (0..n)

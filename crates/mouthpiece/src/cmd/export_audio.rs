@@ -95,7 +95,7 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
     let mut message = Some(first_audio);
     while let Some(m) = message {
         if m.format == format {
-            let _ = timeline.place(m.log_time, &m.samples);
+            timeline.place(m.log_time, &m.samples);
             blocks += 1;
         } else {
             skipped += 1;
