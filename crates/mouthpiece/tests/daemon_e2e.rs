@@ -2,6 +2,8 @@
 //! WebSocket client, real signals.
 
 use std::os::unix::net::UnixDatagram;
+#[path = "../../../tests/daemon/run.rs"]
+mod run;
 #[path = "../../server/tests/webdriver/mod.rs"]
 mod webdriver;
 
@@ -81,16 +83,12 @@ fn write_noisy_session(path: &Path, frames: u64) {
     });
 }
 
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
+use run::free_port;
 
+/// The daemon started with a config written for the test (or the embedded default), its log
+/// kept in its folder; killed when dropped ([`run::Daemon`]).
 struct Daemon {
-    child: Child,
+    process: run::Daemon,
     port: u16,
     dir: tempfile::TempDir,
     stderr: PathBuf,
@@ -153,9 +151,8 @@ impl Daemon {
         for (k, v) in env {
             command.env(k, v);
         }
-        let child = command.spawn().unwrap();
         let daemon = Daemon {
-            child,
+            process: run::Daemon::spawn(&mut command),
             port,
             dir,
             stderr,
@@ -182,7 +179,7 @@ impl Daemon {
 
     fn signal(&self, signal: i32) {
         // SAFETY: kill(2) with our own child's pid and a valid signal number.
-        let rc = unsafe { libc::kill(self.child.id() as i32, signal) };
+        let rc = unsafe { libc::kill(self.process.0.id() as i32, signal) };
         assert_eq!(rc, 0);
     }
 
@@ -190,7 +187,7 @@ impl Daemon {
     fn wait_exit(&mut self, limit: Duration) -> Option<std::process::ExitStatus> {
         let deadline = Instant::now() + limit;
         loop {
-            if let Some(status) = self.child.try_wait().unwrap() {
+            if let Some(status) = self.process.0.try_wait().unwrap() {
                 return Some(status);
             }
             if Instant::now() >= deadline {
@@ -211,13 +208,6 @@ impl Daemon {
         let (mut ws, _) = tokio_tungstenite::connect_async(request).await.unwrap();
         send(&mut ws, json!({"type": "subscribe"})).await;
         ws
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 
@@ -737,7 +727,7 @@ async fn sighup_reloads_characters_without_dropping_clients_and_keeps_the_old_on
         "{}",
         daemon.log()
     );
-    assert!(daemon.child.try_wait().unwrap().is_none());
+    assert!(daemon.process.0.try_wait().unwrap().is_none());
     daemon.signal(libc::SIGTERM);
     assert!(daemon.wait_exit(Duration::from_secs(2)).unwrap().success());
 }
@@ -1296,7 +1286,7 @@ async fn osc_sends_the_streamed_rig_to_a_python_osc_receiver_and_rig_and_osc_rel
     }
     // Still streaming, still running.
     wait_for(&mut ws, Duration::from_secs(5), |v| v["type"] == "frame").await;
-    assert!(daemon.child.try_wait().unwrap().is_none());
+    assert!(daemon.process.0.try_wait().unwrap().is_none());
 
     std::fs::write(&stop_file, "").unwrap();
     let out = receiver.0.wait_with_output_now();
