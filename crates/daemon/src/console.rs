@@ -64,12 +64,12 @@ impl DotPlaces {
 
     /// The overlay: each dot at its pixel when found, else where `predicted` places it,
     /// else where it was last seen; and, while dots are missing, the rectangle the detector
-    /// searched on this frame as the tracker reports it (`searched`).
+    /// rectangles the detector searched on this frame as the tracker reports them (`searched`).
     pub fn overlay(
         &self,
         names: &[String],
         predicted: impl Fn(usize) -> Option<[f64; 2]>,
-        searched: Option<PixelRect>,
+        searched: &[PixelRect],
     ) -> Overlay {
         let mut dots = Vec::with_capacity(names.len());
         for (i, name) in names.iter().enumerate() {
@@ -94,14 +94,18 @@ impl DotPlaces {
                 });
             }
         }
-        let search = searched
-            .filter(|_| self.frames_with_missing > 0)
-            .map(|r| PixelBox {
-                x: r.x as f32,
-                y: r.y as f32,
-                width: r.width as f32,
-                height: r.height as f32,
-            });
+        let search = match self.frames_with_missing > 0 {
+            true => searched
+                .iter()
+                .map(|r| PixelBox {
+                    x: r.x as f32,
+                    y: r.y as f32,
+                    width: r.width as f32,
+                    height: r.height as f32,
+                })
+                .collect(),
+            false => Vec::new(),
+        };
         Overlay { dots, search }
     }
 }
@@ -272,15 +276,21 @@ mod tests {
             width: 104,
             height: 132,
         };
-        let o = places.overlay(&names, |_| None, Some(searched));
+        let below = PixelRect {
+            x: 61,
+            y: 150,
+            width: 104,
+            height: 40,
+        };
+        let o = places.overlay(&names, |_| None, &[searched]);
         assert!(o.dots.iter().all(|d| d.state == DotState::Tracked));
-        assert!(o.search.is_none(), "all found: no search region");
+        assert!(o.search.is_empty(), "all found: no search region");
         // D2 missing: predicted by the caller; F1 missing with no prediction: last seen.
         places.update(&[Some([101.0, 100.0]), None, None]);
         let o = places.overlay(
             &names,
             |i| (i == 1).then_some([125.0, 102.0]),
-            Some(searched),
+            &[searched, below],
         );
         let state = |n: &str| o.dots.iter().find(|d| d.name == n).unwrap().state;
         assert_eq!(state("D1"), DotState::Tracked);
@@ -289,10 +299,17 @@ mod tests {
         let f1 = o.dots.iter().find(|d| d.name == "F1").unwrap();
         assert_eq!((f1.x, f1.y), (110.0, 50.0), "where it was last seen");
         // Exactly the rectangle the tracker reports, nothing re-derived.
-        let s = o.search.unwrap();
-        assert_eq!((s.x, s.y, s.width, s.height), (61.0, 10.0, 104.0, 132.0));
+        let boxes: Vec<_> = o
+            .search
+            .iter()
+            .map(|s| (s.x, s.y, s.width, s.height))
+            .collect();
+        assert_eq!(
+            boxes,
+            [(61.0, 10.0, 104.0, 132.0), (61.0, 150.0, 104.0, 40.0)]
+        );
         // A frame that was not searched draws no region.
-        assert!(places.overlay(&names, |_| None, None).search.is_none());
+        assert!(places.overlay(&names, |_| None, &[]).search.is_empty());
     }
 
     /// The console's region is the tracker's: on a tracked session where a dot goes
@@ -313,7 +330,7 @@ mod tests {
             ..SynthConfig::default()
         })
         .unwrap();
-        let (mut drawn, mut restricted) = (0, 0);
+        let (mut drawn, mut restricted, mut apart) = (0, 0, 0);
         for (i, (mut frame, _)) in synth.enumerate() {
             // From 2 s on, every other frame paints over the mouth's left half: dots go
             // missing and the tracker widens (and now and then drops) its region.
@@ -326,25 +343,33 @@ mod tests {
             pipeline.step(&frame).unwrap();
             let tracked = pipeline.tracked();
             places.update(&tracked.pixels);
-            let o = places.overlay(&names, |_| None, tracked.searched);
-            match (tracked.searched, o.search) {
-                (Some(r), Some(b)) => {
-                    drawn += 1;
-                    assert_eq!(
-                        (b.x, b.y, b.width, b.height),
-                        (r.x as f32, r.y as f32, r.width as f32, r.height as f32)
-                    );
-                    if r.area() < i64::from(frame.color.width * frame.color.height) {
-                        restricted += 1;
-                    }
-                }
-                (_, None) => {}
-                (None, Some(_)) => panic!("frame {i}: a region drawn that was not searched"),
+            let o = places.overlay(&names, |_| None, &tracked.searched);
+            if o.search.is_empty() {
+                continue;
+            }
+            drawn += 1;
+            let boxes: Vec<_> = o
+                .search
+                .iter()
+                .map(|b| (b.x, b.y, b.width, b.height))
+                .collect();
+            let rects: Vec<_> = tracked
+                .searched
+                .iter()
+                .map(|r| (r.x as f32, r.y as f32, r.width as f32, r.height as f32))
+                .collect();
+            assert_eq!(boxes, rects, "frame {i}: drawn is not what was searched");
+            let full = i64::from(frame.color.width * frame.color.height);
+            if tracked.searched.iter().map(|r| r.area()).sum::<i64>() < full {
+                restricted += 1;
+            }
+            if tracked.searched.len() == 2 {
+                apart += 1;
             }
         }
         assert!(
-            drawn > 10 && restricted > 0,
-            "{drawn} drawn, {restricted} restricted"
+            drawn > 10 && restricted > 0 && apart > 0,
+            "{drawn} drawn, {restricted} restricted, {apart} as two regions"
         );
     }
 

@@ -535,8 +535,11 @@ impl Processor for LiveProcessor {
             let p = stab.head.apply(&rest);
             k.project([p.x, p.y, p.z])
         };
-        self.places
-            .overlay(&self.dot_names, predicted, self.pipeline.tracked().searched)
+        self.places.overlay(
+            &self.dot_names,
+            predicted,
+            &self.pipeline.tracked().searched,
+        )
     }
 
     fn look_at(

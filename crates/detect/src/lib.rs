@@ -115,6 +115,14 @@ impl PixelRect {
         })
     }
 
+    /// Whether the two share a pixel.
+    pub fn intersects(&self, other: &PixelRect) -> bool {
+        self.x < other.x + other.width
+            && other.x < self.x + self.width
+            && self.y < other.y + other.height
+            && other.y < self.y + self.height
+    }
+
     pub fn area(&self) -> i64 {
         self.width as i64 * self.height as i64
     }
@@ -146,8 +154,9 @@ pub struct Blob {
 #[derive(Debug, Clone, Default)]
 pub struct Detections {
     pub blobs: Vec<Blob>,
-    /// The rectangle actually searched (clipped to the image).
-    pub searched: Option<PixelRect>,
+    /// The rectangles actually searched (clipped to the image), in the order searched; empty
+    /// when nothing was.
+    pub searched: Vec<PixelRect>,
     /// Components that failed a filter (size, shape, depth); for diagnostics.
     pub rejected: u32,
     /// Components of a dot's shape and depth but smaller than a dot at that distance
@@ -166,6 +175,15 @@ enum Reject {
     NoDepth,
 }
 
+/// One search region's images, kept between frames.
+#[derive(Default)]
+struct RegionImages {
+    /// The region in HSV.
+    hsv: Mat,
+    /// Per pixel of the region, the bits of the (class, hue range) pairs it falls in.
+    pixel_bits: Vec<u32>,
+}
+
 /// The detector, with its scratch images kept between frames so a frame allocates nothing
 /// once sizes settle.
 pub struct Detector {
@@ -174,11 +192,11 @@ pub struct Detector {
     /// saturation]` ([`weight_table`]).
     weights: Vec<Vec<u8>>,
     kernel: Mat,
-    hsv: Mat,
+    /// Per region searched this frame: its HSV image and class bits (kept per region, so
+    /// that regions of different sizes do not reallocate each other's every frame).
+    regions: Vec<RegionImages>,
     /// The colour thresholds of every class as bit tables ([`RangeBits`]).
     range_bits: RangeBits,
-    /// Per pixel of the region, the bits of the (class, hue range) pairs it falls in.
-    pixel_bits: Vec<u32>,
     mask: Mat,
     morphed: Mat,
     labels: Mat,
@@ -224,9 +242,8 @@ impl Detector {
             kernel,
             config,
             weights,
-            hsv: Mat::default(),
+            regions: Vec::new(),
             range_bits,
-            pixel_bits: Vec::new(),
             mask: Mat::default(),
             morphed: Mat::default(),
             labels: Mat::default(),
@@ -242,7 +259,8 @@ impl Detector {
         &self.config
     }
 
-    /// Finds dot candidates of every class inside `search` (the full frame when `None`).
+    /// Finds dot candidates of every class inside `search` (the full frame when `None`);
+    /// [`Self::detect_into`] searches several regions.
     ///
     /// `depth` must be on the colour grid (registered), in units of `depth_scale_m` metres;
     /// without it the depth filter is skipped and the area filter spans the whole
@@ -255,23 +273,26 @@ impl Detector {
         search: Option<PixelRect>,
     ) -> Result<Detections, DetectError> {
         let mut out = Detections::default();
-        self.detect_into(color, depth, fx, search, &mut out)?;
+        let regions = search.map(|r| [r]);
+        self.detect_into(color, depth, fx, regions.as_ref().map(|r| &r[..]), &mut out)?;
         Ok(out)
     }
 
-    /// As [`Self::detect`], into `out` (its blob list is reused: no allocation once it has
-    /// grown to a frame's count).
+    /// As [`Self::detect`] over each of the regions `search` (the full frame when `None`),
+    /// into `out` (its lists are reused: no allocation once they have grown to a frame's
+    /// count). The regions should not overlap (a blob in two is found twice). Blobs come
+    /// class by class, and within a class region by region in the order given.
     pub fn detect_into(
         &mut self,
         color: &ColorImage,
         depth: Option<(&DepthImage, f64)>,
         fx: f64,
-        search: Option<PixelRect>,
+        search: Option<&[PixelRect]>,
         out: &mut Detections,
     ) -> Result<(), DetectError> {
         out.blobs.clear();
         out.faint.clear();
-        out.searched = None;
+        out.searched.clear();
         out.rejected = 0;
         let expected_len = color.width as usize * color.height as usize * 3;
         if color.data.len() != expected_len {
@@ -290,30 +311,36 @@ impl Detector {
                 )));
             }
         }
-        let full = PixelRect::full(color.width, color.height);
-        let roi = match search {
-            Some(r) => match r.clip(color.width, color.height) {
-                Some(r) => r,
-                None => return Ok(()),
-            },
-            None => full,
-        };
+        let full = [PixelRect::full(color.width, color.height)];
+        let regions = search.unwrap_or(&full);
         let image = Mat::new_rows_cols_with_bytes::<Vec3b>(
             color.height as i32,
             color.width as i32,
             &color.data,
         )?;
-        let image_roi = Mat::roi(&image, roi.to_cv())?;
-        imgproc::cvt_color_def(&image_roi, &mut self.hsv, imgproc::COLOR_BGR2HSV)?;
-        self.range_bits
-            .classify(self.hsv.data_bytes()?, &mut self.pixel_bits);
-
-        out.searched = Some(roi);
+        for roi in regions
+            .iter()
+            .filter_map(|r| r.clip(color.width, color.height))
+        {
+            let k = out.searched.len();
+            if self.regions.len() <= k {
+                self.regions.push(RegionImages::default());
+            }
+            let region = &mut self.regions[k];
+            let image_roi = Mat::roi(&image, roi.to_cv())?;
+            imgproc::cvt_color_def(&image_roi, &mut region.hsv, imgproc::COLOR_BGR2HSV)?;
+            self.range_bits
+                .classify(region.hsv.data_bytes()?, &mut region.pixel_bits);
+            out.searched.push(roi);
+        }
         for class_idx in 0..self.config.classes.len() {
-            self.detect_class(class_idx, roi, depth, fx, out)?;
+            for k in 0..out.searched.len() {
+                let roi = out.searched[k];
+                self.detect_class(class_idx, k, roi, depth, fx, out)?;
+            }
         }
         tracing::trace!(
-            roi = ?roi,
+            regions = ?out.searched,
             found = out.blobs.len(),
             rejected = out.rejected,
             "detected"
@@ -324,18 +351,20 @@ impl Detector {
     fn detect_class(
         &mut self,
         class_idx: usize,
+        region: usize,
         roi: PixelRect,
         depth: Option<(&DepthImage, f64)>,
         fx: f64,
         out: &mut Detections,
     ) -> Result<(), DetectError> {
+        let images = &self.regions[region];
         // SAFETY: `class_mask` writes every byte of the new matrix.
         unsafe {
             self.mask
-                .create_rows_cols(self.hsv.rows(), self.hsv.cols(), core::CV_8UC1)?
+                .create_rows_cols(images.hsv.rows(), images.hsv.cols(), core::CV_8UC1)?
         };
         self.range_bits
-            .class_mask(class_idx, &self.pixel_bits, self.mask.data_bytes_mut()?);
+            .class_mask(class_idx, &images.pixel_bits, self.mask.data_bytes_mut()?);
         // Opening only decides which components are real (it would shave a 2-px dot's rim,
         // biasing the centre): components come from the unopened mask and must keep a pixel
         // through the opening. Closing changes the components themselves.
@@ -464,7 +493,7 @@ impl Detector {
                 ComponentImages {
                     labels: &self.labels,
                     crop,
-                    hsv: &self.hsv,
+                    hsv: &self.regions[region].hsv,
                     opened: open,
                     weights: &self.weights[class_idx],
                 },

@@ -292,6 +292,39 @@ fn specks_smaller_than_a_dot_are_kept_apart_as_faint() {
 }
 
 #[test]
+fn several_regions_find_what_each_holds_class_by_class_and_nothing_between() {
+    // Two green dots and a blue one in the upper region, a green one in the lower, a green
+    // one between the two regions.
+    let mut canvas = Canvas::new(320, 240);
+    canvas.disc([60.3, 40.2], 2.0, GREEN);
+    canvas.disc([90.6, 44.1], 2.0, BLUE);
+    canvas.disc([120.2, 40.7], 2.0, GREEN);
+    canvas.disc([100.4, 120.5], 2.0, GREEN);
+    canvas.disc([100.5, 200.3], 2.0, GREEN);
+    let img = canvas.image();
+    let mut det = Detector::new(DetectConfig::default()).unwrap();
+    let upper = PixelRect::around([[60.0, 40.0], [120.0, 44.0]], 12.0).unwrap();
+    let lower = PixelRect::around([[100.0, 200.0]], 12.0).unwrap();
+    let mut found = Detections::default();
+    det.detect_into(&img, None, 525.0, Some(&[upper, lower]), &mut found)
+        .unwrap();
+    assert_eq!(found.searched, [upper, lower]);
+    let centres: Vec<[f64; 2]> = found.blobs.iter().map(|b| b.center).collect();
+    let expected = [[60.3, 40.2], [120.2, 40.7], [100.5, 200.3], [90.6, 44.1]];
+    assert_eq!(centres.len(), expected.len(), "{centres:?}");
+    for (got, want) in centres.iter().zip(expected) {
+        assert!(dist(*got, want) < 0.3, "{centres:?}");
+    }
+    // The same frame as one region round both finds the dot between them too, the others
+    // in the same order.
+    let both = PixelRect::around([[60.0, 40.0], [120.0, 44.0], [100.0, 200.0]], 12.0).unwrap();
+    det.detect_into(&img, None, 525.0, Some(&[both]), &mut found)
+        .unwrap();
+    assert_eq!(found.blobs.len(), 5);
+    assert!(dist(found.blobs[2].center, [100.4, 120.5]) < 0.3);
+}
+
+#[test]
 fn search_region_limits_the_work_and_keeps_full_frame_coordinates() {
     let mut canvas = Canvas::new(320, 240);
     canvas.disc([40.4, 40.6], 2.0, GREEN);
@@ -306,7 +339,10 @@ fn search_region_limits_the_work_and_keeps_full_frame_coordinates() {
         "{:?}",
         found.blobs[0]
     );
-    assert_eq!(found.searched.unwrap().area(), 21 * 21);
+    assert_eq!(
+        found.searched,
+        [PixelRect::around([[250.0, 200.0]], 10.0).unwrap()]
+    );
     // A region entirely outside the image finds nothing and does not fail.
     let off = PixelRect {
         x: 400,
@@ -329,7 +365,7 @@ fn search_region_limits_the_work_and_keeps_full_frame_coordinates() {
     let found = det.detect(&img, None, 525.0, Some(edge)).unwrap();
     assert_eq!(found.blobs.len(), 1);
     assert_eq!(
-        found.searched.unwrap(),
+        found.searched[0],
         PixelRect {
             x: 0,
             y: 0,

@@ -229,8 +229,7 @@
     cctx.fillRect(0, 0, w, h);
     cctx.imageSmoothingEnabled = true;
     cctx.drawImage(bitmap, ox, oy, sw * scale, sh * scale);
-    if (overlay.search) {
-      const s = overlay.search;
+    for (const s of overlay.search || []) {
       const [x0, y0] = toCanvas(s.x, s.y);
       cctx.setLineDash([6 * dpr, 4 * dpr]);
       cctx.strokeStyle = "#ff9f43";

@@ -472,12 +472,12 @@ mod tests {
                     y: 60.0,
                     state: DotState::Predicted,
                 }],
-                search: Some(PixelBox {
+                search: vec![PixelBox {
                     x: 80.0,
                     y: 40.0,
                     width: 100.0,
                     height: 50.0,
-                }),
+                }],
             },
             message: Default::default(),
         }

@@ -128,9 +128,10 @@ pub struct PixelBox {
 pub struct Overlay {
     /// Every dot with a place (seen, predicted or last seen).
     pub dots: Vec<ImageDot>,
-    /// Where the tracker looks while dots are missing; `None` when all are tracked.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub search: Option<PixelBox>,
+    /// Where the tracker looks while dots are missing (the box round the forehead's dots and
+    /// the one round the lips', or one box round all); empty when all are tracked.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub search: Vec<PixelBox>,
 }
 
 /// What the processing thread hands over for one preview image.

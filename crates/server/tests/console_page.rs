@@ -77,7 +77,7 @@ fn spawn_previews(hub: Hub, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()
                 image: image.clone(),
                 overlay: Overlay {
                     dots: dots(),
-                    search: None,
+                    search: Vec::new(),
                 },
             });
             seq += 1;

@@ -47,12 +47,12 @@ fn overlay() -> Overlay {
             dot("D2", 140.0, 110.0, DotState::Predicted),
             dot("F1", 160.0, 40.0, DotState::Lost),
         ],
-        search: Some(PixelBox {
+        search: vec![PixelBox {
             x: 60.0,
             y: 20.0,
             width: 160.0,
             height: 140.0,
-        }),
+        }],
     }
 }
 

@@ -275,12 +275,20 @@ async fn server_messages_match_the_published_schemas() {
                     y: 20.0,
                     state: mouthpiece_server::DotState::Predicted,
                 }],
-                search: Some(mouthpiece_server::PixelBox {
-                    x: 0.0,
-                    y: 0.0,
-                    width: 50.0,
-                    height: 40.0,
-                }),
+                search: vec![
+                    mouthpiece_server::PixelBox {
+                        x: 0.0,
+                        y: 0.0,
+                        width: 50.0,
+                        height: 40.0,
+                    },
+                    mouthpiece_server::PixelBox {
+                        x: 0.0,
+                        y: 60.0,
+                        width: 50.0,
+                        height: 30.0,
+                    },
+                ],
             },
         });
         let deadline = std::time::Instant::now() + Duration::from_millis(500);

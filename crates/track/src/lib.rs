@@ -226,7 +226,7 @@ impl Tracker {
                 stabilised: None,
                 status: Status::default(),
                 steps: Vec::new(),
-                searched: None,
+                searched: Vec::new(),
             },
             config,
         })
@@ -380,15 +380,16 @@ impl Tracker {
             [frame.color.width as usize, frame.color.height as usize],
             k.fx,
         );
-        self.out.searched = None;
+        self.out.searched.clear();
+        let regions = search.map(|s| s.searched());
         self.detector.detect_into(
             &frame.color,
             Some((sensor.depth, sensor.scale)),
             k.fx,
-            search,
+            regions.as_deref(),
             found,
         )?;
-        self.out.searched = found.searched;
+        self.out.searched.clone_from(&found.searched);
         self.cands.clear();
         for (blob_index, blob) in found.blobs.iter().enumerate() {
             let z_hint = blob.depth_m.unwrap_or(DEFAULT_DEPTH_M);

@@ -95,11 +95,12 @@ pub struct TrackedFrame {
     /// per dot a step named, re-named or left missing (the steps:
     /// [`crate::naming::recovery::STEPS`]). A later step or check may change the name again.
     pub steps: Vec<StepEvent>,
-    /// The rectangle the detector searched on this frame, cut to the image (the whole image
-    /// when nothing was predicted, or on the periodic full search while dots are missing);
-    /// `None` when the frame was not searched. The booth console draws this one, so it
-    /// never shows a region the tracker did not use.
-    pub searched: Option<mouthpiece_detect::PixelRect>,
+    /// The rectangles the detector searched on this frame, cut to the image: the box round
+    /// the forehead's predicted dots and the one round the lips' (one box round all when
+    /// they meet), the whole image when nothing was predicted or on the periodic full search
+    /// while dots are missing; empty when the frame was not searched. The booth console
+    /// draws these, so it never shows a region the tracker did not use.
+    pub searched: Vec<mouthpiece_detect::PixelRect>,
 }
 
 /// One name a naming step changed on a frame.

@@ -28,6 +28,32 @@ const PIXEL_GATE_WIDENING_PER_FRAME: f64 = 0.05;
 /// 8 mm would follow over several frames).
 const DEPTH_GATE_WIDENING_PER_FRAME: f64 = 0.2;
 
+/// Where to look on a frame ([`Tracks::search_region`]): the box round every predicted dot
+/// with the margin, and the same round the lips and round the forehead apart.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct SearchRegions {
+    pub(crate) all: PixelRect,
+    pub(crate) lips: Option<PixelRect>,
+    pub(crate) forehead: Option<PixelRect>,
+}
+
+impl SearchRegions {
+    /// The regions the detector searches: the forehead's box and the lips' box when they do
+    /// not meet (the face between them holds no dot), top one first; else the box round all.
+    pub(crate) fn searched(&self) -> smallvec::SmallVec<[PixelRect; 2]> {
+        match (self.forehead, self.lips) {
+            (Some(a), Some(b)) if !a.intersects(&b) => {
+                if a.y <= b.y {
+                    smallvec::smallvec![a, b]
+                } else {
+                    smallvec::smallvec![b, a]
+                }
+            }
+            _ => smallvec::smallvec![self.all],
+        }
+    }
+}
+
 /// A search region covering 1/this of the image or more costs about as much as the full
 /// frame, which is searched instead.
 const FULL_FRAME_DIVISOR: i64 = 2;
@@ -383,7 +409,7 @@ impl Tracks {
         DotSpacing::of_rest(&self.rest, fx)
     }
 
-    /// Where to look: around the predicted dots plus a margin at the lips' mean last depth
+    /// Where to look ([`SearchRegions`]): around the predicted dots plus a margin at the lips' mean last depth
     /// (camera focal length `fx`, pixels): [`Self::margin_spacings`] dot spacings, growing
     /// from [`TrackConfig::roi_margin_spacings`] while some are missing; the full frame
     /// (`None`) when nothing is named, every few frames while dots are missing, or without a
@@ -394,7 +420,7 @@ impl Tracks {
         step_ratio: f64,
         image: [usize; 2],
         fx: f64,
-    ) -> Option<PixelRect> {
+    ) -> Option<SearchRegions> {
         let tracks = self.dots.as_ref()?;
         let spacing = self.spacing(fx)?;
         if self.frames_with_missing > 0
@@ -411,7 +437,16 @@ impl Tracks {
         let margin = self.margin_spacings(config, step_ratio, spacing_px) * spacing_px * grow;
         let rect = PixelRect::around(tracks.iter().map(|t| t.predicted_pixel(step_ratio)), margin)?;
         let full = image[0] as i64 * image[1] as i64;
-        (rect.area() < full / FULL_FRAME_DIVISOR).then_some(rect)
+        (rect.area() < full / FULL_FRAME_DIVISOR).then_some(SearchRegions {
+            all: rect,
+            lips: PixelRect::around(lips.iter().map(|t| t.predicted_pixel(step_ratio)), margin),
+            forehead: PixelRect::around(
+                tracks[lips.len()..]
+                    .iter()
+                    .map(|t| t.predicted_pixel(step_ratio)),
+                margin,
+            ),
+        })
     }
 
     /// *Search margin by motion*, in dot spacings (`spacing_px` pixels each): the dots'
@@ -623,6 +658,51 @@ mod tests {
         assert!((at_far - vga / 2.0).abs() < 1e-9, "{at_far} against {vga}");
     }
 
+    #[test]
+    fn the_forehead_and_the_lips_are_searched_apart_unless_their_boxes_meet() {
+        let scene = Scene::calibrated();
+        let tracks = Tracks {
+            dots: Some(scene.tracks.clone()),
+            rest: scene.rest.clone(),
+            ..Tracks::default()
+        };
+        let regions = |fx: f64| {
+            tracks
+                .search_region(&scene.config, 1.0, [4000, 4000], fx)
+                .unwrap()
+        };
+        // The calibrated face: the forehead's box above the lips', the two apart, each
+        // inside the box round all, together smaller.
+        let r = regions(scene.k.fx);
+        let searched = r.searched();
+        assert_eq!(searched.len(), 2, "{r:?}");
+        let (forehead, lips) = (searched[0], searched[1]);
+        assert_eq!((Some(forehead), Some(lips)), (r.forehead, r.lips));
+        assert!(forehead.y + forehead.height <= lips.y, "{r:?}");
+        for b in [forehead, lips] {
+            assert!(b.x >= r.all.x && b.y >= r.all.y);
+            assert!(b.x + b.width <= r.all.x + r.all.width);
+            assert!(b.y + b.height <= r.all.y + r.all.height);
+        }
+        assert!(forehead.area() + lips.area() < r.all.area(), "{r:?}");
+        // Boxes that meet: one box round all.
+        let meeting = SearchRegions {
+            forehead: Some(PixelRect {
+                y: lips.y - forehead.height + 1,
+                ..forehead
+            }),
+            ..r
+        };
+        assert_eq!(&meeting.searched()[..], [r.all]);
+        // The lips above the forehead (a head upside down): still the top one first.
+        let flipped = SearchRegions {
+            forehead: r.lips,
+            lips: r.forehead,
+            ..r
+        };
+        assert_eq!(&flipped.searched()[..], [forehead, lips]);
+    }
+
     /// The search region's margin is [`TrackConfig::roi_margin_spacings`] dot spacings at
     /// the lips' depth: with twice the focal length (the same dots' pixels), twice the
     /// pixels around them.
@@ -636,7 +716,7 @@ mod tests {
         };
         let config = &scene.config;
         let image = [4000, 4000];
-        let rect = |fx: f64| tracks.search_region(config, 1.0, image, fx).unwrap();
+        let rect = |fx: f64| tracks.search_region(config, 1.0, image, fx).unwrap().all;
         let (vga, hd) = (rect(525.0), rect(1050.0));
         let spacing = DotSpacing::of_rest(&scene.rest, 525.0).unwrap().px(0.6);
         let margin = config.roi_margin_spacings * spacing;
@@ -703,7 +783,7 @@ mod tests {
         // The lips move sideways only: the dots' box is as tall each time.
         let height = |tracks: &Tracks| {
             let r = tracks.search_region(&config, 1.0, [4000, 4000], fx);
-            r.unwrap().height as f64
+            r.unwrap().all.height as f64
         };
         let slow = height(&tracks);
         frame(&mut tracks, 1.4, None);

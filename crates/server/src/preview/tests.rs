@@ -49,7 +49,7 @@ fn encoded_message_follows_the_layout_and_decodes() {
                 y: 200.0,
                 state: DotState::Tracked,
             }],
-            search: None,
+            search: Vec::new(),
         },
     };
     let p = encode(&input, 320, 70).unwrap();
