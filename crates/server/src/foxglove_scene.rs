@@ -84,7 +84,7 @@ pub fn compressed_image(p: &EncodedPreview, timestamp_ns: u64) -> Value {
 }
 
 /// `foxglove.ImageAnnotations` of a preview image: a filled circle and a label per dot,
-/// coloured by state, and the search region as a closed outline, in the JPEG's pixels.
+/// coloured by state, and each search region as a closed outline, in the JPEG's pixels.
 pub fn image_annotations(p: &EncodedPreview, timestamp_ns: u64) -> Value {
     let sx = f64::from(p.width) / f64::from(p.source_width.max(1));
     let sy = f64::from(p.height) / f64::from(p.source_height.max(1));
