@@ -298,7 +298,7 @@ mod tests {
         assert_eq!(state("F1"), DotState::Lost);
         let f1 = o.dots.iter().find(|d| d.name == "F1").unwrap();
         assert_eq!((f1.x, f1.y), (110.0, 50.0), "where it was last seen");
-        // Exactly the rectangle the tracker reports, nothing re-derived.
+        // Exactly the rectangles the tracker reports, nothing re-derived.
         let boxes: Vec<_> = o
             .search
             .iter()

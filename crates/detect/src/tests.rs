@@ -292,6 +292,19 @@ fn specks_smaller_than_a_dot_are_kept_apart_as_faint() {
 }
 
 #[test]
+fn the_union_of_two_boxes_is_the_box_round_both_groups_of_points() {
+    let upper = [[60.3, 40.7], [120.5, 44.2], [-3.5, 38.0]];
+    let lower = [[100.2, 200.9], [80.0, 190.5]];
+    let margin = 11.3;
+    let a = PixelRect::around(upper, margin).unwrap();
+    let b = PixelRect::around(lower, margin).unwrap();
+    let both = PixelRect::around(upper.into_iter().chain(lower), margin).unwrap();
+    assert_eq!(a.union(&b), both);
+    assert_eq!(b.union(&a), both);
+    assert_eq!(a.union(&a), a);
+}
+
+#[test]
 fn several_regions_find_what_each_holds_class_by_class_and_nothing_between() {
     // Two green dots and a blue one in the upper region, a green one in the lower, a green
     // one between the two regions.

@@ -409,8 +409,8 @@ impl Tracks {
         DotSpacing::of_rest(&self.rest, fx)
     }
 
-    /// Where to look ([`SearchRegions`]): around the predicted dots plus a margin at the lips' mean last depth
-    /// (camera focal length `fx`, pixels): [`Self::margin_spacings`] dot spacings, growing
+    /// Where to look ([`SearchRegions`]): around the predicted dots plus a margin at the
+    /// lips' mean last depth (camera focal length `fx`, pixels): [`Self::margin_spacings`] dot spacings, growing
     /// from [`TrackConfig::roi_margin_spacings`] while some are missing; the full frame
     /// (`None`) when nothing is named, every few frames while dots are missing, or without a
     /// spacing.
@@ -435,17 +435,20 @@ impl Tracks {
         let z = lips.iter().map(|t| t.depth).sum::<f64>() / lips.len().max(1) as f64;
         let spacing_px = spacing.px(z);
         let margin = self.margin_spacings(config, step_ratio, spacing_px) * spacing_px * grow;
-        let rect = PixelRect::around(tracks.iter().map(|t| t.predicted_pixel(step_ratio)), margin)?;
+        let around = |group: &[DotTrack]| {
+            PixelRect::around(group.iter().map(|t| t.predicted_pixel(step_ratio)), margin)
+        };
+        let (lips, forehead) = (around(lips), around(&tracks[lips.len()..]));
+        // The box round all is the two boxes' union (the rounding outwards is monotone).
+        let all = match (lips, forehead) {
+            (Some(a), Some(b)) => a.union(&b),
+            (a, b) => a.or(b)?,
+        };
         let full = image[0] as i64 * image[1] as i64;
-        (rect.area() < full / FULL_FRAME_DIVISOR).then_some(SearchRegions {
-            all: rect,
-            lips: PixelRect::around(lips.iter().map(|t| t.predicted_pixel(step_ratio)), margin),
-            forehead: PixelRect::around(
-                tracks[lips.len()..]
-                    .iter()
-                    .map(|t| t.predicted_pixel(step_ratio)),
-                margin,
-            ),
+        (all.area() < full / FULL_FRAME_DIVISOR).then_some(SearchRegions {
+            all,
+            lips,
+            forehead,
         })
     }
 
