@@ -115,12 +115,14 @@ impl PixelRect {
         })
     }
 
-    /// Whether the two share a pixel.
-    pub fn intersects(&self, other: &PixelRect) -> bool {
-        self.x < other.x + other.width
-            && other.x < self.x + self.width
-            && self.y < other.y + other.height
-            && other.y < self.y + self.height
+    /// The pixels between the two along the axis they lie furthest apart on: 0 when they
+    /// share a pixel or touch.
+    pub fn gap(&self, other: &PixelRect) -> i32 {
+        let apart =
+            |a0: i32, a_len: i32, b0: i32, b_len: i32| (b0 - (a0 + a_len)).max(a0 - (b0 + b_len));
+        apart(self.x, self.width, other.x, other.width)
+            .max(apart(self.y, self.height, other.y, other.height))
+            .max(0)
     }
 
     /// The smallest rectangle holding both.

@@ -305,6 +305,27 @@ fn the_union_of_two_boxes_is_the_box_round_both_groups_of_points() {
 }
 
 #[test]
+fn the_gap_between_two_boxes_is_the_pixels_between_them_on_the_axis_most_apart() {
+    let r = |x, y, width, height| PixelRect {
+        x,
+        y,
+        width,
+        height,
+    };
+    let a = r(10, 10, 20, 20); // columns 10..=29, rows 10..=29
+    assert_eq!(a.gap(&r(15, 15, 5, 5)), 0, "inside");
+    assert_eq!(a.gap(&r(29, 29, 5, 5)), 0, "sharing a corner pixel");
+    assert_eq!(a.gap(&r(30, 10, 5, 5)), 0, "touching");
+    assert_eq!(a.gap(&r(10, 33, 5, 5)), 3, "three rows between");
+    assert_eq!(r(10, 33, 5, 5).gap(&a), 3, "either way round");
+    assert_eq!(
+        a.gap(&r(34, 31, 5, 5)),
+        4,
+        "diagonal: the larger of 4 columns and 1 row"
+    );
+}
+
+#[test]
 fn several_regions_find_what_each_holds_class_by_class_and_nothing_between() {
     // Two green dots and a blue one in the upper region, a green one in the lower, a green
     // one between the two regions.

@@ -379,6 +379,7 @@ impl Tracker {
             self.step_ratio,
             [frame.color.width as usize, frame.color.height as usize],
             k.fx,
+            sensor.dot_radius_m,
         );
         self.out.searched.clear();
         let regions = search.map(|s| s.searched());

@@ -35,14 +35,19 @@ pub(crate) struct SearchRegions {
     pub(crate) all: PixelRect,
     pub(crate) lips: Option<PixelRect>,
     pub(crate) forehead: Option<PixelRect>,
+    /// The lips' and the forehead's boxes are searched apart only when at least this many
+    /// pixels lie between them: a dot's diameter at the lips' depth, so no dot's paint can
+    /// straddle the gap and be found as two halves.
+    pub(crate) min_gap_px: i32,
 }
 
 impl SearchRegions {
-    /// The regions the detector searches: the forehead's box and the lips' box when they do
-    /// not meet (the face between them holds no dot), top one first; else the box round all.
+    /// The regions the detector searches: the forehead's box and the lips' box when at least
+    /// [`Self::min_gap_px`] apart (the face between them holds no dot), top one first; else
+    /// the box round all.
     pub(crate) fn searched(&self) -> smallvec::SmallVec<[PixelRect; 2]> {
         match (self.forehead, self.lips) {
-            (Some(a), Some(b)) if !a.intersects(&b) => {
+            (Some(a), Some(b)) if a.gap(&b) >= self.min_gap_px => {
                 if a.y <= b.y {
                     smallvec::smallvec![a, b]
                 } else {
@@ -410,16 +415,17 @@ impl Tracks {
     }
 
     /// Where to look ([`SearchRegions`]): around the predicted dots plus a margin at the
-    /// lips' mean last depth (camera focal length `fx`, pixels): [`Self::margin_spacings`] dot spacings, growing
-    /// from [`TrackConfig::roi_margin_spacings`] while some are missing; the full frame
-    /// (`None`) when nothing is named, every few frames while dots are missing, or without a
-    /// spacing.
+    /// lips' mean last depth (camera focal length `fx`, pixels; dots of `dot_radius_m`):
+    /// [`Self::margin_spacings`] dot spacings, growing from
+    /// [`TrackConfig::roi_margin_spacings`] while some are missing; the full frame (`None`)
+    /// when nothing is named, every few frames while dots are missing, or without a spacing.
     pub(crate) fn search_region(
         &self,
         config: &TrackConfig,
         step_ratio: f64,
         image: [usize; 2],
         fx: f64,
+        dot_radius_m: f64,
     ) -> Option<SearchRegions> {
         let tracks = self.dots.as_ref()?;
         let spacing = self.spacing(fx)?;
@@ -445,10 +451,12 @@ impl Tracks {
             (a, b) => a.or(b)?,
         };
         let full = image[0] as i64 * image[1] as i64;
+        let min_gap_px = (2.0 * dot_radius_m * fx / z.max(f64::MIN_POSITIVE)).ceil() as i32;
         (all.area() < full / FULL_FRAME_DIVISOR).then_some(SearchRegions {
             all,
             lips,
             forehead,
+            min_gap_px,
         })
     }
 
@@ -612,7 +620,7 @@ impl Tracks {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::naming::recovery::test_support::Scene;
+    use crate::naming::recovery::test_support::{Scene, DOT_RADIUS_M};
 
     /// The scene's mouth at rest (lip dots about 10 mm apart at 0.6 m, fx 525): its dot
     /// spacing in pixels grows with the focal length and shrinks with the depth.
@@ -662,7 +670,7 @@ mod tests {
     }
 
     #[test]
-    fn the_forehead_and_the_lips_are_searched_apart_unless_their_boxes_meet() {
+    fn the_forehead_and_the_lips_are_searched_apart_when_a_dot_apart_or_more() {
         let scene = Scene::calibrated();
         let tracks = Tracks {
             dots: Some(scene.tracks.clone()),
@@ -671,7 +679,7 @@ mod tests {
         };
         let regions = |fx: f64| {
             tracks
-                .search_region(&scene.config, 1.0, [4000, 4000], fx)
+                .search_region(&scene.config, 1.0, [4000, 4000], fx, DOT_RADIUS_M)
                 .unwrap()
         };
         // The calibrated face: the forehead's box above the lips', the two apart, each
@@ -688,15 +696,30 @@ mod tests {
             assert!(b.y + b.height <= r.all.y + r.all.height);
         }
         assert!(forehead.area() + lips.area() < r.all.area(), "{r:?}");
-        // Boxes that meet: one box round all.
-        let meeting = SearchRegions {
+        // Boxes that meet, or lie less than a dot's diameter apart: one box round all (a
+        // dot's paint could straddle the gap). A diameter apart: two boxes.
+        let diameter = 2.0 * DOT_RADIUS_M * scene.k.fx / scene.tracks[0].depth;
+        assert!(
+            (r.min_gap_px as f64 - diameter).abs() < 1.0,
+            "{} px against a diameter of {diameter} px",
+            r.min_gap_px
+        );
+        let forehead_ending = |rows_between: i32| SearchRegions {
             forehead: Some(PixelRect {
-                y: lips.y - forehead.height + 1,
+                y: lips.y - forehead.height - rows_between,
                 ..forehead
             }),
             ..r
         };
-        assert_eq!(&meeting.searched()[..], [r.all]);
+        for rows_between in [-1, 0, r.min_gap_px - 1] {
+            let close = forehead_ending(rows_between);
+            assert_eq!(
+                &close.searched()[..],
+                [r.all],
+                "{rows_between} rows between"
+            );
+        }
+        assert_eq!(forehead_ending(r.min_gap_px).searched().len(), 2);
         // The lips above the forehead (a head upside down): still the top one first.
         let flipped = SearchRegions {
             forehead: r.lips,
@@ -719,7 +742,12 @@ mod tests {
         };
         let config = &scene.config;
         let image = [4000, 4000];
-        let rect = |fx: f64| tracks.search_region(config, 1.0, image, fx).unwrap().all;
+        let rect = |fx: f64| {
+            tracks
+                .search_region(config, 1.0, image, fx, DOT_RADIUS_M)
+                .unwrap()
+                .all
+        };
         let (vga, hd) = (rect(525.0), rect(1050.0));
         let spacing = DotSpacing::of_rest(&scene.rest, 525.0).unwrap().px(0.6);
         let margin = config.roi_margin_spacings * spacing;
@@ -785,7 +813,7 @@ mod tests {
         assert!((margin(&tracks) - SEARCH_FLOOR_SPACINGS).abs() < 1e-9);
         // The lips move sideways only: the dots' box is as tall each time.
         let height = |tracks: &Tracks| {
-            let r = tracks.search_region(&config, 1.0, [4000, 4000], fx);
+            let r = tracks.search_region(&config, 1.0, [4000, 4000], fx, DOT_RADIUS_M);
             r.unwrap().all.height as f64
         };
         let slow = height(&tracks);
