@@ -57,7 +57,7 @@ pub(crate) struct ComponentImages<'a> {
     pub(crate) hsv: &'a Mat,
     /// The opened mask over the region, when the class mask is opened.
     pub(crate) opened: Option<&'a Mat>,
-    /// The class's weight table ([`weight_table`]).
+    /// The class's weight table ([`crate::tables::weight_table`]).
     pub(crate) weights: &'a [u8],
 }
 

@@ -349,9 +349,8 @@ impl Detector {
             out.searched.push(roi);
         }
         for class_idx in 0..self.config.classes.len() {
-            for k in 0..out.searched.len() {
-                let roi = out.searched[k];
-                self.detect_class(class_idx, k, roi, depth, fx, out)?;
+            for region in 0..out.searched.len() {
+                self.detect_class(class_idx, region, depth, fx, out)?;
             }
         }
         tracing::trace!(
@@ -363,15 +362,18 @@ impl Detector {
         Ok(())
     }
 
+    /// The blobs of colour class `class_idx` in the searched region `region` (an index into
+    /// `out.searched` and [`Self::regions`]), appended to `out`.
     fn detect_class(
         &mut self,
         class_idx: usize,
         region: usize,
-        roi: PixelRect,
         depth: Option<(&DepthImage, f64)>,
         fx: f64,
         out: &mut Detections,
     ) -> Result<(), DetectError> {
+        // The region as clipped to the image; its pixels' class bits are `regions[region]`.
+        let roi = out.searched[region];
         let images = &self.regions[region];
         // SAFETY: `class_mask` writes every byte of the new matrix.
         unsafe {

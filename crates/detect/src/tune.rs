@@ -14,7 +14,7 @@
 //! [`ColourSampler::propose`] clusters the blobs of every frame by hue (a circular histogram,
 //! smoothed, split at its valleys), keeps the clusters seen in two frames out of three, picks
 //! the lip cluster (about `lip_dots` blobs per frame) and the forehead cluster (about
-//! `forehead_dots`, above the lips), and turns each into a [`ColorClass`]: hue from the 2nd to
+//! `forehead_dots`, above the lips), and turns each into a [`crate::ColorClass`]: hue from the 2nd to
 //! the 98th percentile of its pixels plus a margin (a red across hue 0 written as two ranges,
 //! hue shared with another class split between them), saturation from the lowest level at
 //! which the face shows (almost) no pixel of that hue, value from the paint's low tail.
