@@ -1,6 +1,6 @@
 //! Meshes the generator did not make, and a reference motion to score the binders on them.
 //!
-//! The procedural motion ([`procedural::field`]) is defined on a head's ring parametrisation
+//! The procedural motion ([`crate::procedural::field`]) is defined on a head's ring parametrisation
 //! (each vertex's angle round the mouth and distance from the lip line), which only the
 //! generator's own meshes have. [`LipField`] makes it a function of position alone: the
 //! angle and the distance are those of the nearest point of the lip line (the closed

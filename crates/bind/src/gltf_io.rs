@@ -1,4 +1,4 @@
-//! Reading a mesh from glTF/GLB ([`crate::gltf_read`], re-exported here), and writing an
+//! Reading a mesh from glTF/GLB (`crate::gltf_read`, re-exported here), and writing an
 //! unskinned one (the bound output is [`crate::skin_out`]'s).
 
 use std::path::Path;

@@ -12,7 +12,7 @@
 //! - [`mesh`]: the triangle mesh, its checks, normals, cotangent Laplacian, sparse solver.
 //! - [`gltf_io`]: reading glTF/GLB meshes, writing the skinned GLB.
 //! - [`procedural`]: the family of procedural heads with their analytic mouth motion.
-//! - [`reference`]: reference weights (least squares over the probability simplex).
+//! - [`mod@reference`]: reference weights (least squares over the probability simplex).
 //! - [`eval`]: KL divergence and skinned-deformation error.
 //! - [`training`]: data sets of procedural heads, training and the evaluation table.
 //! - [`families`]: meshes the generator did not make, scored against the procedural motion

@@ -55,7 +55,7 @@ pub enum Binding {
     /// jaw).
     Rigid(Target),
     /// The face: one weight list per vertex of each of its primitives, in the order of
-    /// [`crate::gltf_read::Instance::primitives`].
+    /// `crate::gltf_read::Instance::primitives`.
     Face(Vec<Vec<Vec<(Target, f64)>>>),
 }
 

@@ -14,7 +14,7 @@
 //!   generated from the class targets and overridable by control points.
 //! - [`mapping`]: segments placed on the phone timeline (stable stage scaled, change stage of
 //!   constant length T; short phones start their change stage early).
-//! - [`stitch`]: one pass over the placed segments, blending overlaps linearly.
+//! - [`mod@stitch`]: one pass over the placed segments, blending overlaps linearly.
 //! - [`take`]: the weight curves → the performer's lip dots → the retarget core → take lines.
 //! - [`live`]: the causal analyser: sound blocks → a class and key-pose weights every 10 ms
 //!   (MFCC profiles), and the weights → a character's points.

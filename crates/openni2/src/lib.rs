@@ -629,7 +629,7 @@ impl Recorder {
     /// instructions after the last record, but a loaded machine can preempt the thread right
     /// there for longer than a frame (it happened: a depth stream shifted by one frame
     /// against colour). So the wait ends only once the thread has also run on: it spins
-    /// without blocking, and [`recorder_thread::ran_on`] waits for the scheduler to charge
+    /// without blocking, and `recorder_thread::ran_on` waits for the scheduler to charge
     /// it CPU time twice after the records were seen, millions of instructions later. It
     /// measures the thread's progress, not the clock.
     pub fn start(&self) -> Result<()> {

@@ -9,7 +9,7 @@ use crate::{axes_rotation, open_socket, VmcFrame, VmcPacket};
 
 /// Sends VMC frames from the caller's thread, every frame to every target, in order: for
 /// playing a take, where each frame is due at its time and none may be dropped (the live
-/// output's [`OscOutput`] drops the oldest instead of waiting).
+/// output's [`crate::OscOutput`] drops the oldest instead of waiting).
 pub struct VmcSender {
     packet: VmcPacket,
     axes: UnitQuaternion<f64>,

@@ -170,7 +170,7 @@ impl PipelineConfig {
     /// The `[detect]`, `[track]`, `[retarget]` and `[rig]` tables of a configuration file,
     /// read by the one configuration loader (`mouthpiece_config::ConfigText`, which the
     /// daemon's configuration holds too) and checked: every error names the file, the line
-    /// and the key (`booth.toml:12:1: key `detect.class[0].hue[0]`: …`).
+    /// and the key (``booth.toml:12:1: key `detect.class[0].hue[0]`: …``).
     pub fn from_text(text: &ConfigText) -> Result<Self, ConfigError> {
         #[derive(Deserialize)]
         struct Sections {

@@ -10,7 +10,7 @@
 //! whatever the clients ask.
 //!
 //! The answer (`application/octet-stream`): `MPT1`, a u32 (little-endian) length, that many
-//! bytes of JSON ([`ChunkHeader`]), then the data the header's `[offset, length]` pairs point
+//! bytes of JSON (`ChunkHeader`), then the data the header's `[offset, length]` pairs point
 //! into (offsets from the first byte after the JSON).
 
 use std::sync::{Arc, Mutex};

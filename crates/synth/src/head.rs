@@ -22,7 +22,7 @@ const VH: f64 = 0.14;
 /// Half the gap between the two material rows at the lip seam.
 pub const SEAM_EPS: f64 = 0.0002;
 /// Jaw hinge (temporomandibular axis), parallel to x, at this (y, z): 25 mm above and 80 mm
-/// behind the mouth centre. [`JawPose`] can place it elsewhere.
+/// behind the mouth centre. `JawPose` can place it elsewhere.
 pub const HINGE: [f64; 2] = [-0.025, 0.08];
 /// Head rotation pivot (H frame): roughly the centre of the head.
 pub const PIVOT: [f64; 3] = [0.0, -0.04, 0.09];

@@ -51,7 +51,7 @@ pub struct TrackConfig {
     pub lip_depth_patch_m: f64,
     /// Once named, a lip dot (not a corner) takes its depth again from a patch stretched
     /// along the lip: this far each way along the line through its neighbours (at most
-    /// [`LIP_PATCH_NEIGHBOUR_FRACTION`] of the way to the nearer one), metres; 0: no second
+    /// [`crate::LIP_PATCH_NEIGHBOUR_FRACTION`] of the way to the nearer one), metres; 0: no second
     /// look. A lip is curved across and nearly straight along its line, so the long patch
     /// averages more of the sensor's correlated noise for the same curvature.
     pub lip_depth_along_m: f64,
@@ -59,7 +59,7 @@ pub struct TrackConfig {
     pub lip_depth_across_m: f64,
     /// How far the forehead's skin reaches beyond its dots (to the sides and above; a third
     /// of it below, towards the brows), metres: the surface the head motion is refined on
-    /// once calibrated ([`forehead`]). 0: the head motion from the three dots alone.
+    /// once calibrated (`forehead`). 0: the head motion from the three dots alone.
     pub forehead_surface_margin_m: f64,
     /// Temporal filter on the forehead dots' depths (One Euro: cut-off frequency at rest in Hz,
     /// and how fast it opens with the depth's speed, Hz per m/s; one cutoff for all the dots,

@@ -3,17 +3,17 @@
 //! Per frame ([`Tracker::process`]):
 //! 1. depth onto the colour grid when the source did not register it ([`camera::register_depth`]);
 //! 2. the detector (`mouthpiece-detect`) searches the region around the predicted dots
-//!    ([`prediction`]), or the full frame when dots were lost;
-//! 3. each blob's depth (lip dots: [`lip_depth`], a robust plane over a few millimetres of
-//!    lip; forehead dots: [`head`], a plane over a wide patch of skin), undistorted and
+//!    (`prediction`), or the full frame when dots were lost;
+//! 3. each blob's depth (lip dots: `lip_depth`, a robust plane over a few millimetres of
+//!    lip; forehead dots: `head`, a plane over a wide patch of skin), undistorted and
 //!    deprojected into the camera frame;
-//! 4. names ([`naming`]): from 3D geometry when there are none yet, otherwise by optimal
+//! 4. names (`naming`): from 3D geometry when there are none yet, otherwise by optimal
 //!    assignment to predictions and the recovery steps listed in one place
-//!    ([`naming::recovery`]), every name held to the checks ([`naming::checks`]);
+//!    (`naming::recovery`), every name held to the checks (`naming::checks`);
 //! 5. once named, lip dots take their depth again from a patch stretched along the lip
-//!    ([`lip_depth`]), and, once calibrated, the head motion is refined on the whole forehead
-//!    surface ([`forehead`], [`head`]) and the forehead dots placed by it;
-//! 6. neutral calibration ([`calibration`], docs/method.md) once the mouth has been still for
+//!    (`lip_depth`), and, once calibrated, the head motion is refined on the whole forehead
+//!    surface (`forehead`, `head`) and the forehead dots placed by it;
+//! 6. neutral calibration (`calibration`, docs/method.md) once the mouth has been still for
 //!    [`TrackConfig::calibration_s`] (again on [`Tracker::calibrate`]), then head pose and
 //!    stabilised lip dots every frame through the retarget core's [`Stabiliser`].
 //!

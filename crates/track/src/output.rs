@@ -93,7 +93,7 @@ pub struct TrackedFrame {
     pub status: Status,
     /// The naming steps that changed names on this frame, in the order they ran: one entry
     /// per dot a step named, re-named or left missing (the steps:
-    /// [`crate::naming::recovery::STEPS`]). A later step or check may change the name again.
+    /// `crate::naming::recovery::STEPS`). A later step or check may change the name again.
     pub steps: Vec<StepEvent>,
     /// The rectangles the detector searched on this frame, cut to the image: the box round
     /// the forehead's predicted dots and the one round the lips' (one box round all when
@@ -106,7 +106,7 @@ pub struct TrackedFrame {
 /// One name a naming step changed on a frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StepEvent {
-    /// The step's name ([`crate::naming::recovery::Step::name`]).
+    /// The step's name (`crate::naming::recovery::Step::name`).
     pub step: &'static str,
     /// Numbers the step runs on the frame: the changes of one run share it.
     pub run: u16,

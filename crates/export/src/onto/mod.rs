@@ -5,7 +5,7 @@
 //! meshes' morph targets are matched by name to the take's curves ([`names`]); one
 //! animation with a `weights` channel per node whose mesh has a matching target is appended,
 //! its data after the GLB's binary chunk or, for `.gltf`, in a new embedded buffer
-//! ([`write`]). Nothing else in the document changes.
+//! ([`mod@write`]). Nothing else in the document changes.
 
 pub mod names;
 pub mod read;

@@ -13,7 +13,8 @@ use crate::exit::bad_input;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// What to record: replay:FILE[?loop=1&speed=1.0&start=S], openni2:[URI], v4l2:COLOUR[+DEPTH].
+    /// What to record: replay:FILE[?loop=1&speed=1.0&start=S], `openni2:[URI]`,
+    /// v4l2:COLOUR[+DEPTH].
     #[arg(long)]
     pub source: String,
     /// Output file: .mcap or .oni (OpenNI2 sources through OpenNI2's recorder, others through
@@ -24,7 +25,7 @@ pub struct Args {
     #[arg(long)]
     pub seconds: Option<f64>,
     /// Colour in MCAP: raw (lossless BGR, the default: the detector sees what the camera saw)
-    /// or jpeg[:QUALITY].
+    /// or `jpeg[:QUALITY]`.
     #[arg(long, default_value = "raw")]
     pub color: String,
     /// Also record the sound of this ALSA capture device (PCM name, e.g. `default` or

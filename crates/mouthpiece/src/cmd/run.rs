@@ -18,7 +18,7 @@ pub struct Args {
     /// Listen address, overriding the config (e.g. 127.0.0.1:9870).
     #[arg(long, value_name = "ADDR:PORT")]
     pub listen: Option<SocketAddr>,
-    /// Source spec, overriding the config: replay:PATH[?loop=1&speed=1.0], openni2:[URI],
+    /// Source spec, overriding the config: replay:PATH[?loop=1&speed=1.0], `openni2:[URI]`,
     /// v4l2:COLOUR[+DEPTH].
     #[arg(long, value_name = "SPEC")]
     pub source: Option<String>,

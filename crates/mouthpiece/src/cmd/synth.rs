@@ -54,7 +54,7 @@ pub struct Args {
     /// Depth sensor noise model.
     #[arg(long, value_enum, default_value = "kinect")]
     pub noise: NoiseArg,
-    /// Dot layout (TOML: lip_dots, radius_mm, lip_color, forehead_color, [[forehead]]).
+    /// Dot layout (TOML: lip_dots, radius_mm, lip_color, forehead_color, `[[forehead]]`).
     #[arg(long)]
     pub layout: Option<PathBuf>,
     /// Lens distortion of the colour camera, OpenCV plumb_bob: K1,K2,P1,P2,K3.

@@ -17,7 +17,7 @@ use crate::exit::bad_input;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// A recording (`.mcap`, `.oni`) or a capture spec: replay:FILE, openni2:[URI],
+    /// A recording (`.mcap`, `.oni`) or a capture spec: replay:FILE, `openni2:[URI]`,
     /// v4l2:COLOUR[+DEPTH]. Replays are read unpaced, once.
     pub source: String,
     /// Seconds of frames to sample, from the first frame's device time.
