@@ -94,8 +94,8 @@ impl DotPlaces {
                 });
             }
         }
-        let search = match self.frames_with_missing > 0 {
-            true => searched
+        let search = if self.frames_with_missing > 0 {
+            searched
                 .iter()
                 .map(|r| PixelBox {
                     x: r.x as f32,
@@ -103,8 +103,9 @@ impl DotPlaces {
                     width: r.width as f32,
                     height: r.height as f32,
                 })
-                .collect(),
-            false => Vec::new(),
+                .collect()
+        } else {
+            Vec::new()
         };
         Overlay { dots, search }
     }

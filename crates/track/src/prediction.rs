@@ -622,6 +622,15 @@ mod tests {
     use super::*;
     use crate::naming::recovery::test_support::{Scene, DOT_RADIUS_M};
 
+    /// The calibrated scene's dot tracks and rest shape; everything else as a new tracker's.
+    fn calibrated_tracks(scene: &Scene) -> Tracks {
+        Tracks {
+            dots: Some(scene.tracks.clone()),
+            rest: scene.rest.clone(),
+            ..Tracks::default()
+        }
+    }
+
     /// The scene's mouth at rest (lip dots about 10 mm apart at 0.6 m, fx 525): its dot
     /// spacing in pixels grows with the focal length and shrinks with the depth.
     #[test]
@@ -672,11 +681,7 @@ mod tests {
     #[test]
     fn the_forehead_and_the_lips_are_searched_apart_when_a_dot_apart_or_more() {
         let scene = Scene::calibrated();
-        let tracks = Tracks {
-            dots: Some(scene.tracks.clone()),
-            rest: scene.rest.clone(),
-            ..Tracks::default()
-        };
+        let tracks = calibrated_tracks(&scene);
         let regions = |fx: f64| {
             tracks
                 .search_region(&scene.config, 1.0, [4000, 4000], fx, DOT_RADIUS_M)
@@ -735,11 +740,7 @@ mod tests {
     #[test]
     fn the_search_margin_is_in_dot_spacings() {
         let scene = Scene::calibrated();
-        let tracks = Tracks {
-            dots: Some(scene.tracks.clone()),
-            rest: scene.rest.clone(),
-            ..Tracks::default()
-        };
+        let tracks = calibrated_tracks(&scene);
         let config = &scene.config;
         let image = [4000, 4000];
         let rect = |fx: f64| {
@@ -774,10 +775,8 @@ mod tests {
         let fx = scene.k.fx;
         let spacing = DotSpacing::of_rest(&scene.rest, fx).unwrap().px(0.6);
         let mut tracks = Tracks {
-            dots: Some(scene.tracks.clone()),
-            rest: scene.rest.clone(),
             reference_forehead: scene.forehead.clone(),
-            ..Tracks::default()
+            ..calibrated_tracks(&scene)
         };
         // One frame: the lip dots `shift` spacings right of rest, dot `hidden` unseen.
         let mut frame = |tracks: &mut Tracks, shift: f64, hidden: Option<usize>| {
