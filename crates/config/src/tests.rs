@@ -524,3 +524,21 @@ fn absurd_audio_formats_name_their_key_and_line() {
         err.len()
     );
 }
+
+/// The protocol page's limits table states the client cap the configuration decides.
+#[test]
+fn the_documented_client_limit_is_the_default() {
+    let page = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/protocol.md"),
+    )
+    .unwrap();
+    let row = page
+        .lines()
+        .find(|l| l.starts_with("| WebSocket clients |"))
+        .expect("docs/protocol.md has the WebSocket clients row");
+    let expected = format!(
+        "| WebSocket clients | {} (`[server] max_clients`, at most {MAX_CLIENTS}) |",
+        Config::default().server.max_clients
+    );
+    assert!(row.starts_with(&expected), "{row}\nexpected {expected}");
+}

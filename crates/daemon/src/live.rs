@@ -494,7 +494,7 @@ impl Processor for LiveProcessor {
                     .bound(i)
                     .map(|b| b.m().iter().map(to_f32).collect())
                     .unwrap_or_default(),
-                m_mode: format!("{:?}", c.m_mode).to_lowercase(),
+                m_mode: c.m_mode.name().to_owned(),
                 units: c.units.map(|u| u.symbol().to_owned()).unwrap_or_default(),
             })
             .collect();

@@ -656,6 +656,20 @@ impl GltfWriter {
 mod tests {
     use super::*;
 
+    /// docs/export.md states the blend-shape mesh's target count the code writes.
+    #[test]
+    fn the_documented_morph_target_count_is_the_curve_count() {
+        let page = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/export.md"),
+        )
+        .unwrap();
+        let flat = page.split_whitespace().collect::<Vec<_>>().join(" ");
+        assert!(
+            flat.contains(&format!("carries a mesh with {CURVES} morph targets")),
+            "docs/export.md does not say {CURVES} morph targets"
+        );
+    }
+
     /// The first key of the `path` channel (`translation` or `rotation`) of node `name`, in
     /// a `.gltf` with its `.bin` beside it.
     fn first_key(dir: &Path, gltf: &serde_json::Value, name: &str, path: &str) -> Vec<f32> {

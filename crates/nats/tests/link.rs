@@ -185,7 +185,12 @@ async fn control_over_request_reply_answers_like_the_websocket() {
     assert_eq!(failed["message"], "no performer seen", "{failed}");
     let unknown = ask(json!({"type": "look_at", "character": "cat", "point": null})).await;
     assert_eq!(unknown["code"], "bad_request", "{unknown}");
-    let not_control = ask(json!({"type": "ping"})).await;
+    // A ping is answered as on the WebSocket, with its id.
+    let pong = ask(json!({"type": "ping", "id": 9})).await;
+    assert_eq!(pong["type"], "pong", "{pong}");
+    assert_eq!(pong["id"], 9, "{pong}");
+    assert!(pong["server_wall_us"].as_i64().unwrap() > 0, "{pong}");
+    let not_control = ask(json!({"type": "subscribe"})).await;
     assert_eq!(not_control["code"], "bad_request", "{not_control}");
     let bad = ask(json!("not an object")).await;
     assert_eq!(bad["type"], "error", "{bad}");

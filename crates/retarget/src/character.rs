@@ -32,6 +32,17 @@ pub enum MMode {
     Manual,
 }
 
+impl MMode {
+    /// The spelling of a character file's `m_mode` (kebab-case), which `hello` repeats.
+    pub fn name(self) -> &'static str {
+        match self {
+            MMode::PerPoint => "per-point",
+            MMode::PerAxis => "per-axis",
+            MMode::Manual => "manual",
+        }
+    }
+}
+
 /// Units of a character's coordinates, when the file says (`units`). Export uses them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 pub enum Units {
@@ -615,6 +626,16 @@ P4 = [0.0, -1.0, 0.5]
                 ("<toml>".into(), line, source.message().to_string())
             }
             other => panic!("expected an error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn m_mode_names_read_back_as_the_file_spells_them() {
+        for mode in [MMode::PerPoint, MMode::PerAxis, MMode::Manual] {
+            let parsed: MMode = toml::Value::String(mode.name().to_owned())
+                .try_into()
+                .unwrap();
+            assert_eq!(parsed, mode);
         }
     }
 

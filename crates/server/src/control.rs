@@ -176,10 +176,18 @@ pub async fn answer_text(hub: &Hub, text: &str, client: String, timeout: Duratio
         Ok(message) => message,
         Err(failure) => return error_json(failure.code, failure.message, failure.id),
     };
+    // A ping is answered here as on the WebSocket: `pong` with the request's id.
+    if let ClientMessage::Ping { id } = message {
+        return protocol::to_json(&ServerMessage::Pong {
+            id,
+            server_wall_us: unix_micros_now(),
+        });
+    }
     let Some(call) = control_call(message) else {
         return error_json(
             ErrorCode::BadRequest,
-            "expected a control request: calibrate, record or look_at".into(),
+            "expected a control request: calibrate, record, look_at or tune_colours (or ping)"
+                .into(),
             None,
         );
     };
@@ -190,6 +198,13 @@ pub async fn answer_text(hub: &Hub, text: &str, client: String, timeout: Duratio
         Ok(pending) => pending.answer().await,
         Err(refused) => refused,
     }
+}
+
+/// The host clock, Unix microseconds (a `pong`'s `server_wall_us`).
+pub(crate) fn unix_micros_now() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as i64)
 }
 
 /// An `error` message.

@@ -131,7 +131,7 @@ pub(super) async fn read_loop(
             ClientMessage::Preview(request) => out.try_send(Outgoing::Preview(request)).is_ok(),
             ClientMessage::Ping { id } => reply(protocol::to_json(&ServerMessage::Pong {
                 id,
-                server_wall_us: unix_micros_now(),
+                server_wall_us: crate::control::unix_micros_now(),
             })),
             other => match crate::control::control_call(other) {
                 Some(call) => match crate::control::refuse_early(&shared.hub, &call) {
@@ -188,10 +188,4 @@ fn control(
         let _ = out.try_send(Outgoing::Text(answer));
     });
     true
-}
-
-fn unix_micros_now() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_micros() as i64)
 }
