@@ -865,3 +865,22 @@ fn absurd_look_at_times_exit_2() {
     refused_before_reading(&["--look-at", "0,0.1,2@1e300"], "--look-at");
     refused_before_reading(&["--look-at", "0,0.1,2@-1e10"], "--look-at");
 }
+
+/// `evaluate` with no `--character`, run outside the repository, measures the built-in wolf
+/// (the daemon's default) instead of failing on a path relative to the working directory.
+#[test]
+fn evaluate_outside_the_repository_uses_the_built_in_wolf() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = mouthpiece()
+        .current_dir(dir.path())
+        .args(["evaluate", "--seeds", "3", "--seconds", "2.5", "--head-motion", "mild"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(table.lines().any(|l| l.trim_start().starts_with('3')), "{table}");
+}

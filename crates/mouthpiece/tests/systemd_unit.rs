@@ -77,3 +77,58 @@ fn udev_rule_grants_group_video_to_openni2_vendors() {
         assert!(rule.contains("MODE=\"0660\""), "{rule}");
     }
 }
+
+/// The booth's Debian package, built around the binary under test, installs, upgrades
+/// (keeping an edited configuration) and removes with dpkg, and its service runs the
+/// microphone and the paint check's Apply inside the sandbox its unit describes
+/// (scripts/package-check, which does all of it in a throwaway copy-on-write root).
+#[test]
+fn the_package_installs_upgrades_runs_sandboxed_and_removes() {
+    // SAFETY: getuid has no preconditions.
+    assert_eq!(
+        unsafe { libc::getuid() },
+        0,
+        "the package check needs root (mount namespaces, dpkg), as the README's test command runs"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let mut debs = Vec::new();
+    for version in ["0.1.0~check1", "0.1.0~check2"] {
+        let out = Command::new("bash")
+            .arg(repo().join("scripts/package"))
+            .args(["--binary", env!("CARGO_BIN_EXE_mouthpiece")])
+            .args(["--version", version, "--compress", "none", "--out"])
+            .arg(dir.path())
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "scripts/package failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        debs.push(String::from_utf8(out.stdout).unwrap().trim().to_owned());
+    }
+    let fields = Command::new("dpkg-deb")
+        .args(["-f", &debs[0], "Package", "Depends"])
+        .output()
+        .unwrap();
+    let fields = String::from_utf8_lossy(&fields.stdout);
+    assert!(fields.contains("Package: mouthpiece"), "{fields}");
+    assert!(fields.contains("libopencv-core"), "{fields}");
+    let out = Command::new("bash")
+        .arg(repo().join("scripts/package-check"))
+        .args(&debs)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "scripts/package-check failed:\n{stderr}");
+    for step in [
+        "install",
+        "upgrade",
+        "microphone live",
+        "paint check applied under the unit",
+        "purge",
+        "== package-check: ok",
+    ] {
+        assert!(stderr.contains(step), "no `{step}` in:\n{stderr}");
+    }
+}

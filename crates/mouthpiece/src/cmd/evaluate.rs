@@ -3,6 +3,7 @@
 //! printing one table row per session.
 
 use std::path::PathBuf;
+use anyhow::Context as _;
 
 use mouthpiece_evaluate::rig::RigAccuracy;
 use mouthpiece_evaluate::{EvaluateError, Measure, Metrics, StepStats, TABLE_HEADER};
@@ -44,9 +45,11 @@ pub struct Args {
     /// Length of each session, seconds.
     #[arg(long, default_value_t = 6.0)]
     pub seconds: f64,
-    /// Character the output is measured on.
-    #[arg(long, default_value = "config/characters/wolf.toml")]
-    pub character: PathBuf,
+    /// Character the output is measured on (a character file; default: the built-in wolf,
+    /// the repository's `config/characters/wolf.toml` embedded at build time, so the default
+    /// works from any working directory).
+    #[arg(long)]
+    pub character: Option<PathBuf>,
     /// Configuration file (`[detect]`, `[track]`, `[retarget]`).
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -123,6 +126,16 @@ fn print_per_dot(m: &Metrics, layout: PerformerLayout) {
     }
 }
 
+/// The built-in wolf the daemon drives by default.
+fn builtin_wolf() -> anyhow::Result<mouthpiece_retarget::Character> {
+    let (name, text) = mouthpiece_daemon::characters::BUILTIN
+        .iter()
+        .find(|(name, _)| name.ends_with("/wolf.toml"))
+        .expect("the built-in characters include the wolf");
+    mouthpiece_retarget::Character::from_toml_str(text)
+        .with_context(|| format!("built-in character {name}"))
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let config = load_config(args.config.as_deref())?;
     let layout = match &args.layout {
@@ -130,7 +143,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => mouthpiece_synth::DotLayout::default(),
     };
     mouthpiece_evaluate::check_layout(&layout, &config).map_err(to_anyhow)?;
-    let character = load_character(&args.character)?;
+    let character = match &args.character {
+        Some(path) => load_character(path)?,
+        None => builtin_wolf()?,
+    };
     if !(args.seconds > 2.0 && args.seconds.is_finite()) {
         return Err(bad_input(anyhow::anyhow!(
             "--seconds must be more than 2 (the neutral pose takes the first 1.5 s)"
