@@ -1,6 +1,6 @@
 """Builds the test avatar of `export --onto`, or samples one's shape keys after import.
 
-Run by crates/mouthpiece/tests/export_onto.rs:
+Run by crates/mouthpiece/tests/integration/export_onto.rs:
 
     blender -b --factory-startup --python-exit-code 1 --python onto_avatar.py -- \
         make OUT FORMAT NAME[=DEFAULT] ...

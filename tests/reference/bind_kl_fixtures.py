@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Reference KL divergences for mouthpiece's binding evaluation, computed with scipy.
 
-Writes tests/reference/bind_kl_fixtures.json, read by crates/bind/tests/kl.rs: pairs of skin
+Writes tests/reference/bind_kl_fixtures.json, read by crates/bind/tests/integration/kl.rs: pairs of skin
 weight rows (13 joints: the 12 mouth points and the root) with `scipy.stats.entropy(p, q)`,
 the KL divergence KL(p || q) in nats after normalising both rows. Some p rows are sparse (at
 most four influences, as a bound vertex has), some unnormalised.

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Reference values for mouthpiece's shape smoothing (docs/method.md §8), computed with scipy.
 
-Writes tests/reference/smoothing_fixtures.json, read by crates/retarget/tests/smoothing.rs:
+Writes tests/reference/smoothing_fixtures.json, read by crates/retarget/tests/integration/smoothing.rs:
 - Savitzky-Golay 5-point quadratic on a closed loop: scipy.signal.savgol_filter(window 5,
   order 2, mode="wrap");
 - closed uniform cubic B-spline with the points as control points: scipy.interpolate.BSpline

@@ -71,7 +71,7 @@ fn main() {
                 "Live lip-sync profiles: per class, the mean and variance of the live analyser's\n\
                  features (12 MFCCs, their 20 ms deltas, the level; crates/lipsync/src/live).\n\
                  Written by `cargo run --release -p mouthpiece-lipsync --example live_eval -- --write`;\n\
-                 checked by `cargo test -p mouthpiece-lipsync --test live shipped_profiles`.",
+                 checked by `cargo test -p mouthpiece-lipsync --test integration live::shipped_profiles`.",
             ),
         )
         .unwrap();

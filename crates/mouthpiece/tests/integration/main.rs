@@ -1,0 +1,46 @@
+//! The crate's integration tests, one module per former test file, in one test binary
+//! (each test binary links the whole dependency tree: one binary builds and links once).
+
+#[path = "../../../../tests/alsa/booth.rs"]
+#[allow(dead_code, unused_imports)]
+mod helper_alsa_booth;
+#[path = "../../../../tests/alsa/read_back.rs"]
+#[allow(dead_code, unused_imports)]
+mod helper_alsa_read_back;
+#[path = "../../../../tests/daemon/run.rs"]
+#[allow(dead_code, unused_imports)]
+mod helper_daemon_run;
+#[path = "../../../lipsync/tests/festival/mod.rs"]
+#[allow(dead_code, unused_imports)]
+mod helper_festival;
+#[path = "../../../nats/tests/harness/mod.rs"]
+#[allow(dead_code, unused_imports)]
+mod helper_harness;
+#[path = "../../../../tests/speech/cover_mouth.rs"]
+#[allow(dead_code, unused_imports)]
+mod helper_speech_cover_mouth;
+#[path = "../../../server/tests/webdriver/mod.rs"]
+#[allow(dead_code, unused_imports)]
+mod helper_webdriver;
+
+mod audio_booth;
+mod bind;
+mod capture_cli;
+mod check_config;
+mod console_e2e;
+mod console_player;
+mod console_tune;
+mod daemon_e2e;
+mod export;
+mod export_onto;
+mod lipsync;
+mod lipsync_learn;
+mod nats_e2e;
+mod oni_hostile;
+mod oni_session;
+mod record_audio;
+mod retarget_cli;
+mod speech_booth;
+mod synth_cli;
+mod systemd_unit;
+mod tune_colours;
