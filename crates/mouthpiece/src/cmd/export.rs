@@ -1,6 +1,7 @@
 //! `mouthpiece export`: a take (retarget/process JSONL) → glTF 2.0 / GLB / CSV keyframes. A
-//! recording (`.mcap`, `.oni`) is first processed into a temporary take by the same code as
-//! `mouthpiece process`.
+//! daemon's take (`.mcap`) is read as it was recorded live (`recorded_take`); a plain
+//! recording (`.mcap`, `.oni`), or a take with `--reprocess`, is first processed into a
+//! temporary take by the same code as `mouthpiece process`.
 
 use std::fs::File;
 use std::io::{self, BufRead, BufReader, BufWriter, Seek, SeekFrom, Write as _};
@@ -19,8 +20,9 @@ use crate::exit::{bad_input, bad_input_if};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The take: JSONL from `mouthpiece retarget` or `mouthpiece process` (`-` for stdin), or a
-    /// recording (.mcap, .oni) to process first.
+    /// The take: a daemon's take (.mcap: what went out live, as recorded), JSONL from
+    /// `mouthpiece retarget` or `mouthpiece process` (`-` for stdin), or a recording (.mcap,
+    /// .oni) to process first.
     pub input: PathBuf,
     /// Output format; by default from --out's extension (.gltf, .glb, .csv).
     #[arg(long, value_enum)]
@@ -37,6 +39,10 @@ pub struct Args {
     /// processing uses (as `mouthpiece process --config`).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// A daemon's take: track its camera images again (with --config, or the built-in
+    /// configuration) instead of using the steps it recorded live.
+    #[arg(long)]
+    pub reprocess: bool,
     /// Drop glTF keys that linear interpolation reproduces within TOLERANCE (character units,
     /// per axis).
     #[arg(long, value_name = "TOLERANCE", allow_negative_numbers = true)]
@@ -376,10 +382,10 @@ pub(crate) fn export_error(err: ExportError) -> anyhow::Error {
     bad_input_if(err.is_bad_input(), err)
 }
 
-struct TakeInput {
-    name: String,
-    reader: Box<dyn BufRead>,
-    len: Option<u64>,
+pub(crate) struct TakeInput {
+    pub(crate) name: String,
+    pub(crate) reader: Box<dyn BufRead>,
+    pub(crate) len: Option<u64>,
 }
 
 fn open_take(args: &Args) -> anyhow::Result<TakeInput> {
@@ -409,61 +415,100 @@ fn open_take(args: &Args) -> anyhow::Result<TakeInput> {
     })
 }
 
-/// A recording becomes a take through the processing pipeline (`mouthpiece process`, same
-/// code): one JSONL line per frame into an anonymous temporary file beside the output, read
-/// back from its start.
 fn take_from_recording(args: &Args) -> anyhow::Result<TakeInput> {
-    let path = args.input.as_path();
     let character = args.character.as_deref().ok_or_else(|| {
         bad_input(anyhow!(
-            "{}: exporting a recording needs --character (the recording is processed for that \
-             character first)",
-            path.display()
+            "{}: exporting a recording needs --character (its steps of that character are \
+             exported, or it is processed for that character first)",
+            args.input.display()
         ))
     })?;
-    let dir = spool_dir(&args.out);
-    let mut file = tempfile::tempfile_in(&dir)
-        .with_context(|| format!("cannot create a temporary take in {}", dir.display()))?;
+    let spool = spool_dir(&args.out);
+    recording_as_take(
+        &args.input,
+        character,
+        args.config.as_deref(),
+        args.reprocess,
+        &spool,
+    )
+}
+
+/// A recording as take lines for `character`: a daemon's take as it was recorded live
+/// (unless `reprocess`); a plain recording, or a take with `reprocess`, through the
+/// processing pipeline (`mouthpiece process`, same code). The lines go into an anonymous
+/// temporary file in `spool`, read back from its start. Shared by `export` and `play`.
+pub(crate) fn recording_as_take(
+    path: &Path,
+    character: &Path,
+    config: Option<&Path>,
+    reprocess: bool,
+    spool: &Path,
+) -> anyhow::Result<TakeInput> {
+    use crate::cmd::recorded_take;
+    let mut file = tempfile::tempfile_in(spool)
+        .with_context(|| format!("cannot create a temporary take in {}", spool.display()))?;
     let is_mcap = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
-    if is_mcap && crate::cmd::speech_take::is_speech_only(path)? {
-        // A booth without a camera: the character's recorded speech-driven steps.
-        let name = crate::cmd::process::load_character(character)?.name;
+    let is_take = is_mcap && recorded_take::is_daemon_take(path)?;
+    if is_take && reprocess && recorded_take::has_no_images(path)? {
+        return Err(bad_input(anyhow!(
+            "{}: --reprocess needs camera images and this take has none (speech alone drove \
+             it): leave --reprocess out to use its recorded steps",
+            path.display()
+        )));
+    }
+    let name;
+    if is_take && !reprocess {
+        let character = crate::cmd::process::load_character(character)?.name;
         let mut out = BufWriter::new(&mut file);
-        let steps = crate::cmd::speech_take::write_lines(path, &name, &mut out)?;
+        let steps = recorded_take::write_lines(path, &character, &mut out)?;
         out.flush().context("cannot write the temporary take")?;
         drop(out);
         eprintln!(
-            "{}: no camera frames; {steps} recorded speech-driven steps of {name}",
-            path.display()
+            "{}: {steps} steps of {} as recorded live (--reprocess tracks the images again)",
+            path.display(),
+            mouthpiece_output::shown(&character)
         );
-        file.seek(SeekFrom::Start(0))
-            .context("cannot read back the temporary take")?;
-        let len = file.metadata().ok().map(|m| m.len());
-        return Ok(TakeInput {
-            name: format!("{} (recorded steps)", path.display()),
-            reader: Box::new(BufReader::with_capacity(256 * 1024, file)),
-            len,
-        });
+        name = format!("{} (as recorded)", path.display());
+    } else {
+        if !is_take && reprocess {
+            eprintln!(
+                "{}: not a daemon's take: processed, as without --reprocess",
+                path.display()
+            );
+        }
+        let setup = ProcessSetup {
+            input: path,
+            character,
+            config,
+            // `mouthpiece process`'s default, so that --curve has a curve to export.
+            smooth: Some(Smooth::Bspline),
+            opencv_threads: 0,
+            // A daemon's take: the head as it turned live (`look_at` over the WebSocket).
+            recorded_heads: true,
+        };
+        let summary = process_recording(&setup, &mut BufWriter::new(&mut file))?;
+        summary.log();
+        eprintln!(
+            "{}: processed with {}; neutral pose {}",
+            path.display(),
+            match config {
+                Some(c) => format!("the configuration {}", c.display()),
+                None => "the built-in configuration".to_owned(),
+            },
+            match summary.calibrated_at {
+                Some(t) => format!("taken from the images at {t:.2} s"),
+                None => "never taken (no still, closed mouth with every dot seen)".to_owned(),
+            }
+        );
+        name = format!("{} (processed)", path.display());
     }
-    let setup = ProcessSetup {
-        input: path,
-        character,
-        config: args.config.as_deref(),
-        // `mouthpiece process`'s default, so that --curve has a curve to export.
-        smooth: Some(Smooth::Bspline),
-        opencv_threads: 0,
-        // A daemon's take: the head as it turned live (`look_at` over the WebSocket).
-        recorded_heads: true,
-    };
-    let summary = process_recording(&setup, &mut BufWriter::new(&mut file))?;
-    summary.log();
     file.seek(SeekFrom::Start(0))
         .context("cannot read back the temporary take")?;
     let len = file.metadata().ok().map(|m| m.len());
     Ok(TakeInput {
-        name: format!("{} (processed)", path.display()),
+        name,
         reader: Box::new(BufReader::with_capacity(256 * 1024, file)),
         len,
     })
@@ -497,7 +542,7 @@ fn load_character(path: &Path) -> anyhow::Result<MouthRig> {
 }
 
 /// Spool files live next to the output: same disk, not a RAM-backed /tmp.
-fn spool_dir(out: &Path) -> PathBuf {
+pub(crate) fn spool_dir(out: &Path) -> PathBuf {
     match out.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),

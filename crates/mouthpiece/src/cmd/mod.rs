@@ -16,7 +16,7 @@ pub mod record;
 pub mod recorded_heads;
 pub mod retarget;
 pub mod run;
-pub mod speech_take;
+pub mod recorded_take;
 pub mod synth;
 pub mod synth_speech;
 pub mod takes;

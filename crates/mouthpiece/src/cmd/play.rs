@@ -1,10 +1,11 @@
-//! `mouthpiece play`: a take (JSONL from `process`, `retarget` or `lipsync`) sent over the VMC
+//! `mouthpiece play`: a take (a daemon's `.mcap` take as recorded live, or JSONL from
+//! `process`, `retarget` or `lipsync`) sent over the VMC
 //! protocol as the daemon sends a live character (docs/osc.md): the rig's curves, the VRM
 //! visemes, the head and the eyes, each frame at its time. A speech-driven take and a camera
 //! take drive an avatar app alike.
 
 use std::fs::File;
-use std::io::BufReader;
+use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -14,7 +15,7 @@ use mouthpiece_export::{ExportError, TakeReader};
 use mouthpiece_osc::{VmcFrame, VmcSender};
 use mouthpiece_output::{visemes_from, CurveNaming, RigCurves, RigVisemes, VisemeNaming};
 
-use crate::cmd::export::export_error;
+use crate::cmd::export::{export_error, recording_as_take};
 use crate::cmd::process::load_character;
 use crate::exit::bad_input;
 
@@ -23,8 +24,14 @@ pub const MAX_SPEED: f64 = 1000.0;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The take (JSONL from `mouthpiece process`, `retarget` or `lipsync`).
+    /// The take: a daemon's take (.mcap: the steps as they went out live), JSONL from
+    /// `mouthpiece process`, `retarget` or `lipsync`, or a recording (.mcap, .oni) to process
+    /// first.
     pub take: PathBuf,
+    /// A daemon's take: track its camera images again (built-in configuration) instead of
+    /// sending the steps it recorded live.
+    #[arg(long)]
+    pub reprocess: bool,
     /// The take's character file (TOML): its head frame orients the head and eye bones.
     #[arg(long)]
     pub character: PathBuf,
@@ -76,15 +83,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|t| resolve(t))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let character = load_character(&args.character)?;
-    let name = args.take.display().to_string();
-    let file = File::open(&args.take)
-        .with_context(|| format!("cannot open take {name}"))
-        .map_err(bad_input)?;
-    let mut reader = TakeReader::with_points(
-        BufReader::new(file),
-        name.clone(),
-        character.point_names.clone(),
-    );
+    let is_recording = args
+        .take
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap") || e.eq_ignore_ascii_case("oni"));
+    let (name, input): (String, Box<dyn BufRead>) = if is_recording {
+        let take = recording_as_take(
+            &args.take,
+            &args.character,
+            None,
+            args.reprocess,
+            &std::env::temp_dir(),
+        )?;
+        (take.name, take.reader)
+    } else {
+        let name = args.take.display().to_string();
+        let file = File::open(&args.take)
+            .with_context(|| format!("cannot open take {name}"))
+            .map_err(bad_input)?;
+        (name, Box::new(BufReader::new(file)))
+    };
+    let mut reader = TakeReader::with_points(input, name.clone(), character.point_names.clone());
     let mut sender = VmcSender::new(
         &targets,
         &character.frame.axes,

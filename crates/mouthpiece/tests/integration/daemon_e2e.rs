@@ -1452,3 +1452,121 @@ async fn a_take_exported_keeps_the_look_at_turn_made_live() {
     let turn = quat_angle_deg(heads[0], last);
     assert!(turn > 10.0, "the exported head turned only {turn:.2}°");
 }
+
+/// What was live is what is kept: a take's export is, frame for frame, what a WebSocket
+/// subscriber received while it was recorded: every mouth point and every rig curve the same
+/// 32-bit float, with no frame re-tracked (a re-run of the tracker recalibrates and differs).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_takes_export_is_what_subscribers_received_live() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
+    let mut daemon = Daemon::start(&format!("replay:{}?loop=1", demo.display()), "", &[], &[]);
+    let mut request = format!("ws://127.0.0.1:{}/", daemon.port)
+        .into_client_request()
+        .unwrap();
+    request.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        HeaderValue::from_static("mouthpiece.v1"),
+    );
+    let (mut ws, _) = tokio_tungstenite::connect_async(request).await.unwrap();
+    send(&mut ws, json!({"type": "subscribe", "fields": ["rig"]})).await;
+    let wolf = |v: &Value| -> Option<Value> {
+        v["characters"]
+            .as_array()?
+            .iter()
+            .find(|c| c["name"] == "wolf")
+            .cloned()
+    };
+    wait_for(&mut ws, Duration::from_secs(60), |v| {
+        v["type"] == "frame" && wolf(v).is_some_and(|w| w["rig"].is_object())
+    })
+    .await;
+    // Every frame from here on, by seq: the wolf's points and curves as received.
+    let mut live: std::collections::BTreeMap<u64, Value> = std::collections::BTreeMap::new();
+    let mut keep = |v: &Value, live: &mut std::collections::BTreeMap<u64, Value>| {
+        if v["type"] == "frame" {
+            assert!(v["lagged"].is_null(), "the test client lagged: {v}");
+            live.insert(v["seq"].as_u64().unwrap(), wolf(v).unwrap());
+        }
+    };
+    send(&mut ws, json!({"type": "record", "id": 1, "action": "start", "slate": "live"})).await;
+    let mut started = false;
+    let mut frames_in_take = 0;
+    while frames_in_take < 90 {
+        let v = next_json(&mut ws, Duration::from_secs(10)).await;
+        if v["type"] == "result" && v["id"] == 1 {
+            started = true;
+        }
+        if v["type"] == "status" && v["lagged"].is_number() {
+            panic!("the test client lagged: {v}");
+        }
+        keep(&v, &mut live);
+        if started && v["type"] == "frame" {
+            frames_in_take += 1;
+        }
+    }
+    send(&mut ws, json!({"type": "record", "id": 2, "action": "stop"})).await;
+    loop {
+        let v = next_json(&mut ws, Duration::from_secs(10)).await;
+        keep(&v, &mut live);
+        if v["id"] == 2 {
+            assert_eq!(v["type"], "result", "{v}");
+            break;
+        }
+    }
+    daemon.signal(libc::SIGTERM);
+    assert!(daemon.wait_exit(Duration::from_secs(10)).is_some());
+    let files = takes_in(daemon.dir.path());
+    assert_eq!(files.len(), 1, "{files:?}\n{}", daemon.log());
+
+    let csv = daemon.dir.path().join("take.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .arg("export")
+        .arg(&files[0])
+        .arg("--character")
+        .arg(repo.join("config/characters/wolf.toml"))
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("as recorded live"), "{stderr}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert!(rows.len() >= 80, "{} rows", rows.len());
+    let f32_of = |cell: &str| -> f32 { cell.parse::<f64>().unwrap() as f32 };
+    let json_f32 = |v: &Value| -> f32 { v.as_f64().unwrap() as f32 };
+    let curve_columns: Vec<(usize, &str)> = header
+        .iter()
+        .enumerate()
+        .filter(|(_, h)| mouthpiece_output::CURVE_NAMES.contains(h))
+        .map(|(i, h)| (i, *h))
+        .collect();
+    assert_eq!(curve_columns.len(), mouthpiece_output::CURVES);
+    let same = |row: &[&str], frame: &Value| -> bool {
+        let points = frame["points"].as_array().unwrap();
+        let points_equal = points.iter().enumerate().all(|(p, xyz)| {
+            (0..3).all(|k| f32_of(row[1 + 3 * p + k]) == json_f32(&xyz[k]))
+        });
+        let curves_equal = curve_columns
+            .iter()
+            .all(|(i, name)| f32_of(row[*i]) == json_f32(&frame["rig"]["curves"][name]));
+        points_equal && curves_equal
+    };
+    // The take's first row is one of the frames received; every row after it the next one.
+    let first = live
+        .iter()
+        .find(|(_, frame)| same(&rows[0], frame))
+        .map(|(seq, _)| *seq)
+        .unwrap_or_else(|| panic!("the export's first row is no frame received live: {:?}", rows[0]));
+    for (k, row) in rows.iter().enumerate() {
+        let seq = first + k as u64;
+        let frame = live
+            .get(&seq)
+            .unwrap_or_else(|| panic!("row {k}: frame {seq} was not received live"));
+        assert!(same(row, frame), "row {k} differs from frame {seq}: {row:?}\n{frame}");
+    }
+}

@@ -1,7 +1,10 @@
-//! A take from a booth without a camera (`[source] spec = "none"`): no camera frames, only
-//! the speech-driven steps the daemon wrote (`/character/<name>`, `/head`). `export` turns
-//! the character's recorded steps into its take lines as they are (nothing is re-run: there
-//! is no picture to run on), `t` counted from the first step.
+//! A daemon's take (an MCAP file with the `mouthpiece.take` metadata record): every step
+//! the daemon published is recorded as it went out, per character on `/character/<name>`
+//! (points, confidence, curve, rig, head and eyes, what drove the mouth) and the performer's
+//! head on `/head`, whether the camera, the microphone's speech or both drove it. `export`
+//! and `play` turn a character's recorded steps into take lines as they are: nothing is
+//! re-run, so what they write or send is what WebSocket subscribers received during the take
+//! (the numbers are the same 32-bit floats). `t` counts from the take's first step.
 
 use std::io::Write;
 use std::path::Path;
@@ -20,10 +23,21 @@ fn recording_error(err: mouthpiece_recording::RecordingError) -> anyhow::Error {
     bad_input_if(bad, err)
 }
 
-/// Whether `path` is a take without camera frames whose characters' steps were recorded:
-/// its first character step comes before any colour image (a camera take writes each
-/// frame's image before its derived channels). Reads only as far as that.
-pub fn is_speech_only(path: &Path) -> anyhow::Result<bool> {
+/// The metadata record that marks a daemon's take (written before any message).
+const TAKE_METADATA: &str = "mouthpiece.take";
+
+/// Whether `path` is a daemon's take (its steps recorded) rather than a plain recording
+/// from `record` or `synth` (camera images only). Reads only the file's first message.
+pub fn is_daemon_take(path: &Path) -> anyhow::Result<bool> {
+    let mut reader = MessageReader::open(path)
+        .with_context(|| format!("cannot open session {}", path.display()))
+        .map_err(bad_input)?;
+    reader.next_message().map_err(recording_error)?;
+    Ok(reader.metadata().iter().any(|(name, _)| name == TAKE_METADATA))
+}
+
+/// Whether a take holds no camera image: a booth without a camera, speech alone.
+pub fn has_no_images(path: &Path) -> anyhow::Result<bool> {
     let mut reader = MessageReader::open(path)
         .with_context(|| format!("cannot open session {}", path.display()))
         .map_err(bad_input)?;
@@ -31,11 +45,8 @@ pub fn is_speech_only(path: &Path) -> anyhow::Result<bool> {
         if &*m.topic == TOPIC_COLOR {
             return Ok(false);
         }
-        if m.topic.starts_with("/character/") {
-            return Ok(true);
-        }
     }
-    Ok(false)
+    Ok(true)
 }
 
 /// Writes one take line (the `retarget` output format) per recorded step of `character`;
@@ -48,7 +59,13 @@ pub fn write_lines(path: &Path, character: &str, out: &mut dyn Write) -> anyhow:
     let mut head: Option<(u64, Value)> = None;
     let mut first: Option<u64> = None;
     let mut lines = 0u64;
+    let mut recorded = std::collections::BTreeSet::new();
     while let Some(m) = reader.next_message().map_err(recording_error)? {
+        if let Some(name) = m.topic.strip_prefix("/character/") {
+            if recorded.len() < 64 && !recorded.contains(name) {
+                recorded.insert(name.to_owned());
+            }
+        }
         let is_head = &*m.topic == "/head";
         if !is_head && *m.topic != *topic {
             continue;
@@ -109,9 +126,20 @@ pub fn write_lines(path: &Path, character: &str, out: &mut dyn Write) -> anyhow:
         lines += 1;
     }
     if lines == 0 {
+        let recorded: Vec<String> = recorded
+            .iter()
+            .map(|n| mouthpiece_output::shown(n).to_string())
+            .collect();
         return Err(bad_input(anyhow!(
-            "{}: no camera frames and no step of character {character:?} ({topic})",
-            path.display()
+            "{}: the take recorded no step of character {} ({}); it recorded: {}",
+            path.display(),
+            mouthpiece_output::shown(character),
+            mouthpiece_output::shown(&topic),
+            if recorded.is_empty() {
+                "no character".to_owned()
+            } else {
+                recorded.join(", ")
+            }
         )));
     }
     Ok(lines)
