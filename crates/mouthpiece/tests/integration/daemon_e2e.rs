@@ -1569,4 +1569,27 @@ async fn a_takes_export_is_what_subscribers_received_live() {
             .unwrap_or_else(|| panic!("row {k}: frame {seq} was not received live"));
         assert!(same(row, frame), "row {k} differs from frame {seq}: {row:?}\n{frame}");
     }
+
+    // `play` of the same take sends, over VMC, the curves, visemes, head and eyes the
+    // WebSocket carried (checked by the independent python-osc receiver, float32 exact).
+    let stream: Vec<Value> = rows
+        .iter()
+        .enumerate()
+        .map(|(k, row)| {
+            let frame = &live[&(first + k as u64)];
+            json!({"t": row[0].parse::<f64>().unwrap(), "rig": frame["rig"], "head": frame["head"]})
+        })
+        .collect();
+    let work = daemon.dir.path().join("play");
+    std::fs::create_dir_all(&work).unwrap();
+    let summary = crate::lipsync::play_against_stream(
+        &files[0],
+        &repo.join("config/characters/wolf.toml"),
+        &stream,
+        &work,
+    );
+    assert!(
+        summary["matched_with_rig"].as_u64().unwrap() >= rows.len() as u64 / 2,
+        "{summary}"
+    );
 }

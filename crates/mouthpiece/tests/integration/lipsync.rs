@@ -567,6 +567,23 @@ fn synth_driven_by_weights_and_poses_captured_back_match_the_shipped_poses() {
 /// against the take's own lines: the rig's curves and visemes (float32 exact) and the head and
 /// eye bones after the documented axis conversion. Returns the receiver's summary.
 fn play_to_a_vmc_receiver(take: &Path, character_name: &str, work: &Path) -> Value {
+    // What the receiver compares with: each line's time, rig and character head.
+    let stream: Vec<Value> = read_take(take)
+        .iter()
+        .map(|l| serde_json::json!({"t": l["t"], "rig": l["rig"], "head": l["character_head"]}))
+        .collect();
+    play_against_stream(take, &character(character_name), &stream, work)
+}
+
+/// Sends `take` with `mouthpiece play` to the python-osc VMC receiver, which checks every
+/// frame it receives against `stream` (one `{"t", "rig", "head"}` per frame, the rig and head
+/// as WebSocket frames carry them). Returns the receiver's summary.
+pub(crate) fn play_against_stream(
+    take: &Path,
+    character_file: &Path,
+    stream: &[Value],
+    work: &Path,
+) -> Value {
     use std::process::Stdio;
     use std::time::{Duration, Instant};
     let python = std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into());
@@ -577,19 +594,10 @@ fn play_to_a_vmc_receiver(take: &Path, character_name: &str, work: &Path) -> Val
     );
     let _ = std::fs::remove_file(&port_file);
     let _ = std::fs::remove_file(&stop_file);
-    // What the receiver compares with: each line's time, rig and character head.
-    let lines = read_take(take);
-    let stream: Vec<String> = lines
-        .iter()
-        .map(|l| {
-            serde_json::json!({"t": l["t"], "rig": l["rig"], "head": l["character_head"]})
-                .to_string()
-        })
-        .collect();
-    std::fs::write(&stream_file, stream.join("\n") + "\n").unwrap();
-    let character_file = character(character_name);
+    let text: Vec<String> = stream.iter().map(Value::to_string).collect();
+    std::fs::write(&stream_file, text.join("\n") + "\n").unwrap();
     let parsed = mouthpiece_retarget::Character::from_toml_str(
-        &std::fs::read_to_string(&character_file).unwrap(),
+        &std::fs::read_to_string(character_file).unwrap(),
     )
     .unwrap();
     let axes: Vec<Vec<f64>> = (0..3)
@@ -597,7 +605,7 @@ fn play_to_a_vmc_receiver(take: &Path, character_name: &str, work: &Path) -> Val
         .collect();
     // At 1× the take, a kernel socket buffer of datagrams is plenty even for a slow receiver;
     // half the frames must match (all that arrive must be exact).
-    let min_matched = lines.len() / 2;
+    let min_matched = stream.len() / 2;
     let mut receiver = Command::new(python)
         .arg(repo().join("tests/python/vmc_receiver.py"))
         .arg("--port-file")
@@ -632,7 +640,7 @@ fn play_to_a_vmc_receiver(take: &Path, character_name: &str, work: &Path) -> Val
         .arg("play")
         .arg(take)
         .arg("--character")
-        .arg(&character_file)
+        .arg(character_file)
         .args(["--osc", &format!("127.0.0.1:{port}")])
         .args(["--names", "arkit-pascal", "--visemes", "vrm1"])
         .output()
