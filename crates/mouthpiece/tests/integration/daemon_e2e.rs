@@ -1593,3 +1593,68 @@ async fn a_takes_export_is_what_subscribers_received_live() {
         "{summary}"
     );
 }
+
+/// What a running daemon sends (hello, status, health, frames with every field, pong) is
+/// valid under docs/schemas, checked by Python's `jsonschema`: the field names and enum
+/// spellings the docs promise are the wire's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_daemons_messages_match_the_published_schemas() {
+    use std::io::Write as _;
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
+    let daemon = Daemon::start(&format!("replay:{}?loop=1", demo.display()), "", &[], &[]);
+    let mut request = format!("ws://127.0.0.1:{}/", daemon.port)
+        .into_client_request()
+        .unwrap();
+    request.headers_mut().insert(
+        "Sec-WebSocket-Protocol",
+        HeaderValue::from_static("mouthpiece.v1"),
+    );
+    let (mut ws, _) = tokio_tungstenite::connect_async(request).await.unwrap();
+    send(
+        &mut ws,
+        json!({"type": "subscribe", "fields": ["rig", "curve", "performer", "health"]}),
+    )
+    .await;
+    let mut messages = Vec::new();
+    let mut frames_with_rig = 0;
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while frames_with_rig < 5 || !messages.iter().any(|m: &Value| m["type"] == "health") {
+        assert!(Instant::now() < deadline, "{messages:?}");
+        let v = next_json(&mut ws, Duration::from_secs(10)).await;
+        if v["type"] == "frame"
+            && v["characters"]
+                .as_array()
+                .is_some_and(|c| c.iter().all(|c| c["rig"].is_object()))
+        {
+            frames_with_rig += 1;
+        }
+        messages.push(v);
+    }
+    send(&mut ws, json!({"type": "ping", "id": "p1"})).await;
+    messages.push(wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "pong").await);
+    let hello = messages.iter().find(|m| m["type"] == "hello").expect("hello");
+    for character in hello["characters"].as_array().unwrap() {
+        assert_eq!(character["m_mode"], "per-point", "{character}");
+    }
+    let file = daemon.dir.path().join("messages.jsonl");
+    let mut out = std::fs::File::create(&file).unwrap();
+    for m in &messages {
+        writeln!(out, "{}", json!({"dir": "server", "msg": m})).unwrap();
+    }
+    drop(out);
+    let python = std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let checked = Command::new(python)
+        .arg(repo.join("crates/server/tests/validate_schemas.py"))
+        .arg(repo.join("docs/schemas"))
+        .arg(&file)
+        .arg("--partial")
+        .output()
+        .expect("running Python (set MOUTHPIECE_PYTHON)");
+    assert!(
+        checked.status.success(),
+        "the daemon's messages do not match the schemas:\n{}\n{}",
+        String::from_utf8_lossy(&checked.stdout),
+        String::from_utf8_lossy(&checked.stderr)
+    );
+}

@@ -339,6 +339,36 @@ async fn server_messages_match_the_published_schemas() {
     );
 }
 
+/// Every JSON example in the docs (the ```json blocks' messages) is valid under the published
+/// schemas: field names, types and enum spellings as the wire has them.
+#[test]
+fn the_docs_examples_match_the_published_schemas() {
+    let mut pages: Vec<PathBuf> = std::fs::read_dir(repo().join("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "md"))
+        .collect();
+    pages.sort();
+    pages.push(repo().join("README.md"));
+    let out = Command::new(python())
+        .arg(repo().join("crates/server/tests/validate_schemas.py"))
+        .arg(repo().join("docs/schemas"))
+        .arg("--docs")
+        .args(&pages)
+        .output()
+        .expect("running Python (set MOUTHPIECE_PYTHON)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "a docs example does not match its schema:\n{stdout}\n{stderr}"
+    );
+    // The protocol page's examples are among them.
+    for kind in ["hello 1", "frame 1", "status 2", "pong 1"] {
+        assert!(stdout.contains(kind), "{stdout}");
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_python_example_client_receives_frames() {
     let server = TestServer::start(ServerConfig::default()).await;
