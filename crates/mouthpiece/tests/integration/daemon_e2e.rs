@@ -1483,7 +1483,7 @@ async fn a_takes_export_is_what_subscribers_received_live() {
     .await;
     // Every frame from here on, by seq: the wolf's points and curves as received.
     let mut live: std::collections::BTreeMap<u64, Value> = std::collections::BTreeMap::new();
-    let mut keep = |v: &Value, live: &mut std::collections::BTreeMap<u64, Value>| {
+    let keep = |v: &Value, live: &mut std::collections::BTreeMap<u64, Value>| {
         if v["type"] == "frame" {
             assert!(v["lagged"].is_null(), "the test client lagged: {v}");
             live.insert(v["seq"].as_u64().unwrap(), wolf(v).unwrap());
