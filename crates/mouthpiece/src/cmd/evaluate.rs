@@ -2,8 +2,8 @@
 //! against their ground truth (the figures and their definitions: `mouthpiece-evaluate`),
 //! printing one table row per session.
 
-use std::path::PathBuf;
 use anyhow::Context as _;
+use std::path::PathBuf;
 
 use mouthpiece_evaluate::rig::RigAccuracy;
 use mouthpiece_evaluate::{EvaluateError, Measure, Metrics, StepStats, TABLE_HEADER};

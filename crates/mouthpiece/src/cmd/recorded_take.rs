@@ -33,7 +33,10 @@ pub fn is_daemon_take(path: &Path) -> anyhow::Result<bool> {
         .with_context(|| format!("cannot open session {}", path.display()))
         .map_err(bad_input)?;
     reader.next_message().map_err(recording_error)?;
-    Ok(reader.metadata().iter().any(|(name, _)| name == TAKE_METADATA))
+    Ok(reader
+        .metadata()
+        .iter()
+        .any(|(name, _)| name == TAKE_METADATA))
 }
 
 /// Whether a take holds no camera image: a booth without a camera, speech alone.

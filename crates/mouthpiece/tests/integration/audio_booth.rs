@@ -3,8 +3,8 @@
 //! read back by Foxglove's own MCAP reader and its export checked with Python's `wave`.
 
 use crate::helper_alsa_booth as booth;
-use crate::helper_daemon_run as daemon;
 use crate::helper_alsa_read_back as read_back;
+use crate::helper_daemon_run as daemon;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -1,9 +1,9 @@
 //! `mouthpiece run` end to end: the real binary on a session written at test time, a real
 //! WebSocket client, real signals.
 
-use std::os::unix::net::UnixDatagram;
 use crate::helper_daemon_run as run;
 use crate::helper_webdriver as webdriver;
+use std::os::unix::net::UnixDatagram;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -1489,7 +1489,11 @@ async fn a_takes_export_is_what_subscribers_received_live() {
             live.insert(v["seq"].as_u64().unwrap(), wolf(v).unwrap());
         }
     };
-    send(&mut ws, json!({"type": "record", "id": 1, "action": "start", "slate": "live"})).await;
+    send(
+        &mut ws,
+        json!({"type": "record", "id": 1, "action": "start", "slate": "live"}),
+    )
+    .await;
     let mut started = false;
     let mut frames_in_take = 0;
     while frames_in_take < 90 {
@@ -1505,7 +1509,11 @@ async fn a_takes_export_is_what_subscribers_received_live() {
             frames_in_take += 1;
         }
     }
-    send(&mut ws, json!({"type": "record", "id": 2, "action": "stop"})).await;
+    send(
+        &mut ws,
+        json!({"type": "record", "id": 2, "action": "stop"}),
+    )
+    .await;
     loop {
         let v = next_json(&mut ws, Duration::from_secs(10)).await;
         keep(&v, &mut live);
@@ -1548,9 +1556,10 @@ async fn a_takes_export_is_what_subscribers_received_live() {
     assert_eq!(curve_columns.len(), mouthpiece_output::CURVES);
     let same = |row: &[&str], frame: &Value| -> bool {
         let points = frame["points"].as_array().unwrap();
-        let points_equal = points.iter().enumerate().all(|(p, xyz)| {
-            (0..3).all(|k| f32_of(row[1 + 3 * p + k]) == json_f32(&xyz[k]))
-        });
+        let points_equal = points
+            .iter()
+            .enumerate()
+            .all(|(p, xyz)| (0..3).all(|k| f32_of(row[1 + 3 * p + k]) == json_f32(&xyz[k])));
         let curves_equal = curve_columns
             .iter()
             .all(|(i, name)| f32_of(row[*i]) == json_f32(&frame["rig"]["curves"][name]));
@@ -1561,13 +1570,21 @@ async fn a_takes_export_is_what_subscribers_received_live() {
         .iter()
         .find(|(_, frame)| same(&rows[0], frame))
         .map(|(seq, _)| *seq)
-        .unwrap_or_else(|| panic!("the export's first row is no frame received live: {:?}", rows[0]));
+        .unwrap_or_else(|| {
+            panic!(
+                "the export's first row is no frame received live: {:?}",
+                rows[0]
+            )
+        });
     for (k, row) in rows.iter().enumerate() {
         let seq = first + k as u64;
         let frame = live
             .get(&seq)
             .unwrap_or_else(|| panic!("row {k}: frame {seq} was not received live"));
-        assert!(same(row, frame), "row {k} differs from frame {seq}: {row:?}\n{frame}");
+        assert!(
+            same(row, frame),
+            "row {k} differs from frame {seq}: {row:?}\n{frame}"
+        );
     }
 
     // `play` of the same take sends, over VMC, the curves, visemes, head and eyes the
@@ -1633,7 +1650,10 @@ async fn the_daemons_messages_match_the_published_schemas() {
     }
     send(&mut ws, json!({"type": "ping", "id": "p1"})).await;
     messages.push(wait_for(&mut ws, Duration::from_secs(10), |v| v["type"] == "pong").await);
-    let hello = messages.iter().find(|m| m["type"] == "hello").expect("hello");
+    let hello = messages
+        .iter()
+        .find(|m| m["type"] == "hello")
+        .expect("hello");
     for character in hello["characters"].as_array().unwrap() {
         assert_eq!(character["m_mode"], "per-point", "{character}");
     }

@@ -6,8 +6,8 @@
 //! Needs Debian `festival`, `jackd2`, `libasound2-plugins`.
 
 use crate::helper_alsa_booth as booth;
-use crate::helper_speech_cover_mouth as cover_mouth;
 use crate::helper_daemon_run as daemon;
+use crate::helper_speech_cover_mouth as cover_mouth;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

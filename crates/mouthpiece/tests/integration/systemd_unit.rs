@@ -120,7 +120,10 @@ fn the_package_installs_upgrades_runs_sandboxed_and_removes() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "scripts/package-check failed:\n{stderr}");
+    assert!(
+        out.status.success(),
+        "scripts/package-check failed:\n{stderr}"
+    );
     for step in [
         "install",
         "upgrade",
