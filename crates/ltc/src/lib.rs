@@ -5,7 +5,9 @@
 //! yields each LTC frame it finds with the sample at which the frame ended: the moment the
 //! frame's label was true. Frames whose digits are not a timecode (a BCD digit above 9, a
 //! field out of range, a frame number the rate does not have) are refused and counted, so
-//! noise that happens to contain a sync word is not mistaken for time.
+//! noise that happens to contain a sync word is not mistaken for time. So are frames whose
+//! length is not the rate's (within [`SPEED_TOLERANCE`]): LTC at another rate than the one
+//! configured (25 fps read as 30) would otherwise look like valid labels.
 //!
 //! [`Encoder`] writes LTC as audio, as a timecode generator would (used by the tests and by
 //! anyone who wants to check a booth's wiring).
@@ -116,6 +118,8 @@ pub struct Decoded {
 pub struct Decoder {
     raw: NonNull<sys::LTCDecoder>,
     rate: LtcRate,
+    /// Samples one frame lasts at the rate.
+    frame_samples: f64,
     /// Frames found whose digits are not a timecode at the rate.
     refused: u64,
     scratch: Vec<i16>,
@@ -123,6 +127,10 @@ pub struct Decoder {
 
 // The decoder is plain memory owned by this value; libltc keeps no global state.
 unsafe impl Send for Decoder {}
+
+/// How far a frame's length may be from the rate's: 2 %, so 24 and 25 fps (4 % apart) are
+/// told apart while a generator a little off speed still reads.
+pub const SPEED_TOLERANCE: f64 = 0.02;
 
 /// Frames libltc may hold between two reads; more are dropped by libltc.
 const QUEUE_FRAMES: i32 = 32;
@@ -138,6 +146,7 @@ impl Decoder {
         Decoder {
             raw,
             rate,
+            frame_samples: f64::from(sample_rate) / rate.fps,
             refused: 0,
             scratch: Vec::new(),
         }
@@ -170,7 +179,9 @@ impl Decoder {
                 self.refused += 1;
                 continue;
             };
-            if !label.valid_at(self.rate) || ext.off_end < 0 || ext.off_start < 0 {
+            let length = (ext.off_end - ext.off_start + 1) as f64;
+            let speed_ok = (length / self.frame_samples - 1.0).abs() <= SPEED_TOLERANCE;
+            if !label.valid_at(self.rate) || ext.off_end < 0 || ext.off_start < 0 || !speed_ok {
                 self.refused += 1;
                 continue;
             }

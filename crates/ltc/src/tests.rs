@@ -116,6 +116,22 @@ fn every_rate_decodes_to_the_frame_across_a_minute() {
 }
 
 #[test]
+fn ltc_at_another_rate_is_refused() {
+    let [r23, r24, r25, _, r30] = rates().map(|r| r.1);
+    for (sent, read) in [(r25, r30), (r30, r25), (r24, r25), (r25, r24), (r23, r25)] {
+        let (audio, _) = encode(sent, label(1, 0, 0, 0, false), 50);
+        let (decoded, refused) = decode(read, &audio, 480);
+        assert!(
+            decoded.is_empty(),
+            "{} read as {}: {decoded:?}",
+            sent.fps,
+            read.fps
+        );
+        assert!(refused > 40, "{refused}");
+    }
+}
+
+#[test]
 fn block_size_does_not_change_what_is_decoded() {
     let rate = rates()[3].1;
     let (audio, _) = encode(rate, label(1, 2, 3, 4, true), 30);
