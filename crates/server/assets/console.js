@@ -352,8 +352,8 @@
   const TIMECODE_STATES = {
     system: ["time of day (host clock)", "muted"],
     locked: ["LTC locked", "good"],
-    free_running: ["LTC free-running from the last lock (no LTC on the input)", "warn"],
-    lost: ["LTC lost: no LTC read yet, time of day until it comes", "bad"],
+    free_running: ["LTC free-running (no LTC on the input)", "warn"],
+    lost: ["LTC lost (none read yet): time of day", "bad"],
   };
   function showTimecode() {
     const t = state.status && state.status.timecode;
