@@ -411,6 +411,9 @@ impl Config {
         if let Some(audio) = &self.audio {
             audio.check().map_err(|(key, message)| fail(key, message))?;
         }
+        self.timecode
+            .check(self.audio.as_ref())
+            .map_err(|(key, message)| fail(key, message))?;
         if let Some(name) = self.osc.characters.keys().find(|n| n.is_empty()) {
             return Err(fail(
                 "osc.characters",
@@ -579,7 +582,12 @@ impl Config {
             self.server.listen.0,
             characters,
             self.takes.folder.display(),
-            self.timecode.rate.0,
+            match (self.timecode.source, self.timecode.channel) {
+                (TimecodeSource::Ltc, Some(channel)) => {
+                    format!("{} from LTC on audio channel {channel}", self.timecode.rate.0)
+                }
+                _ => self.timecode.rate.0.clone(),
+            },
             osc,
             match &self.audio {
                 Some(a) => format!("{} ({} Hz, {} ch)", a.device, a.sample_rate, a.channels),
@@ -611,3 +619,5 @@ fn read_token(
 mod tests;
 #[cfg(test)]
 mod tests_nats;
+#[cfg(test)]
+mod tests_timecode;

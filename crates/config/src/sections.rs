@@ -293,15 +293,100 @@ impl std::str::FromStr for Slate {
 #[serde(deny_unknown_fields, default)]
 pub struct TimecodeConfig {
     /// `23.976`, `24`, `25`, `29.97df`, `30`, `48`, `50`, `59.94df`, `60` (the server's rates:
-    /// 29.97 and 59.94 are drop-frame, as recorders count them). Time of day, UTC.
+    /// 29.97 and 59.94 are drop-frame, as recorders count them). Time of day, UTC. With
+    /// `source = "ltc"`: the rate of the studio's LTC, one of [`LTC_RATES`].
     pub rate: TimecodeRateName,
+    /// Where the timecode comes from: the host's time of day, or LTC on the booth's audio.
+    pub source: TimecodeSource,
+    /// With `source = "ltc"`: the channel of the `[audio]` device that carries the LTC,
+    /// counted from 1 (channel 1 is the booth's microphone, so 2 or above).
+    pub channel: Option<u32>,
 }
 
 impl Default for TimecodeConfig {
     fn default() -> Self {
         TimecodeConfig {
             rate: TimecodeRateName("30".to_owned()),
+            source: TimecodeSource::System,
+            channel: None,
         }
+    }
+}
+
+/// The rates LTC is read at (`[timecode] rate` with `source = "ltc"`).
+pub const LTC_RATES: [&str; 5] = ["23.976", "24", "25", "29.97df", "30"];
+
+/// `[timecode] source`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TimecodeSource {
+    /// The host's time of day (UTC).
+    #[default]
+    System,
+    /// Linear timecode decoded from a channel of the `[audio]` device.
+    Ltc,
+}
+
+impl TimecodeConfig {
+    /// The checks serde cannot express, against the `[audio]` table LTC is read from:
+    /// `(key, message)` of the first that fails.
+    pub fn check(&self, audio: Option<&AudioConfig>) -> Result<(), (&'static str, String)> {
+        match self.source {
+            TimecodeSource::System => {
+                if let Some(channel) = self.channel {
+                    return Err((
+                        "timecode.channel",
+                        format!(
+                            "channel {channel} is read only with source = \"ltc\"; remove it or set timecode.source = \"ltc\""
+                        ),
+                    ));
+                }
+            }
+            TimecodeSource::Ltc => {
+                if !LTC_RATES.contains(&self.rate.0.as_str()) {
+                    return Err((
+                        "timecode.rate",
+                        format!(
+                            "expected one of the LTC rates {} with source = \"ltc\", got {:?}",
+                            LTC_RATES.join(", "),
+                            self.rate.0
+                        ),
+                    ));
+                }
+                let Some(audio) = audio else {
+                    return Err((
+                        "timecode.source",
+                        "expected an [audio] table: LTC is read from a channel of the booth's audio input".into(),
+                    ));
+                };
+                let Some(channel) = self.channel else {
+                    return Err((
+                        "timecode.source",
+                        format!(
+                            "expected timecode.channel too: the [audio] channel (2 to {}) that carries the LTC",
+                            audio.channels.max(2)
+                        ),
+                    ));
+                };
+                if channel < 2 || channel > audio.channels {
+                    return Err((
+                        "timecode.channel",
+                        if audio.channels < 2 {
+                            format!(
+                                "expected a channel of [audio] other than the microphone's (1), but audio.channels is {}: set audio.channels = 2 and wire the LTC into input 2",
+                                audio.channels
+                            )
+                        } else {
+                            format!(
+                                "expected 2 to {} (audio.channels; channel 1 is the microphone), got {channel}",
+                                audio.channels
+                            )
+                        },
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 }
 

@@ -125,6 +125,7 @@ async fn serve<F: Factory>(
         .map_err(|source| DaemonError::Bind { addr, source })?;
     let (hub, control) = Hub::new(&HubConfig {
         timecode_rate: rate,
+        timecode_ltc: config.timecode.source == mouthpiece_config::TimecodeSource::Ltc,
         ..HubConfig::default()
     });
     // The console's player reads the takes folder (`/take`).
@@ -159,6 +160,20 @@ async fn serve<F: Factory>(
             crate::audio::spawn(plan, audio.clone(), hub.clone()).map_err(DaemonError::Runtime)?,
         ),
         None => None,
+    };
+    // The studio's LTC, read from a channel of that sound on a thread of its own (the
+    // configuration requires [audio] and a channel for it).
+    let ltc_thread = match (config.timecode.channel, &audio_thread) {
+        (Some(channel), Some(_)) if hub.timecode_clock().is_ltc() => Some(
+            crate::ltc::spawn(
+                channel.saturating_sub(1) as usize,
+                audio.bus.subscribe(crate::ltc::LTC_QUEUE_BLOCKS),
+                audio.clone(),
+                hub.clone(),
+            )
+            .map_err(DaemonError::Runtime)?,
+        ),
+        _ => None,
     };
     let audio_queue = config
         .audio
@@ -302,6 +317,10 @@ async fn serve<F: Factory>(
                     died = Some("audio");
                     break;
                 }
+                if ltc_thread.as_ref().is_some_and(|t| t.is_finished()) {
+                    died = Some("ltc");
+                    break;
+                }
                 // Ping only while the processing loop turns: a hung pipeline gets restarted.
                 let age = epoch.elapsed().as_millis() as u64 - heartbeat.load(Ordering::Relaxed).min(epoch.elapsed().as_millis() as u64);
                 if Duration::from_millis(age) < watchdog_every {
@@ -325,10 +344,12 @@ async fn serve<F: Factory>(
     let mut processing = Some(processing);
     let mut source_thread = Some(source_thread);
     let mut audio_thread = audio_thread;
+    let mut ltc_thread = ltc_thread;
     let failure = died.map(|thread| {
         let handle = match thread {
             "processing" => processing.take(),
             "audio" => audio_thread.take(),
+            "ltc" => ltc_thread.take(),
             _ => source_thread.take(),
         };
         let message = match handle.map(|h| h.join()) {
@@ -415,6 +436,12 @@ fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) ->
             status.audio.sample_rate,
             status.audio.channels
         )),
+    }
+    if status.timecode.source == "ltc" {
+        line.push_str(&format!(
+            "; timecode LTC {}",
+            status.timecode.state.as_str()
+        ));
     }
     if let Some(nats) = hub.nats().status() {
         line.push_str("; ");

@@ -16,11 +16,15 @@
 //! - [`osc`]: the rig, head and eyes as VMC protocol messages over UDP, from its own sender
 //!   thread behind a bounded queue;
 //! - [`logging`]: journald-friendly `tracing` set-up;
+//! - [`ltc`]: the LTC thread: the studio's timecode decoded from a channel of the booth's
+//!   audio into the hub's timecode clock;
 //! - [`take_player`]: the takes folder read chunk by chunk for the console's player;
 //! - [`tune`]: the console's paint check (propose colour ranges, count what they find, apply).
 //!
 //! Threads: the source thread, the processing thread, one take-writer thread while a take
-//! records, the OSC sender thread once `[osc]` has a target, and the async server's runtime. Only bounded queues connect them.
+//! records, the OSC sender thread once `[osc]` has a target, the LTC thread with
+//! `[timecode] source = "ltc"`, and the async server's runtime. Only bounded queues connect
+//! them.
 
 pub mod audio;
 pub mod backoff;
@@ -35,6 +39,7 @@ pub mod hardening;
 pub mod head;
 pub mod live;
 pub mod logging;
+pub mod ltc;
 pub mod notify;
 pub mod osc;
 pub mod pipeline;

@@ -15,9 +15,10 @@ use std::time::{Duration, Instant, SystemTime};
 
 use crossbeam_channel::Receiver;
 use mouthpiece_frame::Frame;
+use mouthpiece_server::timecode_clock::TimecodeClock;
 use mouthpiece_server::{
     ControlCommand, ControlFailure, ControlReceiver, ControlRequest, Hub, Recording,
-    SourceState as WireSourceState, StreamFrame, StreamInfo, Timecode, TimecodeRate,
+    SourceState as WireSourceState, StreamFrame, StreamInfo, TimecodeRate,
 };
 use serde_json::json;
 
@@ -300,7 +301,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                         &out,
                         seq,
                         wall_us,
-                        ctx.timecode_rate,
+                        &ctx.hub.timecode_clock(),
                     );
                     ctx.takes.push(frame, Box::new(derived));
                 }
@@ -344,7 +345,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                     &out,
                     seq,
                     wall_us,
-                    ctx.timecode_rate,
+                    &ctx.hub.timecode_clock(),
                 );
                 ctx.takes.push_step(Box::new(derived));
             }
@@ -588,7 +589,7 @@ fn derive(
     out: &Output,
     seq: u64,
     wall_us: i64,
-    rate: TimecodeRate,
+    clock: &TimecodeClock,
 ) -> Derived {
     let stream = &out.stream;
     let stabilised = match &stream.performer {
@@ -603,7 +604,8 @@ fn derive(
         seq,
         t: stream.t,
         wall_us,
-        timecode: Timecode::from_unix_micros(wall_us, rate).to_string(),
+        // The published frame's clock (time of day or the studio's LTC).
+        timecode: clock.timecode_at(wall_us).to_string(),
         performer: names
             .iter()
             .cloned()

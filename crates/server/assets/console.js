@@ -347,7 +347,25 @@
   function dbfs(v) { return typeof v === "number" && Number.isFinite(v) ? v : -Infinity; }
   function meterShare(db) { return Math.max(0, Math.min(1, (db - METER_FLOOR_DB) / -METER_FLOOR_DB)); }
 
+  // The timecode's source and state: LTC locked is good; free-running and lost want the
+  // technician's eye (docs/daemon.md, Timecode).
+  const TIMECODE_STATES = {
+    system: ["time of day (host clock)", "muted"],
+    locked: ["LTC locked", "good"],
+    free_running: ["LTC free-running (no LTC on the input)", "warn"],
+    lost: ["LTC lost (none read yet): time of day", "bad"],
+  };
+  function showTimecode() {
+    const t = state.status && state.status.timecode;
+    if (!t) return;
+    const [text, cls] = TIMECODE_STATES[t.state] || [t.state, "muted"];
+    const s = el("timecode-state");
+    s.textContent = `${text} · ${t.rate}`;
+    s.className = cls;
+  }
+
   function showAudio() {
+    showTimecode();
     const a = (state.status && state.status.audio) || { state: "off" };
     const m = state.audio;
     const now = performance.now();

@@ -130,6 +130,9 @@ pub struct Status {
     pub audio_message: Option<String>,
     /// The last paint check (`tune_colours`).
     pub tune: Option<crate::console::TuneReport>,
+    /// The timecode's source and state (locked, free-running, lost), set by the daemon's
+    /// LTC thread when it changes.
+    pub timecode: crate::timecode_clock::TimecodeStatus,
 }
 
 /// A control action requested by a client.
@@ -234,6 +237,9 @@ pub struct HubConfig {
     pub control_queue: usize,
     /// Rate of the `timecode` field.
     pub timecode_rate: TimecodeRate,
+    /// Read the timecode from the studio's LTC (fed by the daemon's LTC thread through
+    /// [`Hub::timecode_clock`]) instead of the host's time of day.
+    pub timecode_ltc: bool,
 }
 
 impl Default for HubConfig {
@@ -242,6 +248,7 @@ impl Default for HubConfig {
             client_queue_frames: 128,
             control_queue: 16,
             timecode_rate: TimecodeRate::default(),
+            timecode_ltc: false,
         }
     }
 }
@@ -260,6 +267,8 @@ pub(crate) struct HubInner {
     pub(crate) control: mpsc::Sender<ControlRequest>,
     pub(crate) metrics: Metrics,
     pub(crate) timecode_rate: TimecodeRate,
+    /// Where frames' timecodes come from: the host's time of day or the studio's LTC.
+    pub(crate) clock: Arc<crate::timecode_clock::TimecodeClock>,
     next_seq: AtomicU64,
     /// Recycled frame slots; a slot is reused once nobody else holds it.
     pool: Mutex<Vec<Arc<PublishedFrame>>>,
@@ -289,14 +298,24 @@ impl Hub {
         let capacity = config.client_queue_frames.max(1);
         let (frames, _) = broadcast::channel(capacity);
         let (control, rx) = mpsc::channel(config.control_queue.max(1));
+        let clock = if config.timecode_ltc {
+            crate::timecode_clock::TimecodeClock::ltc(config.timecode_rate)
+        } else {
+            crate::timecode_clock::TimecodeClock::system(config.timecode_rate)
+        };
+        let status = Status {
+            timecode: clock.status(),
+            ..Status::default()
+        };
         let hub = Hub {
             inner: Arc::new(HubInner {
                 frames,
-                status: watch::Sender::new(Status::default()),
+                status: watch::Sender::new(status),
                 info: watch::Sender::new(Arc::new(StreamInfo::default())),
                 control,
                 metrics: Metrics::default(),
                 timecode_rate: config.timecode_rate,
+                clock: Arc::new(clock),
                 next_seq: AtomicU64::new(0),
                 pool: Mutex::new(Vec::new()),
                 // The ring's slots plus frames in flight in client tasks.
@@ -321,7 +340,7 @@ impl Hub {
         let inner = &self.inner;
         let seq = inner.next_seq.fetch_add(1, Ordering::Relaxed);
         let timecode = match frame.wall_us {
-            Some(wall) => Timecode::from_unix_micros(wall, inner.timecode_rate),
+            Some(wall) => inner.clock.timecode_at(wall),
             None => {
                 Timecode::from_micros_of_day((frame.t.max(0.0) * 1e6) as u64, inner.timecode_rate)
             }
@@ -436,6 +455,11 @@ impl Hub {
             rig_curves: &mouthpiece_output::CURVE_NAMES,
             rig_visemes: &mouthpiece_output::VISEME_NAMES,
         }))
+    }
+
+    /// The clock frames' timecodes are read from; the daemon's LTC thread feeds it.
+    pub fn timecode_clock(&self) -> Arc<crate::timecode_clock::TimecodeClock> {
+        self.inner.clock.clone()
     }
 
     /// Frames published so far.

@@ -65,6 +65,8 @@
 //! - [`console`]: health figures, the last calibration and the session's takes.
 //! - [`takes_http`]: `/take`, chunks of a take for the console's player.
 //! - [`timecode`]: SMPTE time-of-day timecode.
+//! - [`timecode_clock`]: the clock frames are stamped from: time of day or the studio's LTC
+//!   (locked, free-running, lost).
 //! - [`loadgen`]: the load tool behind `mouthpiece-loadgen` and the load tests.
 
 pub mod audio;
@@ -89,6 +91,7 @@ mod server;
 mod session;
 pub mod takes_http;
 pub mod timecode;
+pub mod timecode_clock;
 mod tls;
 
 pub use audio::{AudioCounters, AudioState, AudioStatus, SILENCE_DBFS};

@@ -291,7 +291,7 @@ impl Default for ClockDescription {
             t: "seconds since the start of the stream (float)",
             capture_us: "capture clock of the source, microseconds (device timestamp)",
             wall_us: "host wall-clock time when the frame was captured, Unix microseconds (live sources only)",
-            timecode: "SMPTE time-of-day timecode (UTC) of wall_us, else of t, at timecode_rate",
+            timecode: "SMPTE timecode of wall_us at timecode_rate: the studio's LTC when [timecode] source is ltc (status.timecode says locked, free_running or lost), else time of day (UTC); of t when there is no wall_us",
         }
     }
 }
@@ -325,6 +325,8 @@ pub struct StatusMessage<'a> {
     /// The last paint check.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tune: Option<&'a crate::console::TuneReport>,
+    /// The timecode's source and state.
+    pub timecode: &'a crate::timecode_clock::TimecodeStatus,
 }
 
 impl<'a> StatusMessage<'a> {
@@ -341,6 +343,7 @@ impl<'a> StatusMessage<'a> {
             audio: &status.audio,
             audio_message: status.audio_message.as_deref(),
             tune: status.tune.as_ref(),
+            timecode: &status.timecode,
         }
     }
 }

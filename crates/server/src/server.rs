@@ -369,6 +369,7 @@ async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io
                     "message": status.audio_message,
                 },
             });
+            body["timecode"] = shared.hub.inner.clock.health_json();
             if let Some(osc) = shared.hub.inner.osc.health_json() {
                 body["osc"] = osc;
             }

@@ -63,7 +63,7 @@ impl TimecodeRate {
     }
 
     /// (numerator, denominator) of the real frame rate.
-    fn fraction(self) -> (u64, u64) {
+    pub fn fraction(self) -> (u64, u64) {
         match self {
             Self::Fps23_976 => (24000, 1001),
             Self::Fps24 => (24, 1),
@@ -78,9 +78,21 @@ impl TimecodeRate {
     }
 
     /// Frame labels per second (the `FF` range).
-    fn nominal(self) -> u64 {
+    pub fn nominal(self) -> u64 {
         let (n, d) = self.fraction();
         n.div_ceil(d)
+    }
+
+    /// Whether labels are counted drop-frame (29.97, 59.94).
+    pub fn drop_frame(self) -> bool {
+        self.dropped_per_minute() > 0
+    }
+
+    /// Real frames in one 24-hour day of labels (the count wraps at midnight).
+    pub fn frames_per_day(self) -> u64 {
+        let drop = self.dropped_per_minute();
+        // 144 ten-minute blocks a day, each losing nine minutes' dropped labels.
+        144 * (self.nominal() * 600 - 9 * drop)
     }
 
     /// Labels dropped per minute (except every tenth minute), 0 for non-drop rates.
@@ -171,6 +183,32 @@ impl Timecode {
     }
 }
 
+impl Timecode {
+    /// The frame count from 00:00:00:00 of this label at `rate` (the inverse of
+    /// [`Timecode::from_frame_count`]); `None` when the label does not exist at the rate (a
+    /// field out of range, or a label drop-frame counting skips).
+    pub fn to_frame_count(&self, rate: TimecodeRate) -> Option<u64> {
+        let nominal = rate.nominal();
+        let drop = rate.dropped_per_minute();
+        let (h, m, s, f) = (
+            u64::from(self.hours),
+            u64::from(self.minutes),
+            u64::from(self.seconds),
+            u64::from(self.frames),
+        );
+        if h >= 24 || m >= 60 || s >= 60 || f >= nominal {
+            return None;
+        }
+        if drop > 0 && s == 0 && f < drop && m % 10 != 0 {
+            return None;
+        }
+        let minutes = h * 60 + m;
+        let label = (minutes * 60 + s) * nominal + f;
+        // Labels skipped before this one: `drop` per minute, but not in tenth minutes.
+        Some(label - drop * (minutes - minutes / 10))
+    }
+}
+
 impl fmt::Display for Timecode {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let sep = if self.drop_frame { ';' } else { ':' };
@@ -236,6 +274,34 @@ mod tests {
             Timecode::from_frame_count(215_784, r).to_string(),
             "01:00:00;00"
         );
+    }
+
+    #[test]
+    fn frame_counts_round_trip_through_labels() {
+        for r in TimecodeRate::ALL {
+            let day = r.frames_per_day();
+            for frame in (0..day).step_by(997).chain([day - 1, 1799, 1800, 17_982]) {
+                let tc = Timecode::from_frame_count(frame, r);
+                assert_eq!(tc.to_frame_count(r), Some(frame), "{r} {tc}");
+            }
+            // The day wraps: the frame after the last is midnight.
+            assert_eq!(
+                Timecode::from_frame_count(day, r),
+                Timecode::from_frame_count(0, r)
+            );
+        }
+        let dropped = Timecode {
+            minutes: 1,
+            frames: 1,
+            drop_frame: true,
+            ..Timecode::default()
+        };
+        assert_eq!(dropped.to_frame_count(TimecodeRate::Fps29_97Df), None);
+        let beyond = Timecode {
+            frames: 25,
+            ..Timecode::default()
+        };
+        assert_eq!(beyond.to_frame_count(TimecodeRate::Fps25), None);
     }
 
     #[test]
