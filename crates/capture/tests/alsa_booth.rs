@@ -4,7 +4,8 @@
 
 #![cfg(feature = "alsa")]
 
-use crate::helper_alsa_booth as booth;
+#[path = "../../../tests/alsa/booth.rs"]
+mod booth;
 
 use std::time::Duration;
 
