@@ -617,6 +617,6 @@ fn read_token(
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
-mod tests_nats;
-#[cfg(test)]
 mod tests_livelink;
+#[cfg(test)]
+mod tests_nats;

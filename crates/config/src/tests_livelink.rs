@@ -31,7 +31,9 @@ fn livelink_defaults_and_a_character_with_targets() {
         Some("127.0.0.1:8000".parse().unwrap())
     );
     assert!(
-        config.summary().contains("livelink Wolf -> 127.0.0.1:11111"),
+        config
+            .summary()
+            .contains("livelink Wolf -> 127.0.0.1:11111"),
         "{}",
         config.summary()
     );
@@ -61,7 +63,10 @@ fn the_default_device_id_is_a_stable_uuid_of_the_subject() {
 fn an_ipv4_sender_matches_its_mapped_ipv6_form() {
     let allowed = ["127.0.0.1".parse().unwrap()];
     assert!(source_allowed(&allowed, "127.0.0.1".parse().unwrap()));
-    assert!(source_allowed(&allowed, "::ffff:127.0.0.1".parse().unwrap()));
+    assert!(source_allowed(
+        &allowed,
+        "::ffff:127.0.0.1".parse().unwrap()
+    ));
     assert!(!source_allowed(&allowed, "127.0.0.2".parse().unwrap()));
     assert!(!source_allowed(&allowed, "::1".parse().unwrap()));
 }

@@ -15,12 +15,15 @@
 //! - [`notify`]: systemd's notify protocol (READY, STATUS, WATCHDOG, STOPPING);
 //! - [`osc`]: the rig, head and eyes as VMC protocol messages over UDP, from its own sender
 //!   thread behind a bounded queue;
+//! - [`livelink`]: Live Link Face's stream to Unreal and its OSC remote control, each on a
+//!   thread of its own (the stream behind a bounded queue);
 //! - [`logging`]: journald-friendly `tracing` set-up;
 //! - [`take_player`]: the takes folder read chunk by chunk for the console's player;
 //! - [`tune`]: the console's paint check (propose colour ranges, count what they find, apply).
 //!
 //! Threads: the source thread, the processing thread, one take-writer thread while a take
-//! records, the OSC sender thread once `[osc]` has a target, and the async server's runtime. Only bounded queues connect them.
+//! records, the OSC sender thread once `[osc]` has a target, the Live Link sender thread, the Live Link
+//! control thread when `[livelink] control` is set, and the async server's runtime. Only bounded queues connect them.
 
 pub mod audio;
 pub mod backoff;
@@ -34,6 +37,7 @@ pub mod factory;
 pub mod hardening;
 pub mod head;
 pub mod live;
+pub mod livelink;
 pub mod logging;
 pub mod notify;
 pub mod osc;

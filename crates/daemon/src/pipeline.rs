@@ -149,6 +149,8 @@ pub struct Context<R> {
     pub stop: Arc<AtomicBool>,
     /// The OSC output (`[osc]`): offered every published frame, never blocks.
     pub osc: crate::osc::OscOutput,
+    /// Live Link Face's stream, offered the same frames as `osc`.
+    pub livelink: crate::livelink::LiveLinkOutput,
     /// The console's paint check: offered every frame while it samples, never blocks.
     pub tuner: crate::tune::Tuner,
 }
@@ -254,6 +256,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                 out.stream.processing = Some(started.elapsed());
                 let seq = ctx.hub.publish(&out.stream);
                 ctx.osc.offer(&out.stream);
+                ctx.livelink.offer(&out.stream);
                 tracing::trace!(seq, device_ts_us = frame.device_ts_us, "frame processed");
                 health.frame(
                     processor.performer_names().len(),
@@ -334,6 +337,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
             out.stream.processing = None;
             let seq = ctx.hub.publish(&out.stream);
             ctx.osc.offer(&out.stream);
+            ctx.livelink.offer(&out.stream);
             frames += 1;
             if ctx.takes.is_recording() {
                 let info = ctx.hub.info();

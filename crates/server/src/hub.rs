@@ -320,12 +320,9 @@ impl Hub {
     pub fn publish(&self, frame: &StreamFrame) -> u64 {
         let inner = &self.inner;
         let seq = inner.next_seq.fetch_add(1, Ordering::Relaxed);
-        let timecode = match frame.wall_us {
-            Some(wall) => Timecode::from_unix_micros(wall, inner.timecode_rate),
-            None => {
-                Timecode::from_micros_of_day((frame.t.max(0.0) * 1e6) as u64, inner.timecode_rate)
-            }
-        };
+        let timecode =
+            crate::timecode::FrameTime::of_stream(frame.wall_us, frame.t, inner.timecode_rate)
+                .timecode(inner.timecode_rate);
         let mut slot = self.take_slot();
         {
             // take_slot only returns slots nobody else holds.
@@ -519,7 +516,9 @@ impl Hub {
     }
 
     /// Queues a control request for the daemon; the answer comes back on the returned slot.
-    pub(crate) fn request_control(
+    /// Queues a control request for the daemon without waiting; the receiver gets its
+    /// answer. For transports outside this crate (the Live Link Face remote control).
+    pub fn request_control(
         &self,
         command: ControlCommand,
         client: String,
@@ -540,9 +539,12 @@ impl Hub {
     }
 }
 
+/// Why a control request could not be queued.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum ControlQueueError {
+pub enum ControlQueueError {
+    /// Too many requests wait already.
     Full,
+    /// No daemon takes requests.
     NoDaemon,
 }
 
