@@ -2,6 +2,7 @@
 //! WebSocket client, real signals.
 
 use std::os::unix::net::UnixDatagram;
+mod livelink;
 #[path = "../../../tests/daemon/run.rs"]
 mod run;
 #[path = "../../server/tests/webdriver/mod.rs"]
