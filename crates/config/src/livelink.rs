@@ -274,5 +274,5 @@ pub fn source_allowed(allowed: &[IpAddr], source: IpAddr) -> bool {
         IpAddr::V6(v6) => v6.to_ipv4_mapped().map_or(source, IpAddr::V4),
         v4 => v4,
     };
-    allowed.iter().any(|a| *a == source)
+    allowed.contains(&source)
 }

@@ -538,7 +538,7 @@ fn socket_addr(args: &[OscType]) -> Result<SocketAddr, BadArguments> {
 /// [`TYPE_TAGS`]; this is checked on the raw bytes before the decoder sees them, so nothing
 /// nested (bundles in bundles, arrays in arrays) is ever built from a hostile datagram.
 pub fn parse_message(data: &[u8]) -> Option<OscMessage> {
-    if data.first() != Some(&b'/') || data.len() % 4 != 0 {
+    if data.first() != Some(&b'/') || !data.len().is_multiple_of(4) {
         return None;
     }
     let address_end = data.iter().position(|b| *b == 0)?;
@@ -553,7 +553,7 @@ pub fn parse_message(data: &[u8]) -> Option<OscMessage> {
         return None;
     }
     match rosc::decoder::decode_udp(data) {
-        Ok((rest, OscPacket::Message(m))) if rest.is_empty() => Some(m),
+        Ok(([], OscPacket::Message(m))) => Some(m),
         _ => None,
     }
 }
