@@ -31,6 +31,7 @@ use serde::de::DeserializeOwned;
 use serde::Deserialize;
 
 mod audio;
+mod livelink;
 mod locate;
 mod nats;
 mod sections;
@@ -38,6 +39,7 @@ mod text;
 mod tokens;
 
 pub use audio::*;
+pub use livelink::*;
 pub(crate) use locate::{invalid, key_location, line_col, span_of_key, state_directory};
 pub use locate::{read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
 pub use nats::{subject_safe, NatsConfig, NatsSecrets, MAX_NATS_QUEUE_FRAMES, MAX_NATS_SERVERS};
@@ -157,6 +159,8 @@ pub struct Config {
     pub rig: toml::Table,
     /// OSC / VMC protocol output to avatar apps and engines (docs/osc.md).
     pub osc: OscConfig,
+    /// Live Link Face's UDP stream to Unreal and its OSC remote control (docs/livelink.md).
+    pub livelink: LiveLinkConfig,
     /// The booth's microphone (`[audio]`, docs/daemon.md); `None` (no table): no audio.
     pub audio: Option<AudioConfig>,
     /// The booth on a NATS server (docs/nats.md); off by default.
@@ -180,6 +184,7 @@ impl Default for Config {
             retarget: toml::Table::new(),
             rig: toml::Table::new(),
             osc: OscConfig::default(),
+            livelink: LiveLinkConfig::default(),
             audio: None,
             nats: NatsConfig::default(),
             origin: Origin::Embedded,
@@ -427,6 +432,7 @@ impl Config {
             ));
         }
         self.nats.validate(&fail)?;
+        self.livelink.validate(&fail)?;
         Ok(())
     }
 
@@ -576,7 +582,7 @@ impl Config {
             each.join(", ")
         };
         format!(
-            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, audio {}, nats {}, tokens: read {}, control {}",
+            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, livelink {}, audio {}, nats {}, tokens: read {}, control {}",
             self.origin.describe(),
             self.source.spec.0,
             self.server.listen.0,
@@ -589,6 +595,7 @@ impl Config {
                 _ => self.timecode.rate.0.clone(),
             },
             osc,
+            self.livelink.summary(),
             match &self.audio {
                 Some(a) => format!("{} ({} Hz, {} ch)", a.device, a.sample_rate, a.channels),
                 None => "off".to_owned(),
@@ -617,6 +624,8 @@ fn read_token(
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_livelink;
 #[cfg(test)]
 mod tests_nats;
 #[cfg(test)]

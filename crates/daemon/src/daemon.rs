@@ -82,6 +82,7 @@ pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Resul
     let rate = timecode_rate(&config)?;
     let processor = factory.processor(&config)?;
     let osc = crate::osc::settings(&config)?;
+    let livelink = crate::livelink::settings(&config, rate)?;
     let _ = crate::logging::set_level(&config.logging.level);
     tracing::info!("{}", config.summary());
 
@@ -96,7 +97,7 @@ pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Resul
         factory,
         options,
         processor,
-        (server_config, osc),
+        (server_config, osc, livelink),
         rate,
     ));
     // Threads still blocked in a source's read must not hold up the exit.
@@ -109,7 +110,11 @@ async fn serve<F: Factory>(
     factory: F,
     options: RunOptions,
     processor: F::Processor,
-    (server_config, osc_settings): (ServerConfig, crate::osc::OscSettings),
+    (server_config, osc_settings, livelink_settings): (
+        ServerConfig,
+        crate::osc::OscSettings,
+        crate::livelink::LiveLinkSettings,
+    ),
     rate: TimecodeRate,
 ) -> Result<(), DaemonError> {
     let notifier = Notifier::from_env().unwrap_or_else(|e| {
@@ -144,6 +149,10 @@ async fn serve<F: Factory>(
     let throttle = config.logging.throttle_s.duration();
     let osc = crate::osc::OscOutput::new(hub.osc(), throttle);
     osc.configure(osc_settings).map_err(DaemonError::Runtime)?;
+    let livelink = crate::livelink::LiveLinkOutput::new(throttle);
+    livelink
+        .configure(livelink_settings)
+        .map_err(DaemonError::Runtime)?;
     let source_thread = source::spawn(
         factory.opener(&spec, config.source.stall_timeout_s.duration()),
         spec.clone(),
@@ -216,6 +225,7 @@ async fn serve<F: Factory>(
             epoch,
             stop: stop.clone(),
             osc: osc.clone(),
+            livelink: livelink.clone(),
             tuner: crate::tune::Tuner::new(hub.clone(), options.config_path.clone()),
         },
     )
@@ -246,6 +256,23 @@ async fn serve<F: Factory>(
                 None
             }
         },
+        None => None,
+    };
+
+    // Live Link Face's remote control: its own thread; takes go through the control queue.
+    let remote = match crate::livelink::remote_settings(&config, rate) {
+        Some(settings) => {
+            let addr = settings.listen;
+            Some(
+                crate::livelink::LiveLinkRemote::start(
+                    settings,
+                    hub.clone(),
+                    livelink.clone(),
+                    throttle,
+                )
+                .map_err(|source| DaemonError::Bind { addr, source })?,
+            )
+        }
         None => None,
     };
 
@@ -283,11 +310,17 @@ async fn serve<F: Factory>(
             _ = sighup.recv() => {
                 let _ = notifier.reloading();
                 match reload(&factory, &options, &current, local) {
-                    Ok((config, payload, new_server, new_osc)) => {
+                    Ok((config, payload, new_server, new_osc, new_livelink)) => {
                         if commands_tx.try_send(Command::Reload(payload)).is_ok() {
                             hub.set_tokens(new_server.read_token, new_server.control_token);
                             if let Err(e) = osc.configure(new_osc) {
                                 tracing::error!("SIGHUP: OSC output not reconfigured: {e}");
+                            }
+                            if let Err(e) = livelink.configure(new_livelink) {
+                                tracing::error!("SIGHUP: Live Link output not reconfigured: {e}");
+                            }
+                            if let Some(remote) = &remote {
+                                remote.set_allowed(config.livelink.allowed());
                             }
                             tracing::info!("SIGHUP: {}", config.summary());
                             current = config;
@@ -297,7 +330,7 @@ async fn serve<F: Factory>(
                     }
                     Err(e) => tracing::error!("SIGHUP: new configuration rejected, old one kept: {}", source::error_chain(&e)),
                 }
-                let _ = notifier.reloaded(&status_line(&shared, &hub, &osc));
+                let _ = notifier.reloaded(&status_line(&shared, &hub, &osc, &livelink, remote.as_ref()));
             }
             _ = sigusr1.recv() => {
                 let _ = commands_tx.try_send(Command::RecordStart { slate: current.takes.slate.0.clone(), take: None });
@@ -328,7 +361,7 @@ async fn serve<F: Factory>(
                 } else {
                     tracing::warn!(stalled_ms = age, "processing thread not turning; withholding watchdog ping");
                 }
-                let status = status_line(&shared, &hub, &osc);
+                let status = status_line(&shared, &hub, &osc, &livelink, remote.as_ref());
                 if status != last_status {
                     let _ = notifier.status(&status);
                     last_status = status;
@@ -407,7 +440,13 @@ async fn serve<F: Factory>(
     }
 }
 
-fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) -> String {
+fn status_line(
+    shared: &SourceShared,
+    hub: &Hub,
+    osc: &crate::osc::OscOutput,
+    livelink: &crate::livelink::LiveLinkOutput,
+    remote: Option<&crate::livelink::LiveLinkRemote>,
+) -> String {
     let source = match shared.state().1 {
         SourceState::Starting => "source starting".to_owned(),
         SourceState::Up(info) => format!("source up ({})", info.description),
@@ -421,6 +460,14 @@ fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) ->
     if let Some(osc) = osc.status() {
         line.push_str("; ");
         line.push_str(&osc);
+    }
+    if let Some(livelink) = livelink.status() {
+        line.push_str("; ");
+        line.push_str(&livelink);
+    }
+    if let Some(remote) = remote {
+        line.push_str("; ");
+        line.push_str(&remote.status());
     }
     let status = hub.status();
     match status.audio.state {
@@ -451,8 +498,14 @@ fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) ->
 }
 
 /// What a validated reload carries: the config, the processor's payload, the server's
-/// settings (tokens) and the OSC output's.
-type Reloaded<R> = (Config, R, ServerConfig, crate::osc::OscSettings);
+/// settings (tokens), the OSC output's and the Live Link output's.
+type Reloaded<R> = (
+    Config,
+    R,
+    ServerConfig,
+    crate::osc::OscSettings,
+    crate::livelink::LiveLinkSettings,
+);
 
 /// Loads the config again (same file, same CLI overrides) and validates everything a reload
 /// changes.
@@ -476,6 +529,7 @@ fn reload<F: Factory>(
     crate::hardening::check_against(&config, &server, bound)?;
     let payload = factory.reload(&config)?;
     let osc = crate::osc::settings(&config)?;
+    let livelink = crate::livelink::settings(&config, timecode_rate(current)?)?;
     for (what, changed) in [
         ("source", config.source != current.source),
         (
@@ -485,13 +539,17 @@ fn reload<F: Factory>(
         ("takes", config.takes != current.takes),
         ("timecode", config.timecode != current.timecode),
         ("nats", config.nats != current.nats),
+        (
+            "livelink.control",
+            config.livelink.control != current.livelink.control,
+        ),
     ] {
         if changed {
             tracing::warn!("{what} changed: takes effect after a restart");
         }
     }
     let _ = crate::logging::set_level(&config.logging.level);
-    Ok((config, payload, server, osc))
+    Ok((config, payload, server, osc, livelink))
 }
 
 /// CLI flags win over the file.

@@ -15,6 +15,8 @@
 //! - [`notify`]: systemd's notify protocol (READY, STATUS, WATCHDOG, STOPPING);
 //! - [`osc`]: the rig, head and eyes as VMC protocol messages over UDP, from its own sender
 //!   thread behind a bounded queue;
+//! - [`livelink`]: Live Link Face's stream to Unreal and its OSC remote control, each on a
+//!   thread of its own (the stream behind a bounded queue);
 //! - [`logging`]: journald-friendly `tracing` set-up;
 //! - [`ltc`]: the LTC thread: the studio's timecode decoded from a channel of the booth's
 //!   audio into the hub's timecode clock;
@@ -22,7 +24,8 @@
 //! - [`tune`]: the console's paint check (propose colour ranges, count what they find, apply).
 //!
 //! Threads: the source thread, the processing thread, one take-writer thread while a take
-//! records, the OSC sender thread once `[osc]` has a target, the LTC thread with
+//! records, the OSC sender thread once `[osc]` has a target, the Live Link sender thread, the
+//! Live Link control thread when `[livelink] control` is set, the LTC thread with
 //! `[timecode] source = "ltc"`, and the async server's runtime. Only bounded queues connect
 //! them.
 
@@ -38,6 +41,7 @@ pub mod factory;
 pub mod hardening;
 pub mod head;
 pub mod live;
+pub mod livelink;
 pub mod logging;
 pub mod ltc;
 pub mod notify;

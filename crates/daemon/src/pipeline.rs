@@ -150,6 +150,8 @@ pub struct Context<R> {
     pub stop: Arc<AtomicBool>,
     /// The OSC output (`[osc]`): offered every published frame, never blocks.
     pub osc: crate::osc::OscOutput,
+    /// Live Link Face's stream, offered the same frames as `osc`.
+    pub livelink: crate::livelink::LiveLinkOutput,
     /// The console's paint check: offered every frame while it samples, never blocks.
     pub tuner: crate::tune::Tuner,
 }
@@ -253,8 +255,10 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                 out.stream.capture_us = frame.device_ts_us;
                 out.stream.wall_us = Some(wall_us);
                 out.stream.processing = Some(started.elapsed());
-                let seq = ctx.hub.publish(&out.stream);
+                let time = ctx.hub.frame_time(&out.stream);
+                let seq = ctx.hub.publish_at(&out.stream, time);
                 ctx.osc.offer(&out.stream);
+                ctx.livelink.offer(&out.stream, time);
                 tracing::trace!(seq, device_ts_us = frame.device_ts_us, "frame processed");
                 health.frame(
                     processor.performer_names().len(),
@@ -333,8 +337,10 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
             out.stream.capture_us = 0;
             out.stream.wall_us = Some(mouthpiece_takes::unix_us(wall));
             out.stream.processing = None;
-            let seq = ctx.hub.publish(&out.stream);
+            let time = ctx.hub.frame_time(&out.stream);
+            let seq = ctx.hub.publish_at(&out.stream, time);
             ctx.osc.offer(&out.stream);
+            ctx.livelink.offer(&out.stream, time);
             frames += 1;
             if ctx.takes.is_recording() {
                 let info = ctx.hub.info();

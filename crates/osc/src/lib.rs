@@ -673,6 +673,8 @@ fn run(
     tracing::info!("OSC sender stopped");
 }
 
+pub mod livelink;
+pub mod remote;
 mod sender;
 pub use sender::VmcSender;
 

@@ -333,18 +333,33 @@ impl Hub {
         (hub, ControlReceiver { rx })
     }
 
+    /// Where a frame falls on the timecode grid: of its wall clock by the timecode clock (the
+    /// host's time of day, or the studio's LTC), else of its stream time `t` as a time of day.
+    /// The one rule for every frame's `timecode` and every output that carries one.
+    pub fn frame_time(&self, frame: &StreamFrame) -> crate::timecode::FrameTime {
+        let inner = &self.inner;
+        match frame.wall_us {
+            Some(wall) => inner.clock.frame_time_at(wall),
+            None => crate::timecode::FrameTime::from_micros_of_day(
+                (frame.t.max(0.0) * 1e6) as u64,
+                inner.timecode_rate,
+            ),
+        }
+    }
+
     /// Publishes one frame to every subscribed client and returns its `seq`.
     ///
     /// Never blocks and never waits for a client; call it from the processing thread.
     pub fn publish(&self, frame: &StreamFrame) -> u64 {
+        self.publish_at(frame, self.frame_time(frame))
+    }
+
+    /// [`Hub::publish`] with the frame's place on the timecode grid already read
+    /// ([`Hub::frame_time`]), so that outputs beside the hub carry the same timecode.
+    pub fn publish_at(&self, frame: &StreamFrame, time: crate::timecode::FrameTime) -> u64 {
         let inner = &self.inner;
         let seq = inner.next_seq.fetch_add(1, Ordering::Relaxed);
-        let timecode = match frame.wall_us {
-            Some(wall) => inner.clock.timecode_at(wall),
-            None => {
-                Timecode::from_micros_of_day((frame.t.max(0.0) * 1e6) as u64, inner.timecode_rate)
-            }
-        };
+        let timecode = time.timecode(inner.timecode_rate);
         let mut slot = self.take_slot();
         {
             // take_slot only returns slots nobody else holds.
@@ -543,7 +558,9 @@ impl Hub {
     }
 
     /// Queues a control request for the daemon; the answer comes back on the returned slot.
-    pub(crate) fn request_control(
+    /// Queues a control request for the daemon without waiting; the receiver gets its
+    /// answer. For transports outside this crate (the Live Link Face remote control).
+    pub fn request_control(
         &self,
         command: ControlCommand,
         client: String,
@@ -564,9 +581,12 @@ impl Hub {
     }
 }
 
+/// Why a control request could not be queued.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum ControlQueueError {
+pub enum ControlQueueError {
+    /// Too many requests wait already.
     Full,
+    /// No daemon takes requests.
     NoDaemon,
 }
 

@@ -124,4 +124,4 @@ pub use takes_http::{ChunkAudio, ChunkFrame, TakeArchive, TakeChunk, TakeChunkEr
 pub fn check_tls(files: &TlsFiles) -> Result<(), ServerError> {
     tls::acceptor(files).map(|_| ())
 }
-pub use timecode::{Timecode, TimecodeRate};
+pub use timecode::{FrameTime, Timecode, TimecodeRate};

@@ -141,19 +141,57 @@ pub struct Timecode {
     pub drop_frame: bool,
 }
 
+/// A time of day as a position on a rate's frame grid: whole frames since midnight (real
+/// frames, as Unreal's `FFrameNumber` counts them; drop-frame labels are a matter of
+/// [`Timecode`]) and how far into the next one, `0 ≤ sub_frame < 1`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameTime {
+    pub frame: u64,
+    pub sub_frame: f64,
+}
+
+impl FrameTime {
+    /// The position of a time of day given in microseconds since midnight.
+    pub fn from_micros_of_day(micros: u64, rate: TimecodeRate) -> Self {
+        let (num, den) = rate.fraction();
+        let scaled = u128::from(micros) * u128::from(num);
+        let per_frame = u128::from(den) * 1_000_000;
+        FrameTime {
+            frame: (scaled / per_frame) as u64,
+            sub_frame: (scaled % per_frame) as f64 / per_frame as f64,
+        }
+    }
+
+    /// The position of a Unix time in microseconds, as time of day in UTC.
+    pub fn from_unix_micros(unix_us: i64, rate: TimecodeRate) -> Self {
+        const DAY_US: i64 = 86_400 * 1_000_000;
+        Self::from_micros_of_day(unix_us.rem_euclid(DAY_US) as u64, rate)
+    }
+
+    /// A published frame's position: of its wall clock (`wall_us`), else of its stream time
+    /// `t` taken as a time of day (the rule of every frame's `timecode`).
+    pub fn of_stream(wall_us: Option<i64>, t: f64, rate: TimecodeRate) -> Self {
+        match wall_us {
+            Some(wall) => Self::from_unix_micros(wall, rate),
+            None => Self::from_micros_of_day((t.max(0.0) * 1e6) as u64, rate),
+        }
+    }
+
+    /// The timecode label of [`FrameTime::frame`].
+    pub fn timecode(self, rate: TimecodeRate) -> Timecode {
+        Timecode::from_frame_count(self.frame, rate)
+    }
+}
+
 impl Timecode {
     /// The timecode of a time of day given in microseconds since midnight.
     pub fn from_micros_of_day(micros: u64, rate: TimecodeRate) -> Self {
-        let (num, den) = rate.fraction();
-        // Real frames elapsed since midnight.
-        let frame = (u128::from(micros) * u128::from(num) / (u128::from(den) * 1_000_000)) as u64;
-        Self::from_frame_count(frame, rate)
+        FrameTime::from_micros_of_day(micros, rate).timecode(rate)
     }
 
     /// The timecode of a Unix time in microseconds, as time of day in UTC.
     pub fn from_unix_micros(unix_us: i64, rate: TimecodeRate) -> Self {
-        const DAY_US: i64 = 86_400 * 1_000_000;
-        Self::from_micros_of_day(unix_us.rem_euclid(DAY_US) as u64, rate)
+        FrameTime::from_unix_micros(unix_us, rate).timecode(rate)
     }
 
     /// The timecode label of the `frame`-th frame counted from 00:00:00:00.

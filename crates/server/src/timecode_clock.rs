@@ -17,7 +17,7 @@ use std::sync::Mutex;
 
 use serde::{Deserialize, Serialize};
 
-use crate::timecode::{Timecode, TimecodeRate};
+use crate::timecode::{FrameTime, Timecode, TimecodeRate};
 
 /// Consecutive agreeing LTC frames needed to lock, or to follow a jump.
 pub const CONFIRM_FRAMES: u32 = 3;
@@ -155,15 +155,25 @@ impl TimecodeClock {
     /// The timecode at `wall_us` (Unix microseconds): LTC counted on from the last lock, or
     /// the host's time of day when there is no lock.
     pub fn timecode_at(&self, wall_us: i64) -> Timecode {
+        self.frame_time_at(wall_us).timecode(self.rate)
+    }
+
+    /// [`TimecodeClock::timecode_at`] as a place on the frame grid: the frame and how far
+    /// into it `wall_us` is (Live Link's frame number and sub-frame).
+    pub fn frame_time_at(&self, wall_us: i64) -> FrameTime {
         if self.ltc {
             if let Some(lock) = self.lock().lock {
-                return Timecode::from_frame_count(
-                    ltc_frame_at(lock, wall_us, self.rate),
-                    self.rate,
-                );
+                let (num, den) = self.rate.fraction();
+                let elapsed = i128::from(wall_us) - i128::from(lock.end_wall_us);
+                let per = i128::from(den) * 1_000_000;
+                let into = (elapsed * i128::from(num)).rem_euclid(per);
+                return FrameTime {
+                    frame: ltc_frame_at(lock, wall_us, self.rate),
+                    sub_frame: into as f64 / per as f64,
+                };
             }
         }
-        Timecode::from_unix_micros(wall_us, self.rate)
+        FrameTime::from_unix_micros(wall_us, self.rate)
     }
 
     /// One decoded LTC frame, `label`, that ended at `end_wall_us`. Returns the state after

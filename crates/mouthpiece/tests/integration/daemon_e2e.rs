@@ -4,6 +4,7 @@
 use crate::helper_daemon_run as run;
 use crate::helper_webdriver as webdriver;
 use std::os::unix::net::UnixDatagram;
+mod livelink;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
