@@ -2,6 +2,8 @@
 //! place that carries it (the WebSocket protocol and its Foxglove bridge, OSC/VMC, takes,
 //! exports, the retarget core's curve list).
 //!
+//! - [`arkit`]: a character's face as ARKit's 52 blend shapes and head and eye angles (Live
+//!   Link Face, iFacialMocap);
 //! - [`curves`]: the rig's curve names (ARKit's), in the one order every output uses;
 //! - [`rig`]: a character's rig in one frame (jaw, lips, curves), fixed-size;
 //! - [`head`]: the performer's head pose and a character's head and eyes;
@@ -13,6 +15,7 @@
 //! Plain data with serde; no I/O, no threads, no dependencies beyond serde, so the pure
 //! math at the bottom of the workspace and the servers at the top can share it.
 
+pub mod arkit;
 pub mod curves;
 pub mod frame;
 pub mod head;
@@ -20,6 +23,10 @@ pub mod log;
 pub mod rig;
 pub mod slate;
 
+pub use arkit::{
+    angles_of, arkit_index, ArkitFace, HeadAxes, ARKIT_NAMES, BLENDSHAPES, EYE_LOOK_FULL_SCALE_DEG,
+    LIVELINK_NAMES, LIVELINK_VALUES, UNMEASURED,
+};
 pub use curves::{
     curve_index, pascal_name, visemes_from, CurveNaming, VisemeNaming, CURVES, CURVE_NAMES,
     PASCAL_NAMES, VISEMES, VISEME_NAMES, VISEME_NAMES_VRM0,
