@@ -1,7 +1,7 @@
 //! A character's face as ARKit's 52 blend shapes plus head and eye angles: the values the
 //! studio protocols that speak ARKit carry (Live Link Face's stream and CSV takes,
 //! iFacialMocap), built once from a character's frame so every such output sends the same
-//! numbers (docs/livelink.md, *The ARKit face*).
+//! numbers (docs/arkit.md).
 //!
 //! - The blend shapes are in Apple's ARKit order ([`ARKIT_NAMES`], the order of Unreal's
 //!   `EARFaceBlendShape` and of the Live Link Face datagram): `eyeBlinkLeft` first, `jawOpen`
@@ -212,7 +212,7 @@ impl HeadAxes {
     }
 
     /// `Aᵀ R A`: a model-frame rotation matrix written in the head frame's axes.
-    fn to_head(&self, r: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    fn in_head_axes(&self, r: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
         let a = [self.left, self.up, self.forward];
         let mut out = [[0.0; 3]; 3];
         for (i, ai) in a.iter().enumerate() {
@@ -370,11 +370,11 @@ impl ArkitFace {
 
     /// The head and eye angles and the eyes' `eyeLook*` shapes from a character's head.
     pub fn set_head(&mut self, head: &CharacterHead, axes: &HeadAxes) {
-        self.head = angles_of(&axes.to_head(&matrix_of(head.rotation))).map(|v| v as f32);
+        self.head = angles_of(&axes.in_head_axes(&matrix_of(head.rotation))).map(|v| v as f32);
         // The eyes' rotations are relative to the head, in its axes (the model's axes turned
         // with the head): the same change of axes applies.
-        let left = axes.to_head(&matrix_of(head.eye_left));
-        let right = axes.to_head(&matrix_of(head.eye_right));
+        let left = axes.in_head_axes(&matrix_of(head.eye_left));
+        let right = axes.in_head_axes(&matrix_of(head.eye_right));
         self.eye_left = angles_of(&left).map(|v| v as f32);
         self.eye_right = angles_of(&right).map(|v| v as f32);
         let full = EYE_LOOK_FULL_SCALE_DEG.to_radians();
