@@ -31,6 +31,7 @@ use serde::de::DeserializeOwned;
 use serde::Deserialize;
 
 mod audio;
+mod ifacialmocap;
 mod locate;
 mod nats;
 mod sections;
@@ -38,6 +39,7 @@ mod text;
 mod tokens;
 
 pub use audio::*;
+pub use ifacialmocap::IfacialmocapConfig;
 pub(crate) use locate::{invalid, key_location, line_col, span_of_key, state_directory};
 pub use locate::{read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
 pub use nats::{subject_safe, NatsConfig, NatsSecrets, MAX_NATS_QUEUE_FRAMES, MAX_NATS_SERVERS};
@@ -161,6 +163,8 @@ pub struct Config {
     pub audio: Option<AudioConfig>,
     /// The booth on a NATS server (docs/nats.md); off by default.
     pub nats: NatsConfig,
+    /// The iFacialMocap output (docs/ifacialmocap.md); off by default.
+    pub ifacialmocap: IfacialmocapConfig,
     /// Where this configuration came from, with its text (for [`Config::extract`]).
     #[serde(skip)]
     pub origin: Origin,
@@ -182,6 +186,7 @@ impl Default for Config {
             osc: OscConfig::default(),
             audio: None,
             nats: NatsConfig::default(),
+            ifacialmocap: IfacialmocapConfig::default(),
             origin: Origin::Embedded,
         }
     }
@@ -424,6 +429,7 @@ impl Config {
             ));
         }
         self.nats.validate(&fail)?;
+        self.ifacialmocap.validate(&fail)?;
         Ok(())
     }
 
@@ -573,7 +579,7 @@ impl Config {
             each.join(", ")
         };
         format!(
-            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, audio {}, nats {}, tokens: read {}, control {}",
+            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, audio {}, nats {}, ifacialmocap {}, tokens: read {}, control {}",
             self.origin.describe(),
             self.source.spec.0,
             self.server.listen.0,
@@ -586,6 +592,7 @@ impl Config {
                 None => "off".to_owned(),
             },
             self.nats.summary(),
+            self.ifacialmocap.summary(),
             if self.server.tokens.read.is_some() { "set" } else { "none" },
             if self.server.tokens.control.is_some() { "set" } else { "none" },
         )
@@ -609,5 +616,7 @@ fn read_token(
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_ifacialmocap;
 #[cfg(test)]
 mod tests_nats;
