@@ -3,11 +3,14 @@
 //!
 //! Threads: `mouthpiece-source` (owns the source), `mouthpiece-process` (processing, takes
 //! control), `mouthpiece-take` (while a take records), `mouthpiece-osc` (once `[osc]` has a
-//! target: the VMC sender behind a bounded queue), and a 2-thread tokio runtime for the
+//! target: the VMC sender behind a bounded queue), `mouthpiece-ifacialmocap` (while
+//! `[ifacialmocap]` is enabled: answers handshakes, streams to receivers, behind a bounded
+//! queue), and a 2-thread tokio runtime for the
 //! server, the NATS link (once `[nats]` has servers), the signals and the watchdog. Start-up: validate the config, bind the port, start
 //! the threads, then `READY=1`. Signals: SIGTERM/SIGINT stop (a take written out to its
 //! last queued frame and synced, clients closed with 1001, exit 0 within 2 s when no take
-//! drains); SIGHUP reloads characters, tokens, colour ranges, `[rig]` and `[osc]`;
+//! drains); SIGHUP reloads characters, tokens, colour ranges, `[rig]`, `[osc]` and
+//! `[ifacialmocap]`;
 //! SIGUSR1 starts a take with the default slate, SIGUSR2 stops it.
 
 use std::path::PathBuf;
@@ -82,6 +85,7 @@ pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Resul
     let rate = timecode_rate(&config)?;
     let processor = factory.processor(&config)?;
     let osc = crate::osc::settings(&config)?;
+    let ifacialmocap = crate::ifacialmocap::settings(&config)?;
     let _ = crate::logging::set_level(&config.logging.level);
     tracing::info!("{}", config.summary());
 
@@ -96,7 +100,7 @@ pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Resul
         factory,
         options,
         processor,
-        (server_config, osc),
+        (server_config, osc, ifacialmocap),
         rate,
     ));
     // Threads still blocked in a source's read must not hold up the exit.
@@ -109,7 +113,11 @@ async fn serve<F: Factory>(
     factory: F,
     options: RunOptions,
     processor: F::Processor,
-    (server_config, osc_settings): (ServerConfig, crate::osc::OscSettings),
+    (server_config, osc_settings, ifm_settings): (
+        ServerConfig,
+        crate::osc::OscSettings,
+        Option<crate::ifacialmocap::IfmSettings>,
+    ),
     rate: TimecodeRate,
 ) -> Result<(), DaemonError> {
     let notifier = Notifier::from_env().unwrap_or_else(|e| {
@@ -143,6 +151,10 @@ async fn serve<F: Factory>(
     let throttle = config.logging.throttle_s.duration();
     let osc = crate::osc::OscOutput::new(hub.osc(), throttle);
     osc.configure(osc_settings).map_err(DaemonError::Runtime)?;
+    let ifacialmocap = crate::ifacialmocap::IfmOutput::new();
+    ifacialmocap
+        .configure(ifm_settings)
+        .map_err(DaemonError::Runtime)?;
     let source_thread = source::spawn(
         factory.opener(&spec, config.source.stall_timeout_s.duration()),
         spec.clone(),
@@ -201,6 +213,7 @@ async fn serve<F: Factory>(
             epoch,
             stop: stop.clone(),
             osc: osc.clone(),
+            ifacialmocap: ifacialmocap.clone(),
             tuner: crate::tune::Tuner::new(hub.clone(), options.config_path.clone()),
         },
     )
@@ -268,11 +281,14 @@ async fn serve<F: Factory>(
             _ = sighup.recv() => {
                 let _ = notifier.reloading();
                 match reload(&factory, &options, &current, local) {
-                    Ok((config, payload, new_server, new_osc)) => {
+                    Ok((config, payload, new_server, (new_osc, new_ifm))) => {
                         if commands_tx.try_send(Command::Reload(payload)).is_ok() {
                             hub.set_tokens(new_server.read_token, new_server.control_token);
                             if let Err(e) = osc.configure(new_osc) {
                                 tracing::error!("SIGHUP: OSC output not reconfigured: {e}");
+                            }
+                            if let Err(e) = ifacialmocap.configure(new_ifm) {
+                                tracing::error!("SIGHUP: iFacialMocap output not reconfigured: {e}");
                             }
                             tracing::info!("SIGHUP: {}", config.summary());
                             current = config;
@@ -282,7 +298,7 @@ async fn serve<F: Factory>(
                     }
                     Err(e) => tracing::error!("SIGHUP: new configuration rejected, old one kept: {}", source::error_chain(&e)),
                 }
-                let _ = notifier.reloaded(&status_line(&shared, &hub, &osc));
+                let _ = notifier.reloaded(&status_line(&shared, &hub, &osc, &ifacialmocap));
             }
             _ = sigusr1.recv() => {
                 let _ = commands_tx.try_send(Command::RecordStart { slate: current.takes.slate.0.clone(), take: None });
@@ -309,7 +325,7 @@ async fn serve<F: Factory>(
                 } else {
                     tracing::warn!(stalled_ms = age, "processing thread not turning; withholding watchdog ping");
                 }
-                let status = status_line(&shared, &hub, &osc);
+                let status = status_line(&shared, &hub, &osc, &ifacialmocap);
                 if status != last_status {
                     let _ = notifier.status(&status);
                     last_status = status;
@@ -386,7 +402,12 @@ async fn serve<F: Factory>(
     }
 }
 
-fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) -> String {
+fn status_line(
+    shared: &SourceShared,
+    hub: &Hub,
+    osc: &crate::osc::OscOutput,
+    ifacialmocap: &crate::ifacialmocap::IfmOutput,
+) -> String {
     let source = match shared.state().1 {
         SourceState::Starting => "source starting".to_owned(),
         SourceState::Up(info) => format!("source up ({})", info.description),
@@ -400,6 +421,10 @@ fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) ->
     if let Some(osc) = osc.status() {
         line.push_str("; ");
         line.push_str(&osc);
+    }
+    if let Some(ifm) = ifacialmocap.status() {
+        line.push_str("; ");
+        line.push_str(&ifm);
     }
     let status = hub.status();
     match status.audio.state {
@@ -424,8 +449,16 @@ fn status_line(shared: &SourceShared, hub: &Hub, osc: &crate::osc::OscOutput) ->
 }
 
 /// What a validated reload carries: the config, the processor's payload, the server's
-/// settings (tokens) and the OSC output's.
-type Reloaded<R> = (Config, R, ServerConfig, crate::osc::OscSettings);
+/// settings (tokens), the OSC output's and the iFacialMocap output's.
+type Reloaded<R> = (
+    Config,
+    R,
+    ServerConfig,
+    (
+        crate::osc::OscSettings,
+        Option<crate::ifacialmocap::IfmSettings>,
+    ),
+);
 
 /// Loads the config again (same file, same CLI overrides) and validates everything a reload
 /// changes.
@@ -449,6 +482,7 @@ fn reload<F: Factory>(
     crate::hardening::check_against(&config, &server, bound)?;
     let payload = factory.reload(&config)?;
     let osc = crate::osc::settings(&config)?;
+    let ifacialmocap = crate::ifacialmocap::settings(&config)?;
     for (what, changed) in [
         ("source", config.source != current.source),
         (
@@ -464,7 +498,7 @@ fn reload<F: Factory>(
         }
     }
     let _ = crate::logging::set_level(&config.logging.level);
-    Ok((config, payload, server, osc))
+    Ok((config, payload, server, (osc, ifacialmocap)))
 }
 
 /// CLI flags win over the file.

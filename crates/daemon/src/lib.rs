@@ -33,6 +33,7 @@ pub mod error;
 pub mod factory;
 pub mod hardening;
 pub mod head;
+pub mod ifacialmocap;
 pub mod live;
 pub mod logging;
 pub mod notify;

@@ -149,6 +149,9 @@ pub struct Context<R> {
     pub stop: Arc<AtomicBool>,
     /// The OSC output (`[osc]`): offered every published frame, never blocks.
     pub osc: crate::osc::OscOutput,
+    /// The iFacialMocap output (`[ifacialmocap]`): offered every published frame, never
+    /// blocks.
+    pub ifacialmocap: crate::ifacialmocap::IfmOutput,
     /// The console's paint check: offered every frame while it samples, never blocks.
     pub tuner: crate::tune::Tuner,
 }
@@ -254,6 +257,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                 out.stream.processing = Some(started.elapsed());
                 let seq = ctx.hub.publish(&out.stream);
                 ctx.osc.offer(&out.stream);
+                ctx.ifacialmocap.offer(&out.stream);
                 tracing::trace!(seq, device_ts_us = frame.device_ts_us, "frame processed");
                 health.frame(
                     processor.performer_names().len(),
@@ -334,6 +338,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
             out.stream.processing = None;
             let seq = ctx.hub.publish(&out.stream);
             ctx.osc.offer(&out.stream);
+            ctx.ifacialmocap.offer(&out.stream);
             frames += 1;
             if ctx.takes.is_recording() {
                 let info = ctx.hub.info();

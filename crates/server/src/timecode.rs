@@ -63,7 +63,7 @@ impl TimecodeRate {
     }
 
     /// (numerator, denominator) of the real frame rate.
-    fn fraction(self) -> (u64, u64) {
+    pub fn fraction(self) -> (u64, u64) {
         match self {
             Self::Fps23_976 => (24000, 1001),
             Self::Fps24 => (24, 1),
