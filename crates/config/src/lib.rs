@@ -32,6 +32,7 @@ use serde::Deserialize;
 
 mod audio;
 mod livelink;
+mod ifacialmocap;
 mod locate;
 mod nats;
 mod sections;
@@ -40,6 +41,7 @@ mod tokens;
 
 pub use audio::*;
 pub use livelink::*;
+pub use ifacialmocap::IfacialmocapConfig;
 pub(crate) use locate::{invalid, key_location, line_col, span_of_key, state_directory};
 pub use locate::{read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
 pub use nats::{subject_safe, NatsConfig, NatsSecrets, MAX_NATS_QUEUE_FRAMES, MAX_NATS_SERVERS};
@@ -165,6 +167,8 @@ pub struct Config {
     pub audio: Option<AudioConfig>,
     /// The booth on a NATS server (docs/nats.md); off by default.
     pub nats: NatsConfig,
+    /// The iFacialMocap output (docs/ifacialmocap.md); off by default.
+    pub ifacialmocap: IfacialmocapConfig,
     /// Where this configuration came from, with its text (for [`Config::extract`]).
     #[serde(skip)]
     pub origin: Origin,
@@ -187,6 +191,7 @@ impl Default for Config {
             livelink: LiveLinkConfig::default(),
             audio: None,
             nats: NatsConfig::default(),
+            ifacialmocap: IfacialmocapConfig::default(),
             origin: Origin::Embedded,
         }
     }
@@ -433,6 +438,7 @@ impl Config {
         }
         self.nats.validate(&fail)?;
         self.livelink.validate(&fail)?;
+        self.ifacialmocap.validate(&fail)?;
         Ok(())
     }
 
@@ -582,7 +588,7 @@ impl Config {
             each.join(", ")
         };
         format!(
-            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, livelink {}, audio {}, nats {}, tokens: read {}, control {}",
+            "config {}: source {}, listen {}, characters [{}], takes in {}, timecode {}, osc {}, livelink {}, audio {}, nats {}, ifacialmocap {}, tokens: read {}, control {}",
             self.origin.describe(),
             self.source.spec.0,
             self.server.listen.0,
@@ -601,6 +607,7 @@ impl Config {
                 None => "off".to_owned(),
             },
             self.nats.summary(),
+            self.ifacialmocap.summary(),
             if self.server.tokens.read.is_some() { "set" } else { "none" },
             if self.server.tokens.control.is_some() { "set" } else { "none" },
         )
@@ -626,6 +633,7 @@ fn read_token(
 mod tests;
 #[cfg(test)]
 mod tests_livelink;
+mod tests_ifacialmocap;
 #[cfg(test)]
 mod tests_nats;
 #[cfg(test)]

@@ -23,6 +23,8 @@ pub fn check(config: &Config) -> Result<(), CheckError> {
     crate::osc::settings(config)?;
     // `[livelink]`: the characters exist, every target resolves.
     crate::livelink::settings(config, crate::settings::timecode_rate(config)?)?;
+    // `[ifacialmocap]`: the character exists.
+    crate::ifacialmocap::settings(config)?;
     let listen = config.server.listen.0;
     if !listen.ip().is_loopback()
         && (config.server.tokens.read.is_none() || config.server.tokens.control.is_none())

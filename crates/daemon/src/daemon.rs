@@ -3,11 +3,14 @@
 //!
 //! Threads: `mouthpiece-source` (owns the source), `mouthpiece-process` (processing, takes
 //! control), `mouthpiece-take` (while a take records), `mouthpiece-osc` (once `[osc]` has a
-//! target: the VMC sender behind a bounded queue), and a 2-thread tokio runtime for the
+//! target: the VMC sender behind a bounded queue), `mouthpiece-ifacialmocap` (while
+//! `[ifacialmocap]` is enabled: answers handshakes, streams to receivers, behind a bounded
+//! queue), and a 2-thread tokio runtime for the
 //! server, the NATS link (once `[nats]` has servers), the signals and the watchdog. Start-up: validate the config, bind the port, start
 //! the threads, then `READY=1`. Signals: SIGTERM/SIGINT stop (a take written out to its
 //! last queued frame and synced, clients closed with 1001, exit 0 within 2 s when no take
-//! drains); SIGHUP reloads characters, tokens, colour ranges, `[rig]` and `[osc]`;
+//! drains); SIGHUP reloads characters, tokens, colour ranges, `[rig]`, `[osc]` and
+//! `[ifacialmocap]`;
 //! SIGUSR1 starts a take with the default slate, SIGUSR2 stops it.
 
 use std::path::PathBuf;
@@ -83,6 +86,7 @@ pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Resul
     let processor = factory.processor(&config)?;
     let osc = crate::osc::settings(&config)?;
     let livelink = crate::livelink::settings(&config, rate)?;
+    let ifacialmocap = crate::ifacialmocap::settings(&config)?;
     let _ = crate::logging::set_level(&config.logging.level);
     tracing::info!("{}", config.summary());
 
@@ -97,7 +101,7 @@ pub fn run<F: Factory>(config: Config, factory: F, options: RunOptions) -> Resul
         factory,
         options,
         processor,
-        (server_config, osc, livelink),
+        (server_config, osc, livelink, ifacialmocap),
         rate,
     ));
     // Threads still blocked in a source's read must not hold up the exit.
@@ -110,10 +114,11 @@ async fn serve<F: Factory>(
     factory: F,
     options: RunOptions,
     processor: F::Processor,
-    (server_config, osc_settings, livelink_settings): (
+    (server_config, osc_settings, livelink_settings, ifm_settings): (
         ServerConfig,
         crate::osc::OscSettings,
         crate::livelink::LiveLinkSettings,
+        Option<crate::ifacialmocap::IfmSettings>,
     ),
     rate: TimecodeRate,
 ) -> Result<(), DaemonError> {
@@ -152,6 +157,10 @@ async fn serve<F: Factory>(
     let livelink = crate::livelink::LiveLinkOutput::new(throttle);
     livelink
         .configure(livelink_settings)
+        .map_err(DaemonError::Runtime)?;
+    let ifacialmocap = crate::ifacialmocap::IfmOutput::new();
+    ifacialmocap
+        .configure(ifm_settings)
         .map_err(DaemonError::Runtime)?;
     let source_thread = source::spawn(
         factory.opener(&spec, config.source.stall_timeout_s.duration()),
@@ -226,6 +235,7 @@ async fn serve<F: Factory>(
             stop: stop.clone(),
             osc: osc.clone(),
             livelink: livelink.clone(),
+            ifacialmocap: ifacialmocap.clone(),
             tuner: crate::tune::Tuner::new(hub.clone(), options.config_path.clone()),
         },
     )
@@ -310,7 +320,7 @@ async fn serve<F: Factory>(
             _ = sighup.recv() => {
                 let _ = notifier.reloading();
                 match reload(&factory, &options, &current, local) {
-                    Ok((config, payload, new_server, new_osc, new_livelink)) => {
+                    Ok((config, payload, new_server, new_osc, new_livelink, new_ifm)) => {
                         if commands_tx.try_send(Command::Reload(payload)).is_ok() {
                             hub.set_tokens(new_server.read_token, new_server.control_token);
                             if let Err(e) = osc.configure(new_osc) {
@@ -322,6 +332,9 @@ async fn serve<F: Factory>(
                             if let Some(remote) = &remote {
                                 remote.set_allowed(config.livelink.allowed());
                             }
+                            if let Err(e) = ifacialmocap.configure(new_ifm) {
+                                tracing::error!("SIGHUP: iFacialMocap output not reconfigured: {e}");
+                            }
                             tracing::info!("SIGHUP: {}", config.summary());
                             current = config;
                         } else {
@@ -330,7 +343,7 @@ async fn serve<F: Factory>(
                     }
                     Err(e) => tracing::error!("SIGHUP: new configuration rejected, old one kept: {}", source::error_chain(&e)),
                 }
-                let _ = notifier.reloaded(&status_line(&shared, &hub, &osc, &livelink, remote.as_ref()));
+                let _ = notifier.reloaded(&status_line(&shared, &hub, &osc, &livelink, remote.as_ref(), &ifacialmocap));
             }
             _ = sigusr1.recv() => {
                 let _ = commands_tx.try_send(Command::RecordStart { slate: current.takes.slate.0.clone(), take: None });
@@ -361,7 +374,7 @@ async fn serve<F: Factory>(
                 } else {
                     tracing::warn!(stalled_ms = age, "processing thread not turning; withholding watchdog ping");
                 }
-                let status = status_line(&shared, &hub, &osc, &livelink, remote.as_ref());
+                let status = status_line(&shared, &hub, &osc, &livelink, remote.as_ref(), &ifacialmocap);
                 if status != last_status {
                     let _ = notifier.status(&status);
                     last_status = status;
@@ -446,6 +459,7 @@ fn status_line(
     osc: &crate::osc::OscOutput,
     livelink: &crate::livelink::LiveLinkOutput,
     remote: Option<&crate::livelink::LiveLinkRemote>,
+    ifacialmocap: &crate::ifacialmocap::IfmOutput,
 ) -> String {
     let source = match shared.state().1 {
         SourceState::Starting => "source starting".to_owned(),
@@ -468,6 +482,10 @@ fn status_line(
     if let Some(remote) = remote {
         line.push_str("; ");
         line.push_str(&remote.status());
+    }
+    if let Some(ifm) = ifacialmocap.status() {
+        line.push_str("; ");
+        line.push_str(&ifm);
     }
     let status = hub.status();
     match status.audio.state {
@@ -498,13 +516,14 @@ fn status_line(
 }
 
 /// What a validated reload carries: the config, the processor's payload, the server's
-/// settings (tokens), the OSC output's and the Live Link output's.
+/// settings (tokens), the OSC output's, the Live Link output's and the iFacialMocap output's.
 type Reloaded<R> = (
     Config,
     R,
     ServerConfig,
     crate::osc::OscSettings,
     crate::livelink::LiveLinkSettings,
+    Option<crate::ifacialmocap::IfmSettings>,
 );
 
 /// Loads the config again (same file, same CLI overrides) and validates everything a reload
@@ -530,6 +549,7 @@ fn reload<F: Factory>(
     let payload = factory.reload(&config)?;
     let osc = crate::osc::settings(&config)?;
     let livelink = crate::livelink::settings(&config, timecode_rate(current)?)?;
+    let ifacialmocap = crate::ifacialmocap::settings(&config)?;
     for (what, changed) in [
         ("source", config.source != current.source),
         (
@@ -549,7 +569,7 @@ fn reload<F: Factory>(
         }
     }
     let _ = crate::logging::set_level(&config.logging.level);
-    Ok((config, payload, server, osc, livelink))
+    Ok((config, payload, server, osc, livelink, ifacialmocap))
 }
 
 /// CLI flags win over the file.

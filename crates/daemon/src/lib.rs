@@ -40,6 +40,7 @@ pub mod error;
 pub mod factory;
 pub mod hardening;
 pub mod head;
+pub mod ifacialmocap;
 pub mod live;
 pub mod livelink;
 pub mod logging;

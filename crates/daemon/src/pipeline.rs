@@ -152,6 +152,9 @@ pub struct Context<R> {
     pub osc: crate::osc::OscOutput,
     /// Live Link Face's stream, offered the same frames as `osc`.
     pub livelink: crate::livelink::LiveLinkOutput,
+    /// The iFacialMocap output (`[ifacialmocap]`): offered every published frame, never
+    /// blocks.
+    pub ifacialmocap: crate::ifacialmocap::IfmOutput,
     /// The console's paint check: offered every frame while it samples, never blocks.
     pub tuner: crate::tune::Tuner,
 }
@@ -259,6 +262,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
                 let seq = ctx.hub.publish_at(&out.stream, time);
                 ctx.osc.offer(&out.stream);
                 ctx.livelink.offer(&out.stream, time);
+                ctx.ifacialmocap.offer(&out.stream);
                 tracing::trace!(seq, device_ts_us = frame.device_ts_us, "frame processed");
                 health.frame(
                     processor.performer_names().len(),
@@ -341,6 +345,7 @@ fn run<P: Processor>(mut processor: P, mut ctx: Context<P::Reload>) {
             let seq = ctx.hub.publish_at(&out.stream, time);
             ctx.osc.offer(&out.stream);
             ctx.livelink.offer(&out.stream, time);
+            ctx.ifacialmocap.offer(&out.stream);
             frames += 1;
             if ctx.takes.is_recording() {
                 let info = ctx.hub.info();

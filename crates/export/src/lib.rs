@@ -13,6 +13,7 @@
 //!   assembled at the end. Memory is constant in the number of frames.
 //! - [`reduce`]: the [`Reducer`], streaming key reduction within a tolerance.
 //! - [`csv`]: the streaming [`CsvWriter`].
+//! - [`livelink_csv`]: the streaming [`LiveLinkCsvWriter`], Live Link Face's CSV take layout.
 //! - [`onto_rig`]: a take's animation copied onto a rigged mesh (`export --rig`).
 //! - [`onto`]: a take's curves as morph-target weights on the user's avatar (`export --onto`).
 //! - [`asset`]: files a glTF names, read only from its own folder; bounded reads.
@@ -24,6 +25,7 @@ pub mod asset;
 pub mod csv;
 mod error;
 pub mod gltf;
+pub mod livelink_csv;
 pub mod onto;
 pub mod onto_rig;
 mod output;
@@ -35,6 +37,7 @@ pub mod wav;
 pub use csv::{CsvSummary, CsvWriter};
 pub use error::ExportError;
 pub use gltf::{GltfLayout, GltfOptions, GltfSummary, GltfWriter, ModelUp};
+pub use livelink_csv::{livelink_timecode, LiveLinkCsvWriter, LIVELINK_CSV_COLUMNS};
 pub use onto_rig::{animate_rig, RigSummary};
 pub use output::PendingFile;
 pub use reduce::Reducer;

@@ -10,9 +10,10 @@ use std::time::Duration;
 
 use anyhow::{anyhow, Context as _};
 use mouthpiece_export::{
-    CsvWriter, ExportError, GltfLayout, GltfOptions, GltfWriter, ModelUp, MouthRig, RigPoint,
-    TakeFrame, TakeReader,
+    livelink_timecode, CsvWriter, ExportError, GltfLayout, GltfOptions, GltfWriter,
+    LiveLinkCsvWriter, ModelUp, MouthRig, RigPoint, TakeFrame, TakeReader,
 };
+use mouthpiece_server::{Timecode, TimecodeRate};
 
 use crate::cmd::process::{process_recording, ProcessSetup};
 use crate::cmd::retarget::Smooth;
@@ -87,6 +88,9 @@ pub enum Format {
     /// One row per frame: t, x, y, z per point, then the head's and eyes' quaternions (when
     /// the take has a head), the jaw's angle and slide and one column per rig curve.
     Csv,
+    /// Live Link Face's CSV take: `Timecode,BlendShapeCount,` then the 52 ARKit blend shapes
+    /// and the head and eye angles, one row per frame at its timecode (docs/export.md).
+    LivelinkCsv,
 }
 
 impl Format {
@@ -130,8 +134,9 @@ fn export_animation(args: Args) -> anyhow::Result<()> {
             ))
         })?,
     };
+    let csv = matches!(format, Format::Csv | Format::LivelinkCsv);
     if let Some(tolerance) = args.reduce {
-        if format == Format::Csv {
+        if csv {
             return Err(bad_input(anyhow!(
                 "--reduce applies to glTF keys; CSV keeps one row per frame"
             )));
@@ -140,7 +145,7 @@ fn export_animation(args: Args) -> anyhow::Result<()> {
             return Err(bad_input(ExportError::BadTolerance(tolerance)));
         }
     }
-    if args.curve && format == Format::Csv {
+    if args.curve && csv {
         return Err(bad_input(anyhow!(
             "--curve applies to glTF; CSV has the points only"
         )));
@@ -151,7 +156,7 @@ fn export_animation(args: Args) -> anyhow::Result<()> {
         )));
     }
     if let Some(avatar) = &args.onto {
-        if format == Format::Csv {
+        if csv {
             return Err(bad_input(anyhow!(
                 "--onto writes the avatar with the animation: give --out NAME.glb or NAME.gltf"
             )));
@@ -198,6 +203,11 @@ fn export_animation(args: Args) -> anyhow::Result<()> {
     };
 
     let source_name = reader.source_name().to_owned();
+    // The rows' timecodes: the take's own clock (read before the progress bar shows).
+    let clock = match format {
+        Format::LivelinkCsv => Some(take_clock(&args.input)?),
+        _ => None,
+    };
     let progress = progress_bar(total_bytes);
     let mut frames = Frames {
         first: Some(first),
@@ -216,6 +226,29 @@ fn export_animation(args: Args) -> anyhow::Result<()> {
             let summary = writer.finish().map_err(export_error)?;
             progress.finish_and_clear();
             eprintln!("wrote {}: {} rows", summary.file.display(), summary.rows);
+        }
+        Format::LivelinkCsv => {
+            let (start_us, rate) = clock.unwrap_or((0, TimecodeRate::Fps30));
+            let mut writer = LiveLinkCsvWriter::create(&rig, &args.out)
+                .map_err(export_error)?
+                .named(source_name);
+            let mut t0 = None;
+            while let Some(frame) = frames.next()? {
+                let t0 = *t0.get_or_insert(frame.t);
+                let us = start_us + ((frame.t - t0) * 1e6).round() as i64;
+                writer
+                    .push(&frame, &row_timecode(us, rate))
+                    .map_err(export_error)?;
+            }
+            progress.set_message("finishing");
+            let summary = writer.finish().map_err(export_error)?;
+            progress.finish_and_clear();
+            eprintln!(
+                "wrote {}: {} rows (Live Link Face CSV, {} fps)",
+                summary.file.display(),
+                summary.rows,
+                rate.name()
+            );
         }
         Format::Gltf | Format::Glb => {
             let options = GltfOptions {
@@ -386,6 +419,54 @@ pub(crate) struct TakeInput {
     pub(crate) name: String,
     pub(crate) reader: Box<dyn BufRead>,
     pub(crate) len: Option<u64>,
+}
+
+/// A Live Link CSV row's timecode at `unix_us` (time of day, UTC, as the takes' timecode):
+/// the label and the sub-frame in thousandths (`HH:MM:SS:FF.fff`).
+fn row_timecode(unix_us: i64, rate: TimecodeRate) -> String {
+    const DAY_US: i64 = 86_400 * 1_000_000;
+    let (num, den) = rate.fraction();
+    let of_day = unix_us.rem_euclid(DAY_US) as u128;
+    let scaled = of_day * u128::from(num);
+    let per_frame = u128::from(den) * 1_000_000;
+    let frame = (scaled / per_frame) as u64;
+    let sub = (scaled % per_frame) as f64 / per_frame as f64;
+    livelink_timecode(&Timecode::from_frame_count(frame, rate).to_string(), sub)
+}
+
+/// Where a take's rows sit on the clock: a daemon's take (`.mcap`) at its first frame's time
+/// of day and its recorded timecode rate; any other take (JSONL: no clock) at 00:00:00:00,
+/// 30 fps.
+fn take_clock(input: &Path) -> anyhow::Result<(i64, TimecodeRate)> {
+    let is_mcap = input
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if !is_mcap {
+        return Ok((0, TimecodeRate::Fps30));
+    }
+    let error = |e: mouthpiece_recording::RecordingError| {
+        let bad = e.is_bad_input();
+        bad_input_if(bad, e)
+    };
+    let mut messages = mouthpiece_recording::MessageReader::open(input).map_err(error)?;
+    let (mut first_frame, mut first_step) = (None, None);
+    while let Some(m) = messages.next_message().map_err(error)? {
+        if &*m.topic == mouthpiece_recording::TOPIC_COLOR {
+            first_frame.get_or_insert(m.log_time);
+        } else if m.topic.starts_with("/character/") {
+            // A booth without a camera: its frames are the characters' steps.
+            first_step.get_or_insert(m.log_time);
+        }
+    }
+    let start_ns = first_frame.or(first_step).unwrap_or(0);
+    let rate = messages
+        .metadata()
+        .iter()
+        .find(|(n, _)| n == "mouthpiece.take")
+        .and_then(|(_, m)| m.get("timecode_rate"))
+        .and_then(|r| r.parse().ok())
+        .unwrap_or(TimecodeRate::Fps30);
+    Ok(((start_ns / 1000) as i64, rate))
 }
 
 fn open_take(args: &Args) -> anyhow::Result<TakeInput> {

@@ -162,3 +162,28 @@ fn a_bad_osc_target_or_character_exits_2_naming_the_element() {
         "{stdout}"
     );
 }
+
+#[test]
+fn a_bad_ifacialmocap_section_exits_2_naming_the_key() {
+    // A character that is not configured (checked against the characters, not by the parser).
+    let (code, _, stderr) = check("[ifacialmocap]\nenabled = true\ncharacter = \"ghost\"\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains(":3:")
+            && stderr.contains("ifacialmocap.character")
+            && stderr.contains("human, wolf"),
+        "{stderr}"
+    );
+    // A host name where an address is expected.
+    let (code, _, stderr) = check("[ifacialmocap]\naddress = \"booth.local\"\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains(":2:") && stderr.contains("ifacialmocap.address"),
+        "{stderr}"
+    );
+    // And a good one, shown in the summary.
+    let (code, stdout, stderr) =
+        check("[ifacialmocap]\nenabled = true\naddress = \"0.0.0.0\"\ncharacter = \"wolf\"\n");
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("ifacialmocap 0.0.0.0:49983"), "{stdout}");
+}

@@ -999,3 +999,169 @@ fn damaged_recordings_are_exit_2_naming_the_file() {
     }
     assert_no_temporary_files(dir.path());
 }
+
+/// `--format livelink-csv`: read back by Python's `csv` module (not our reader) and compared
+/// with the take: the app's header, 61 values a row, each column the value its name says
+/// (the rig's curves as they are, the head and eyes in radians, a turn to the character's
+/// left a negative yaw), and the timecodes on the take's clock (a JSONL take: from
+/// 00:00:00:00 at 30 fps).
+#[test]
+fn a_take_exported_as_livelink_csv_reads_back_with_pythons_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let take_path = dir.path().join("take.jsonl");
+    let take = write_take(&take_path, 40, 12);
+    let curves = |i: usize| -> Vec<(&str, f64)> {
+        let x = i as f64 / 40.0;
+        vec![
+            ("jawOpen", 0.8 * x),
+            ("mouthLeft", 0.25 * x),
+            ("jawRight", 0.5 - 0.5 * x),
+            ("mouthSmileLeft", 0.125),
+        ]
+    };
+    // The head turns to the character's left (about +y: forward, +z, towards left, +x) by
+    // 0.5° a frame; the eyes look 10° down.
+    let yaw_deg = |i: usize| 0.5 * i as f64;
+    let quat = |axis: [f64; 3], deg: f64| {
+        let h = deg.to_radians() / 2.0;
+        [
+            h.cos(),
+            axis[0] * h.sin(),
+            axis[1] * h.sin(),
+            axis[2] * h.sin(),
+        ]
+    };
+    let text: String = std::fs::read_to_string(&take_path)
+        .unwrap()
+        .lines()
+        .enumerate()
+        .map(|(i, line)| {
+            let named: Vec<String> = mouthpiece_output::CURVE_NAMES
+                .iter()
+                .map(|n| {
+                    let v = curves(i).iter().find(|c| c.0 == *n).map_or(0.0, |c| c.1);
+                    format!("\"{n}\": {v:?}")
+                })
+                .collect();
+            let extra = format!(
+                r#", "rig": {{"jaw": {{"angle_deg": 0.0, "slide_m": 0.0}}, "lips": {{"upper": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0], "residual": 0}}, "lower": {{"rotation": [1, 0, 0, 0], "translation": [0, 0, 0], "residual": 0}}}}, "curves": {{{}}}}}, "character_head": {{"rotation": {}, "eye_left": {}, "eye_right": {}, "mode": "follow", "in_reach": null, "progress": 1.0}}"#,
+                named.join(", "),
+                json!(quat([0.0, 1.0, 0.0], yaw_deg(i))),
+                json!(quat([1.0, 0.0, 0.0], 10.0)),
+                json!(quat([1.0, 0.0, 0.0], 10.0)),
+            );
+            format!(
+                "{}\n",
+                line.replace("\"curve\": null", &format!("\"curve\": null{extra}"))
+            )
+        })
+        .collect();
+    std::fs::write(&take_path, text).unwrap();
+    let out = dir.path().join("take.csv");
+    export_ok(&[
+        take_path.to_str().unwrap(),
+        "--format",
+        "livelink-csv",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    // Python's csv module reads the file; the timecode `HH:MM:SS:FF.fff` becomes seconds at
+    // 30 fps (the sub-frame in thousandths of a frame).
+    let script = r#"
+import csv, json, re, sys
+with open(sys.argv[1], newline="") as f:
+    rows = list(csv.reader(f))
+header, body = rows[0], rows[1:]
+out = {"header": header, "rows": []}
+for row in body:
+    assert len(row) == len(header), row
+    m = re.fullmatch(r"(\d\d):(\d\d):(\d\d):(\d\d)\.(\d\d\d)", row[0])
+    assert m, row[0]
+    h, mi, s, ff, sub = (int(g) for g in m.groups())
+    seconds = (h * 60 + mi) * 60 + s + (ff + sub / 1000) / 30
+    values = {name: float(v) for name, v in zip(header[2:], row[2:])}
+    out["rows"].append({"seconds": seconds, "count": row[1], "values": values})
+print(json.dumps(out))
+"#;
+    let got = run_json(
+        Command::new(python()).arg("-c").arg(script).arg(&out),
+        "python csv",
+    );
+    let header: Vec<&str> = got["header"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert_eq!(header.len(), 63);
+    assert_eq!(
+        &header[..4],
+        [
+            "Timecode",
+            "BlendShapeCount",
+            "EyeBlinkLeft",
+            "EyeLookDownLeft"
+        ]
+    );
+    // The app's header has Right before Left for the jaw's and the mouth's sideways shapes.
+    assert_eq!(
+        &header[16..20],
+        ["JawForward", "JawRight", "JawLeft", "JawOpen"]
+    );
+    assert_eq!(&header[23..25], ["MouthRight", "MouthLeft"]);
+    assert_eq!(header[53], "TongueOut");
+    assert_eq!(
+        &header[54..],
+        [
+            "HeadYaw",
+            "HeadPitch",
+            "HeadRoll",
+            "LeftEyeYaw",
+            "LeftEyePitch",
+            "LeftEyeRoll",
+            "RightEyeYaw",
+            "RightEyePitch",
+            "RightEyeRoll"
+        ]
+    );
+    let rows = got["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), take.len());
+    let close = |a: f64, b: f64, tol: f64| (a - b).abs() <= tol;
+    for (i, (row, (t, _))) in rows.iter().zip(&take).enumerate() {
+        assert_eq!(row["count"], "61");
+        // Within one thousandth of a frame (the sub-frame's resolution) of the take's time.
+        let seconds = row["seconds"].as_f64().unwrap();
+        assert!(
+            seconds <= *t + 1e-6 && *t - seconds < 1.0 / 30_000.0 + 1e-6,
+            "{i}: {seconds} vs {t}"
+        );
+        let v = |name: &str| row["values"][name].as_f64().unwrap();
+        for (name, want) in curves(i) {
+            let column = format!("{}{}", name[..1].to_uppercase(), &name[1..]);
+            assert!(
+                close(v(&column), want, 1e-6),
+                "{i} {column}: {} vs {want}",
+                v(&column)
+            );
+        }
+        assert_eq!(v("MouthRight"), 0.0);
+        assert_eq!(v("JawLeft"), 0.0);
+        for unmeasured in ["EyeBlinkLeft", "BrowInnerUp", "CheekPuff", "TongueOut"] {
+            assert_eq!(v(unmeasured), 0.0, "{unmeasured}");
+        }
+        // A turn to the character's left: a negative yaw, radians.
+        assert!(
+            close(v("HeadYaw"), -yaw_deg(i).to_radians(), 1e-6),
+            "{i}: {}",
+            v("HeadYaw")
+        );
+        assert!(close(v("HeadPitch"), 0.0, 1e-6) && close(v("HeadRoll"), 0.0, 1e-6));
+        for eye in ["LeftEye", "RightEye"] {
+            assert!(close(v(&format!("{eye}Pitch")), 10f64.to_radians(), 1e-6));
+            assert!(close(v(&format!("{eye}Yaw")), 0.0, 1e-6));
+        }
+        // 10° down of the 30° full scale.
+        assert!(close(v("EyeLookDownLeft"), 1.0 / 3.0, 1e-6));
+        assert_eq!(v("EyeLookUpRight"), 0.0);
+    }
+}
