@@ -760,3 +760,29 @@ fn play_refuses_an_endless_line_and_an_endless_gap_naming_the_line() {
         );
     }
 }
+
+/// A phone file under the size limit whose line is longer than the line limit: refused,
+/// naming the file and the line, nothing written.
+#[test]
+fn a_phone_file_with_an_endless_line_names_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let phn = dir.path().join("long.phn");
+    std::fs::write(&phn, format!("0 3050 h#\n{}\n", "9".repeat(2 << 20))).unwrap();
+    let out = dir.path().join("take.jsonl");
+    let run = mouthpiece()
+        .args(["lipsync", "--character"])
+        .arg(character("wolf"))
+        .arg("--phonemes")
+        .arg(&phn)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!("{} line 2", phn.display())) && stderr.contains("longer than"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
+}
