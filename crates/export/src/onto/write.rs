@@ -218,7 +218,7 @@ fn split_once<'a>(text: &'a [u8], needle: &[u8]) -> Option<(&'a [u8], &'a [u8])>
     found
         .next()
         .is_none()
-        .then(|| (&text[..at], &text[at + needle.len()..]))
+        .then_some((&text[..at], &text[at + needle.len()..]))
 }
 
 /// A GLB whose binary chunk is `head`, zeros up to `base`, then `bytes` bytes written by
