@@ -188,12 +188,14 @@ impl Avatar {
             let w = pending.writer();
             w.write_all(before).map_err(out_err)?;
             w.write_all(DATA_URI_PREFIX.as_bytes()).map_err(out_err)?;
-            let mut encoder = base64::write::EncoderWriter::new(
-                &mut *w,
-                &base64::engine::general_purpose::STANDARD,
-            );
-            data(&mut encoder).map_err(out_err)?;
-            encoder.finish().map_err(out_err)?;
+            let w = {
+                let mut encoder = base64::write::EncoderWriter::new(
+                    w,
+                    &base64::engine::general_purpose::STANDARD,
+                );
+                data(&mut encoder).map_err(out_err)?;
+                encoder.finish().map_err(out_err)?
+            };
             w.write_all(after).map_err(out_err)?;
         }
         pending.commit().map_err(out_err)?;
