@@ -58,9 +58,14 @@ impl AudioRecorder {
         self.track.started(writer, &self.info)
     }
 
-    /// Writes what the thread delivered since the last call.
+    /// Writes what the thread had delivered when called: only that many events, so a
+    /// device that never blocks (ALSA's `null`) and refills the queue as fast as it is
+    /// emptied cannot keep the recording in here (the frames, and `--seconds`, go on).
     pub fn drain(&mut self, writer: &mut SessionWriter) -> Result<(), RecordingError> {
-        while let Ok(event) = self.rx.try_recv() {
+        for _ in 0..self.rx.len() {
+            let Ok(event) = self.rx.try_recv() else {
+                break;
+            };
             match event {
                 Event::Block(block) => self.track.block(writer, &block)?,
                 Event::Stopped { reason, at } => {

@@ -324,28 +324,87 @@ pub fn write_classes(path: &Path, classes: &[ColorClass]) -> Result<(), String> 
         .map_err(|e| format!("the new ranges do not load (nothing written): {e}"))?;
     crate::live::setup(&config)
         .map_err(|e| format!("the new ranges do not pass the checks (nothing written): {e}"))?;
-    let dir = path.parent().unwrap_or(Path::new("."));
+    // A link stays a link: the file written is the link's final target (what a technician
+    // who linked a shared booth file into place expects to change), replaced by a rename in
+    // its own folder.
+    let target = std::fs::canonicalize(path).map_err(|e| format!("resolving {shown}: {e}"))?;
+    let dir = target.parent().unwrap_or(Path::new("/"));
     let tmp = dir.join(format!(
         ".{}.tune-{}",
-        path.file_name().unwrap_or_default().to_string_lossy(),
+        target.file_name().unwrap_or_default().to_string_lossy(),
         std::process::id()
     ));
-    std::fs::write(&tmp, new_text.as_bytes())
-        .and_then(|()| {
-            if let Ok(meta) = std::fs::metadata(path) {
-                std::fs::set_permissions(&tmp, meta.permissions())?;
-            }
-            std::fs::rename(&tmp, path)
-        })
-        .map_err(|e| {
+    let written = || -> std::io::Result<()> {
+        use std::io::Write as _;
+        use std::os::unix::fs::OpenOptionsExt as _;
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .custom_flags(libc::O_NOFOLLOW)
+            .open(&tmp)?;
+        if let Ok(meta) = std::fs::metadata(&target) {
+            file.set_permissions(meta.permissions())?;
+        }
+        file.write_all(new_text.as_bytes())?;
+        file.sync_all()?;
+        drop(file);
+        std::fs::rename(&tmp, &target)
+    };
+    written().map_err(|e| {
+        // Only a file this call created (it is created new).
+        if e.kind() != std::io::ErrorKind::AlreadyExists {
             let _ = std::fs::remove_file(&tmp);
+        }
+        if target == path {
             format!("writing {shown}: {e}")
-        })
+        } else {
+            format!("writing {} (the target of {shown}): {e}", target.display())
+        }
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A configuration file that is a symbolic link stays one: the new ranges go to its
+    /// target, written beside the target, and nothing is left in either folder.
+    #[test]
+    fn writing_classes_through_a_symbolic_link_writes_its_target() {
+        let shared = tempfile::tempdir().unwrap();
+        let etc = tempfile::tempdir().unwrap();
+        let target = shared.path().join("booth-a.toml");
+        std::fs::write(
+            &target,
+            "# booth A\n[source]\nspec = \"replay:x.mcap\"\n\n[detect]\nmin_area_px = 3\n",
+        )
+        .unwrap();
+        let link = etc.path().join("mouthpiece.toml");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let classes = vec![ColorClass {
+            name: "lip".into(),
+            role: DotRole::Lip,
+            hue: vec![[0, 8]],
+            saturation: [100, 255],
+            value: [50, 255],
+        }];
+        write_classes(&link, &classes).unwrap();
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink(),
+            "the link was replaced by a file"
+        );
+        assert_eq!(std::fs::read_link(&link).unwrap(), target);
+        let written = std::fs::read_to_string(&target).unwrap();
+        assert!(
+            written.contains("# booth A") && written.contains("\"lip\""),
+            "{written}"
+        );
+        assert_eq!(std::fs::read_dir(shared.path()).unwrap().count(), 1);
+        assert_eq!(std::fs::read_dir(etc.path()).unwrap().count(), 1);
+    }
 
     #[test]
     fn writing_classes_keeps_the_rest_of_the_file() {

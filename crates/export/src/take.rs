@@ -8,7 +8,7 @@
 use std::collections::HashMap;
 use std::io::BufRead;
 
-use mouthpiece_retarget::jsonl::OutputLine;
+use mouthpiece_retarget::jsonl::{read_line_limited, OutputLine, MAX_LINE_BYTES};
 use mouthpiece_retarget::rig::{RigFrame, CURVES, CURVE_NAMES};
 
 use crate::ExportError;
@@ -209,14 +209,13 @@ impl<R: BufRead> TakeReader<R> {
         loop {
             self.buf.clear();
             self.line_no += 1;
-            let n = self
-                .input
-                .read_line(&mut self.buf)
-                .map_err(|cause| ExportError::Read {
+            let n = read_line_limited(&mut self.input, &mut self.buf, MAX_LINE_BYTES).map_err(
+                |cause| ExportError::Read {
                     source_name: self.source_name.clone(),
                     line: self.line_no,
                     cause,
-                })?;
+                },
+            )?;
             if n == 0 {
                 self.line_no -= 1;
                 return Ok(None);

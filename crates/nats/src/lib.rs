@@ -238,20 +238,33 @@ pub fn server_addrs(servers: &[String]) -> Result<Vec<async_nats::ServerAddr>, N
         .collect()
 }
 
-/// Connects once, failing at once when no server answers (for tools such as
-/// `mouthpiece takes`).
+/// How long [`connect_once`] tries the servers in all (each server gets
+/// [`CONNECT_TIMEOUT_PER_SERVER`] of it) before it gives up.
+pub const CONNECT_DEADLINE: Duration = Duration::from_secs(10);
+
+/// How long [`connect_once`] waits for one server to answer.
+pub const CONNECT_TIMEOUT_PER_SERVER: Duration = Duration::from_secs(5);
+
+/// Connects once for tools such as `mouthpiece takes`: the servers are tried in turn, and
+/// when none has answered within [`CONNECT_DEADLINE`] in all it is an error, however many
+/// servers are listed.
 pub async fn connect_once(settings: &NatsSettings) -> Result<async_nats::Client, NatsError> {
     let options = async_nats::ConnectOptions::new()
         .name("mouthpiece tool")
-        .connection_timeout(Duration::from_secs(5));
+        .connection_timeout(CONNECT_TIMEOUT_PER_SERVER);
     let options = with_credentials(options, settings).await?;
-    options
-        .connect(server_addrs(&settings.servers)?)
-        .await
-        .map_err(|e| NatsError::Connect {
-            servers: settings.servers.join(", "),
+    let servers = settings.servers.join(", ");
+    let addrs = server_addrs(&settings.servers)?;
+    match tokio::time::timeout(CONNECT_DEADLINE, options.connect(addrs)).await {
+        Ok(connected) => connected.map_err(|e| NatsError::Connect {
+            servers,
             message: e.to_string(),
-        })
+        }),
+        Err(_) => Err(NatsError::Connect {
+            servers,
+            message: format!("no server answered within {} s", CONNECT_DEADLINE.as_secs()),
+        }),
+    }
 }
 
 /// Counts connections: every task that must act on (re)connection watches it.

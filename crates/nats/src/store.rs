@@ -2,11 +2,13 @@
 //! of their metadata. Used by the uploader and by `mouthpiece takes list|fetch`.
 
 use std::path::Path;
+use std::time::Duration;
 
 use async_nats::jetstream::{self, kv, object_store};
 use futures_util::StreamExt;
+use mouthpiece_config::quote_excerpt;
 use serde::{Deserialize, Serialize};
-use tokio::io::AsyncWriteExt;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 use crate::subjects::{escape, meta_bucket, takes_bucket};
 use crate::NatsError;
@@ -171,20 +173,73 @@ impl TakeStore {
 
     /// Copies object `name` to `out`, written to a temporary file beside it and renamed into
     /// place once complete (no partial file is left behind). Returns the bytes written.
+    /// Waits at most [`FETCH_IDLE_TIMEOUT`] for each piece of the object.
     pub async fn fetch(&self, name: &str, out: &Path) -> Result<u64, NatsError> {
-        let mut object = self
-            .objects
-            .get(name)
+        self.fetch_with_timeout(name, out, FETCH_IDLE_TIMEOUT).await
+    }
+
+    /// [`TakeStore::fetch`], waiting at most `idle` for each piece of the object: an object
+    /// whose metadata promises chunks the store does not hold is an error after that long.
+    ///
+    /// The object's metadata is read first and a link is refused (never followed: the client
+    /// library follows links without limit, so a link to itself would never end). The
+    /// temporary file is created new, never through an existing name or a symbolic link.
+    pub async fn fetch_with_timeout(
+        &self,
+        name: &str,
+        out: &Path,
+        idle: Duration,
+    ) -> Result<u64, NatsError> {
+        let info = tokio::time::timeout(idle, self.objects.info(name))
             .await
+            .map_err(|_| store_error(&format!("cannot get {name}"), "no answer"))?
             .map_err(|e| store_error(&format!("cannot get {name}"), e))?;
+        if let Some(link) = info.options.as_ref().and_then(|o| o.link.as_ref()) {
+            return Err(NatsError::Store(format!(
+                "{name} is a link (to bucket {}, object {}): links are not fetched; fetch the \
+                 object itself",
+                quote_excerpt(&link.bucket),
+                quote_excerpt(link.name.as_deref().unwrap_or(""))
+            )));
+        }
+        if info.deleted {
+            return Err(NatsError::Store(format!("{name} was deleted")));
+        }
+        let mut object = tokio::time::timeout(idle, self.objects.get(name))
+            .await
+            .map_err(|_| store_error(&format!("cannot get {name}"), "no answer"))?
+            .map_err(|e| store_error(&format!("cannot get {name}"), e))?;
+        if object.info.nuid != info.nuid {
+            return Err(NatsError::Store(format!(
+                "{name} changed while it was fetched (or became a link): try again"
+            )));
+        }
         let partial = partial_path(out);
+        let mut file = create_new_file(&partial)
+            .await
+            .map_err(|e| store_error(&format!("cannot create {}", partial.display()), e))?;
         let result = async {
-            let mut file = tokio::fs::File::create(&partial)
-                .await
-                .map_err(|e| store_error(&format!("cannot create {}", partial.display()), e))?;
-            let written = tokio::io::copy(&mut object, &mut file)
-                .await
-                .map_err(|e| store_error(&format!("cannot fetch {name}"), e))?;
+            let mut written = 0u64;
+            let mut buf = vec![0u8; 64 * 1024];
+            loop {
+                let n = tokio::time::timeout(idle, object.read(&mut buf))
+                    .await
+                    .map_err(|_| {
+                        NatsError::Store(format!(
+                            "cannot fetch {name}: no data for {} s after {written} bytes (the \
+                             store does not hold the chunks its metadata names)",
+                            idle.as_secs_f64()
+                        ))
+                    })?
+                    .map_err(|e| store_error(&format!("cannot fetch {name}"), e))?;
+                if n == 0 {
+                    break;
+                }
+                file.write_all(&buf[..n])
+                    .await
+                    .map_err(|e| store_error(&format!("cannot write {}", partial.display()), e))?;
+                written += n as u64;
+            }
             file.sync_all()
                 .await
                 .map_err(|e| store_error(&format!("cannot write {}", partial.display()), e))?;
@@ -196,10 +251,26 @@ impl TakeStore {
         }
         .await;
         if result.is_err() {
+            // Only the file this call created: it was created new above.
             let _ = tokio::fs::remove_file(&partial).await;
         }
         result
     }
+}
+
+/// How long [`TakeStore::fetch`] waits for each piece of an object.
+pub const FETCH_IDLE_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// Creates `path` for writing: a new file, never an existing one nor through a symbolic link
+/// (`O_CREAT | O_EXCL | O_NOFOLLOW`: a name that exists, a dangling link included, is an
+/// error).
+async fn create_new_file(path: &Path) -> std::io::Result<tokio::fs::File> {
+    tokio::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(path)
+        .await
 }
 
 /// `<out>.partial`: where a file is written before it is renamed into place.

@@ -116,13 +116,15 @@ pub fn closed_takes_waiting(folder: &Path, hub: &Hub) -> Vec<PathBuf> {
     };
     let mut found: Vec<(std::time::SystemTime, PathBuf)> = entries
         .filter_map(Result::ok)
+        // The entry's own type, not its target's: a symbolic link is never a take.
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
         .filter(|p| Some(p) != recording.as_ref())
-        .filter(|p| !marker_path(p).exists())
+        .filter(|p| std::fs::symlink_metadata(marker_path(p)).is_err())
         .filter(|p| ends_closed(p))
         .map(|p| {
-            let modified = std::fs::metadata(&p)
+            let modified = std::fs::symlink_metadata(&p)
                 .and_then(|m| m.modified())
                 .unwrap_or(std::time::UNIX_EPOCH);
             (modified, p)
@@ -139,10 +141,25 @@ pub fn marker_path(take: &Path) -> PathBuf {
     take.with_file_name(name)
 }
 
+/// Opens a take for reading without following a symbolic link (`O_NOFOLLOW`; a link put in
+/// the takes folder never sends another file to the store), and only a regular file.
+pub fn open_take(path: &Path) -> std::io::Result<std::fs::File> {
+    use std::os::unix::fs::OpenOptionsExt as _;
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        // Non-blocking: opening a FIFO planted under a take's name does not wait for a writer.
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
+        .open(path)?;
+    if !file.metadata()?.is_file() {
+        return Err(std::io::Error::other("not a regular file"));
+    }
+    Ok(file)
+}
+
 /// Whether the file ends with MCAP's closing magic (written last when a take closes).
 fn ends_closed(path: &Path) -> bool {
     use std::io::{Read, Seek, SeekFrom};
-    let Ok(mut file) = std::fs::File::open(path) else {
+    let Ok(mut file) = open_take(path) else {
         return false;
     };
     let mut end = [0u8; 8];
@@ -160,8 +177,8 @@ pub async fn upload_take(
     let mut record = tokio::task::spawn_blocking(move || read_record(&owned, &booth_owned))
         .await
         .map_err(|e| NatsError::Store(format!("metadata reader died: {e}")))??;
-    let mut file = tokio::fs::File::open(path)
-        .await
+    let mut file = open_take(path)
+        .map(tokio::fs::File::from_std)
         .map_err(|e| NatsError::Store(format!("cannot open {}: {e}", path.display())))?;
     let meta = ObjectMetadata {
         name: record.object.clone(),
@@ -214,10 +231,24 @@ pub async fn upload_take(
     Ok(record)
 }
 
-/// Written to a temporary name and renamed: a marker is whole or absent.
+/// Written to a temporary name and renamed: a marker is whole or absent. The temporary file
+/// is created new without following links (`O_CREAT | O_EXCL | O_NOFOLLOW`); whatever was at
+/// its name (a crash's leftover, a planted link) is removed first, never written through.
 fn write_marker(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write as _;
+    use std::os::unix::fs::OpenOptionsExt as _;
     let partial = crate::store::partial_path(path);
-    std::fs::write(&partial, bytes)?;
+    match std::fs::remove_file(&partial) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+        _ => {}
+    }
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(&partial)?;
+    file.write_all(bytes)?;
+    drop(file);
     std::fs::rename(&partial, path)
 }
 
@@ -227,7 +258,7 @@ pub fn read_record(path: &Path, booth: &str) -> Result<TakeRecord, NatsError> {
     use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
     use std::io::{Read, Seek, SeekFrom};
     let fail = |what: String| NatsError::Store(format!("{}: {what}", path.display()));
-    let mut file = std::fs::File::open(path).map_err(|e| fail(format!("cannot open: {e}")))?;
+    let mut file = open_take(path).map_err(|e| fail(format!("cannot open: {e}")))?;
     let size = file
         .metadata()
         .map_err(|e| fail(format!("cannot read: {e}")))?

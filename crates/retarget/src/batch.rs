@@ -156,10 +156,12 @@ impl<R: BufRead> Lines<R> {
 
     fn next_line(&mut self, input_name: &str) -> Result<Option<(usize, &str)>, BatchError> {
         self.buf.clear();
-        let n = self
-            .reader
-            .read_line(&mut self.buf)
-            .map_err(|e| BatchError::input(at_line(input_name, self.line_no + 1), e))?;
+        let n = crate::jsonl::read_line_limited(
+            &mut self.reader,
+            &mut self.buf,
+            crate::jsonl::MAX_LINE_BYTES,
+        )
+        .map_err(|e| BatchError::input(at_line(input_name, self.line_no + 1), e))?;
         if n == 0 {
             return Ok(None);
         }

@@ -3,6 +3,8 @@
 //! [`InputLine`]: raw 3D dots in the camera frame. [`OutputLine`]: one character's mouth per
 //! time step; `process` extends it (flatten it into a larger struct) and `export` reads it.
 
+use std::io::{self, BufRead};
+
 use serde::{Deserialize, Serialize};
 
 use crate::layout::{parse_dot_name, DotId, PerformerDots, PerformerLayout};
@@ -210,9 +212,63 @@ impl OutputLine {
     }
 }
 
+/// Longest line read from a line-per-record input (take JSONL, `retarget`'s dots): a frame
+/// line of a character with many points is a few kilobytes, so a longer one is not a take
+/// (`/dev/zero`, a binary file) and is refused before it fills memory.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
+/// Reads one line (with its `\n`) into `buf`, as [`BufRead::read_line`] does, but at most
+/// `limit` bytes: a longer line is an [`io::ErrorKind::InvalidData`] error ("line longer than
+/// … bytes"), as are bytes that are not UTF-8. Returns the bytes read, 0 at the end. Every
+/// reader of outside input line by line goes through this one function.
+pub fn read_line_limited<R: BufRead + ?Sized>(
+    reader: &mut R,
+    buf: &mut String,
+    limit: usize,
+) -> io::Result<usize> {
+    let mut bytes = std::mem::take(buf).into_bytes();
+    bytes.clear();
+    let n = std::io::Read::take(&mut *reader, limit as u64 + 1).read_until(b'\n', &mut bytes)?;
+    if n > limit {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("line longer than {limit} bytes"),
+        ));
+    }
+    *buf = String::from_utf8(bytes).map_err(|_| {
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            "stream did not contain valid UTF-8",
+        )
+    })?;
+    Ok(n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_line_longer_than_the_limit_is_refused_before_it_is_held() {
+        let mut buf = String::new();
+        let mut input = io::Cursor::new(b"abc\nabcdefgh\nxy".to_vec());
+        assert_eq!(read_line_limited(&mut input, &mut buf, 5).unwrap(), 4);
+        assert_eq!(buf, "abc\n");
+        let err = read_line_limited(&mut input, &mut buf, 5).unwrap_err();
+        assert_eq!(err.kind(), io::ErrorKind::InvalidData);
+        assert!(err.to_string().contains("longer than 5 bytes"), "{err}");
+        // An endless line (a device) ends with the error too.
+        let mut zeros = io::BufReader::new(io::repeat(0));
+        let err = read_line_limited(&mut zeros, &mut buf, MAX_LINE_BYTES).unwrap_err();
+        assert_eq!(err.kind(), io::ErrorKind::InvalidData);
+        let mut last = io::Cursor::new(b"xy".to_vec());
+        assert_eq!(read_line_limited(&mut last, &mut buf, 5).unwrap(), 2);
+        assert_eq!(buf, "xy");
+        assert_eq!(read_line_limited(&mut last, &mut buf, 5).unwrap(), 0);
+        let mut bad = io::Cursor::new(vec![b'a', 0xff, b'\n']);
+        let err = read_line_limited(&mut bad, &mut buf, 5).unwrap_err();
+        assert_eq!(err.kind(), io::ErrorKind::InvalidData);
+    }
 
     fn layout() -> PerformerLayout {
         PerformerLayout {

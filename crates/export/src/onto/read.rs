@@ -15,6 +15,11 @@ use crate::onto_rig::parse_glb;
 /// Largest avatar file read, and largest total of the buffers it names.
 pub const MAX_AVATAR_BYTES: u64 = 256 * 1024 * 1024;
 
+/// Most morph targets one mesh may have (a face rig has tens to a few hundred): each is a
+/// weight per frame in the appended animation, so a mesh of hundreds of thousands would make
+/// an animation of gigabytes from a take of seconds.
+pub const MAX_MORPH_TARGETS: usize = 4096;
+
 /// One mesh's morph targets as the avatar names them.
 #[derive(Clone, Debug)]
 pub struct AvatarMesh {
@@ -394,6 +399,12 @@ fn read_meshes(doc: &Value, accessors: Vec<u64>) -> Result<Vec<AvatarMesh>, Stri
             }
         }
         let targets = targets.unwrap_or(0);
+        if targets > MAX_MORPH_TARGETS {
+            return Err(format!(
+                "{label} has {targets} morph targets, more than the {MAX_MORPH_TARGETS} a mesh \
+                 may have for --onto"
+            ));
+        }
         let target_names = match mesh.pointer("/extras/targetNames") {
             None => Vec::new(),
             Some(Value::Array(names)) => {
@@ -464,6 +475,27 @@ mod tests {
 
     fn read(doc: &Value) -> Result<Avatar, String> {
         Avatar::from_bytes(&serde_json::to_vec(doc).unwrap(), Path::new("avatar.gltf"))
+    }
+
+    #[test]
+    fn a_mesh_with_more_morph_targets_than_the_cap_is_refused_with_its_counts() {
+        let mut doc = doc();
+        let n = MAX_MORPH_TARGETS + 1;
+        doc["meshes"][0]["primitives"][0]["targets"] = json!(vec![json!({"POSITION": 0}); n]);
+        doc["meshes"][0]["extras"]["targetNames"] = json!(vec!["t"; n]);
+        doc["meshes"][0]["weights"] = json!(vec![0.0; n]);
+        let err = read(&doc).unwrap_err();
+        assert!(
+            err.contains(&format!(
+                "meshes[0] (`Face`) has {n} morph targets, more than the {MAX_MORPH_TARGETS}"
+            )),
+            "{err}"
+        );
+        doc["meshes"][0]["primitives"][0]["targets"] =
+            json!(vec![json!({"POSITION": 0}); MAX_MORPH_TARGETS]);
+        doc["meshes"][0]["extras"]["targetNames"] = json!(vec!["t"; MAX_MORPH_TARGETS]);
+        doc["meshes"][0]["weights"] = json!(vec![0.0; MAX_MORPH_TARGETS]);
+        assert_eq!(read(&doc).unwrap().meshes[0].targets, MAX_MORPH_TARGETS);
     }
 
     #[test]

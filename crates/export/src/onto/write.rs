@@ -2,16 +2,17 @@
 //! (the data after the binary chunk's bytes); `.gltf` in, `.gltf` out (the data in one new
 //! buffer, a base64 `data:` URI, so no file beside the output is written or overwritten).
 
+use std::io::Write;
 use std::path::Path;
 
 use serde_json::{json, Value};
 
 use super::{avatar_error, Avatar, Plan, Source};
-use crate::onto_rig::write_glb;
 use crate::{ExportError, PendingFile};
 
-/// Most bytes of animation data `--onto` appends (times and weights, 4 bytes each): guards
-/// memory (the data, and for `.gltf` its base64 text, are built in memory).
+/// Most bytes of animation data `--onto` appends (times and weights, 4 bytes each). The data
+/// is streamed into the output (never held in memory, nor its base64 text); the bound keeps
+/// a GLB under its 4 GiB and a `.gltf`'s one data URI to a size viewers load.
 pub const MAX_ADDED_BYTES: u64 = 1024 * 1024 * 1024;
 
 /// What [`Avatar::write_onto`] wrote.
@@ -84,48 +85,25 @@ impl Avatar {
                     weights
                 ))
             })?;
-        let mut data = Vec::with_capacity(bytes as usize);
-        for t in times {
-            data.extend_from_slice(&t.to_le_bytes());
-        }
-        for sources in &outputs {
-            for frame in values.chunks_exact(curves.max(1)).take(frames) {
-                for source in *sources {
-                    let w = match *source {
-                        Source::Curve(c) => frame[c],
-                        Source::Default(w) => w,
-                    };
-                    data.extend_from_slice(&w.to_le_bytes());
-                }
-            }
-        }
         // Where the data goes: after the GLB's chunk, as the GLB's first buffer, or a new
-        // embedded buffer.
+        // embedded buffer. It is never built in memory: it is written straight into the
+        // output (for `.gltf` through a base64 encoder) once the document is complete.
         let buffers = self.doc["buffers"].as_array().map_or(0, Vec::len);
         let glb_chunk = self.glb && buffers > 0 && self.doc["buffers"][0].get("uri").is_none();
         let (buffer, base) = if glb_chunk {
-            let bin = self.bin.get_or_insert_with(Vec::new);
-            while !bin.len().is_multiple_of(4) {
-                bin.push(0);
-            }
-            let base = bin.len();
-            bin.extend_from_slice(&data);
-            self.doc["buffers"][0]["byteLength"] = json!(bin.len());
+            let head = self.bin.as_ref().map_or(0, Vec::len);
+            let base = head.next_multiple_of(4);
+            self.doc["buffers"][0]["byteLength"] = json!(base as u64 + bytes);
             (0, base)
         } else if self.glb && buffers == 0 {
-            self.doc["buffers"] = json!([{ "byteLength": data.len() }]);
-            self.bin = Some(data.clone());
+            self.doc["buffers"] = json!([{ "byteLength": bytes }]);
+            self.bin = None;
             (0, 0)
         } else {
-            use base64::Engine as _;
-            let uri = format!(
-                "data:application/octet-stream;base64,{}",
-                base64::engine::general_purpose::STANDARD.encode(&data)
-            );
             push(
                 &mut self.doc,
                 "buffers",
-                json!({ "byteLength": data.len(), "uri": uri }),
+                json!({ "byteLength": bytes, "uri": DATA_PLACEHOLDER }),
             );
             (buffers, 0)
         };
@@ -178,17 +156,124 @@ impl Avatar {
             json!({ "name": "take", "samplers": samplers, "channels": channels }),
         );
         let out_err = |cause: std::io::Error| ExportError::write(out, cause);
+        let data = |w: &mut dyn Write| -> std::io::Result<()> {
+            for t in times {
+                w.write_all(&t.to_le_bytes())?;
+            }
+            for sources in &outputs {
+                for frame in values.chunks_exact(curves.max(1)).take(frames) {
+                    for source in *sources {
+                        let w_value = match *source {
+                            Source::Curve(c) => frame[c],
+                            Source::Default(w) => w,
+                        };
+                        w.write_all(&w_value.to_le_bytes())?;
+                    }
+                }
+            }
+            Ok(())
+        };
         let mut pending = PendingFile::create(out).map_err(out_err)?;
         if self.glb {
             let json = serde_json::to_vec(&self.doc).map_err(ExportError::Serialize)?;
-            let bin = self.bin.as_deref().unwrap_or_default();
-            write_glb(&json, bin, pending.writer()).map_err(out_err)?;
+            let head = self.bin.as_deref().unwrap_or_default();
+            write_glb_appended(&json, head, base, bytes, data, pending.writer())
+                .map_err(out_err)?;
         } else {
-            serde_json::to_writer_pretty(pending.writer(), &self.doc)
-                .map_err(ExportError::Serialize)?;
+            let text = serde_json::to_vec_pretty(&self.doc).map_err(ExportError::Serialize)?;
+            let (before, after) =
+                split_once(&text, DATA_PLACEHOLDER.as_bytes()).ok_or_else(|| {
+                    bad("its JSON already holds mouthpiece's buffer placeholder".into())
+                })?;
+            let w = pending.writer();
+            w.write_all(before).map_err(out_err)?;
+            w.write_all(DATA_URI_PREFIX.as_bytes()).map_err(out_err)?;
+            let w = {
+                let mut encoder = base64::write::EncoderWriter::new(
+                    w,
+                    &base64::engine::general_purpose::STANDARD,
+                );
+                data(&mut encoder).map_err(out_err)?;
+                encoder.finish().map_err(out_err)?
+            };
+            w.write_all(after).map_err(out_err)?;
         }
         pending.commit().map_err(out_err)?;
         Ok(summary)
+    }
+}
+
+/// The `.gltf` output's new buffer URI while the document is serialised; replaced by the
+/// data URI as the file is written. An avatar holding this text anywhere is refused.
+const DATA_PLACEHOLDER: &str = "mouthpiece-onto-data-7f3a1c9e";
+
+/// The start of the `.gltf` output's data URI (then the base64 data).
+const DATA_URI_PREFIX: &str = "data:application/octet-stream;base64,";
+
+/// `text` around the one occurrence of `needle`; `None` when it is missing or not alone.
+fn split_once<'a>(text: &'a [u8], needle: &[u8]) -> Option<(&'a [u8], &'a [u8])> {
+    let mut found = text
+        .windows(needle.len())
+        .enumerate()
+        .filter(|(_, w)| *w == needle);
+    let (at, _) = found.next()?;
+    found
+        .next()
+        .is_none()
+        .then_some((&text[..at], &text[at + needle.len()..]))
+}
+
+/// A GLB whose binary chunk is `head`, zeros up to `base`, then `bytes` bytes written by
+/// `data` (a multiple of 4: floats), without holding those in memory.
+fn write_glb_appended(
+    json: &[u8],
+    head: &[u8],
+    base: usize,
+    bytes: u64,
+    data: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+    out: &mut dyn Write,
+) -> std::io::Result<()> {
+    let json_pad = (4 - json.len() % 4) % 4;
+    let json_len = (json.len() + json_pad) as u64;
+    let bin_len = base as u64 + bytes;
+    let total = u32::try_from(12 + 8 + json_len + 8 + bin_len)
+        .map_err(|_| std::io::Error::other("more than GLB's 4 GiB limit"))?;
+    out.write_all(b"glTF")?;
+    out.write_all(&2u32.to_le_bytes())?;
+    out.write_all(&total.to_le_bytes())?;
+    out.write_all(&(json_len as u32).to_le_bytes())?;
+    out.write_all(b"JSON")?;
+    out.write_all(json)?;
+    out.write_all(&b"   "[..json_pad])?;
+    out.write_all(&(bin_len as u32).to_le_bytes())?;
+    out.write_all(b"BIN\0")?;
+    out.write_all(head)?;
+    out.write_all(&[0u8; 3][..base - head.len()])?;
+    let mut counted = Counted { out, n: 0 };
+    data(&mut counted)?;
+    if counted.n != bytes {
+        return Err(std::io::Error::other(format!(
+            "wrote {} bytes of animation, planned {bytes}",
+            counted.n
+        )));
+    }
+    Ok(())
+}
+
+/// Counts the bytes written through it.
+struct Counted<'a> {
+    out: &'a mut dyn Write,
+    n: u64,
+}
+
+impl Write for Counted<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.out.write(buf)?;
+        self.n += n as u64;
+        Ok(n)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
     }
 }
 

@@ -102,7 +102,9 @@ pub const MAX_TRANSCRIPT_BYTES: u64 = 1 << 20;
 pub const MAX_WEIGHTS_CSV_BYTES: u64 = 64 << 20;
 
 /// Reads a text file of at most `limit` bytes (UTF-8, or UTF-16 with a byte order mark):
-/// a longer one (a device such as `/dev/zero`, a wrong path) is an error naming the file.
+/// a longer one (a device such as `/dev/zero`, a wrong path) is an error naming the file, and
+/// so is a line longer than [`MAX_LINE_BYTES`](mouthpiece_retarget::jsonl::MAX_LINE_BYTES),
+/// naming its line.
 pub fn read_text(path: &Path, what: &str, limit: u64) -> anyhow::Result<String> {
     use std::io::Read;
     let name = path.display().to_string();
@@ -116,7 +118,19 @@ pub fn read_text(path: &Path, what: &str, limit: u64) -> anyhow::Result<String> 
             "{name}: {what} longer than {limit} bytes"
         )));
     }
-    mouthpiece_lipsync::input::decode_text(&bytes, &name).map_err(bad_input)
+    let text = mouthpiece_lipsync::input::decode_text(&bytes, &name).map_err(bad_input)?;
+    // Line by line as the take readers read, with their limit: a line of megabytes is not a
+    // phone file, table or transcript, and the error says where it is.
+    use mouthpiece_retarget::jsonl::{read_line_limited, MAX_LINE_BYTES};
+    let (mut rest, mut line) = (text.as_bytes(), String::new());
+    for n in 1.. {
+        match read_line_limited(&mut rest, &mut line, MAX_LINE_BYTES) {
+            Ok(0) => break,
+            Ok(_) => {}
+            Err(e) => return Err(bad_input(anyhow::anyhow!("{name} line {n}: {what}: {e}"))),
+        }
+    }
+    Ok(text)
 }
 
 /// The method's tables from `--classes`, `--poses` and `--segments` (the shipped ones when

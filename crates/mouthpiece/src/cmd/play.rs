@@ -19,8 +19,14 @@ use crate::cmd::export::{export_error, recording_as_take};
 use crate::cmd::process::load_character;
 use crate::exit::bad_input;
 
+/// Slowest `--speed` (a hundredth of the take's own pace).
+pub const MIN_SPEED: f64 = 0.01;
 /// Fastest `--speed`.
 pub const MAX_SPEED: f64 = 1000.0;
+/// Longest time between two lines of a take that `play` waits through, seconds of the take:
+/// a live take has a line per frame, so a longer gap is a broken or hostile file, refused at
+/// its line rather than waited on for years.
+pub const MAX_GAP_S: f64 = 60.0;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -50,7 +56,7 @@ pub struct Args {
     /// Do not send the eye bones.
     #[arg(long)]
     pub no_eyes: bool,
-    /// Playback speed: 1 is the take's own timing, 2 twice as fast (up to 1000).
+    /// Playback speed: 1 is the take's own timing, 2 twice as fast (0.01 to 1000).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
 }
@@ -71,9 +77,9 @@ fn resolve(text: &str) -> anyhow::Result<SocketAddr> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if !(args.speed.is_finite() && args.speed > 0.0 && args.speed <= MAX_SPEED) {
+    if !(MIN_SPEED..=MAX_SPEED).contains(&args.speed) {
         return Err(bad_input(anyhow!(
-            "--speed must be above 0 and at most {MAX_SPEED}, got {}",
+            "--speed must be from {MIN_SPEED} to {MAX_SPEED}, got {}",
             args.speed
         )));
     }
@@ -115,15 +121,37 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )
     .context("cannot open a UDP socket")?;
     let mut start: Option<(Instant, f64)> = None;
+    let mut previous_t = None;
     let mut frames = 0u64;
     while let Some(frame) = reader.next_frame().map_err(export_error)? {
         if frames == 0 {
             reader.check_character(&character.name).map_err(bad_input)?;
         }
+        // The reader has checked that `t` is finite and increasing; the gap is bounded here,
+        // so every wait below is a few hours at most.
+        if let Some(previous) = previous_t.replace(frame.t) {
+            if frame.t - previous > MAX_GAP_S {
+                return Err(bad_input(anyhow!(
+                    "{name} line {}: t is {} s after the previous line's, more than the {MAX_GAP_S} s \
+                     play waits between two lines",
+                    frame.line,
+                    frame.t - previous
+                )));
+            }
+        }
         // Each frame at its time from the first, divided by the speed; a late frame goes at
         // once (the receiver sees the take's times in /VMC/Ext/T either way).
         let (t0_wall, t0) = *start.get_or_insert((Instant::now(), frame.t));
-        let due = t0_wall + Duration::from_secs_f64(((frame.t - t0) / args.speed).max(0.0));
+        let due = Duration::try_from_secs_f64(((frame.t - t0) / args.speed).max(0.0))
+            .ok()
+            .and_then(|offset| t0_wall.checked_add(offset))
+            .ok_or_else(|| {
+                bad_input(anyhow!(
+                    "{name} line {}: t = {} is too far from the first line's",
+                    frame.line,
+                    frame.t
+                ))
+            })?;
         if let Some(wait) = due.checked_duration_since(Instant::now()) {
             std::thread::sleep(wait);
         }

@@ -155,7 +155,9 @@ async fn fetch(store: &TakeStore, objects: &[String], out: &std::path::Path) -> 
             )));
         }
         let path = out.join(file);
-        if path.exists() || partial_path(&path).exists() {
+        // Any entry counts, a dangling symbolic link too (`exists` follows links).
+        let taken = |p: &std::path::Path| std::fs::symlink_metadata(p).is_ok();
+        if taken(&path) || taken(&partial_path(&path)) {
             return Err(bad_input(anyhow::anyhow!(
                 "{} exists: not overwritten",
                 path.display()

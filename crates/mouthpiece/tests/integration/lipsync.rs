@@ -701,6 +701,7 @@ fn a_speech_take_and_a_camera_take_both_play_over_vmc() {
     // Bad flags are bad input, named.
     for (flag, value) in [
         ("--speed", "0"),
+        ("--speed", "1e-300"),
         ("--osc", "nowhere"),
         ("--names", "JawOpen"),
     ] {
@@ -717,4 +718,79 @@ fn a_speech_take_and_a_camera_take_both_play_over_vmc() {
         assert_eq!(out.status.code(), Some(2), "{flag} {value}: {stderr}");
         assert!(stderr.contains(flag), "{flag} {value}: {stderr}");
     }
+}
+
+/// A take `play` cannot pace is refused at its line, exit 2, before anything waits or fills
+/// memory: a gap of 1e20 s between two lines, an endless line (`/dev/zero`).
+#[test]
+fn play_refuses_an_endless_line_and_an_endless_gap_naming_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let phn = dir.path().join("sa1.phn");
+    std::fs::write(&phn, SA1_PHN).unwrap();
+    let speech = dir.path().join("speech.jsonl");
+    run_ok(
+        mouthpiece()
+            .args(["lipsync", "--character"])
+            .arg(character("wolf"))
+            .arg("--phonemes")
+            .arg(&phn)
+            .arg("--out")
+            .arg(&speech),
+    );
+    let text = std::fs::read_to_string(&speech).unwrap();
+    let mut lines: Vec<serde_json::Value> = text
+        .lines()
+        .take(3)
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    lines[2]["t"] = serde_json::json!(1e20);
+    let gap = dir.path().join("gap.jsonl");
+    let gap_text: String = lines.iter().map(|l| format!("{l}\n")).collect();
+    std::fs::write(&gap, gap_text).unwrap();
+    for (take, expected) in [
+        (gap.as_path(), "line 3"),
+        (Path::new("/dev/zero"), "line 1"),
+    ] {
+        let out = mouthpiece()
+            .arg("play")
+            .arg(take)
+            .arg("--character")
+            .arg(character("wolf"))
+            .args(["--osc", "127.0.0.1:9"])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{}: {stderr}", take.display());
+        assert!(
+            stderr.contains(&take.display().to_string()) && stderr.contains(expected),
+            "{}: {stderr}",
+            take.display()
+        );
+    }
+}
+
+/// A phone file under the size limit whose line is longer than the line limit: refused,
+/// naming the file and the line, nothing written.
+#[test]
+fn a_phone_file_with_an_endless_line_names_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let phn = dir.path().join("long.phn");
+    std::fs::write(&phn, format!("0 3050 h#\n{}\n", "9".repeat(2 << 20))).unwrap();
+    let out = dir.path().join("take.jsonl");
+    let run = mouthpiece()
+        .args(["lipsync", "--character"])
+        .arg(character("wolf"))
+        .arg("--phonemes")
+        .arg(&phn)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!("{} line 2", phn.display())) && stderr.contains("longer than"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
 }

@@ -145,3 +145,55 @@ fn a_recording_holds_the_booths_sound_bit_exact_and_where_it_stopped() {
         String::from_utf8_lossy(&monotonic.stderr)
     );
 }
+
+/// ALSA's `null` device never blocks: it refills the sound queue as fast as the recording
+/// empties it. `--seconds` still ends the recording, with a session holding frames and sound.
+#[test]
+fn seconds_end_the_recording_whatever_the_sound_device_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s.mcap");
+    let demo = repo().join("recordings/demo.mcap");
+    let log = dir.path().join("stderr.log");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .args(["record", "--source"])
+        .arg(format!("replay:{}?loop=1", demo.display()))
+        .arg("--out")
+        .arg(&out)
+        .args(["--audio", "null", "--seconds", "1"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    // A watchdog for a hang, not a measurement.
+    let mut ended = None;
+    wait_until("the recording ended by itself", || {
+        ended = child.try_wait().unwrap();
+        ended.is_some()
+    });
+    let stderr = std::fs::read_to_string(&log).unwrap_or_default();
+    assert!(ended.unwrap().success(), "{stderr}");
+    let summary = Command::new(python())
+        .arg("-c")
+        .arg(
+            "import sys\nfrom mcap.reader import make_reader\n\
+             n = {}\n\
+             with open(sys.argv[1], 'rb') as f:\n\
+             \x20   for s, c, m in make_reader(f).iter_messages(topics=['/audio', '/camera/color']):\n\
+             \x20       n[c.topic] = n.get(c.topic, 0) + 1\n\
+             print(n.get('/audio', 0), n.get('/camera/color', 0))\n",
+        )
+        .arg(&out)
+        .output()
+        .unwrap();
+    let counts = String::from_utf8_lossy(&summary.stdout);
+    let counts: Vec<u64> = counts
+        .split_whitespace()
+        .map(|n| n.parse().unwrap())
+        .collect();
+    assert!(
+        counts.len() == 2 && counts.iter().all(|&n| n > 0),
+        "/audio and /camera/color messages: {counts:?} {}",
+        String::from_utf8_lossy(&summary.stderr)
+    );
+}
