@@ -8,6 +8,7 @@
 //! - [`frame`]: one published frame: the performer's head and dots and every character's
 //!   points, confidences, curve, rig and head;
 //! - [`slate`]: the one rule for naming a take;
+//! - [`shown`]: how a name from a file or the network is printed (control characters escaped);
 //! - [`log`]: how the long-running outputs report trouble (error chains, throttled warnings).
 //!
 //! Plain data with serde; no I/O, no threads, no dependencies beyond serde, so the pure
@@ -18,6 +19,7 @@ pub mod frame;
 pub mod head;
 pub mod log;
 pub mod rig;
+pub mod shown;
 pub mod slate;
 
 pub use curves::{
@@ -28,4 +30,5 @@ pub use frame::{CharacterFrame, MouthSource, PerformerFrame, StreamFrame};
 pub use head::{CharacterHead, HeadPose, LookMode, RigidPose};
 pub use log::{error_chain, Throttle};
 pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RigVisemes};
+pub use shown::{shown, shown_message, Shown};
 pub use slate::{valid_slate, SLATE_RULE};
