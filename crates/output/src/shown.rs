@@ -80,7 +80,10 @@ mod tests {
     #[test]
     fn plain_names_are_unchanged_and_borrowed() {
         for name in ["wolf", "scene.1_T003", "naïve Ωmega", "a b", ""] {
-            assert!(matches!(shown(name), Cow::Borrowed(n) if n == name), "{name}");
+            assert!(
+                matches!(shown(name), Cow::Borrowed(n) if n == name),
+                "{name}"
+            );
         }
     }
 
