@@ -126,15 +126,32 @@ pub fn key_segment(name: &str) -> String {
     out
 }
 
-/// A dotted path and its optional trailing index: `osc.characters."a[1]"[0]` →
-/// (`osc.characters."a[1]"`, `Some(0)`).
+/// A dotted path up to its first index, and that index when it ends the path:
+/// `osc.characters."a[1]"[0]` → (`osc.characters."a[1]"`, `Some(0)`); `detect.class[0].hue`
+/// → (`detect.class`, `None`). Brackets inside a quoted key are part of the name.
 fn split_index(key: &str) -> (&str, Option<usize>) {
-    if let Some(open) = key.strip_suffix(']').and_then(|k| k.rfind('[')) {
-        if let Ok(index) = key[open + 1..key.len() - 1].parse::<usize>() {
-            return (&key[..open], Some(index));
+    let mut quoted = false;
+    let mut escaped = false;
+    let mut open = None;
+    for (i, c) in key.char_indices() {
+        match c {
+            _ if escaped => escaped = false,
+            '\\' if quoted => escaped = true,
+            '"' => quoted = !quoted,
+            '[' if !quoted => {
+                open = Some(i);
+                break;
+            }
+            _ => {}
         }
     }
-    (key, None)
+    let Some(open) = open else {
+        return (key, None);
+    };
+    let index = key[open + 1..]
+        .strip_suffix(']')
+        .and_then(|i| i.parse::<usize>().ok());
+    (&key[..open], index)
 }
 
 /// The span of the key at a dotted path; with an array index (`osc.targets[1]`), of that

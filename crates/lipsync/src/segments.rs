@@ -203,7 +203,7 @@ impl SegmentTable {
                     {
                         return Err(config(
                             &key,
-                            format!("control point {k}: weight {} is not within 0 to 1", q[1]),
+                            format!("control point {k}: weight {:?} is not within 0 to 1", q[1]),
                         ));
                     }
                     let pts: Vec<(f64, f64)> = points.iter().map(|q| (q[0], q[1])).collect();

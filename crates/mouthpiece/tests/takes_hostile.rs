@@ -134,3 +134,38 @@ async fn an_object_without_a_digest_is_refused_with_exit_code_2_and_nothing_kept
     );
     assert_eq!(std::fs::read_dir(&folder).unwrap().count(), 0);
 }
+
+/// `takes --config` with a CA file that is missing or not a certificate: refused at load
+/// with the config's file, line and key, before any connection.
+#[test]
+fn a_bad_ca_file_in_the_config_is_named_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("not-a-cert.pem"), "hello\n").unwrap();
+    for (ca, says) in [
+        ("missing.pem", "cannot read"),
+        ("not-a-cert.pem", "no PEM certificate"),
+    ] {
+        let config = dir.path().join("booth.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "[nats]\nservers = [\"tls://127.0.0.1:1\"]\nbooth = \"b1\"\ntls_ca = \"{ca}\"\n"
+            ),
+        )
+        .unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+            .args(["takes", "--config"])
+            .arg(&config)
+            .arg("list")
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains("booth.toml:4:1: key `nats.tls_ca`")
+                && stderr.contains(ca)
+                && stderr.contains(says),
+            "{stderr}"
+        );
+    }
+}

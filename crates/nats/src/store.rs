@@ -274,6 +274,12 @@ fn untrusted(name: &str, why: String) -> NatsError {
     }
 }
 
+/// An object's info from the JSON the store holds (what the client library reads before
+/// [`TakeStore::fetch`] checks it); the entry point of the store's fuzz target.
+pub fn info_from_json(json: &[u8]) -> Result<ObjectInfo, String> {
+    serde_json::from_slice(json).map_err(|e| e.to_string())
+}
+
 /// Where a link object points, when `info` is one: `Ok(None)` for a plain object; refused
 /// when the link leads into another bucket or to a whole bucket.
 pub fn link_target(info: &ObjectInfo, bucket: &str) -> Result<Option<String>, NatsError> {
@@ -392,7 +398,7 @@ impl Received {
                 self.bytes, self.expected.size
             ));
         }
-        if self.digest.finish().as_ref() != self.expected.sha256 {
+        if self.digest.finish().as_ref() != self.expected.sha256.as_slice() {
             return Err("data does not match the digest in its info: refused, nothing kept".into());
         }
         Ok(self.bytes)
