@@ -31,6 +31,12 @@ pub struct AudioConfig {
     /// Blocks held for each consumer (takes, the live speech analyser); beyond this the
     /// oldest is dropped and counted.
     pub queue_blocks: u32,
+    /// Let `device` use ALSA's `file` plugin (or `tee`, its alias in alsa.conf), a pipe to a
+    /// command (`|`) or an inline definition (`{ … }`) written in the device string itself.
+    /// Off: such a string, which can write any file or run any command as the daemon's user,
+    /// is refused ([`check_alsa_device`]). A PCM of that kind named in an asound.conf is
+    /// always allowed (the configuration files of ALSA are trusted like this one).
+    pub allow_file_plugin: bool,
     /// Live lip-sync profiles learned from this booth's own voice (`mouthpiece lipsync
     /// learn`) instead of the shipped ones; relative to the config file.
     pub speech_profiles: Option<PathBuf>,
@@ -45,23 +51,66 @@ impl Default for AudioConfig {
             period_frames: 480,
             buffer_frames: 4_800,
             queue_blocks: 200,
+            allow_file_plugin: false,
             speech_profiles: None,
         }
     }
 }
 
+/// The ALSA PCM types that write a file or run a command: `file` (its `file` may be
+/// `|command`), and `tee`, alsa.conf's shorthand for it; `ladspa` loads a shared library
+/// from a path.
+pub const ALSA_WRITING_PLUGINS: [&str; 3] = ["file", "tee", "ladspa"];
+
+/// Checks an ALSA PCM name (from `[audio] device` or `record --audio`) before alsa-lib sees
+/// it: 1 to 256 bytes without control characters and, unless `allow_file_plugin`, without
+/// what lets the string itself write a file or run a command: a pipe (`|`), an inline
+/// definition (`{`), or one of [`ALSA_WRITING_PLUGINS`] as the PCM or inside its arguments
+/// (`file:'|cmd'`, `plug:'tee:hw,/x'`). The device name is trusted configuration otherwise:
+/// a PCM defined in an asound.conf is opened whatever its type.
+pub fn check_alsa_device(device: &str, allow_file_plugin: bool) -> Result<(), String> {
+    if device.is_empty() || device.len() > 256 || device.chars().any(char::is_control) {
+        return Err(format!(
+            "expected an ALSA PCM name (1 to 256 bytes without control characters, e.g. \"default\" or \"hw:1,0\"), got {}",
+            quote_excerpt(device)
+        ));
+    }
+    if allow_file_plugin {
+        return Ok(());
+    }
+    let refused = |what: &str| {
+        Err(format!(
+            "{} {what}, which can write a file or run a command: refused (name a PCM defined in an asound.conf instead)",
+            quote_excerpt(device)
+        ))
+    };
+    if device.contains('|') {
+        return refused("holds a pipe (`|`)");
+    }
+    if device.contains('{') {
+        return refused("holds an inline definition (`{`)");
+    }
+    let separators = |c: char| matches!(c, ':' | '=' | ',' | '\'' | '"' | ' ' | ';');
+    if let Some(plugin) = device
+        .split(separators)
+        .find(|token| ALSA_WRITING_PLUGINS.contains(token))
+    {
+        return refused(&format!("uses ALSA's `{plugin}` plugin"));
+    }
+    Ok(())
+}
+
 impl AudioConfig {
     /// The checks serde cannot express: `(key, message)` of the first value out of range.
     pub fn check(&self) -> Result<(), (&'static str, String)> {
-        if self.device.is_empty() || self.device.len() > 256 || self.device.contains('\0') {
-            return Err((
-                "audio.device",
-                format!(
-                    "expected an ALSA PCM name (1 to 256 bytes, e.g. \"default\" or \"hw:1,0\"), got {}",
-                    quote_excerpt(&self.device)
-                ),
-            ));
-        }
+        check_alsa_device(&self.device, self.allow_file_plugin).map_err(|message| {
+            let hint = if message.ends_with("instead)") {
+                ", or set audio.allow_file_plugin = true"
+            } else {
+                ""
+            };
+            ("audio.device", format!("{message}{hint}"))
+        })?;
         if !AUDIO_RATES.contains(&self.sample_rate) {
             return Err((
                 "audio.sample_rate",

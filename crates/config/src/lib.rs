@@ -43,7 +43,7 @@ pub use audio::*;
 pub use livelink::*;
 pub use ifacialmocap::IfacialmocapConfig;
 pub(crate) use locate::{invalid, key_location, line_col, span_of_key, state_directory};
-pub use locate::{read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
+pub use locate::{key_segment, read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
 pub use nats::{subject_safe, NatsConfig, NatsSecrets, MAX_NATS_QUEUE_FRAMES, MAX_NATS_SERVERS};
 pub use sections::*;
 pub use text::ConfigText;
@@ -64,6 +64,50 @@ pub const MAX_QUEUE_FRAMES: u32 = 3600;
 
 /// Hard cap of `[server] max_clients`: the server's TCP connection cap.
 pub const MAX_CLIENTS: u32 = 512;
+
+/// Longest `.creds` or TLS file of `[nats]` read.
+pub const MAX_NATS_FILE_BYTES: u64 = 1 << 20;
+
+/// What a PEM file named in `[nats]` must hold.
+#[derive(Debug, Clone, Copy)]
+enum PemHolds {
+    Certificate,
+    PrivateKey,
+}
+
+impl PemHolds {
+    fn what(self) -> &'static str {
+        match self {
+            PemHolds::Certificate => "certificate",
+            PemHolds::PrivateKey => "private key",
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            PemHolds::Certificate => "CERTIFICATE",
+            PemHolds::PrivateKey => "PRIVATE KEY",
+        }
+    }
+
+    /// Whether `pem` has a block of this kind (`PRIVATE KEY`, `RSA PRIVATE KEY`, `EC
+    /// PRIVATE KEY` for a key).
+    fn found_in(self, pem: &str) -> bool {
+        pem.lines().any(|line| {
+            let Some(label) = line
+                .trim()
+                .strip_prefix("-----BEGIN ")
+                .and_then(|l| l.strip_suffix("-----"))
+            else {
+                return false;
+            };
+            match self {
+                PemHolds::Certificate => label == "CERTIFICATE",
+                PemHolds::PrivateKey => label.ends_with("PRIVATE KEY"),
+            }
+        })
+    }
+}
 
 /// Why a configuration was rejected.
 #[derive(Debug, thiserror::Error)]
@@ -128,12 +172,13 @@ pub struct Location {
 
 impl fmt::Display for Location {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.file)?;
+        write!(f, "{}", mouthpiece_output::shown(&self.file))?;
         if self.line > 0 {
             write!(f, ":{}:{}", self.line, self.column)?;
         }
         if let Some(key) = &self.key {
-            write!(f, ": key `{key}`")?;
+            // Names in keys are quoted and escaped already ([`key_segment`]).
+            write!(f, ": key `{}`", mouthpiece_output::shown_message(key))?;
         }
         Ok(())
     }
@@ -373,7 +418,7 @@ impl Config {
             }
         }
         for (name, o) in &self.characters.settings {
-            let key = format!("characters.settings.{name}");
+            let key = format!("characters.settings.{}", key_segment(name));
             if name.is_empty() {
                 return Err(fail(
                     "characters.settings",
@@ -510,23 +555,39 @@ impl Config {
         })
     }
 
-    /// A `.creds` file that cannot be read is a configuration error at load time, not a
-    /// connection that never authenticates.
+    /// A `.creds` file or a TLS file that cannot be read, or a TLS file without what its key
+    /// promises (a certificate for `tls_ca` and `tls_cert`, a private key for `tls_key`), is
+    /// a configuration error at load time, not a connection that never authenticates.
     fn check_nats_files(&self, text: &str, file: &str) -> Result<(), ConfigError> {
-        let Some(path) = &self.nats.credentials_file else {
-            return Ok(());
-        };
-        read_bounded(path, 64 * 1024).map(|_| ()).map_err(|source| {
-            let key = "nats.credentials_file";
-            ConfigError::Token {
-                location: key_location(text, file, key),
-                key: key.to_owned(),
-                source: TokenError::File {
-                    path: path.clone(),
-                    source,
-                },
+        let nats = &self.nats;
+        let files = [
+            ("nats.credentials_file", &nats.credentials_file, None),
+            ("nats.tls_ca", &nats.tls_ca, Some(PemHolds::Certificate)),
+            ("nats.tls_cert", &nats.tls_cert, Some(PemHolds::Certificate)),
+            ("nats.tls_key", &nats.tls_key, Some(PemHolds::PrivateKey)),
+        ];
+        for (key, path, holds) in files {
+            let Some(path) = path else { continue };
+            let content =
+                read_bounded(path, MAX_NATS_FILE_BYTES).map_err(|e| ConfigError::Invalid {
+                    location: key_location(text, file, key),
+                    message: format!("cannot read {}: {e}", path.display()),
+                })?;
+            if let Some(holds) = holds {
+                if !holds.found_in(&content) {
+                    return Err(ConfigError::Invalid {
+                        location: key_location(text, file, key),
+                        message: format!(
+                            "{} holds no PEM {} (-----BEGIN {}-----)",
+                            path.display(),
+                            holds.what(),
+                            holds.label()
+                        ),
+                    });
+                }
             }
-        })
+        }
+        Ok(())
     }
 
     /// Deserializes the file's text once more into `T`: a struct of the caller's that reads

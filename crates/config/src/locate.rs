@@ -95,21 +95,75 @@ fn key_path_at(text: &str, span: Range<usize>) -> Option<String> {
     best.map(|(path, _)| path)
 }
 
+/// One key of a dotted path as TOML writes it: bare when it is made of letters, digits, `-`
+/// and `_`, else a basic string whose quote, backslash, control and bidirectional characters
+/// are escapes (`"wolf.v2"`, `"a\u001B[2J"`). Names from the file go into error keys this
+/// way, so that the key both reads as one line and finds its place in the file again.
+pub fn key_segment(name: &str) -> String {
+    use std::fmt::Write as _;
+    let bare = !name.is_empty()
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
+    if bare {
+        return name.to_owned();
+    }
+    let mut out = String::with_capacity(name.len() + 2);
+    out.push('"');
+    for c in name.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\t' => out.push_str("\\t"),
+            c if mouthpiece_output::shown::needs_escape(c) => {
+                let _ = write!(out, "\\u{:04X}", c as u32);
+            }
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// A dotted path up to its first index, and that index when it ends the path:
+/// `osc.characters."a[1]"[0]` → (`osc.characters."a[1]"`, `Some(0)`); `detect.class[0].hue`
+/// → (`detect.class`, `None`). Brackets inside a quoted key are part of the name.
+fn split_index(key: &str) -> (&str, Option<usize>) {
+    let mut quoted = false;
+    let mut escaped = false;
+    let mut open = None;
+    for (i, c) in key.char_indices() {
+        match c {
+            _ if escaped => escaped = false,
+            '\\' if quoted => escaped = true,
+            '"' => quoted = !quoted,
+            '[' if !quoted => {
+                open = Some(i);
+                break;
+            }
+            _ => {}
+        }
+    }
+    let Some(open) = open else {
+        return (key, None);
+    };
+    let index = key[open + 1..]
+        .strip_suffix(']')
+        .and_then(|i| i.parse::<usize>().ok());
+    (&key[..open], index)
+}
+
 /// The span of the key at a dotted path; with an array index (`osc.targets[1]`), of that
 /// element when the array is there, else of the key.
 pub(crate) fn span_of_key(text: &str, key: &str) -> Option<Range<usize>> {
     let doc = toml_edit::ImDocument::parse(text).ok()?;
-    let wanted = key.split('[').next().unwrap_or(key);
-    if let Some(index) = key
-        .strip_prefix(wanted)
-        .and_then(|rest| rest.strip_prefix('['))
-        .and_then(|rest| rest.strip_suffix(']'))
-        .and_then(|i| i.parse::<usize>().ok())
-    {
-        let mut segments = wanted.split('.');
-        let mut item = doc.as_table().get(segments.next()?);
+    let (wanted, index) = split_index(key);
+    if let (Some(index), Ok(segments)) = (index, toml_edit::Key::parse(wanted)) {
+        let mut segments = segments.iter();
+        let mut item = doc.as_table().get(segments.next()?.get());
         for segment in segments {
-            item = item.and_then(|i| i.get(segment));
+            item = item.and_then(|i| i.get(segment.get()));
         }
         if let Some(span) = item
             .and_then(|i| i.as_array())
@@ -134,9 +188,9 @@ type KeyVisitor<'a> = dyn FnMut(&str, Option<Range<usize>>, Option<Range<usize>>
 fn visit_table(table: &toml_edit::Table, prefix: &str, f: &mut KeyVisitor<'_>) {
     for (key, item) in table.iter() {
         let path = if prefix.is_empty() {
-            key.to_owned()
+            key_segment(key)
         } else {
-            format!("{prefix}.{key}")
+            format!("{prefix}.{}", key_segment(key))
         };
         let key_span = table.key(key).and_then(|k| k.span());
         f(&path, key_span, item.span());
@@ -144,7 +198,7 @@ fn visit_table(table: &toml_edit::Table, prefix: &str, f: &mut KeyVisitor<'_>) {
             toml_edit::Item::Table(t) => visit_table(t, &path, f),
             toml_edit::Item::Value(toml_edit::Value::InlineTable(t)) => {
                 for (k, v) in t.iter() {
-                    let sub = format!("{path}.{k}");
+                    let sub = format!("{path}.{}", key_segment(k));
                     f(&sub, t.key(k).and_then(|k| k.span()), v.span());
                 }
             }

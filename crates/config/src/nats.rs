@@ -277,6 +277,14 @@ impl NatsConfig {
 /// `nats://host:port`, `tls://host:port` or `host:port`; credentials in the URL are refused
 /// (they would show wherever the URL is logged: use `user`/`password` or `token`).
 fn check_server_url(url: &str) -> Result<(), String> {
+    // A NUL would cut the address short in the C-level resolver; other controls and spaces
+    // are no part of a host name either.
+    if url.chars().any(|c| c.is_control() || c.is_whitespace()) {
+        return Err(format!(
+            "expected a server URL without control characters or spaces, got {}",
+            quote_excerpt(url)
+        ));
+    }
     let rest = match url.split_once("://") {
         Some(("nats" | "tls", rest)) => rest,
         Some((scheme, _)) => {

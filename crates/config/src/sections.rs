@@ -504,7 +504,7 @@ impl OscConfig {
         let named = self.characters.iter().flat_map(|(name, targets)| {
             targets.iter().enumerate().map(move |(i, t)| {
                 (
-                    format!("osc.characters.{name}[{i}]"),
+                    format!("osc.characters.{}[{i}]", key_segment(name)),
                     t.as_str(),
                     Some(name.as_str()),
                 )

@@ -542,3 +542,48 @@ fn the_documented_client_limit_is_the_default() {
     );
     assert!(row.starts_with(&expected), "{row}\nexpected {expected}");
 }
+
+/// Device strings that would make alsa-lib write a file or run a command are refused unless
+/// `allow_file_plugin` says otherwise; names of PCMs (an asound.conf's too) pass.
+#[test]
+fn alsa_devices_that_write_files_or_run_commands_are_refused() {
+    for good in [
+        "default",
+        "hw:1,0",
+        "plughw:CARD=USB,DEV=0",
+        "dsnoop:CARD=PCH",
+        "booth_file",
+        "profile",
+    ] {
+        let text = format!("[audio]\ndevice = \"{good}\"\n");
+        assert!(parse(&text).is_ok(), "{good}");
+    }
+    for (bad, says) in [
+        ("file:'|touch /tmp/x'", "pipe"),
+        ("file:FILE=/tmp/out.raw", "`file` plugin"),
+        ("plug:'file:FILE=/tmp/x'", "`file` plugin"),
+        ("tee:hw,/tmp/x,raw", "`tee` plugin"),
+        (
+            "plug:{type file slave.pcm null file x}",
+            "inline definition",
+        ),
+        ("ladspa:x", "`ladspa` plugin"),
+        ("hw:0\\u001b[2J", "control characters"),
+    ] {
+        let text = format!("[audio]\n\ndevice = \"{}\"\n", bad.replace('"', "\\\""));
+        let err = parse(&text).unwrap_err();
+        assert_eq!(err.key(), Some("audio.device"), "{bad}: {err}");
+        let shown = err.to_string();
+        assert!(shown.starts_with("/etc/mouthpiece/test.toml:3:"), "{shown}");
+        assert!(shown.contains(says), "{bad}: {shown}");
+        assert!(!shown.contains('\u{1b}'), "{shown:?}");
+        if says != "control characters" {
+            assert!(shown.contains("audio.allow_file_plugin = true"), "{shown}");
+            let allowed = format!(
+                "[audio]\nallow_file_plugin = true\ndevice = \"{}\"\n",
+                bad.replace('"', "\\\"")
+            );
+            assert!(parse(&allowed).is_ok(), "{bad}");
+        }
+    }
+}

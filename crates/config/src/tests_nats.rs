@@ -142,3 +142,80 @@ fn a_missing_nats_password_variable_names_its_key() {
     assert_eq!(err.key(), Some("nats.password"));
     assert!(err.to_string().contains(":5:"), "{err}");
 }
+
+#[test]
+fn a_nul_or_a_control_character_in_a_server_url_is_refused() {
+    for url in [
+        "nats://h\\u0000x:4222",
+        "nats://h:4222\\n",
+        "nats://h\\u001b[2J:4222",
+    ] {
+        let text = format!("[nats]\nbooth = \"a\"\nservers = [\n  \"{url}\"]\n");
+        let err = parse(&text).unwrap_err();
+        assert_eq!(err.key(), Some("nats.servers[0]"), "{err}");
+        let message = err.to_string();
+        assert!(
+            message.starts_with("/etc/mouthpiece/test.toml:4:"),
+            "{message}"
+        );
+        assert!(message.contains("control characters"), "{message}");
+        assert!(!message.contains(['\0', '\n', '\u{1b}']), "{message:?}");
+    }
+}
+
+const CERT: &str = "-----BEGIN CERTIFICATE-----\nMIIB\n-----END CERTIFICATE-----\n";
+const KEY: &str = "-----BEGIN PRIVATE KEY-----\nMIIE\n-----END PRIVATE KEY-----\n";
+
+/// `[nats]`'s TLS files are read at load time: a missing file, a certificate given as the
+/// key or a key given as the certificate (or CA) are refused with the key's line.
+#[test]
+fn nats_tls_files_must_exist_and_hold_what_their_key_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.toml");
+    std::fs::write(dir.path().join("ca.pem"), CERT).unwrap();
+    std::fs::write(dir.path().join("cert.pem"), CERT).unwrap();
+    std::fs::write(dir.path().join("key.pem"), KEY).unwrap();
+    let head = "[nats]\nservers = [\"tls://127.0.0.1:4222\"]\nbooth = \"b1\"\n";
+    let good =
+        format!("{head}tls_ca = \"ca.pem\"\ntls_cert = \"cert.pem\"\ntls_key = \"key.pem\"\n");
+    let config = Config::parse(&good, &path).unwrap();
+    assert_eq!(config.nats.tls_ca, Some(dir.path().join("ca.pem")));
+    for (files, key, line, says) in [
+        (
+            "tls_ca = \"missing.pem\"\n",
+            "nats.tls_ca",
+            4,
+            "missing.pem",
+        ),
+        (
+            "tls_ca = \"ca.pem\"\ntls_cert = \"cert.pem\"\ntls_key = \"cert.pem\"\n",
+            "nats.tls_key",
+            6,
+            "no PEM private key",
+        ),
+        (
+            "tls_cert = \"key.pem\"\ntls_key = \"key.pem\"\n",
+            "nats.tls_cert",
+            4,
+            "no PEM certificate",
+        ),
+        (
+            "tls_ca = \"key.pem\"\n",
+            "nats.tls_ca",
+            4,
+            "no PEM certificate",
+        ),
+        (
+            "tls_cert = \"cert.pem\"\ntls_key = \"gone.pem\"\n",
+            "nats.tls_key",
+            5,
+            "gone.pem",
+        ),
+    ] {
+        let err = Config::parse(&format!("{head}{files}"), &path).unwrap_err();
+        assert_eq!(err.key(), Some(key), "{err}");
+        let message = err.to_string();
+        assert!(message.contains(&format!("m.toml:{line}:")), "{message}");
+        assert!(message.contains(says), "{message}");
+    }
+}

@@ -61,7 +61,10 @@ pub fn setup(config: &Config) -> Result<Setup, CheckError> {
     for name in config.characters.settings.keys() {
         if !characters.iter().any(|c| &c.name == name) {
             return Err(invalid(
-                &format!("characters.settings.{name}"),
+                &format!(
+                    "characters.settings.{}",
+                    mouthpiece_config::key_segment(name)
+                ),
                 format!("no configured character is named {name:?}"),
             ));
         }

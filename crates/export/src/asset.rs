@@ -14,10 +14,13 @@ use std::path::{Component, Path, PathBuf};
 /// Longest part of a URI (or other input) quoted in an error message.
 pub const SHOWN_CHARS: usize = 80;
 
-/// `text` cut to [`SHOWN_CHARS`] characters (with `…` when cut), for error messages.
+/// `text` cut to [`SHOWN_CHARS`] characters (with `…` when cut) and its control characters
+/// escaped ([`mouthpiece_output::shown`]), for messages and reports: a name from a file never
+/// reaches the terminal raw.
 pub fn shown(text: &str) -> String {
     let mut chars = text.chars();
     let head: String = chars.by_ref().take(SHOWN_CHARS).collect();
+    let head = mouthpiece_output::shown(&head).into_owned();
     if chars.next().is_some() {
         format!("{head}…")
     } else {
@@ -187,6 +190,7 @@ mod tests {
         let err = read_bounded(Path::new("/dev/zero"), 1000).unwrap_err();
         assert!(err.to_string().contains("longer than 1000 bytes"), "{err}");
         assert_eq!(shown("abc"), "abc");
+        assert_eq!(shown("a\u{1b}[2J\nb"), "a\\u{1b}[2J\\nb");
         let long = "x".repeat(10_000);
         assert_eq!(shown(&long).chars().count(), SHOWN_CHARS + 1);
     }

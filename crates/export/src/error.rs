@@ -54,8 +54,16 @@ pub enum ExportError {
         cause: Box<mouthpiece_retarget::Error>,
     },
     /// The take names another character than the character file.
-    #[error("the take was made for character `{take}`, the character file is `{file}`")]
-    CharacterMismatch { take: String, file: String },
+    #[error(
+        "{source_name}: the take was made for character `{take}`, the character file is `{file}`"
+    )]
+    CharacterMismatch {
+        /// The take, as its reader names it.
+        source_name: String,
+        /// The take's character, as shown (escaped, cut).
+        take: String,
+        file: String,
+    },
     /// The description of the character's mouth (names, rest pose, placement) is unusable.
     #[error("character: {0}")]
     BadRig(String),

@@ -179,8 +179,9 @@ impl<R: BufRead> TakeReader<R> {
     pub fn check_character(&self, file: &str) -> Result<(), ExportError> {
         match self.character() {
             Some(take) if take != file => Err(ExportError::CharacterMismatch {
-                take: take.to_owned(),
-                file: file.to_owned(),
+                source_name: self.source_name.clone(),
+                take: crate::asset::shown(take),
+                file: crate::asset::shown(file),
             }),
             _ => Ok(()),
         }

@@ -33,6 +33,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("lipsync_tables", lipsync_tables),
     ("retarget_options", retarget_options),
     ("gltf_onto", gltf_onto),
+    ("store_object_info", store_object_info),
 ];
 
 /// Runs the target called `name`; `false` when there is none.
@@ -446,6 +447,37 @@ pub fn retarget_options(data: &[u8]) {
                     }
                 }
             }
+        }
+    }
+}
+
+/// An object's info as the take store holds it (JSON), through every check `takes fetch`
+/// makes before and while reading its data (the link, the bucket, the digest, then the
+/// size and digest of the data, here the input itself); and the input as a take's record,
+/// whose texts `takes list` prints escaped.
+pub fn store_object_info(data: &[u8]) {
+    use mouthpiece_nats::store;
+    const BUCKET: &str = "mouthpiece-takes-studio";
+    if let Ok(info) = store::info_from_json(data) {
+        let _ = store::link_target(&info, BUCKET);
+        if let Ok(expected) = store::verified_info(&info, BUCKET) {
+            let mut received = store::Received::new(expected);
+            for piece in data.chunks(7) {
+                if received.update(piece).is_err() {
+                    return;
+                }
+            }
+            let _ = received.finish();
+        }
+    }
+    if let Ok(record) = serde_json::from_slice::<store::TakeRecord>(data) {
+        for text in [
+            &record.booth,
+            &record.slate,
+            &record.object,
+            &record.timecode,
+        ] {
+            let _ = mouthpiece_output::shown(text);
         }
     }
 }

@@ -99,6 +99,16 @@ impl ClassTable {
             ));
         }
         for (i, p) in file.poses.iter().enumerate() {
+            if !crate::input::valid_name(p) {
+                return Err(config(
+                    format!("poses[{i}]"),
+                    format!(
+                        "pose name {} must be {} (it names a column of the weights CSV)",
+                        cut(p),
+                        crate::input::NAME_RULE
+                    ),
+                ));
+            }
             if file.poses[..i].contains(p) {
                 return Err(config(
                     "poses".into(),
@@ -110,6 +120,12 @@ impl ClassTable {
         let mut classes: Vec<Class> = Vec::with_capacity(file.class.len());
         for (ci, c) in file.class.into_iter().enumerate() {
             let key = |k: &str| format!("class[{ci}] ({}).{k}", cut(&c.name));
+            if !crate::input::valid_name(&c.name) {
+                return Err(config(
+                    key("name"),
+                    format!("a class name must be {}", crate::input::NAME_RULE),
+                ));
+            }
             if classes.iter().any(|o: &Class| o.name == c.name) {
                 return Err(config(key("name"), "class name used twice".into()));
             }
@@ -132,6 +148,26 @@ impl ClassTable {
             let mut phones = Vec::with_capacity(c.phones.len());
             for listed in &c.phones {
                 let p = normalise(listed.get_ref());
+                let line = || {
+                    text[..listed.span().start.min(text.len())]
+                        .bytes()
+                        .filter(|&b| b == b'\n')
+                        .count()
+                        + 1
+                };
+                // No phone file can hold an empty phone, nor one with a space or a control
+                // character: such an entry is a mistake in the table.
+                if p.is_empty() || p.chars().any(|c| c.is_whitespace() || c.is_control()) {
+                    return Err(Error::Parse {
+                        source_name: source_name.to_string(),
+                        line: line(),
+                        what: format!(
+                            "{}: phone {:?} is empty or holds a space or control character",
+                            key("phones"),
+                            cut(listed.get_ref())
+                        ),
+                    });
+                }
                 if let Some(&other) = by_phone.get(&p) {
                     // The class being read is not in `classes` yet.
                     let other = if other == ci {
@@ -139,14 +175,9 @@ impl ClassTable {
                     } else {
                         format!("class {:?}", cut(&classes[other].name))
                     };
-                    let line = text[..listed.span().start.min(text.len())]
-                        .bytes()
-                        .filter(|&b| b == b'\n')
-                        .count()
-                        + 1;
                     return Err(Error::Parse {
                         source_name: source_name.to_string(),
-                        line,
+                        line: line(),
                         what: format!(
                             "{}: phone {:?} (read as {:?}) is already in {other}",
                             key("phones"),
@@ -280,6 +311,39 @@ target = { closed = 1.0 }
             let err = ClassTable::from_toml_str(&text, "c.toml").unwrap_err();
             assert!(err.to_string().contains(expect), "{err} / {expect}");
             assert!(err.to_string().starts_with("c.toml:"), "{err}");
+        }
+    }
+
+    /// An empty phone (or one the normalisation empties, `1`), a phone with a space, and
+    /// names that would split a CSV column or a TOML key are refused, not accepted silently.
+    #[test]
+    fn empty_phones_and_names_with_separators_are_refused() {
+        for (listed, line) in [
+            ("\"M\", \"\"", 8),
+            ("\"M\",\n \"1\"", 9),
+            ("\"M\", \"a b\"", 8),
+        ] {
+            let text = SMALL.replace("\"M\", \"b\"", listed);
+            let err = ClassTable::from_toml_str(&text, "c.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(err.starts_with(&format!("c.toml:{line}: ")), "{err}");
+            assert!(err.contains("is empty or holds a space"), "{err}");
+        }
+        for (text, key) in [
+            (SMALL.replace("\"open\"]", "\"op,en\"]"), "poses[1]"),
+            (SMALL.replace("\"open\"]", "\"a\\u001b[2J\"]"), "poses[1]"),
+            (
+                SMALL.replace("name = \"m\"", "name = \"m.x\""),
+                "class[1] (m.x).name",
+            ),
+        ] {
+            let err = ClassTable::from_toml_str(&text, "c.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(err.starts_with(&format!("c.toml: {key}: ")), "{err}");
+            assert!(err.contains(crate::input::NAME_RULE), "{err}");
+            assert!(!err.contains('\u{1b}'), "{err:?}");
         }
     }
 

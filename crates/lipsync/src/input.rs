@@ -7,13 +7,27 @@ use crate::Error;
 /// Longest piece of input an error quotes, in characters.
 pub const QUOTE_CHARS: usize = 80;
 
-/// `s` cut to [`QUOTE_CHARS`] characters (an ellipsis marks the cut): errors never echo
-/// megabytes of input.
+/// `s` cut to [`QUOTE_CHARS`] characters (an ellipsis marks the cut) with its control
+/// characters escaped ([`mouthpiece_output::shown`]): errors never echo megabytes of input,
+/// nor an escape sequence or a newline to the terminal.
 pub fn cut(s: &str) -> String {
     match s.char_indices().nth(QUOTE_CHARS) {
-        Some((i, _)) => format!("{}…", &s[..i]),
-        None => s.to_string(),
+        Some((i, _)) => format!("{}…", mouthpiece_output::shown(&s[..i])),
+        None => mouthpiece_output::shown(s).into_owned(),
     }
+}
+
+/// The rule for the names a lip-sync file gives (key poses, classes, pose marks), in words.
+pub const NAME_RULE: &str = "1 to 64 ASCII letters, digits, '_' or '-'";
+
+/// Whether `name` may name a key pose, a class or a pose mark: it becomes a column of the
+/// weights CSV and a key of the TOML files written, so nothing that separates either
+/// (`,`, `.`, quotes, spaces, control characters) ([`NAME_RULE`]).
+pub fn valid_name(name: &str) -> bool {
+    (1..=64).contains(&name.len())
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
 }
 
 /// A text file's bytes → text: UTF-8 (a leading byte order mark dropped), or UTF-16 little-
@@ -92,5 +106,25 @@ mod tests {
         let q = cut(&long);
         assert_eq!(q.chars().count(), QUOTE_CHARS + 1);
         assert_eq!(cut("short"), "short");
+        assert_eq!(cut("a\u{1b}[2J\nb"), "a\\u{1b}[2J\\nb");
+    }
+
+    #[test]
+    fn names_are_single_csv_columns_and_toml_keys() {
+        for good in ["open", "mid_front", "lip-roll", "A1"] {
+            assert!(valid_name(good), "{good}");
+        }
+        for bad in [
+            "",
+            "a,b",
+            "a.b",
+            "a b",
+            "a\"b",
+            "a\nb",
+            "é",
+            &"x".repeat(65),
+        ] {
+            assert!(!valid_name(bad), "{bad:?}");
+        }
     }
 }

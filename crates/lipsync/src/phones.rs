@@ -64,9 +64,14 @@ pub const TIMIT_RATE: f64 = 16_000.0;
 pub const HTK_UNIT: f64 = 1e-7;
 /// Slack for rounding in time checks, seconds.
 pub const TIME_SLACK: f64 = 1e-6;
-/// Latest time a phone may end, seconds (a day): a later end is an error naming its line,
-/// not a timeline sampled for years.
+/// Latest time, seconds (a day), of the lip-sync inputs that are timelines of a session
+/// (pose marks, a `synth --speech` CSV).
 pub const MAX_TIME: f64 = 86_400.0;
+
+/// Latest time a phone may end, seconds (ten minutes): as long as the longest audio the
+/// speech recogniser reads (a line of dialogue is seconds, a scene minutes). A later end is
+/// an error naming its line, not minutes of weights written for one phone.
+pub const MAX_PHONE_SECONDS: f64 = 600.0;
 
 /// Lowercases and drops ARPAbet stress digits (`AH0` → `ah`; TIMIT names have no digits).
 pub fn normalise(phone: &str) -> String {
@@ -465,12 +470,12 @@ pub fn check(raw: Vec<PhoneSpan>, source_name: &str) -> Result<Vec<PhoneSpan>, E
                 ),
             ));
         }
-        if p.end > MAX_TIME {
+        if p.end > MAX_PHONE_SECONDS {
             return Err(parse_err(
                 source_name,
                 p.line,
                 format!(
-                    "phone {:?} ends at {} s, past the limit of {MAX_TIME} s",
+                    "phone {:?} ends at {} s, past the limit of {MAX_PHONE_SECONDS} s",
                     p.phone, p.end
                 ),
             ));

@@ -117,6 +117,12 @@ impl BasicPoses {
         }
         for (i, p) in self.poses.iter().enumerate() {
             let key = format!("pose[{i}] ({})", crate::input::cut(&p.name));
+            if !crate::input::valid_name(&p.name) {
+                return Err((
+                    format!("{key}.name"),
+                    format!("a pose name must be {}", crate::input::NAME_RULE),
+                ));
+            }
             if let Some((k, v)) = p.mouth.iter().find(|(_, v)| !v.is_finite()) {
                 return Err((
                     format!("{key}.mouth.{}", crate::input::cut(k)),

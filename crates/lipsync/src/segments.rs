@@ -194,6 +194,18 @@ impl SegmentTable {
                         .iter()
                         .position(|n| n == pose)
                         .ok_or_else(|| config(&key, format!("unknown pose {pose:?}")))?;
+                    // Weights, like the class targets they join: 0 to 1 (a point of 1e298
+                    // would carry into the take's points).
+                    if let Some((k, q)) = points
+                        .iter()
+                        .enumerate()
+                        .find(|(_, q)| !(0.0..=1.0).contains(&q[1]))
+                    {
+                        return Err(config(
+                            &key,
+                            format!("control point {k}: weight {:?} is not within 0 to 1", q[1]),
+                        ));
+                    }
                     let pts: Vec<(f64, f64)> = points.iter().map(|q| (q[0], q[1])).collect();
                     out[p] = StageCurve::from_points(&pts).map_err(|e| config(&key, e))?;
                 }
@@ -260,6 +272,14 @@ target = { open = 1.0, closed = 0.0 }
         assert!(
             err.to_string()
                 .contains("must start where stable.closed ends"),
+            "{err}"
+        );
+        // A weight of 1e298 inside a stage (the joins still hold) would carry into the take.
+        let bad = ok.replace("[0.5, 0.9]", "[0.5, 1e298]");
+        let err = segs.apply_overrides(&table, &bad, "o.toml").unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("stable.closed: control point 1: weight 1e298 is not within 0 to 1"),
             "{err}"
         );
         let bad = ok.replace("to = \"aa\"", "to = \"ee\"");

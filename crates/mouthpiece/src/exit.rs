@@ -3,6 +3,8 @@
 use std::fmt;
 use std::process::ExitCode;
 
+use mouthpiece_output::shown_message;
+
 /// Exit code for bad input or configuration (a file the user gave us is wrong).
 pub const BAD_INPUT: u8 = 2;
 
@@ -43,9 +45,11 @@ where
 
 /// Prints `error: …` and every cause once, and picks the exit code.
 pub fn report(err: &anyhow::Error) -> ExitCode {
-    eprintln!("error: {err}");
+    // The names in a message are escaped where it is made; this keeps an escape sequence
+    // that slipped through (a cause from a library quoting its input) off the terminal.
+    eprintln!("error: {}", shown_message(&err.to_string()));
     for cause in err.chain().skip(1) {
-        eprintln!("  caused by: {cause}");
+        eprintln!("  caused by: {}", shown_message(&cause.to_string()));
     }
     if err.chain().any(|e| e.is::<BadInput>()) {
         ExitCode::from(BAD_INPUT)

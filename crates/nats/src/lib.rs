@@ -163,6 +163,10 @@ pub enum NatsError {
     Connect { servers: String, message: String },
     #[error("NATS: {0}")]
     Store(String),
+    /// An object whose info or data cannot be trusted (no digest, a link out of the bucket,
+    /// a size or digest that does not match what was received).
+    #[error("object {object} {why}")]
+    Untrusted { object: String, why: String },
 }
 
 /// The reconnection delay after `attempts` failed attempts: none at first (another node of

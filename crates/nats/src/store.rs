@@ -4,9 +4,10 @@
 use std::path::Path;
 use std::time::Duration;
 
+use async_nats::jetstream::object_store::ObjectInfo;
 use async_nats::jetstream::{self, kv, object_store};
 use futures_util::StreamExt;
-use mouthpiece_config::quote_excerpt;
+use mouthpiece_output::shown;
 use serde::{Deserialize, Serialize};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
@@ -61,6 +62,8 @@ pub fn record_key(booth: &str, file: &str) -> String {
 pub struct TakeStore {
     pub objects: object_store::ObjectStore,
     pub meta: kv::Store,
+    /// The takes bucket's name (objects and links must stay in it).
+    bucket: String,
 }
 
 impl std::fmt::Debug for TakeStore {
@@ -114,7 +117,11 @@ impl TakeStore {
                 })?
             }
         };
-        Ok(TakeStore { objects, meta })
+        Ok(TakeStore {
+            objects,
+            meta,
+            bucket: takes_bucket(studio),
+        })
     }
 
     /// Opens the studio's buckets without creating them (for reading).
@@ -135,7 +142,11 @@ impl TakeStore {
             .get_key_value(&bucket)
             .await
             .map_err(|e| store_error(&format!("no key-value bucket {bucket}"), e))?;
-        Ok(TakeStore { objects, meta })
+        Ok(TakeStore {
+            objects,
+            meta,
+            bucket: takes_bucket(studio),
+        })
     }
 
     /// Every take's record, sorted by booth, then start time.
@@ -174,6 +185,10 @@ impl TakeStore {
     /// Copies object `name` to `out`, written to a temporary file beside it and renamed into
     /// place once complete (no partial file is left behind). Returns the bytes written.
     /// Waits at most [`FETCH_IDLE_TIMEOUT`] for each piece of the object.
+    ///
+    /// The object's info is not trusted: an object without a SHA-256 digest, a link into
+    /// another bucket or to another link, and data whose size or digest differs from the
+    /// info are refused ([`verified_info`], [`Received`]) and nothing is kept.
     pub async fn fetch(&self, name: &str, out: &Path) -> Result<u64, NatsError> {
         self.fetch_with_timeout(name, out, FETCH_IDLE_TIMEOUT).await
     }
@@ -181,65 +196,80 @@ impl TakeStore {
     /// [`TakeStore::fetch`], waiting at most `idle` for each piece of the object: an object
     /// whose metadata promises chunks the store does not hold is an error after that long.
     ///
-    /// The object's metadata is read first and a link is refused (never followed: the client
-    /// library follows links without limit, so a link to itself would never end). The
-    /// temporary file is created new, never through an existing name or a symbolic link.
+    /// A link is followed here, at most once and within the bucket, never by the client
+    /// library (which follows any chain, into any bucket, and a link to itself without end).
+    /// The temporary file is created new, never through an existing name or a symbolic link.
     pub async fn fetch_with_timeout(
         &self,
         name: &str,
         out: &Path,
         idle: Duration,
     ) -> Result<u64, NatsError> {
-        let info = tokio::time::timeout(idle, self.objects.info(name))
+        let info_of = |object: String| async move {
+            tokio::time::timeout(idle, self.objects.info(&object))
+                .await
+                .map_err(|_| store_error(&format!("cannot get {}", shown(&object)), "no answer"))?
+                .map_err(|e| store_error(&format!("cannot get {}", shown(&object)), e))
+        };
+        let info = info_of(name.to_owned()).await?;
+        let (target, target_info) = match link_target(&info, self.bucket_name())? {
+            Some(target) => {
+                let linked = info_of(target.clone()).await?;
+                if linked.options.as_ref().is_some_and(|o| o.link.is_some()) {
+                    return Err(untrusted(name, "is a link to another link".into()));
+                }
+                (target, linked)
+            }
+            None => (name.to_owned(), info),
+        };
+        if target_info.deleted {
+            return Err(NatsError::Store(format!("{} was deleted", shown(&target))));
+        }
+        let mut object = tokio::time::timeout(idle, self.objects.get(&target))
             .await
-            .map_err(|_| store_error(&format!("cannot get {name}"), "no answer"))?
-            .map_err(|e| store_error(&format!("cannot get {name}"), e))?;
-        if let Some(link) = info.options.as_ref().and_then(|o| o.link.as_ref()) {
+            .map_err(|_| store_error(&format!("cannot get {}", shown(name)), "no answer"))?
+            .map_err(|e| store_error(&format!("cannot get {}", shown(name)), e))?;
+        if object.info().nuid != target_info.nuid {
             return Err(NatsError::Store(format!(
-                "{name} is a link (to bucket {}, object {}): links are not fetched; fetch the \
-                 object itself",
-                quote_excerpt(&link.bucket),
-                quote_excerpt(link.name.as_deref().unwrap_or(""))
+                "{} changed while it was fetched (or became a link): try again",
+                shown(name)
             )));
         }
-        if info.deleted {
-            return Err(NatsError::Store(format!("{name} was deleted")));
-        }
-        let mut object = tokio::time::timeout(idle, self.objects.get(name))
-            .await
-            .map_err(|_| store_error(&format!("cannot get {name}"), "no answer"))?
-            .map_err(|e| store_error(&format!("cannot get {name}"), e))?;
-        if object.info.nuid != info.nuid {
-            return Err(NatsError::Store(format!(
-                "{name} changed while it was fetched (or became a link): try again"
-            )));
-        }
+        // The info the data is read with is the one checked.
+        let expected =
+            verified_info(object.info(), self.bucket_name()).map_err(|why| untrusted(name, why))?;
         let partial = partial_path(out);
         let mut file = create_new_file(&partial)
             .await
             .map_err(|e| store_error(&format!("cannot create {}", partial.display()), e))?;
         let result = async {
-            let mut written = 0u64;
-            let mut buf = vec![0u8; 64 * 1024];
+            let mut received = Received::new(expected);
+            let mut buffer = vec![0u8; 64 * 1024];
+            let mut read = 0u64;
             loop {
-                let n = tokio::time::timeout(idle, object.read(&mut buf))
+                let n = tokio::time::timeout(idle, object.read(&mut buffer))
                     .await
                     .map_err(|_| {
                         NatsError::Store(format!(
-                            "cannot fetch {name}: no data for {} s after {written} bytes (the \
-                             store does not hold the chunks its metadata names)",
+                            "cannot fetch {}: no data for {} s after {read} bytes (the store \
+                             does not hold the chunks its metadata names)",
+                            shown(name),
                             idle.as_secs_f64()
                         ))
                     })?
-                    .map_err(|e| store_error(&format!("cannot fetch {name}"), e))?;
+                    .map_err(|e| store_error(&format!("cannot fetch {}", shown(name)), e))?;
                 if n == 0 {
                     break;
                 }
-                file.write_all(&buf[..n])
+                read += n as u64;
+                received
+                    .update(&buffer[..n])
+                    .map_err(|why| untrusted(name, why))?;
+                file.write_all(&buffer[..n])
                     .await
                     .map_err(|e| store_error(&format!("cannot write {}", partial.display()), e))?;
-                written += n as u64;
             }
+            let written = received.finish().map_err(|why| untrusted(name, why))?;
             file.sync_all()
                 .await
                 .map_err(|e| store_error(&format!("cannot write {}", partial.display()), e))?;
@@ -255,6 +285,149 @@ impl TakeStore {
             let _ = tokio::fs::remove_file(&partial).await;
         }
         result
+    }
+
+    /// The takes bucket's name.
+    fn bucket_name(&self) -> &str {
+        self.bucket.as_str()
+    }
+}
+
+fn untrusted(name: &str, why: String) -> NatsError {
+    NatsError::Untrusted {
+        object: shown(name).into_owned(),
+        why,
+    }
+}
+
+/// An object's info from the JSON the store holds (what the client library reads before
+/// [`TakeStore::fetch`] checks it); the entry point of the store's fuzz target.
+pub fn info_from_json(json: &[u8]) -> Result<ObjectInfo, String> {
+    serde_json::from_slice(json).map_err(|e| e.to_string())
+}
+
+/// Where a link object points, when `info` is one: `Ok(None)` for a plain object; refused
+/// when the link leads into another bucket or to a whole bucket.
+pub fn link_target(info: &ObjectInfo, bucket: &str) -> Result<Option<String>, NatsError> {
+    let Some(link) = info.options.as_ref().and_then(|o| o.link.as_ref()) else {
+        return Ok(None);
+    };
+    let name = &info.name;
+    match &link.name {
+        _ if link.bucket != bucket => Err(untrusted(
+            name,
+            format!(
+                "is a link into another bucket ({}): refused",
+                shown(&link.bucket)
+            ),
+        )),
+        None => Err(untrusted(
+            name,
+            "is a link to a whole bucket: refused".into(),
+        )),
+        Some(target) => Ok(Some(target.clone())),
+    }
+}
+
+/// What the data of an object must be: its size and SHA-256 digest, from its info.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Expected {
+    pub size: u64,
+    pub sha256: [u8; 32],
+}
+
+/// Checks an object's info before its data is read: in `bucket`, not deleted, not a link,
+/// with a well-formed `SHA-256=<base64url>` digest (an object without one cannot be
+/// verified and is refused). The reason in words when refused.
+pub fn verified_info(info: &ObjectInfo, bucket: &str) -> Result<Expected, String> {
+    if info.bucket != bucket {
+        return Err(format!(
+            "its info names another bucket ({}): refused",
+            shown(&info.bucket)
+        ));
+    }
+    if info.deleted {
+        return Err("is deleted".into());
+    }
+    if info.options.as_ref().is_some_and(|o| o.link.is_some()) {
+        return Err("is a link: refused".into());
+    }
+    let Some(digest) = info.digest.as_deref() else {
+        return Err("has no digest: its data cannot be verified, refused".into());
+    };
+    let sha256 = parse_digest(digest).ok_or_else(|| {
+        format!(
+            "has a digest that is not SHA-256=<base64url of 32 bytes> ({}): refused",
+            shown(&excerpt(digest))
+        )
+    })?;
+    Ok(Expected {
+        size: info.size as u64,
+        sha256,
+    })
+}
+
+/// `SHA-256=<base64url>` as the object store writes it (with or without padding).
+pub fn parse_digest(digest: &str) -> Option<[u8; 32]> {
+    use base64::Engine as _;
+    let encoded = digest.strip_prefix("SHA-256=")?;
+    let engine = base64::engine::GeneralPurpose::new(
+        &base64::alphabet::URL_SAFE,
+        base64::engine::GeneralPurposeConfig::new()
+            .with_decode_padding_mode(base64::engine::DecodePaddingMode::Indifferent),
+    );
+    if encoded.len() > 64 {
+        return None;
+    }
+    engine.decode(encoded).ok()?.try_into().ok()
+}
+
+fn excerpt(s: &str) -> String {
+    s.chars().take(80).collect()
+}
+
+/// The data of an object as it arrives, checked against what its info promised: never
+/// more bytes than its size, and at the end exactly its size and its digest.
+pub struct Received {
+    expected: Expected,
+    bytes: u64,
+    digest: ring::digest::Context,
+}
+
+impl Received {
+    pub fn new(expected: Expected) -> Received {
+        Received {
+            expected,
+            bytes: 0,
+            digest: ring::digest::Context::new(&ring::digest::SHA256),
+        }
+    }
+
+    /// Takes the next piece; refused once the data is longer than the info says.
+    pub fn update(&mut self, data: &[u8]) -> Result<(), String> {
+        self.bytes += data.len() as u64;
+        if self.bytes > self.expected.size {
+            return Err(format!(
+                "sent more than the {} bytes its info gives: refused, nothing kept",
+                self.expected.size
+            ));
+        }
+        self.digest.update(data);
+        Ok(())
+    }
+
+    /// The byte count when the data is whole and its digest matches.
+    pub fn finish(self) -> Result<u64, String> {
+        if self.bytes != self.expected.size {
+            return Err(format!(
+                "sent {} bytes, its info gives {}: refused, nothing kept",
+                self.bytes, self.expected.size
+            ));
+        }
+        if self.digest.finish().as_ref() != self.expected.sha256.as_slice() {
+            return Err("data does not match the digest in its info: refused, nothing kept".into());
+        }
+        Ok(self.bytes)
     }
 }
 
@@ -278,4 +451,63 @@ pub fn partial_path(out: &Path) -> std::path::PathBuf {
     let mut name = out.file_name().unwrap_or_default().to_os_string();
     name.push(".partial");
     out.with_file_name(name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn expected(data: &[u8]) -> Expected {
+        let digest = ring::digest::digest(&ring::digest::SHA256, data);
+        Expected {
+            size: data.len() as u64,
+            sha256: digest.as_ref().try_into().unwrap(),
+        }
+    }
+
+    #[test]
+    fn data_must_have_the_size_and_digest_of_its_info() {
+        let data = b"a take's bytes";
+        let mut whole = Received::new(expected(data));
+        whole.update(&data[..4]).unwrap();
+        whole.update(&data[4..]).unwrap();
+        assert_eq!(whole.finish(), Ok(data.len() as u64));
+
+        let mut short = Received::new(expected(data));
+        short.update(&data[..4]).unwrap();
+        assert!(short.finish().unwrap_err().contains("sent 4 bytes"));
+
+        let mut long = Received::new(expected(data));
+        long.update(data).unwrap();
+        assert!(long.update(b"x").unwrap_err().contains("more than"));
+
+        let mut changed = Received::new(expected(data));
+        changed.update(b"A take's bytes").unwrap();
+        assert!(changed.finish().unwrap_err().contains("digest"));
+    }
+
+    #[test]
+    fn digests_are_sha256_in_base64url() {
+        use base64::Engine as _;
+        let sum = ring::digest::digest(&ring::digest::SHA256, b"x");
+        let padded = base64::engine::general_purpose::URL_SAFE.encode(sum);
+        let bare = base64::engine::general_purpose::URL_SAFE_NO_PAD.encode(sum);
+        for text in [format!("SHA-256={padded}"), format!("SHA-256={bare}")] {
+            assert_eq!(
+                parse_digest(&text).unwrap().as_slice(),
+                sum.as_ref(),
+                "{text}"
+            );
+        }
+        for bad in [
+            "",
+            "SHA-256=",
+            "MD5=abc",
+            "SHA-256=not base64!",
+            "SHA-256=AAAA",
+            &format!("SHA-256={}", "A".repeat(10_000)),
+        ] {
+            assert!(parse_digest(bad).is_none(), "{bad}");
+        }
+    }
 }

@@ -343,7 +343,7 @@ impl Decoder {
         source_name: &str,
         audio: &str,
     ) -> Result<Vec<TimedPhone>, Error> {
-        let words = crate::isolated::checked_words(transcript, source_name, samples.len())?;
+        let words = crate::isolated::checked_words(transcript, source_name, samples.len(), audio)?;
         let mut rules = Vec::with_capacity(words.len());
         for word in &words {
             let prons = self.pronunciations(word)?;

@@ -38,6 +38,7 @@ pub(crate) fn checked_words(
     transcript: &str,
     source_name: &str,
     samples: usize,
+    audio: &str,
 ) -> Result<Vec<String>, Error> {
     let words = transcript_words(transcript);
     if words.is_empty() {
@@ -45,11 +46,18 @@ pub(crate) fn checked_words(
             source_name: source_name.to_string(),
         });
     }
+    if let Some(word) = words.iter().find(|w| w.chars().any(char::is_control)) {
+        return Err(Error::BadWord {
+            source_name: source_name.to_string(),
+            word: crate::cut(word),
+        });
+    }
     let seconds = samples as f64 / MODEL_RATE as f64;
     let max = ((seconds * MAX_WORDS_PER_SECOND).ceil() as usize).max(10);
     if words.len() > max {
         return Err(Error::TooManyWords {
             source_name: source_name.to_string(),
+            audio: audio.to_string(),
             words: words.len(),
             max,
             per_second: MAX_WORDS_PER_SECOND,
@@ -73,7 +81,7 @@ pub fn decode(
         source_name,
     } = task
     {
-        checked_words(transcript, source_name, samples.len())?;
+        checked_words(transcript, source_name, samples.len(), audio)?;
     }
     let log = tempfile::Builder::new()
         .prefix("mouthpiece-pocketsphinx-")
@@ -388,5 +396,25 @@ mod tests {
                 .starts_with("long.txt: the transcript has 100000 words, more than 10"),
             "{err}"
         );
+        // The audio is named too: a WAV cut short is as likely as a long transcript.
+        assert!(err.to_string().contains("1.0 s of audio in a.wav"), "{err}");
+    }
+
+    /// A word with a NUL (or another control character) names the transcript and shows the
+    /// word escaped; it never reaches the library.
+    #[test]
+    fn a_transcript_word_with_a_nul_names_the_transcript() {
+        for text in ["hello wor\0ld", "hello \u{1b}[2Jworld"] {
+            let task = Task::Align {
+                transcript: text,
+                source_name: "t.txt",
+            };
+            let err = decode(&ModelPaths::debian(), &tone(), "a.wav", task).unwrap_err();
+            let shown = err.to_string();
+            assert!(shown.starts_with("t.txt: word "), "{shown}");
+            assert!(shown.contains("holds a control character"), "{shown}");
+            assert!(!shown.contains(['\0', '\u{1b}']), "{shown:?}");
+            assert!(err.is_bad_input());
+        }
     }
 }

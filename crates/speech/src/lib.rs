@@ -18,11 +18,13 @@ pub mod wav;
 pub use decoder::{transcript_words, Decoder, ModelPaths, TimedPhone};
 pub use isolated::{decode, Task, MAX_WORDS_PER_SECOND};
 
-/// `s` cut to 80 characters (an ellipsis marks the cut): errors never echo megabytes.
+/// `s` cut to 80 characters (an ellipsis marks the cut) with its control characters
+/// escaped ([`mouthpiece_output::shown`]): errors never echo megabytes, nor an escape
+/// sequence.
 pub(crate) fn cut(s: &str) -> String {
     match s.char_indices().nth(80) {
-        Some((i, _)) => format!("{}…", &s[..i]),
-        None => s.to_string(),
+        Some((i, _)) => format!("{}…", mouthpiece_output::shown(&s[..i])),
+        None => mouthpiece_output::shown(s).into_owned(),
     }
 }
 
@@ -61,10 +63,11 @@ pub enum Error {
     /// A transcript with more words than the audio can hold.
     #[error(
         "{source_name}: the transcript has {words} words, more than {max} (at most \
-         {per_second} a second of the audio's {seconds:.1} s can be aligned)"
+         {per_second} a second of the {seconds:.1} s of audio in {audio} can be aligned)"
     )]
     TooManyWords {
         source_name: String,
+        audio: String,
         words: usize,
         max: usize,
         per_second: f64,
@@ -76,6 +79,10 @@ pub enum Error {
          transcript say what it says?)"
     )]
     NoPath { audio: String },
+    /// A transcript word with a NUL or another control character (no dictionary holds one,
+    /// and the library takes C strings).
+    #[error("{source_name}: word {word} holds a control character")]
+    BadWord { source_name: String, word: String },
     /// The transcript has no words.
     #[error("{source_name}: the transcript is empty")]
     EmptyTranscript { source_name: String },

@@ -89,12 +89,13 @@ fn list(names: impl ExactSizeIterator<Item = String>) -> String {
 
 impl fmt::Display for MatchReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        for mesh in &self.meshes {
+        // An avatar may have thousands of meshes: their lines are cut like the lists.
+        for mesh in self.meshes.iter().take(LISTED) {
             let targets = mesh.matched.len() + mesh.without_curve.len();
             let nodes = if mesh.nodes.is_empty() {
                 "no node shows it: not animated".to_owned()
             } else {
-                mesh.nodes.join(", ")
+                list(mesh.nodes.iter().cloned())
             };
             writeln!(
                 f,
@@ -107,7 +108,7 @@ impl fmt::Display for MatchReport {
                     if target == curve {
                         shown(target)
                     } else {
-                        format!("{} ← {curve}", shown(target))
+                        format!("{} ← {}", shown(target), shown(curve))
                     }
                 });
                 writeln!(f, "  matched: {}", list(pairs))?;
@@ -116,6 +117,13 @@ impl fmt::Display for MatchReport {
                 let names = mesh.without_curve.iter().map(|n| shown(n));
                 writeln!(f, "  no curve for: {}", list(names))?;
             }
+        }
+        if self.meshes.len() > LISTED {
+            writeln!(
+                f,
+                "… and {} more meshes with morph targets",
+                self.meshes.len() - LISTED
+            )?;
         }
         if !self.unnamed.is_empty() {
             writeln!(
@@ -130,7 +138,7 @@ impl fmt::Display for MatchReport {
             writeln!(
                 f,
                 "curves with no target: {}",
-                list(self.curves_without_target.iter().cloned())
+                list(self.curves_without_target.iter().map(|n| shown(n)))
             )
         }
     }
@@ -313,6 +321,54 @@ mod tests {
             .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
             .collect();
         assert_eq!(floats, [0.0, 0.5, 0.25, 0.25, 1.0, 0.25]);
+    }
+
+    /// 2 000 meshes, each with a hostile target name: the report stays a few kilobytes,
+    /// every line cut at 40 names, and no control character reaches the terminal.
+    #[test]
+    fn the_report_is_cut_at_40_names_and_escapes_the_names() {
+        let b64 = "A".repeat(64);
+        let meshes: Vec<Value> = (0..2_000)
+            .map(|i| {
+                json!({"name": format!("m{i}\u{1b}[2J"), "extras": {"targetNames": ["jawOpen", "x\nforged: row"]},
+                       "primitives": [{"attributes": {"POSITION": 0}, "targets": [{"POSITION": 0}, {"POSITION": 0}]}]})
+            })
+            .collect();
+        let nodes: Vec<Value> = (0..100)
+            .map(|i| json!({"mesh": 0, "name": format!("n{i}")}))
+            .collect();
+        let doc = json!({
+            "asset": {"version": "2.0"},
+            "buffers": [{"byteLength": 48, "uri": format!("data:application/octet-stream;base64,{b64}")}],
+            "bufferViews": [{"buffer": 0, "byteLength": 48}],
+            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"}],
+            "meshes": meshes,
+            "nodes": nodes,
+        });
+        let avatar =
+            Avatar::from_bytes(&serde_json::to_vec(&doc).unwrap(), Path::new("avatar.gltf"))
+                .unwrap();
+        let report = avatar
+            .plan(&CurveTable::new(&["jawOpen"]))
+            .unwrap()
+            .report
+            .to_string();
+        assert!(report.len() < 16_000, "{} bytes", report.len());
+        assert!(!report.contains('\u{1b}'), "{report}");
+        assert!(report.contains("meshes[0] (`m0\\u{1b}[2J`)"), "{report}");
+        assert!(
+            report.contains("no curve for: x\\nforged: row\n"),
+            "{report}"
+        );
+        assert!(
+            report.contains("… and 1960 more meshes with morph targets"),
+            "{report}"
+        );
+        assert!(report.contains("(`n39`), … and 60 more)"), "{report}");
+        assert_eq!(
+            report.lines().filter(|l| l.starts_with("meshes[")).count(),
+            40
+        );
     }
 
     #[test]

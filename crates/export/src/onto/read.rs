@@ -428,10 +428,14 @@ fn read_meshes(doc: &Value, accessors: Vec<u64>) -> Result<Vec<AvatarMesh>, Stri
             None => vec![0.0; targets],
             Some(Value::Array(w)) if w.len() == targets => w
                 .iter()
-                .map(|v| v.as_f64().filter(|x| x.is_finite()).map(|x| x as f32))
+                // Checked once converted: 1e308 is finite as a double, +inf as a float.
+                .map(|v| v.as_f64().map(|x| x as f32).filter(|x| x.is_finite()))
                 .collect::<Option<Vec<f32>>>()
                 .ok_or_else(|| {
-                    format!("{label}.weights holds something that is not a finite number")
+                    format!(
+                        "{label}.weights holds something that is not a finite 32-bit number \
+                         (glTF weights are floats, at most about 3.4e38)"
+                    )
                 })?,
             Some(_) => {
                 return Err(format!(
@@ -559,6 +563,23 @@ mod tests {
             let err = read(&doc).unwrap_err();
             assert!(err.contains(says), "{pointer}: {err}");
         }
+    }
+
+    /// A default weight that is finite as a double but not as the float glTF stores.
+    #[test]
+    fn a_weight_that_overflows_a_float_is_refused() {
+        for weight in [1e308, -1e39] {
+            let mut doc = doc();
+            doc["meshes"][0]["weights"] = json!([weight]);
+            let err = read(&doc).unwrap_err();
+            assert!(
+                err.contains("meshes[0] (`Face`).weights") && err.contains("32-bit"),
+                "{err}"
+            );
+        }
+        let mut doc = doc();
+        doc["meshes"][0]["weights"] = json!([3.0e38]);
+        read(&doc).unwrap();
     }
 
     #[test]

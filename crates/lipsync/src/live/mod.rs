@@ -287,4 +287,23 @@ mod tests {
         let unknown = "version = 1\nlearned_on = \"x\"\n[[class]]\nname = \"zz\"\nframes = 3\nmean = [0.0]\nvar = [1.0]\n";
         assert!(Profiles::from_toml_str(unknown, "p.toml").is_err());
     }
+
+    /// A class name from a profile file reaches the terminal escaped, whichever check
+    /// refuses it.
+    #[test]
+    fn class_names_in_profile_errors_are_escaped() {
+        let hostile = "op\\u001b[2J\\nen";
+        let bad_len = format!("version = 1\nlearned_on = \"x\"\n[[class]]\nname = \"{hostile}\"\nframes = 3\nmean = [0.0]\nvar = [1.0]\n");
+        let e = Profiles::from_toml_str(&bad_len, "p.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("class op\\u{1b}[2J\\nen:"), "{e}");
+        let shipped = Profiles::from_toml_str(SHIPPED_PROFILES, "shipped").unwrap();
+        let mut renamed = shipped.clone();
+        renamed.classes[0].name = "x\u{1b}]0;t\u{7}".into();
+        let table = ClassTable::from_toml_str(DEFAULT_CLASSES, "classes").unwrap();
+        let e = renamed.bind(&table, "p.toml").unwrap_err().to_string();
+        assert!(e.contains("class x\\u{1b}]0;t\\u{7} is not in"), "{e}");
+        assert!(!e.contains(['\u{1b}', '\u{7}', '\n']), "{e:?}");
+    }
 }

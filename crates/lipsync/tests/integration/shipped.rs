@@ -105,23 +105,43 @@ fn identical_phone_files_give_identical_weights() {
 fn a_timeline_of_too_many_samples_is_refused_before_sampling() {
     let t = table();
     let segments = SegmentTable::generate(&t);
-    // A day of phones is readable, but at 10 000 samples per second it would be 8.6e8
-    // samples (tens of GB of weights): an error naming the sample count, no allocation.
+    // Ten minutes of phones (the longest accepted) at 10 000 samples per second would be
+    // 6e6 samples: an error naming the sample count, no allocation.
     let spans = phones::read(
-        "0 1000 sh\n1000 1382400000 iy\n",
+        "0 1000 sh\n1000 9600000 iy\n",
         PhoneFormat::Timit,
-        "day.phn",
+        "long.phn",
     )
     .unwrap();
-    let err = weights_for_phones(&spans, "day.phn", &t, &segments, 0.04, 10_000.0).unwrap_err();
+    let err = weights_for_phones(&spans, "long.phn", &t, &segments, 0.04, 10_000.0).unwrap_err();
     assert!(
-        err.to_string().contains("day.phn: the phones last 86400 s")
+        err.to_string().contains("long.phn: the phones last 600 s")
             && err.to_string().contains("4000000 samples"),
         "{err}"
     );
-    // The same phones at 40 per second are 3.5 million samples: fine.
-    let w = weights_for_phones(&spans, "day.phn", &t, &segments, 0.04, 40.0).unwrap();
-    assert_eq!(w.len(), 86_400 * 40 + 1);
+    // The same phones at 40 per second are 24 000 samples: fine.
+    let w = weights_for_phones(&spans, "long.phn", &t, &segments, 0.04, 40.0).unwrap();
+    assert_eq!(w.len(), 600 * 40 + 1);
+}
+
+/// A phone that lasts a day (or 18 hours) is refused where it is read, with its line, as the
+/// speech reader refuses audio longer than ten minutes: not minutes of weights written.
+#[test]
+fn a_phone_longer_than_the_limit_is_refused_at_its_line() {
+    for (text, format) in [
+        ("0 1000 sh\n1000 1382400000 iy\n", PhoneFormat::Timit),
+        (
+            "{\"start\": 0, \"end\": 0.1, \"phone\": \"sh\"}\n{\"start\": 0.1, \"end\": 64800, \"phone\": \"iy\"}\n",
+            PhoneFormat::Jsonl,
+        ),
+    ] {
+        let err = phones::read(text, format, "day.phn").unwrap_err().to_string();
+        assert!(
+            err.starts_with("day.phn:2:") && err.contains("past the limit of 600 s"),
+            "{err}"
+        );
+    }
+    assert_eq!(phones::MAX_PHONE_SECONDS, 600.0);
 }
 
 #[test]

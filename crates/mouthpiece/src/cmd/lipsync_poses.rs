@@ -46,7 +46,8 @@ pub struct PosesArgs {
 
 /// Parses marks: `name = [start, end]`, start < end, finite.
 pub fn parse_marks(text: &str, source_name: &str) -> anyhow::Result<Vec<(String, f64, f64)>> {
-    let table: BTreeMap<String, [f64; 2]> = toml::from_str(text)
+    // A list, its length checked here: a `[f64; 2]` would take `[1, 2, 3]` as `[1, 2]`.
+    let table: BTreeMap<String, Vec<f64>> = toml::from_str(text)
         .with_context(|| format!("{source_name}: expected `name = [start_s, end_s]` per pose"))
         .map_err(bad_input)?;
     if table.is_empty() {
@@ -54,7 +55,20 @@ pub fn parse_marks(text: &str, source_name: &str) -> anyhow::Result<Vec<(String,
     }
     table
         .into_iter()
-        .map(|(name, [a, b])| {
+        .map(|(name, range)| {
+            if !mouthpiece_lipsync::input::valid_name(&name) {
+                return Err(bad_input(anyhow::anyhow!(
+                    "{source_name}: pose name {} must be {} (it becomes a column and a key)",
+                    mouthpiece_lipsync::input::cut(&name),
+                    mouthpiece_lipsync::input::NAME_RULE
+                )));
+            }
+            let &[a, b] = range.as_slice() else {
+                return Err(bad_input(anyhow::anyhow!(
+                    "{source_name}: {name}: expected [start_s, end_s], got {} values",
+                    range.len()
+                )));
+            };
             let day = mouthpiece_lipsync::phones::MAX_TIME;
             if !(a.is_finite() && b.is_finite() && 0.0 <= a && a < b && b <= day) {
                 return Err(bad_input(anyhow::anyhow!(
@@ -173,4 +187,39 @@ pub fn run(args: PosesArgs) -> anyhow::Result<()> {
     f.commit()
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn marks_are_two_times_under_a_plain_name() {
+        let marks = parse_marks("open = [1.0, 2.5]\nclosed = [3, 4]\n", "m.toml").unwrap();
+        assert_eq!(
+            marks,
+            [
+                ("closed".to_owned(), 3.0, 4.0),
+                ("open".to_owned(), 1.0, 2.5)
+            ]
+        );
+        for (text, says) in [
+            (
+                "open = [1.0, 2.0, 3.0]\n",
+                "open: expected [start_s, end_s], got 3 values",
+            ),
+            ("open = [1.0]\n", "got 1 values"),
+            ("\"a,b\" = [1.0, 2.0]\n", "pose name a,b must be"),
+            ("\"a.b\" = [1.0, 2.0]\n", "pose name a.b must be"),
+            (
+                "\"a\\u001b[2J\" = [1.0, 2.0]\n",
+                "pose name a\\u{1b}[2J must be",
+            ),
+        ] {
+            let err = format!("{:#}", parse_marks(text, "m.toml").unwrap_err());
+            assert!(err.starts_with("m.toml: "), "{err}");
+            assert!(err.contains(says), "{text}: {err}");
+            assert!(!err.contains('\u{1b}'), "{err:?}");
+        }
+    }
 }

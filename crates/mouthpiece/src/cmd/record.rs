@@ -59,6 +59,9 @@ fn open_audio(args: &Args) -> anyhow::Result<Option<Box<dyn mouthpiece_frame::Au
             args.audio_channels
         )));
     }
+    // The string reaches alsa-lib, whose `file` plugin can write a file or run a command.
+    mouthpiece_config::check_alsa_device(device, false)
+        .map_err(|e| bad_input(anyhow::anyhow!("--audio: {e}")))?;
     let request = mouthpiece_capture::alsa::AlsaRequest {
         device: device.clone(),
         sample_rate: args.audio_rate,

@@ -8,6 +8,7 @@ use anyhow::Context as _;
 use mouthpiece_config::Config;
 use mouthpiece_nats::store::{partial_path, TakeRecord, TakeStore};
 use mouthpiece_nats::NatsSettings;
+use mouthpiece_output::shown;
 
 use crate::exit::bad_input;
 
@@ -121,16 +122,19 @@ async fn list(store: &TakeStore, booth: Option<&str>, json: bool) -> anyhow::Res
     }
     println!("booth\tslate\ttake\ttimecode\tseconds\tframes\tcharacters\tobject");
     for r in &records {
+        // Every text comes from the store: escaped, so that a tab, a newline or an escape
+        // sequence cannot forge a column, a row or the terminal's state.
+        let characters: Vec<_> = r.characters.iter().map(|c| shown(c)).collect();
         println!(
             "{}\t{}\t{}\t{}\t{:.2}\t{}\t{}\t{}",
-            r.booth,
-            r.slate,
+            shown(&r.booth),
+            shown(&r.slate),
             r.take,
-            r.timecode,
+            shown(&r.timecode),
             r.duration_s,
             r.frames,
-            r.characters.join(","),
-            r.object
+            characters.join(","),
+            shown(&r.object)
         );
     }
     eprintln!("{} takes", records.len());
@@ -166,7 +170,11 @@ async fn fetch(store: &TakeStore, objects: &[String], out: &std::path::Path) -> 
         targets.push((object, path));
     }
     for (object, path) in targets {
-        let bytes = store.fetch(object, &path).await?;
+        let bytes = store.fetch(object, &path).await.map_err(|e| match e {
+            // The store's contents are at fault, not the network: bad input.
+            e @ mouthpiece_nats::NatsError::Untrusted { .. } => bad_input(e),
+            e => e.into(),
+        })?;
         println!("{} ({bytes} bytes)", path.display());
     }
     Ok(())

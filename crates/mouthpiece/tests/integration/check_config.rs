@@ -187,3 +187,48 @@ fn a_bad_ifacialmocap_section_exits_2_naming_the_key() {
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("ifacialmocap 0.0.0.0:49983"), "{stdout}");
 }
+
+/// A character's name in a table key (`[characters.settings."…"]`, `[osc.characters]`) is
+/// shown quoted and escaped, with its line: no escape sequence or newline reaches the
+/// terminal, and a name with a dot or a bracket still finds its line.
+#[test]
+fn names_in_keys_are_escaped_and_keep_their_line() {
+    let (code, _, stderr) = check(
+        "[characters]\nfiles = [\"/nonexistent-dir/wolf.toml\"]\n\n[characters.settings.\"w.v2\\u001b[2J\"]\nspeech_hold_ms = 99999999\n",
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(!stderr.contains('\u{1b}'), "{stderr:?}");
+    assert!(
+        stderr.contains(
+            "mouthpiece.toml:5:1: key `characters.settings.\"w.v2\\u001B[2J\".speech_hold_ms`"
+        ),
+        "{stderr}"
+    );
+    let (code, _, stderr) = check("[osc.characters]\n\"h\\nforged[0]\" = [\n  \"127.0.0.1\"]\n");
+    assert_eq!(code, 2, "{stderr}");
+    assert_eq!(
+        stderr.lines().filter(|l| l.contains("key `")).count(),
+        1,
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("mouthpiece.toml:3:3: key `osc.characters.\"h\\nforged[0]\"[0]`"),
+        "{stderr}"
+    );
+}
+
+/// A `[characters.settings]` name that no character has: the error names its line.
+#[test]
+fn settings_for_an_unknown_character_name_their_line() {
+    let (code, _, stderr) = check(concat!(
+        "[characters]\nfiles = [\"",
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/characters/wolf.toml\"]\n\n[characters.settings.\"wolf.v2\"]\nspeech = \"fallback\"\n"
+    ));
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("mouthpiece.toml:4:") && stderr.contains("characters.settings.\"wolf.v2\""),
+        "{stderr}"
+    );
+    assert!(stderr.contains("no configured character"), "{stderr}");
+}

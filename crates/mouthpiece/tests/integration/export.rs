@@ -406,6 +406,9 @@ fn bad_input_is_exit_2_naming_the_line() {
     let good = dir.path().join("good.jsonl");
     write_take(&good, 5, 12);
     let g = good.to_str().unwrap();
+    // The take is named with the character it was made for.
+    let mismatch =
+        format!("{g}: the take was made for character `human`, the character file is `wolf`");
     // Every line's curve empty (a `process` take that never took the neutral pose).
     let shapeless = dir.path().join("shapeless.jsonl");
     let text = std::fs::read_to_string(&good).unwrap().replace(
@@ -446,7 +449,7 @@ fn bad_input_is_exit_2_naming_the_line() {
         ),
         (
             vec![g, "--out", "x.glb", "--character", wolf.as_str()],
-            "made for character `human`, the character file is `wolf`",
+            mismatch.as_str(),
         ),
         (
             vec![g, "--out", "x.csv", "--curve"],

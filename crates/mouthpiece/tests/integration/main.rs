@@ -43,4 +43,5 @@ mod retarget_cli;
 mod speech_booth;
 mod synth_cli;
 mod systemd_unit;
+mod takes_hostile;
 mod tune_colours;

@@ -24,6 +24,40 @@ fn wait_until(what: &str, mut check: impl FnMut() -> bool) {
     }
 }
 
+/// A device string that would make alsa-lib run a command or write a file is refused before
+/// alsa-lib sees it.
+#[test]
+fn a_device_string_with_a_pipe_or_the_file_plugin_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s.mcap");
+    let ran = dir.path().join("ran");
+    let written = dir.path().join("written.raw");
+    let demo = repo().join("recordings/demo.mcap");
+    for device in [
+        format!("file:'|touch {}'", ran.display()),
+        format!("file:FILE={},raw", written.display()),
+    ] {
+        let run = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+            .args(["record", "--source"])
+            .arg(format!("replay:{}", demo.display()))
+            .arg("--out")
+            .arg(&out)
+            .args(["--audio", &device])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains("--audio") && stderr.contains("refused"),
+            "{stderr}"
+        );
+        assert!(
+            !ran.exists() && !written.exists() && !out.exists(),
+            "{stderr}"
+        );
+    }
+}
+
 #[test]
 fn a_device_that_cannot_be_opened_is_named_and_nothing_is_written() {
     let dir = tempfile::tempdir().unwrap();

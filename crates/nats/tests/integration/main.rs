@@ -9,5 +9,6 @@ mod helper_harness;
 mod helper_harness_take;
 
 mod cluster;
+mod fetch_trust;
 mod link;
 mod takes;
