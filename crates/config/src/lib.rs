@@ -31,8 +31,8 @@ use serde::de::DeserializeOwned;
 use serde::Deserialize;
 
 mod audio;
-mod livelink;
 mod ifacialmocap;
+mod livelink;
 mod locate;
 mod nats;
 mod sections;
@@ -40,8 +40,8 @@ mod text;
 mod tokens;
 
 pub use audio::*;
-pub use livelink::*;
 pub use ifacialmocap::IfacialmocapConfig;
+pub use livelink::*;
 pub(crate) use locate::{invalid, key_location, line_col, span_of_key, state_directory};
 pub use locate::{key_segment, read_bounded, MAX_CONFIG_FILE_BYTES, MAX_TOKEN_FILE_BYTES};
 pub use nats::{subject_safe, NatsConfig, NatsSecrets, MAX_NATS_QUEUE_FRAMES, MAX_NATS_SERVERS};
@@ -692,9 +692,9 @@ fn read_token(
 
 #[cfg(test)]
 mod tests;
+mod tests_ifacialmocap;
 #[cfg(test)]
 mod tests_livelink;
-mod tests_ifacialmocap;
 #[cfg(test)]
 mod tests_nats;
 #[cfg(test)]
