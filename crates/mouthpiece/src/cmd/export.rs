@@ -229,16 +229,21 @@ fn export_animation(args: Args) -> anyhow::Result<()> {
         }
         Format::LivelinkCsv => {
             let (start_us, rate) = clock.unwrap_or((0, TimecodeRate::Fps30));
+            // A daemon's take as recorded: each row at the timecode its step went out with.
+            let recorded = recorded_labels(&args, &rig)?;
             let mut writer = LiveLinkCsvWriter::create(&rig, &args.out)
                 .map_err(export_error)?
                 .named(source_name);
             let mut t0 = None;
+            let mut row = 0;
             while let Some(frame) = frames.next()? {
                 let t0 = *t0.get_or_insert(frame.t);
-                let us = start_us + ((frame.t - t0) * 1e6).round() as i64;
-                writer
-                    .push(&frame, &row_timecode(us, rate))
-                    .map_err(export_error)?;
+                let timecode = match recorded.get(row) {
+                    Some(label) => livelink_timecode(label, 0.0),
+                    None => row_timecode(start_us + ((frame.t - t0) * 1e6).round() as i64, rate),
+                };
+                writer.push(&frame, &timecode).map_err(export_error)?;
+                row += 1;
             }
             progress.set_message("finishing");
             let summary = writer.finish().map_err(export_error)?;
@@ -419,6 +424,22 @@ pub(crate) struct TakeInput {
     pub(crate) name: String,
     pub(crate) reader: Box<dyn BufRead>,
     pub(crate) len: Option<u64>,
+}
+
+/// The timecode labels of a daemon's take read as recorded (empty for anything else: its rows
+/// are placed on the take's clock instead).
+fn recorded_labels(args: &Args, rig: &MouthRig) -> anyhow::Result<Vec<String>> {
+    let is_mcap = args
+        .input
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    if !is_mcap || args.reprocess || !crate::cmd::recorded_take::is_daemon_take(&args.input)? {
+        return Ok(Vec::new());
+    }
+    match rig.character() {
+        Some(name) => crate::cmd::recorded_take::timecodes(&args.input, name),
+        None => Ok(Vec::new()),
+    }
 }
 
 /// A Live Link CSV row's timecode at `unix_us` (time of day, UTC, as the takes' timecode):

@@ -147,3 +147,55 @@ pub fn write_lines(path: &Path, character: &str, out: &mut dyn Write) -> anyhow:
     }
     Ok(lines)
 }
+
+/// The timecode label each recorded step of `character` was published with (the studio's LTC
+/// when the booth followed one), in the order of [`write_lines`]' lines. A label that is not
+/// `HH:MM:SS:FF` (`;` before the frames for drop-frame) is bad input naming the message.
+pub fn timecodes(path: &Path, character: &str) -> anyhow::Result<Vec<String>> {
+    let mut reader = MessageReader::open(path)
+        .with_context(|| format!("cannot open session {}", path.display()))
+        .map_err(bad_input)?;
+    let topic = format!("/character/{character}");
+    let mut labels = Vec::new();
+    while let Some(m) = reader.next_message().map_err(recording_error)? {
+        if *m.topic != *topic || m.data.len() > MAX_MESSAGE {
+            continue;
+        }
+        let message: Value = serde_json::from_slice(&m.data)
+            .with_context(|| format!("{}: {topic} at log time {} ns: not JSON", path.display(), m.log_time))
+            .map_err(bad_input)?;
+        let label = message["timecode"].as_str().unwrap_or_default();
+        if !is_timecode_label(label) {
+            return Err(bad_input(anyhow!(
+                "{}: {topic} at log time {} ns: timecode {} is not HH:MM:SS:FF",
+                path.display(),
+                m.log_time,
+                mouthpiece_output::shown(label)
+            )));
+        }
+        labels.push(label.to_owned());
+    }
+    Ok(labels)
+}
+
+/// `HH:MM:SS:FF`, or `HH:MM:SS;FF` (drop-frame), digits only.
+fn is_timecode_label(label: &str) -> bool {
+    let b = label.as_bytes();
+    b.len() == 11
+        && [2, 5].iter().all(|&i| b[i] == b':')
+        && (b[8] == b':' || b[8] == b';')
+        && [0, 1, 3, 4, 6, 7, 9, 10].iter().all(|&i| b[i].is_ascii_digit())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn timecode_labels_are_checked() {
+        for good in ["10:00:00:00", "23:59:59;29"] {
+            assert!(super::is_timecode_label(good), "{good}");
+        }
+        for bad in ["", "10:00:00", "10:00:00:0x", "10:00:00:00,1", "1\n:00:00:00"] {
+            assert!(!super::is_timecode_label(bad), "{bad}");
+        }
+    }
+}
