@@ -692,6 +692,7 @@ fn read_token(
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
 mod tests_ifacialmocap;
 #[cfg(test)]
 mod tests_livelink;
