@@ -1679,3 +1679,108 @@ async fn the_daemons_messages_match_the_published_schemas() {
         String::from_utf8_lossy(&checked.stderr)
     );
 }
+
+/// The 27 rig curves of a datagram from `[ifacialmocap]`, decoded from the published layout
+/// (`name-value|…|=head#…`, `_L`/`_R` the side suffixes), as ARKit-named integers 0–100.
+fn ifm_curves(text: &str) -> Vec<i64> {
+    let (shapes, transforms) = text.split_once('=').expect("one '='");
+    assert!(
+        transforms.starts_with("head#") && text.ends_with('|'),
+        "{text}"
+    );
+    let mut by_name = std::collections::HashMap::new();
+    for field in shapes.split('|').filter(|f| !f.is_empty()) {
+        let (name, value) = field.split_once('-').expect(field);
+        let name = match (name.strip_suffix("_L"), name.strip_suffix("_R")) {
+            (Some(stem), _) => format!("{stem}Left"),
+            (_, Some(stem)) => format!("{stem}Right"),
+            _ => name.to_owned(),
+        };
+        by_name.insert(name, value.parse::<i64>().expect(field));
+    }
+    assert_eq!(by_name.len(), 52, "{text}");
+    mouthpiece_output::CURVE_NAMES
+        .iter()
+        .map(|n| by_name[*n])
+        .collect()
+}
+
+/// `[ifacialmocap]` in the daemon: a receiver that sends the handshake gets the wolf's face,
+/// and every datagram's 27 rig curves (×100, rounded) are a frame the WebSocket streamed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ifacialmocap_streams_the_streamed_rig_to_a_receiver_that_asks() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
+    let ifm_port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let daemon = Daemon::start(
+        &format!("replay:{}?loop=1", demo.display()),
+        &format!(
+            "[ifacialmocap]\nenabled = true\nport = {ifm_port}\nreply_port = 0\ncharacter = \"wolf\"\n"
+        ),
+        &[],
+        &[],
+    );
+    let mut ws = daemon.connect().await;
+    send(
+        &mut ws,
+        json!({"type": "subscribe", "fields": ["rig"], "characters": ["wolf"]}),
+    )
+    .await;
+    wait_for(&mut ws, Duration::from_secs(20), |v| {
+        v["type"] == "frame" && v["characters"][0]["rig"].is_object()
+    })
+    .await;
+    let peer = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    peer.set_read_timeout(Some(Duration::from_millis(20)))
+        .unwrap();
+    peer.send_to(b"not a handshake", ("127.0.0.1", ifm_port))
+        .unwrap();
+    peer.send_to(
+        b"iFacialMocap_sahuasouryya9218sauhuiayeta91555dy3719",
+        ("127.0.0.1", ifm_port),
+    )
+    .unwrap();
+    let mut streamed = std::collections::HashSet::new();
+    let mut datagrams = Vec::new();
+    let started = Instant::now();
+    let mut buf = [0u8; 4096];
+    while started.elapsed() < Duration::from_secs(3) {
+        let f = wait_for(&mut ws, Duration::from_secs(5), |v| v["type"] == "frame").await;
+        if let Some(curves) = f["characters"][0]["rig"]["curves"].as_object() {
+            let row: Vec<i64> = mouthpiece_output::CURVE_NAMES
+                .iter()
+                .map(|n| {
+                    let v = curves[*n].as_f64().unwrap() as f32;
+                    (v.clamp(0.0, 1.0) * 100.0).round() as i64
+                })
+                .collect();
+            streamed.insert(row);
+        }
+        while let Ok((n, _)) = peer.recv_from(&mut buf) {
+            datagrams.push(String::from_utf8(buf[..n].to_vec()).unwrap());
+        }
+    }
+    // Frames published after the last WebSocket frame read are not compared.
+    let received = datagrams.len();
+    assert!(
+        received >= 30,
+        "{received} datagrams in 3 s\n{}",
+        daemon.log()
+    );
+    let matched = datagrams
+        .iter()
+        .filter(|d| streamed.contains(&ifm_curves(d)))
+        .count();
+    assert!(
+        matched * 10 >= received * 9,
+        "{matched} of {received} datagrams match a streamed frame"
+    );
+    assert!(
+        datagrams.iter().any(|d| ifm_curves(d)[0] > 0),
+        "jawOpen never above 0"
+    );
+}
