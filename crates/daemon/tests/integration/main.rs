@@ -5,7 +5,7 @@
 #[allow(dead_code, unused_imports)]
 mod helper_speech_cover_mouth;
 #[path = "../../../../tests/speech/festival.rs"]
-#[allow(dead_code, unused_imports)]
+#[allow(unused_imports)]
 mod helper_speech_festival;
 
 mod hardening;

@@ -2,7 +2,7 @@
 //! (each test binary links the whole dependency tree: one binary builds and links once).
 
 #[path = "../festival/mod.rs"]
-#[allow(dead_code, unused_imports)]
+#[allow(unused_imports)]
 mod helper_festival;
 
 mod continuity;

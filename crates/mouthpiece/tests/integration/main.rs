@@ -2,19 +2,19 @@
 //! (each test binary links the whole dependency tree: one binary builds and links once).
 
 #[path = "../../../../tests/alsa/booth.rs"]
-#[allow(dead_code, unused_imports)]
+#[allow(unused_imports)]
 mod helper_alsa_booth;
 #[path = "../../../../tests/alsa/read_back.rs"]
-#[allow(dead_code, unused_imports)]
+#[allow(unused_imports)]
 mod helper_alsa_read_back;
 #[path = "../../../../tests/daemon/run.rs"]
-#[allow(dead_code, unused_imports)]
+#[allow(unused_imports)]
 mod helper_daemon_run;
 #[path = "../../../lipsync/tests/festival/mod.rs"]
-#[allow(dead_code, unused_imports)]
+#[allow(unused_imports)]
 mod helper_festival;
 #[path = "../../../nats/tests/harness/mod.rs"]
-#[allow(dead_code, unused_imports)]
+#[allow(unused_imports)]
 mod helper_harness;
 #[path = "../../../../tests/speech/cover_mouth.rs"]
 #[allow(dead_code, unused_imports)]

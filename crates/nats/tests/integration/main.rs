@@ -2,7 +2,7 @@
 //! (each test binary links the whole dependency tree: one binary builds and links once).
 
 #[path = "../harness/mod.rs"]
-#[allow(dead_code, unused_imports)]
+#[allow(unused_imports)]
 mod helper_harness;
 #[path = "../harness/take.rs"]
 #[allow(dead_code, unused_imports)]
