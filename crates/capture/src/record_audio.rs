@@ -11,7 +11,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use std::time::SystemTime;
+use std::time::{Duration, Instant, SystemTime};
 
 use crossbeam_channel::{Receiver, Sender};
 use mouthpiece_frame::{AudioBlock, AudioSource, AudioSourceInfo};
@@ -101,19 +101,38 @@ impl Drop for AudioRecorder {
     }
 }
 
+/// How far the sound may run ahead of the wall clock (a device's buffer filled at the start
+/// comes at once) before the device counts as broken: one that never blocks (ALSA's `null`)
+/// would otherwise fill the session with silence as fast as the disk takes it.
+const MAX_AHEAD: Duration = Duration::from_secs(2);
+
 /// The thread: blocks out, stamped on the wall clock, until stopped or the source fails.
 fn read(source: &mut dyn AudioSource, tx: &Sender<Event>, stop: &AtomicBool) {
     let mut last_wall = None;
+    let started = Instant::now();
+    let mut delivered = Duration::ZERO;
     while !stop.load(Ordering::Acquire) {
         let reason = match source.next_block() {
             Ok(Some(mut block)) => {
-                let wall = SystemTime::now() - block.first_sample_at().elapsed();
-                block.wall_clock = Some(wall);
-                last_wall = Some(wall + block.format.duration_of(block.frames()));
-                if tx.send(Event::Block(block)).is_err() {
-                    return;
+                let length = block.format.duration_of(block.frames());
+                delivered += length;
+                let elapsed = started.elapsed();
+                if delivered > elapsed + MAX_AHEAD {
+                    format!(
+                        "the device delivers sound faster than real time ({:.1} s of sound in \
+                         {:.1} s)",
+                        delivered.as_secs_f64(),
+                        elapsed.as_secs_f64()
+                    )
+                } else {
+                    let wall = SystemTime::now() - block.first_sample_at().elapsed();
+                    block.wall_clock = Some(wall);
+                    last_wall = Some(wall + length);
+                    if tx.send(Event::Block(block)).is_err() {
+                        return;
+                    }
+                    continue;
                 }
-                continue;
             }
             Ok(None) => "the audio source ended".to_owned(),
             Err(err) => {

@@ -181,7 +181,8 @@ fn a_recording_holds_the_booths_sound_bit_exact_and_where_it_stopped() {
 }
 
 /// ALSA's `null` device never blocks: it refills the sound queue as fast as the recording
-/// empties it. `--seconds` still ends the recording, with a session holding frames and sound.
+/// empties it. `--seconds` still ends the recording, with a session holding frames and sound,
+/// and the sound is given up (the video goes on) once it runs seconds ahead of the clock.
 #[test]
 fn seconds_end_the_recording_whatever_the_sound_device_does() {
     let dir = tempfile::tempdir().unwrap();
@@ -207,6 +208,8 @@ fn seconds_end_the_recording_whatever_the_sound_device_does() {
     });
     let stderr = std::fs::read_to_string(&log).unwrap_or_default();
     assert!(ended.unwrap().success(), "{stderr}");
+    // The device is given up once it runs seconds ahead of the clock: the session says so.
+    assert!(stderr.contains("faster than real time"), "{stderr}");
     let summary = Command::new(python())
         .arg("-c")
         .arg(
