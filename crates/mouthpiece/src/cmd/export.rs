@@ -560,8 +560,7 @@ pub(crate) fn recording_as_take(
             path.display()
         )));
     }
-    let name;
-    if is_take && !reprocess {
+    let name = if is_take && !reprocess {
         let character = crate::cmd::process::load_character(character)?.name;
         let mut out = BufWriter::new(&mut file);
         let steps = recorded_take::write_lines(path, &character, &mut out)?;
@@ -572,7 +571,7 @@ pub(crate) fn recording_as_take(
             path.display(),
             mouthpiece_output::shown(&character)
         );
-        name = format!("{} (as recorded)", path.display());
+        format!("{} (as recorded)", path.display())
     } else {
         if !is_take && reprocess {
             eprintln!(
@@ -604,8 +603,8 @@ pub(crate) fn recording_as_take(
                 None => "never taken (no still, closed mouth with every dot seen)".to_owned(),
             }
         );
-        name = format!("{} (processed)", path.display());
-    }
+        format!("{} (processed)", path.display())
+    };
     file.seek(SeekFrom::Start(0))
         .context("cannot read back the temporary take")?;
     let len = file.metadata().ok().map(|m| m.len());
