@@ -212,7 +212,11 @@ fn the_studios_ltc_through_real_alsa_stamps_the_frames() {
             .unwrap_or_else(|| panic!("decoded {} was never encoded", d.label));
         // The last frame before the noise ends where the noise's first edge lets libltc see
         // it: within 1 ms; every other within 2 samples.
-        let allowed = if found.2 + 1 == timeline.noise.0 { 48 } else { 2 };
+        let allowed = if found.2 + 1 == timeline.noise.0 {
+            48
+        } else {
+            2
+        };
         worst = worst.max(d.end_sample.abs_diff(found.2));
         assert!(
             d.end_sample.abs_diff(found.2) <= allowed,
