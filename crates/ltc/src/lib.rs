@@ -85,7 +85,10 @@ impl Label {
             return false;
         }
         // Drop-frame skips labels 0 and 1 at the start of every minute but every tenth.
-        !(rate.drop_frame && self.seconds == 0 && self.frames < 2 && !self.minutes.is_multiple_of(10))
+        !(rate.drop_frame
+            && self.seconds == 0
+            && self.frames < 2
+            && !self.minutes.is_multiple_of(10))
     }
 }
 

@@ -38,7 +38,7 @@ fn next(l: Label, rate: LtcRate) -> Label {
             }
         }
     }
-    if rate.drop_frame && n.seconds == 0 && n.frames < 2 && n.minutes % 10 != 0 {
+    if rate.drop_frame && n.seconds == 0 && n.frames < 2 && !n.minutes.is_multiple_of(10) {
         n.frames = 2;
     }
     n

@@ -237,7 +237,7 @@ impl Timecode {
         if h >= 24 || m >= 60 || s >= 60 || f >= nominal {
             return None;
         }
-        if drop > 0 && s == 0 && f < drop && m % 10 != 0 {
+        if drop > 0 && s == 0 && f < drop && !m.is_multiple_of(10) {
             return None;
         }
         let minutes = h * 60 + m;
