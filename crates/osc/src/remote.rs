@@ -58,10 +58,10 @@ pub const ANSWER_LIMIT: Duration = Duration::from_secs(30);
 const MAX_DATAGRAM: usize = 4096;
 
 /// Argument type tags taken: strings, 32-bit integers and floats, and their 64-bit kinds.
-const TYPE_TAGS: &[u8] = b"sifdh";
+pub const TYPE_TAGS: &[u8] = b"sifdh";
 
 /// Most arguments in one command (the app's take at most two).
-const MAX_ARGS: usize = 8;
+pub const MAX_ARGS: usize = 8;
 
 /// What the remote control counted (the daemon's status line shows them).
 #[derive(Debug, Default)]
