@@ -162,7 +162,13 @@ pub fn timecodes(path: &Path, character: &str) -> anyhow::Result<Vec<String>> {
             continue;
         }
         let message: Value = serde_json::from_slice(&m.data)
-            .with_context(|| format!("{}: {topic} at log time {} ns: not JSON", path.display(), m.log_time))
+            .with_context(|| {
+                format!(
+                    "{}: {topic} at log time {} ns: not JSON",
+                    path.display(),
+                    m.log_time
+                )
+            })
             .map_err(bad_input)?;
         let label = message["timecode"].as_str().unwrap_or_default();
         if !is_timecode_label(label) {
@@ -184,7 +190,9 @@ fn is_timecode_label(label: &str) -> bool {
     b.len() == 11
         && [2, 5].iter().all(|&i| b[i] == b':')
         && (b[8] == b':' || b[8] == b';')
-        && [0, 1, 3, 4, 6, 7, 9, 10].iter().all(|&i| b[i].is_ascii_digit())
+        && [0, 1, 3, 4, 6, 7, 9, 10]
+            .iter()
+            .all(|&i| b[i].is_ascii_digit())
 }
 
 #[cfg(test)]
@@ -194,7 +202,13 @@ mod tests {
         for good in ["10:00:00:00", "23:59:59;29"] {
             assert!(super::is_timecode_label(good), "{good}");
         }
-        for bad in ["", "10:00:00", "10:00:00:0x", "10:00:00:00,1", "1\n:00:00:00"] {
+        for bad in [
+            "",
+            "10:00:00",
+            "10:00:00:0x",
+            "10:00:00:00,1",
+            "1\n:00:00:00",
+        ] {
             assert!(!super::is_timecode_label(bad), "{bad}");
         }
     }
