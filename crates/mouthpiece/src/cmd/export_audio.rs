@@ -51,7 +51,14 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
     let (mut first_frame, mut last_frame, mut frames) = (None, 0u64, 0u64);
     let mut steps: (Option<u64>, u64, u64) = (None, 0, 0);
     let mut step_topic: Option<String> = None;
+    // The timecode the first frame was published with (`/head` is stamped with every frame).
+    let mut first_label: Option<String> = None;
     while let Some(m) = messages.next_message().map_err(recording_error)? {
+        if first_label.is_none() && &*m.topic == "/head" && m.data.len() < 1 << 20 {
+            first_label = serde_json::from_slice::<serde_json::Value>(&m.data)
+                .ok()
+                .and_then(|v| v["timecode"].as_str().map(str::to_owned));
+        }
         if &*m.topic == TOPIC_COLOR {
             first_frame.get_or_insert(m.log_time);
             last_frame = last_frame.max(m.log_time);
@@ -121,11 +128,29 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
     let rate = meta("mouthpiece.take", "timecode_rate")
         .and_then(|r| TimecodeRate::ALL.into_iter().find(|t| t.name() == r))
         .unwrap_or_default();
-    let timecode = Timecode::from_unix_micros(start_us, rate);
+    let of_day = Timecode::from_unix_micros(start_us, rate);
     const DAY_US: u64 = 86_400 * 1_000_000;
     let us_of_day = (start / 1000) % DAY_US;
-    let time_reference =
-        (u128::from(us_of_day) * u128::from(format.sample_rate) / 1_000_000) as u64;
+    // The take's own timecode wins: when the booth followed the studio's LTC, the first frame
+    // went out with the LTC's label, not the time of day, and sample 0 is placed there (at
+    // the start of that frame). Otherwise the time of day, to the microsecond.
+    let recorded = first_label
+        .as_deref()
+        .and_then(parse_label)
+        .and_then(|tc| Some((tc, tc.to_frame_count(rate)?)))
+        .filter(|(tc, _)| tc.to_string() != of_day.to_string());
+    let (timecode, time_reference) = match recorded {
+        Some((tc, frame)) => {
+            let (num, den) = rate.fraction();
+            let samples = u128::from(frame) * u128::from(den) * u128::from(format.sample_rate)
+                / u128::from(num);
+            (tc, samples as u64)
+        }
+        None => (
+            of_day,
+            (u128::from(us_of_day) * u128::from(format.sample_rate) / 1_000_000) as u64,
+        ),
+    };
     let name = match (
         meta("mouthpiece.take", "slate"),
         meta("mouthpiece.take", "take"),
@@ -171,6 +196,22 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
 }
 
 /// `yyyy-mm-dd` and `hh-mm-ss` (UTC) of Unix microseconds.
+/// A timecode label `HH:MM:SS:FF` (`;` before the frames: drop-frame) as recorded in a take.
+fn parse_label(label: &str) -> Option<Timecode> {
+    let b = label.as_bytes();
+    if b.len() != 11 || b[2] != b':' || b[5] != b':' || !(b[8] == b':' || b[8] == b';') {
+        return None;
+    }
+    let field = |i: usize| -> Option<u8> { label.get(i..i + 2)?.parse().ok() };
+    Some(Timecode {
+        hours: field(0)?,
+        minutes: field(3)?,
+        seconds: field(6)?,
+        frames: field(9)?,
+        drop_frame: b[8] == b';',
+    })
+}
+
 fn utc_date_time(unix_us: i64) -> (String, String) {
     let secs = unix_us.div_euclid(1_000_000);
     let days = secs.div_euclid(86_400);
@@ -193,6 +234,16 @@ fn utc_date_time(unix_us: i64) -> (String, String) {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn recorded_labels_parse_and_junk_does_not() {
+        let tc = super::parse_label("10:20:30;04").unwrap();
+        assert_eq!((tc.hours, tc.minutes, tc.seconds, tc.frames), (10, 20, 30, 4));
+        assert!(tc.drop_frame);
+        for junk in ["", "10:20:30", "1x:20:30:04", "10-20-30-04", "10:20:30:04\n"] {
+            assert!(super::parse_label(junk).is_none(), "{junk:?}");
+        }
+    }
+
     #[test]
     fn dates_are_utc_civil_dates() {
         assert_eq!(
