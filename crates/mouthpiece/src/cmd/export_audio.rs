@@ -237,9 +237,18 @@ mod tests {
     #[test]
     fn recorded_labels_parse_and_junk_does_not() {
         let tc = super::parse_label("10:20:30;04").unwrap();
-        assert_eq!((tc.hours, tc.minutes, tc.seconds, tc.frames), (10, 20, 30, 4));
+        assert_eq!(
+            (tc.hours, tc.minutes, tc.seconds, tc.frames),
+            (10, 20, 30, 4)
+        );
         assert!(tc.drop_frame);
-        for junk in ["", "10:20:30", "1x:20:30:04", "10-20-30-04", "10:20:30:04\n"] {
+        for junk in [
+            "",
+            "10:20:30",
+            "1x:20:30:04",
+            "10-20-30-04",
+            "10:20:30:04\n",
+        ] {
             assert!(super::parse_label(junk).is_none(), "{junk:?}");
         }
     }

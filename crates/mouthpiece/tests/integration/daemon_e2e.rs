@@ -197,6 +197,11 @@ impl Daemon {
     }
 
     async fn connect(&self) -> Client {
+        self.connect_with(json!({"type": "subscribe"})).await
+    }
+
+    /// Connects and sends `subscribe` (a `subscribe` message, with its fields).
+    async fn connect_with(&self, subscribe: Value) -> Client {
         let mut request = format!("ws://127.0.0.1:{}/", self.port)
             .into_client_request()
             .unwrap();
@@ -205,7 +210,7 @@ impl Daemon {
             HeaderValue::from_static("mouthpiece.v1"),
         );
         let (mut ws, _) = tokio_tungstenite::connect_async(request).await.unwrap();
-        send(&mut ws, json!({"type": "subscribe"})).await;
+        send(&mut ws, subscribe).await;
         ws
     }
 }
@@ -1413,15 +1418,7 @@ async fn a_take_exported_keeps_the_look_at_turn_made_live() {
     assert_eq!(files.len(), 1, "{files:?}\n{}", daemon.log());
 
     let csv = daemon.dir.path().join("take.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-        .arg("export")
-        .arg(&files[0])
-        .arg("--character")
-        .arg(repo.join("config/characters/wolf.toml"))
-        .arg("--out")
-        .arg(&csv)
-        .output()
-        .unwrap();
+    let out = export_wolf(&files[0], &csv);
     assert!(
         out.status.success(),
         "{}",
@@ -1454,6 +1451,20 @@ async fn a_take_exported_keeps_the_look_at_turn_made_live() {
     assert!(turn > 10.0, "the exported head turned only {turn:.2}°");
 }
 
+/// `mouthpiece export TAKE --character wolf --out OUT`.
+fn export_wolf(take: &Path, out: &Path) -> std::process::Output {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        .arg("export")
+        .arg(take)
+        .arg("--character")
+        .arg(repo.join("config/characters/wolf.toml"))
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
 /// What was live is what is kept: a take's export is, frame for frame, what a WebSocket
 /// subscriber received while it was recorded: every mouth point and every rig curve the same
 /// 32-bit float, with no frame re-tracked (a re-run of the tracker recalibrates and differs).
@@ -1462,15 +1473,9 @@ async fn a_takes_export_is_what_subscribers_received_live() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
     let mut daemon = Daemon::start(&format!("replay:{}?loop=1", demo.display()), "", &[], &[]);
-    let mut request = format!("ws://127.0.0.1:{}/", daemon.port)
-        .into_client_request()
-        .unwrap();
-    request.headers_mut().insert(
-        "Sec-WebSocket-Protocol",
-        HeaderValue::from_static("mouthpiece.v1"),
-    );
-    let (mut ws, _) = tokio_tungstenite::connect_async(request).await.unwrap();
-    send(&mut ws, json!({"type": "subscribe", "fields": ["rig"]})).await;
+    let mut ws = daemon
+        .connect_with(json!({"type": "subscribe", "fields": ["rig"]}))
+        .await;
     let wolf = |v: &Value| -> Option<Value> {
         v["characters"]
             .as_array()?
@@ -1529,15 +1534,7 @@ async fn a_takes_export_is_what_subscribers_received_live() {
     assert_eq!(files.len(), 1, "{files:?}\n{}", daemon.log());
 
     let csv = daemon.dir.path().join("take.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-        .arg("export")
-        .arg(&files[0])
-        .arg("--character")
-        .arg(repo.join("config/characters/wolf.toml"))
-        .arg("--out")
-        .arg(&csv)
-        .output()
-        .unwrap();
+    let out = export_wolf(&files[0], &csv);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("as recorded live"), "{stderr}");
@@ -1621,19 +1618,11 @@ async fn the_daemons_messages_match_the_published_schemas() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
     let daemon = Daemon::start(&format!("replay:{}?loop=1", demo.display()), "", &[], &[]);
-    let mut request = format!("ws://127.0.0.1:{}/", daemon.port)
-        .into_client_request()
-        .unwrap();
-    request.headers_mut().insert(
-        "Sec-WebSocket-Protocol",
-        HeaderValue::from_static("mouthpiece.v1"),
-    );
-    let (mut ws, _) = tokio_tungstenite::connect_async(request).await.unwrap();
-    send(
-        &mut ws,
-        json!({"type": "subscribe", "fields": ["rig", "curve", "performer", "health"]}),
-    )
-    .await;
+    let mut ws = daemon
+        .connect_with(
+            json!({"type": "subscribe", "fields": ["rig", "curve", "performer", "health"]}),
+        )
+        .await;
     let mut messages = Vec::new();
     let mut frames_with_rig = 0;
     let deadline = Instant::now() + Duration::from_secs(60);
