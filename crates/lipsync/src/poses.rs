@@ -331,7 +331,9 @@ mod tests {
             // refused by the rule, shown escaped.
             p.poses[0].name = name.to_string();
             let text = p.to_toml_string("");
-            let err = BasicPoses::from_toml_str(&text, "p.toml").unwrap_err().to_string();
+            let err = BasicPoses::from_toml_str(&text, "p.toml")
+                .unwrap_err()
+                .to_string();
             assert!(err.starts_with("p.toml: pose[0] ("), "{err}");
             assert!(err.contains(crate::input::NAME_RULE), "{err}");
             assert!(!err.contains(['\n', '\r', '\u{7f}']), "{err:?}");
