@@ -15,7 +15,7 @@ use std::path::{Component, Path, PathBuf};
 pub const SHOWN_CHARS: usize = 80;
 
 /// `text` cut to [`SHOWN_CHARS`] characters (with `…` when cut) and its control characters
-/// escaped ([`mouthpiece_output::shown`]), for messages and reports: a name from a file never
+/// escaped ([`mouthpiece_output::shown()`]), for messages and reports: a name from a file never
 /// reaches the terminal raw.
 pub fn shown(text: &str) -> String {
     let mut chars = text.chars();

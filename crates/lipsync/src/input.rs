@@ -8,7 +8,7 @@ use crate::Error;
 pub const QUOTE_CHARS: usize = 80;
 
 /// `s` cut to [`QUOTE_CHARS`] characters (an ellipsis marks the cut) with its control
-/// characters escaped ([`mouthpiece_output::shown`]): errors never echo megabytes of input,
+/// characters escaped ([`mouthpiece_output::shown()`]): errors never echo megabytes of input,
 /// nor an escape sequence or a newline to the terminal.
 pub fn cut(s: &str) -> String {
     match s.char_indices().nth(QUOTE_CHARS) {

@@ -681,20 +681,21 @@ item []:
     }
 
     #[test]
-    fn times_past_a_day_are_refused_naming_the_line() {
+    fn times_past_the_limit_are_refused_naming_the_line() {
         // 1e300 samples used to reach the sampling as an endless timeline.
         for (text, format) in [
             ("0 100 sh\n100 1e300 iy\n", PhoneFormat::Timit),
             ("0 1000 sh\n1000 1e19 iy\n", PhoneFormat::Label),
             (
-                "{\"start\": 0, \"end\": 0.1, \"phone\": \"sh\"}\n{\"start\": 0.1, \"end\": 86400.5, \"phone\": \"iy\"}\n",
+                "{\"start\": 0, \"end\": 0.1, \"phone\": \"sh\"}\n{\"start\": 0.1, \"end\": 600.5, \"phone\": \"iy\"}\n",
                 PhoneFormat::Jsonl,
             ),
         ] {
             let err = read(text, format, "long").unwrap_err();
             assert!(err.to_string().starts_with("long:2: phone \"iy\" ends at"), "{err}");
         }
-        assert!(read("0 100 sh\n100 1382400000 iy\n", PhoneFormat::Timit, "day").is_ok());
+        assert!(read("0 100 sh\n100 9600000 iy\n", PhoneFormat::Timit, "600 s").is_ok());
+        assert!(read("0 100 sh\n100 9600017 iy\n", PhoneFormat::Timit, "600 s").is_err());
     }
 
     #[test]

@@ -314,20 +314,29 @@ mod tests {
     }
 
     #[test]
-    fn hostile_pose_names_round_trip_and_the_file_always_parses() {
-        // A marks name may hold anything TOML keys can: it must stay one string.
+    fn hostile_names_never_break_the_file_and_pose_names_keep_to_the_rule() {
         for name in [
             "open\"\n[[pose]]\nname = \"x",
             "a]\n\n[[pose]]\nname = 'evil'\ndisplacement = []",
             "tab\there, back\\slash, \u{7f} and \r\n",
         ] {
+            // A mouth key may hold anything TOML keys can: it stays one string.
             let mut p = poses();
-            p.poses[0].name = name.to_string();
             p.poses[1].mouth.insert(format!("{name}]"), 0.5);
             let text = p.to_toml_string(&format!("captured from {name}"));
             let back = BasicPoses::from_toml_str(&text, "p.toml")
                 .unwrap_or_else(|e| panic!("{e:?}\n{text}"));
             assert_eq!(back, p, "{text}");
+            // A pose name becomes a column and a key: the file still parses, and the name is
+            // refused by the rule, shown escaped.
+            p.poses[0].name = name.to_string();
+            let text = p.to_toml_string("");
+            let err = BasicPoses::from_toml_str(&text, "p.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(err.starts_with("p.toml: pose[0] ("), "{err}");
+            assert!(err.contains(crate::input::NAME_RULE), "{err}");
+            assert!(!err.contains(['\n', '\r', '\u{7f}']), "{err:?}");
         }
     }
 }

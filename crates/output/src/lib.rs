@@ -10,7 +10,7 @@
 //! - [`frame`]: one published frame: the performer's head and dots and every character's
 //!   points, confidences, curve, rig and head;
 //! - [`slate`]: the one rule for naming a take;
-//! - [`shown`]: how a name from a file or the network is printed (control characters escaped);
+//! - [`shown`](mod@shown): how a name from a file or the network is printed (control characters escaped);
 //! - [`log`]: how the long-running outputs report trouble (error chains, throttled warnings).
 //!
 //! Plain data with serde; no I/O, no threads, no dependencies beyond serde, so the pure

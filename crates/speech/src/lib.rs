@@ -19,7 +19,7 @@ pub use decoder::{transcript_words, Decoder, ModelPaths, TimedPhone};
 pub use isolated::{decode, Task, MAX_WORDS_PER_SECOND};
 
 /// `s` cut to 80 characters (an ellipsis marks the cut) with its control characters
-/// escaped ([`mouthpiece_output::shown`]): errors never echo megabytes, nor an escape
+/// escaped ([`mouthpiece_output::shown()`]): errors never echo megabytes, nor an escape
 /// sequence.
 pub(crate) fn cut(s: &str) -> String {
     match s.char_indices().nth(80) {
