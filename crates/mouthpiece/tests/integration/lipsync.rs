@@ -231,14 +231,16 @@ fn bad_input_exits_2_naming_file_and_line_and_writes_nothing() {
 
 #[test]
 fn a_long_take_is_streamed_to_its_file_not_held_in_memory() {
-    // Ten minutes of phones at 60 fps: a 270 MB take. Held in memory (as it once was) it
-    // cannot be made under a 256 MB address-space limit; streamed it needs about 20 MB.
+    // Ten minutes of phones (just under the phone files' 600 s limit) at 60 fps: a 270 MB
+    // take. Held in memory (as it once was) it cannot be made under a 256 MB address-space
+    // limit; streamed it needs about 20 MB.
     let dir = tempfile::tempdir().unwrap();
     let phn = dir.path().join("long.phn");
     let names = ["sh", "iy", "aa", "m", "p", "s", "ow", "l"];
     let mut text = String::new();
     let (mut t, mut k) = (0u64, 0usize);
-    while t < 16_000 * 600 {
+    // The longest phone is 3199 samples: the last one ends before 600 s.
+    while t + 3200 <= 16_000 * 600 {
         let d = 800 + (k as u64 * 977) % 2400;
         text.push_str(&format!("{t} {} {}\n", t + d, names[k % names.len()]));
         t += d;
