@@ -25,7 +25,6 @@ mod helper_webdriver;
 
 mod audio_booth;
 mod bind;
-mod capture_cli;
 mod check_config;
 mod console_e2e;
 mod console_player;
@@ -37,7 +36,6 @@ mod lipsync;
 mod lipsync_learn;
 mod nats_e2e;
 mod oni_hostile;
-mod oni_session;
 mod record_audio;
 mod retarget_cli;
 mod speech_booth;
