@@ -162,6 +162,13 @@ async fn serve<F: Factory>(
     ifacialmocap
         .configure(ifm_settings)
         .map_err(DaemonError::Runtime)?;
+    hub.set_metrics_source("livelink", Some(livelink.metrics()));
+    hub.set_metrics_source(
+        "ifacialmocap",
+        Some(std::sync::Arc::new(crate::ifacialmocap::IfmMetrics(
+            ifacialmocap.counters(),
+        ))),
+    );
     let source_thread = source::spawn(
         factory.opener(&spec, config.source.stall_timeout_s.duration()),
         spec.clone(),
@@ -285,6 +292,9 @@ async fn serve<F: Factory>(
         }
         None => None,
     };
+    if let Some(remote) = &remote {
+        hub.set_metrics_source("livelink_control", Some(remote.metrics()));
+    }
 
     let (shutdown_tx, shutdown_rx) = tokio::sync::oneshot::channel::<()>();
     let mut server = tokio::spawn(mouthpiece_server::run(

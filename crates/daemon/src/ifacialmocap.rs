@@ -52,3 +52,13 @@ pub fn settings(config: &Config) -> Result<Option<IfmSettings>, CheckError> {
         axes,
     }))
 }
+
+/// The output's counters in `/metrics` (the output's crate does not know the server's).
+#[derive(Debug)]
+pub struct IfmMetrics(pub std::sync::Arc<mouthpiece_ifacialmocap::IfmCounters>);
+
+impl mouthpiece_server::MetricsSource for IfmMetrics {
+    fn render_metrics(&self, out: &mut String) {
+        self.0.render_metrics(out);
+    }
+}

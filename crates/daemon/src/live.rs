@@ -409,8 +409,20 @@ impl Processor for LiveProcessor {
                 curve.clear();
                 curve.extend(result.curve.iter().map(to_f32));
             }
-            // The performer's rig, with the character's own ranges where it has them.
-            slot.rig = rig.map(|r| crate::rig::rig_state_for(r, &bound.character().rig_ranges));
+            // The performer's rig, with the character's own ranges where it has them; while
+            // speech has a share in the mouth, moved towards the speech-driven dots' rig by
+            // that share, as the points are.
+            let ranges = &bound.character().rig_ranges;
+            slot.rig = rig.map(|r| crate::rig::rig_state_for(r, ranges));
+            if let Some((speech_rig, share)) =
+                self.speech.as_ref().and_then(|d| d.speech_rig(index))
+            {
+                let speech_state = crate::rig::rig_state_for(speech_rig, ranges);
+                slot.rig = Some(match slot.rig {
+                    Some(camera) => camera.blend(&speech_state, share as f32),
+                    None => speech_state,
+                });
+            }
             slot.head = Some(crate::head::wire(&result.head));
         }
     }
@@ -446,7 +458,7 @@ impl Processor for LiveProcessor {
             if slot.name != c.name {
                 slot.name.clone_from(&c.name);
             }
-            let Some(result) = driver.mouth_alone(k, step.t, &step.weights) else {
+            let Some((result, rig)) = driver.mouth_alone(k, step.t, &step.weights) else {
                 continue;
             };
             slot.source = MouthSource::Speech;
@@ -461,7 +473,8 @@ impl Processor for LiveProcessor {
                 curve.clear();
                 curve.extend(result.curve.iter().map(to_f32));
             }
-            slot.rig = None;
+            // The rig on the speech-driven dots, with the character's own ranges.
+            slot.rig = rig.map(|r| crate::rig::rig_state_for(r, &c.rig_ranges));
             slot.head = Some(crate::head::wire(&result.head));
         }
         Some(step.heard_at)

@@ -67,6 +67,9 @@ pub enum ExportError {
     /// The description of the character's mouth (names, rest pose, placement) is unusable.
     #[error("character: {0}")]
     BadRig(String),
+    /// A playback speed outside the range `play` keeps its waits finite in.
+    #[error("--speed must be from {min} to {max}, got {0}", min = crate::play::MIN_SPEED, max = crate::play::MAX_SPEED)]
+    BadSpeed(f64),
     /// `--reduce` needs a finite tolerance ≥ 0.
     #[error("reduce tolerance {0} is not a finite number ≥ 0")]
     BadTolerance(f64),
@@ -119,6 +122,7 @@ impl ExportError {
                 | Self::NoCurve { .. }
                 | Self::BadRig(_)
                 | Self::BadTolerance(_)
+                | Self::BadSpeed(_)
                 | Self::TooLargeForGlb { .. }
                 | Self::Rig { .. }
                 | Self::RigRead { .. }

@@ -16,6 +16,7 @@
 //! - [`livelink_csv`]: the streaming [`LiveLinkCsvWriter`], Live Link Face's CSV take layout.
 //! - [`onto_rig`]: a take's animation copied onto a rigged mesh (`export --rig`).
 //! - [`onto`]: a take's curves as morph-target weights on the user's avatar (`export --onto`).
+//! - [`play`]: the [`PlayClock`], when each frame of a take is due when it is played.
 //! - [`asset`]: files a glTF names, read only from its own folder; bounded reads.
 //!
 //! The writers take frames from any source, so a recording turned into frames by the
@@ -29,6 +30,7 @@ pub mod livelink_csv;
 pub mod onto;
 pub mod onto_rig;
 mod output;
+pub mod play;
 pub mod reduce;
 pub mod rig;
 pub mod take;
@@ -40,6 +42,7 @@ pub use gltf::{GltfLayout, GltfOptions, GltfSummary, GltfWriter, ModelUp};
 pub use livelink_csv::{livelink_timecode, LiveLinkCsvWriter, LIVELINK_CSV_COLUMNS};
 pub use onto_rig::{animate_rig, RigSummary};
 pub use output::PendingFile;
+pub use play::PlayClock;
 pub use reduce::Reducer;
 pub use rig::{MouthRig, RigHead, RigPoint};
 pub use take::{HeadKeys, LipKeys, RigKeys, TakeFrame, TakeReader};

@@ -194,11 +194,22 @@ fn main() {
         "lines.jsonl",
         b"{\"t\": 0.033, \"points\": {\"D1\": [0.0457, 0.0436, 0.6868], \"D2\": null, \"F1\": [-0.014, -0.053, 0.703]}, \"neutral\": true}\n{\"t\": 0.066, \"points\": {\"D3\": [0.01, 0.02, 0.6], \"F3\": [0, 0, 1]}}\n",
     );
-    put(
-        "take_jsonl",
-        "take.jsonl",
-        b"{\"t\": 1.966667, \"seq\": 59, \"character\": \"wolf\", \"points\": {\"P1\": [0.0717, 0.0004, 0.0296], \"P2\": [0.01, 0.02, 0.03]}, \"confidence\": {\"P1\": 1.0, \"P2\": 0.0}, \"head\": {\"rotation\": [0.9995, 0.012, -0.021, 0.004], \"translation\": [0.0035, 0.0008, 0.0002]}, \"head_lost\": false, \"curve\": {\"method\": \"bspline\", \"closed\": true, \"points\": [[0.0707, -0.0010, 0.0229]]}}\n{\"t\": 2.0, \"seq\": 60, \"character\": \"wolf\", \"points\": {\"P1\": [0.07, 0.0, 0.03], \"P2\": [0.01, 0.02, 0.03]}, \"confidence\": {\"P1\": 1.0, \"P2\": 1.0}, \"head\": {\"rotation\": [1, 0, 0, 0], \"translation\": [0, 0, 0]}, \"head_lost\": true, \"curve\": {\"method\": \"ma\", \"closed\": true, \"points\": []}}\n",
-    );
+    const TAKE: &[u8] = b"{\"t\": 1.966667, \"seq\": 59, \"character\": \"wolf\", \"points\": {\"P1\": [0.0717, 0.0004, 0.0296], \"P2\": [0.01, 0.02, 0.03]}, \"confidence\": {\"P1\": 1.0, \"P2\": 0.0}, \"head\": {\"rotation\": [0.9995, 0.012, -0.021, 0.004], \"translation\": [0.0035, 0.0008, 0.0002]}, \"head_lost\": false, \"curve\": {\"method\": \"bspline\", \"closed\": true, \"points\": [[0.0707, -0.0010, 0.0229]]}}\n{\"t\": 2.0, \"seq\": 60, \"character\": \"wolf\", \"points\": {\"P1\": [0.07, 0.0, 0.03], \"P2\": [0.01, 0.02, 0.03]}, \"confidence\": {\"P1\": 1.0, \"P2\": 1.0}, \"head\": {\"rotation\": [1, 0, 0, 0], \"translation\": [0, 0, 0]}, \"head_lost\": true, \"curve\": {\"method\": \"ma\", \"closed\": true, \"points\": []}}\n";
+    put("take_jsonl", "take.jsonl", TAKE);
+    // `play`'s first line is its `--speed`: in range, at each end, and refused ones.
+    for (name, speed) in [
+        ("one", "1"),
+        ("slow", "0.01"),
+        ("fast", "1000"),
+        ("tiny", "1e-300"),
+        ("nan", "NaN"),
+    ] {
+        put(
+            "take_play",
+            &format!("take-{name}.jsonl"),
+            &[speed.as_bytes(), b"\n", TAKE].concat(),
+        );
+    }
     for (name, text) in [
         (
             "subscribe",

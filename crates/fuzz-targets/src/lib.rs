@@ -23,6 +23,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("character_toml", character_toml),
     ("retarget_jsonl", retarget_jsonl),
     ("take_jsonl", take_jsonl),
+    ("take_play", take_play),
     ("protocol_v1", protocol_v1),
     ("protocol_foxglove", protocol_foxglove),
     ("http_head", http_head),
@@ -145,6 +146,50 @@ pub fn take_jsonl(data: &[u8]) {
             Ok(Some(_)) => {}
             _ => break,
         }
+    }
+}
+
+/// `mouthpiece play`'s path through a take: the first line is the `--speed` argument (read
+/// as clap reads an `f64`), the rest a take checked against a character's points and name,
+/// each frame paced by the play clock and encoded as the VMC bundles `play` sends (to no
+/// receiver). A speed or a time that made a wait unbounded would panic in `Duration`.
+pub fn take_play(data: &[u8]) {
+    use mouthpiece_export::{PlayClock, TakeReader};
+    use mouthpiece_output::{CurveNaming, VisemeNaming};
+    let split = data.iter().position(|&b| b == b'\n').unwrap_or(data.len());
+    let Some(speed) = std::str::from_utf8(&data[..split])
+        .ok()
+        .and_then(|s| s.trim().parse::<f64>().ok())
+    else {
+        return;
+    };
+    let Ok(mut clock) = PlayClock::new(speed, "fuzz") else {
+        return;
+    };
+    let take = data.get(split + 1..).unwrap_or_default();
+    let names = ["P1", "P2"].map(String::from).to_vec();
+    let mut reader = TakeReader::with_points(take, "fuzz", names);
+    let Ok(mut sender) = mouthpiece_osc::VmcSender::new(
+        &[],
+        &nalgebra::Matrix3::identity(),
+        true,
+        true,
+        CurveNaming::Arkit,
+        VisemeNaming::Vrm0,
+    ) else {
+        return;
+    };
+    for line in 0..1024 {
+        let Ok(Some(frame)) = reader.next_frame() else {
+            break;
+        };
+        if line == 0 && reader.check_character("wolf").is_err() {
+            break;
+        }
+        if clock.due(&frame).is_err() {
+            break;
+        }
+        sender.send(&mouthpiece_osc::VmcFrame::from(&frame));
     }
 }
 

@@ -190,6 +190,52 @@ pub struct IfmCounters {
     pub receivers: AtomicU64,
 }
 
+impl IfmCounters {
+    /// Appends the Prometheus text (`/metrics`): `mouthpiece_ifacialmocap_…`.
+    pub fn render_metrics(&self, out: &mut String) {
+        use std::fmt::Write as _;
+        let n = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        for (name, kind, help, value) in [
+            (
+                "handshakes_total",
+                "counter",
+                "Handshakes answered.",
+                n(&self.handshakes),
+            ),
+            (
+                "malformed_total",
+                "counter",
+                "Datagrams received that were not a handshake (ignored).",
+                n(&self.malformed),
+            ),
+            ("sent_total", "counter", "Datagrams sent.", n(&self.sent)),
+            (
+                "errors_total",
+                "counter",
+                "Sends that failed.",
+                n(&self.errors),
+            ),
+            (
+                "dropped_total",
+                "counter",
+                "Frames dropped because the sender thread was behind.",
+                n(&self.dropped),
+            ),
+            (
+                "receivers",
+                "gauge",
+                "Receivers being streamed to.",
+                n(&self.receivers),
+            ),
+        ] {
+            let _ = writeln!(
+                out,
+                "# HELP mouthpiece_ifacialmocap_{name} {help}\n# TYPE mouthpiece_ifacialmocap_{name} {kind}\nmouthpiece_ifacialmocap_{name} {value}"
+            );
+        }
+    }
+}
+
 /// `[ifacialmocap]` checked and resolved.
 #[derive(Debug, Clone, PartialEq)]
 pub struct IfmSettings {

@@ -16,7 +16,8 @@ use std::time::Duration;
 
 use async_nats::connection::State;
 use async_nats::jetstream::object_store::ObjectMetadata;
-use mouthpiece_server::{Hub, Timecode, TimecodeRate};
+use mouthpiece_server::Hub;
+use mouthpiece_takes::read::{TakeMetadata, CHARACTER_PREFIX, TAKE_METADATA, TOPIC_HEAD};
 
 use crate::store::{TakeRecord, TakeStore};
 use crate::{Connections, NatsError, NatsSettings};
@@ -290,8 +291,8 @@ pub fn read_record(path: &Path, booth: &str) -> Result<TakeRecord, NatsError> {
     let index = summary
         .metadata_indexes
         .iter()
-        .find(|m| m.name == "mouthpiece.take")
-        .ok_or_else(|| fail("no mouthpiece.take metadata".into()))?;
+        .find(|m| m.name == TAKE_METADATA)
+        .ok_or_else(|| fail(format!("no {TAKE_METADATA} metadata")))?;
     if index.length > MAX_SUMMARY_BYTES as u64 {
         return Err(fail(format!("metadata of {} bytes", index.length)));
     }
@@ -303,20 +304,12 @@ pub fn read_record(path: &Path, booth: &str) -> Result<TakeRecord, NatsError> {
         Some(Ok(mcap::records::Record::Metadata(m))) => m.metadata,
         _ => return Err(fail("the metadata record is not readable".into())),
     };
-    let field = |key: &str| metadata.get(key).cloned().unwrap_or_default();
-    let take: u32 = field("take")
-        .parse()
-        .map_err(|_| fail("the metadata has no take number".into()))?;
-    let started_unix_us: i64 = field("started_unix_us").parse().unwrap_or(0);
-    let rate_name = field("timecode_rate");
-    let timecode = rate_name
-        .parse::<TimecodeRate>()
-        .map(|rate| Timecode::from_unix_micros(started_unix_us, rate).to_string())
-        .unwrap_or_default();
+    let take =
+        TakeMetadata::from_record(path, &metadata).map_err(|e| NatsError::Store(e.to_string()))?;
     let mut characters: Vec<String> = summary
         .channels
         .values()
-        .filter_map(|c| c.topic.strip_prefix("/character/").map(str::to_owned))
+        .filter_map(|c| c.topic.strip_prefix(CHARACTER_PREFIX).map(str::to_owned))
         .collect();
     characters.sort();
     characters.dedup();
@@ -324,7 +317,7 @@ pub fn read_record(path: &Path, booth: &str) -> Result<TakeRecord, NatsError> {
     let frames = summary
         .channels
         .iter()
-        .find(|(_, c)| c.topic == "/head")
+        .find(|(_, c)| c.topic == TOPIC_HEAD)
         .and_then(|(id, _)| stats.and_then(|s| s.channel_message_counts.get(id).copied()))
         .unwrap_or(0);
     let duration_s = stats.map_or(0.0, |s| {
@@ -336,18 +329,18 @@ pub fn read_record(path: &Path, booth: &str) -> Result<TakeRecord, NatsError> {
         .unwrap_or_default();
     Ok(TakeRecord {
         booth: booth.to_owned(),
-        slate: field("slate"),
-        take,
+        timecode: take.start_timecode(),
+        slate: take.slate,
+        take: take.take,
         object: format!("{booth}/{file_name}"),
         file: file_name,
         size,
-        started_unix_us,
-        timecode,
-        timecode_rate: rate_name,
+        started_unix_us: take.started_unix_us,
+        timecode_rate: take.timecode_rate,
         duration_s,
         frames,
         characters,
-        source: field("source"),
+        source: take.source,
         uploaded_unix_us: 0,
     })
 }

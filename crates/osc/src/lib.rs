@@ -11,17 +11,18 @@
 //! is counted and logged at most once per `[logging] throttle_s`; it never blocks anything.
 //! Counters: the server's [`OscCounters`] (`/metrics`, `/healthz`, the systemd status).
 
-use std::net::{SocketAddr, UdpSocket};
+use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
+use link::UdpLink;
 use mouthpiece_output::{
-    CurveNaming, MouthSource, RigCurves, RigVisemes, StreamFrame, Throttle, VisemeNaming,
+    CurveNaming, MouthSource, RigCurves, RigVisemes, StreamFrame, VisemeNaming,
 };
-use mouthpiece_server::{OscCounters, OscTargetCounters};
+use mouthpiece_server::OscCounters;
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion};
 use rosc::{OscBundle, OscMessage, OscPacket, OscTime, OscType};
 
@@ -491,77 +492,17 @@ impl OscOutput {
     }
 }
 
-/// One target on the sender thread.
+/// One configured target on the sender thread.
 struct Link {
     target: Target,
-    socket: Option<UdpSocket>,
-    /// When to try opening the socket again after a failure.
-    retry_at: Option<Instant>,
-    counters: Arc<OscTargetCounters>,
-    failures: Throttle,
-}
-
-/// A UDP socket connected to `addr` (so that the kernel reports a refusing target on later
-/// sends), non-blocking.
-pub(crate) fn open_socket(addr: SocketAddr) -> std::io::Result<UdpSocket> {
-    let local: SocketAddr = if addr.is_ipv4() {
-        (std::net::Ipv4Addr::UNSPECIFIED, 0).into()
-    } else {
-        (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
-    };
-    let socket = UdpSocket::bind(local)?;
-    socket.connect(addr)?;
-    socket.set_nonblocking(true)?;
-    Ok(socket)
+    udp: UdpLink,
 }
 
 impl Link {
     fn new(target: Target, throttle: Duration) -> Self {
         Link {
-            counters: Arc::new(OscTargetCounters::new(target.label.clone())),
+            udp: UdpLink::new(target.addr, &target.label, "OSC", throttle),
             target,
-            socket: None,
-            retry_at: None,
-            failures: Throttle::new(throttle),
-        }
-    }
-
-    fn failed(&mut self, what: &str, e: &std::io::Error) {
-        self.counters.errors.fetch_add(1, Ordering::Relaxed);
-        if let Some(held_back) = self.failures.allow(Instant::now()) {
-            tracing::warn!(
-                target_addr = %self.target.label,
-                held_back,
-                "OSC: {what} {}: {e}",
-                self.target.addr
-            );
-        }
-    }
-
-    fn send(&mut self, bytes: &[u8]) {
-        if self.socket.is_none() {
-            if self.retry_at.is_some_and(|at| Instant::now() < at) {
-                self.counters.errors.fetch_add(1, Ordering::Relaxed);
-                return;
-            }
-            match open_socket(self.target.addr) {
-                Ok(socket) => {
-                    self.socket = Some(socket);
-                    self.retry_at = None;
-                }
-                Err(e) => {
-                    self.retry_at = Some(Instant::now() + Duration::from_secs(1));
-                    self.failed("cannot open a socket to", &e);
-                    return;
-                }
-            }
-        }
-        let Some(socket) = &self.socket else { return };
-        match socket.send(bytes) {
-            Ok(_) => {
-                self.counters.sent.fetch_add(1, Ordering::Relaxed);
-            }
-            Err(e) => self.failed("cannot send to", &e),
         }
     }
 }
@@ -589,7 +530,7 @@ impl SenderState {
             };
             self.links.push(link);
         }
-        counters.set_targets(self.links.iter().map(|l| l.counters.clone()).collect());
+        counters.set_targets(self.links.iter().map(|l| l.udp.counters.clone()).collect());
         self.packet = VmcPacket::new(
             settings.head,
             settings.eyes,
@@ -663,7 +604,7 @@ fn run(
                     for i in 0..state.packet.packets().len() {
                         state.packet.encode(i, &mut bytes);
                         for link in state.links.iter_mut().filter(|l| l.target.character == c) {
-                            link.send(&bytes);
+                            link.udp.send(&bytes);
                         }
                     }
                 }
@@ -673,6 +614,7 @@ fn run(
     tracing::info!("OSC sender stopped");
 }
 
+mod link;
 pub mod livelink;
 pub mod remote;
 mod sender;

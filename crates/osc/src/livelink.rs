@@ -17,13 +17,14 @@ use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender};
-use mouthpiece_output::{ArkitFace, HeadAxes, StreamFrame, Throttle, LIVELINK_VALUES};
-use mouthpiece_server::{FrameTime, OscCounters, OscTargetCounters, TimecodeRate};
+use mouthpiece_output::{ArkitFace, HeadAxes, StreamFrame, LIVELINK_VALUES};
+use mouthpiece_server::{FrameTime, MetricsSource, OscCounters, TimecodeRate};
 
-use crate::{open_socket, push_drop_oldest, MAX_CHARACTERS};
+use crate::link::UdpLink;
+use crate::{push_drop_oldest, MAX_CHARACTERS};
 
 /// The packet version Unreal's Live Link Face source reads (6: device id, subject, frame
 /// time with its rate, 61 values).
@@ -284,6 +285,11 @@ impl LiveLinkOutput {
         }
     }
 
+    /// The per-target counters and drops, for `/metrics` (`mouthpiece_livelink_…`).
+    pub fn metrics(&self) -> Arc<dyn MetricsSource> {
+        Arc::new(LiveLinkMetrics(self.inner.counters.clone()))
+    }
+
     /// One line for the systemd status; `None` when no target is configured.
     pub fn status(&self) -> Option<String> {
         let targets = self.inner.counters.targets();
@@ -302,69 +308,27 @@ impl LiveLinkOutput {
     }
 }
 
+/// The Live Link output's counters under their own metric names.
+#[derive(Debug)]
+struct LiveLinkMetrics(Arc<OscCounters>);
+
+impl MetricsSource for LiveLinkMetrics {
+    fn render_metrics(&self, out: &mut String) {
+        self.0.render_metrics_as("livelink", "Live Link", out);
+    }
+}
+
 /// One target on the sender thread.
 struct Link {
     target: LiveLinkTarget,
-    socket: Option<UdpLink>,
-    counters: Arc<OscTargetCounters>,
-    failures: Throttle,
-}
-
-/// A connected socket, or when to try opening one again.
-enum UdpLink {
-    Open(std::net::UdpSocket),
-    RetryAt(Instant),
+    udp: UdpLink,
 }
 
 impl Link {
     fn new(target: LiveLinkTarget, throttle: Duration) -> Self {
         Link {
-            counters: Arc::new(OscTargetCounters::new(target.label.clone())),
+            udp: UdpLink::new(target.addr, &target.label, "Live Link", throttle),
             target,
-            socket: None,
-            failures: Throttle::new(throttle),
-        }
-    }
-
-    fn failed(&mut self, what: &str, e: &std::io::Error) {
-        self.counters.errors.fetch_add(1, Ordering::Relaxed);
-        if let Some(held_back) = self.failures.allow(Instant::now()) {
-            tracing::warn!(
-                target_addr = %self.target.label,
-                held_back,
-                "Live Link: {what} {}: {e}",
-                self.target.addr
-            );
-        }
-    }
-
-    fn send(&mut self, bytes: &[u8]) {
-        let open = match &self.socket {
-            Some(UdpLink::Open(_)) => true,
-            Some(UdpLink::RetryAt(at)) if Instant::now() < *at => {
-                self.counters.errors.fetch_add(1, Ordering::Relaxed);
-                return;
-            }
-            _ => false,
-        };
-        if !open {
-            match open_socket(self.target.addr) {
-                Ok(socket) => self.socket = Some(UdpLink::Open(socket)),
-                Err(e) => {
-                    self.socket = Some(UdpLink::RetryAt(Instant::now() + Duration::from_secs(1)));
-                    self.failed("cannot open a socket to", &e);
-                    return;
-                }
-            }
-        }
-        let Some(UdpLink::Open(socket)) = &self.socket else {
-            return;
-        };
-        match socket.send(bytes) {
-            Ok(_) => {
-                self.counters.sent.fetch_add(1, Ordering::Relaxed);
-            }
-            Err(e) => self.failed("cannot send to", &e),
         }
     }
 }
@@ -423,7 +387,7 @@ impl SenderState {
             };
             self.links.push(link);
         }
-        counters.set_targets(self.links.iter().map(|l| l.counters.clone()).collect());
+        counters.set_targets(self.links.iter().map(|l| l.udp.counters.clone()).collect());
         *shared.characters.lock().unwrap_or_else(|e| e.into_inner()) = self
             .settings
             .characters
@@ -523,7 +487,7 @@ fn run(
                         values,
                     );
                     for link in state.links.iter_mut().filter(|l| l.target.character == c) {
-                        link.send(&bytes);
+                        link.udp.send(&bytes);
                     }
                 }
             }

@@ -7,18 +7,24 @@
 //! authentication; an answer would tell a scanner that something listens). A datagram that
 //! is not a plain OSC message with string, integer and float arguments, or whose arguments
 //! do not fit its command, is counted as malformed; an unknown address as unknown; neither is
-//! answered. Takes go through the daemon's control queue, as the WebSocket `record` request
+//! answered. Each allowed source address may send [`COMMANDS_PER_SECOND`] datagrams a second
+//! (a burst of as many); what it sends beyond that is counted as flooded and dropped
+//! unread, so one runaway script can neither fill the journal nor starve another
+//! controller. Takes go through the daemon's control queue, as the WebSocket `record` request
 //! does: they are the daemon's ordinary takes. Replies go to the address set with
 //! `/OSCSetSendTarget`, else to the sender.
 
+use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use mouthpiece_output::Throttle;
-use mouthpiece_server::{ControlCommand, ControlOutcome, Hub, Timecode, TimecodeRate};
+use mouthpiece_output::{Throttle, TokenBucket};
+use mouthpiece_server::{
+    ControlCommand, ControlOutcome, Hub, MetricsSource, Timecode, TimecodeRate,
+};
 use rosc::{OscMessage, OscPacket, OscType};
 use tokio::sync::oneshot;
 
@@ -63,6 +69,16 @@ pub const TYPE_TAGS: &[u8] = b"sifdh";
 /// Most arguments in one command (the app's take at most two).
 pub const MAX_ARGS: usize = 8;
 
+/// Datagrams a second taken from one source address, with a burst of as many. A take needs
+/// a handful of commands (slate, take, start, stop); Switchboard polls battery and thermals
+/// every few seconds. The same figure as the WebSocket's default per-client message rate.
+pub const COMMANDS_PER_SECOND: u32 = 50;
+
+/// Source addresses whose rate is tracked at once. A source quiet for a second has a full
+/// bucket and is forgotten first; past this many busy sources, a new one waits (flooded)
+/// until one falls quiet.
+pub const MAX_TRACKED_SOURCES: usize = 1024;
+
 /// What the remote control counted (the daemon's status line shows them).
 #[derive(Debug, Default)]
 pub struct RemoteCounters {
@@ -76,6 +92,34 @@ pub struct RemoteCounters {
     pub unknown: AtomicU64,
     /// Commands the daemon refused or did not answer (a take that would not start).
     pub failed: AtomicU64,
+    /// Datagrams from an allowed address beyond its [`COMMANDS_PER_SECOND`] (dropped unread).
+    pub flooded: AtomicU64,
+}
+
+impl MetricsSource for RemoteCounters {
+    fn render_metrics(&self, out: &mut String) {
+        use std::fmt::Write as _;
+        let name = "mouthpiece_livelink_control_datagrams_total";
+        let _ = writeln!(
+            out,
+            "# HELP {name} Datagrams at the Live Link Face remote control, by what became of them.\n\
+             # TYPE {name} counter"
+        );
+        for (outcome, value) in [
+            ("taken", &self.taken),
+            ("refused", &self.refused),
+            ("malformed", &self.malformed),
+            ("unknown", &self.unknown),
+            ("failed", &self.failed),
+            ("flooded", &self.flooded),
+        ] {
+            let _ = writeln!(
+                out,
+                "{name}{{outcome=\"{outcome}\"}} {}",
+                value.load(Ordering::Relaxed)
+            );
+        }
+    }
 }
 
 /// The remote control's configuration.
@@ -135,6 +179,8 @@ impl LiveLinkRemote {
             pending: Vec::new(),
             refusals: Throttle::new(throttle),
             faults: Throttle::new(throttle),
+            rates: SourceRates::new(COMMANDS_PER_SECOND),
+            floods: Throttle::new(throttle),
         };
         let stopping = stop.clone();
         let thread = std::thread::Builder::new()
@@ -164,17 +210,24 @@ impl LiveLinkRemote {
         &self.counters
     }
 
+    /// The counters, for `/metrics`.
+    pub fn metrics(&self) -> Arc<dyn MetricsSource> {
+        self.counters.clone()
+    }
+
     /// One line for the systemd status.
     pub fn status(&self) -> String {
         let c = &self.counters;
         format!(
-            "livelink control on {}: {} taken, {} refused, {} malformed, {} unknown, {} failed",
+            "livelink control on {}: {} taken, {} refused, {} malformed, {} unknown, {} failed, \
+             {} flooded",
             self.local,
             c.taken.load(Ordering::Relaxed),
             c.refused.load(Ordering::Relaxed),
             c.malformed.load(Ordering::Relaxed),
             c.unknown.load(Ordering::Relaxed),
-            c.failed.load(Ordering::Relaxed)
+            c.failed.load(Ordering::Relaxed),
+            c.flooded.load(Ordering::Relaxed)
         )
     }
 }
@@ -221,6 +274,38 @@ struct Control {
     pending: Vec<Pending>,
     refusals: Throttle,
     faults: Throttle,
+    rates: SourceRates,
+    floods: Throttle,
+}
+
+/// Each source address's rate of datagrams: one [`TokenBucket`] per address, forgotten once
+/// full again.
+struct SourceRates {
+    rate: u32,
+    buckets: HashMap<IpAddr, TokenBucket>,
+}
+
+impl SourceRates {
+    fn new(rate: u32) -> Self {
+        SourceRates {
+            rate,
+            buckets: HashMap::new(),
+        }
+    }
+
+    /// True when one more datagram from `source` is within its rate.
+    fn take(&mut self, source: IpAddr, now: Instant) -> bool {
+        if !self.buckets.contains_key(&source) && self.buckets.len() >= MAX_TRACKED_SOURCES {
+            self.buckets.retain(|_, bucket| !bucket.is_full(now));
+            if self.buckets.len() >= MAX_TRACKED_SOURCES {
+                return false;
+            }
+        }
+        self.buckets
+            .entry(source)
+            .or_insert_with(|| TokenBucket::new(self.rate, now))
+            .take(now)
+    }
 }
 
 /// A command's arguments did not fit it.
@@ -261,6 +346,19 @@ impl Control {
                     %source,
                     held_back,
                     "Live Link control: refused a datagram from an address outside [livelink] allow"
+                );
+            }
+            return;
+        }
+        let now = Instant::now();
+        if !self.rates.take(source.ip(), now) {
+            self.counters.flooded.fetch_add(1, Ordering::Relaxed);
+            if let Some(held_back) = self.floods.allow(now) {
+                tracing::warn!(
+                    %source,
+                    held_back,
+                    "Live Link control: dropped datagrams beyond {COMMANDS_PER_SECOND} a second \
+                     from one address"
                 );
             }
             return;
@@ -633,5 +731,27 @@ mod tests {
         }
         assert_eq!(take_number(&OscType::Int(-1)).ok(), Some(None));
         assert!(take_number(&OscType::String("1".into())).is_err());
+    }
+
+    #[test]
+    fn each_source_has_its_own_rate_and_quiet_sources_are_forgotten() {
+        let t0 = Instant::now();
+        let mut rates = SourceRates::new(5);
+        let a: IpAddr = "10.0.0.1".parse().unwrap();
+        let b: IpAddr = "10.0.0.2".parse().unwrap();
+        assert_eq!((0..50).filter(|_| rates.take(a, t0)).count(), 5);
+        assert!(
+            rates.take(b, t0),
+            "a flood from one address leaves the others alone"
+        );
+        // Many busy sources: the table stays bounded, a new source waits until one is quiet.
+        for i in 0..MAX_TRACKED_SOURCES as u32 {
+            rates.take(IpAddr::from((0x0b00_0000 + i).to_be_bytes()), t0);
+        }
+        assert!(rates.buckets.len() <= MAX_TRACKED_SOURCES);
+        let late: IpAddr = "12.0.0.1".parse().unwrap();
+        assert!(!rates.take(late, t0));
+        assert!(rates.take(late, t0 + Duration::from_secs(2)));
+        assert_eq!(rates.buckets.len(), 1, "the quiet ones were forgotten");
     }
 }

@@ -2,10 +2,14 @@
 
 use std::net::{SocketAddr, UdpSocket};
 
-use mouthpiece_output::{CurveNaming, VisemeNaming};
+use mouthpiece_export::{HeadKeys, TakeFrame};
+use mouthpiece_output::{
+    visemes_from, CurveNaming, MouthSource, RigCurves, RigVisemes, VisemeNaming,
+};
 use nalgebra::{Matrix3, UnitQuaternion};
 
-use crate::{axes_rotation, open_socket, VmcFrame, VmcPacket};
+use crate::link::open_socket;
+use crate::{axes_rotation, VmcFrame, VmcPacket};
 
 /// Sends VMC frames from the caller's thread, every frame to every target, in order: for
 /// playing a take, where each frame is due at its time and none may be dropped (the live
@@ -56,6 +60,27 @@ impl VmcSender {
                     Err(_) => self.errors += 1,
                 }
             }
+        }
+    }
+}
+
+/// A take frame as the live output sends it: without a rig (before the neutral pose) every
+/// curve and viseme at rest; without a head, identities.
+impl From<&TakeFrame> for VmcFrame {
+    fn from(frame: &TakeFrame) -> Self {
+        let f32s = |q: [f64; 4]| q.map(|v| v as f32);
+        let head = frame.head.unwrap_or(HeadKeys::REST);
+        VmcFrame {
+            t: frame.t,
+            curves: frame.rig.map(|r| RigCurves(r.curves.map(|v| v as f32))),
+            visemes: frame
+                .rig
+                .map(|r| RigVisemes(visemes_from(&r.curves).map(|v| v as f32))),
+            head: f32s(head.head),
+            eye_left: f32s(head.eye_left),
+            eye_right: f32s(head.eye_right),
+            // A take line does not say what drove it live.
+            source: MouthSource::Camera,
         }
     }
 }

@@ -2,6 +2,8 @@ use super::*;
 use mouthpiece_output::{
     CharacterFrame, CharacterHead, RigState, CURVES, CURVE_NAMES, PASCAL_NAMES, VISEMES,
 };
+use std::net::UdpSocket;
+use std::time::Instant;
 
 fn frame_with(t: f64, curves: Option<[f32; CURVES]>, head: [f32; 4]) -> StreamFrame {
     StreamFrame {

@@ -35,7 +35,7 @@ pub use curves::{
 };
 pub use frame::{CharacterFrame, MouthSource, PerformerFrame, StreamFrame};
 pub use head::{CharacterHead, HeadPose, LookMode, RigidPose};
-pub use log::{error_chain, Throttle};
+pub use log::{error_chain, Throttle, TokenBucket};
 pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RigVisemes};
 pub use shown::{shown, shown_message, Shown};
 pub use slate::{valid_slate, SLATE_RULE};

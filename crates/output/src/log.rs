@@ -43,6 +43,51 @@ impl Throttle {
     }
 }
 
+/// A rate limit on messages from one sender: `rate` per second, with a burst of the same
+/// size. A sender that keeps within the rate is never refused; one that floods gets `rate` a
+/// second through, whatever it sends.
+#[derive(Clone, Debug)]
+pub struct TokenBucket {
+    rate: f64,
+    tokens: f64,
+    last: Instant,
+}
+
+impl TokenBucket {
+    /// A full bucket: a burst of `rate` messages is taken at once.
+    pub fn new(rate: u32, now: Instant) -> Self {
+        Self {
+            rate: f64::from(rate),
+            tokens: f64::from(rate),
+            last: now,
+        }
+    }
+
+    /// True when one more message is within the rate (and counts it).
+    pub fn take(&mut self, now: Instant) -> bool {
+        self.refill(now);
+        if self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// True when the sender has been quiet long enough for a whole burst: such a bucket can
+    /// be forgotten and made again at no cost to the sender.
+    pub fn is_full(&mut self, now: Instant) -> bool {
+        self.refill(now);
+        self.tokens >= self.rate
+    }
+
+    fn refill(&mut self, now: Instant) {
+        let elapsed = now.saturating_duration_since(self.last).as_secs_f64();
+        self.tokens = (self.tokens + elapsed * self.rate).min(self.rate);
+        self.last = self.last.max(now);
+    }
+}
+
 /// `error: cause: cause`, for status messages and logs.
 pub fn error_chain(err: &dyn std::error::Error) -> String {
     let mut text = err.to_string();
@@ -58,6 +103,25 @@ pub fn error_chain(err: &dyn std::error::Error) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_token_bucket_takes_a_burst_then_its_rate() {
+        let t0 = Instant::now();
+        let mut bucket = TokenBucket::new(10, t0);
+        let burst = (0..100).filter(|_| bucket.take(t0)).count();
+        assert_eq!(burst, 10, "a burst of the rate");
+        // A flood for 2 s, a message every millisecond: 10 a second get through.
+        let through = (1..=2000)
+            .filter(|ms| bucket.take(t0 + Duration::from_millis(*ms)))
+            .count();
+        assert_eq!(through, 20);
+        assert!(!bucket.is_full(t0 + Duration::from_millis(2000)));
+        assert!(bucket.is_full(t0 + Duration::from_millis(3000)));
+        // A clock read out of order never adds tokens.
+        let mut bucket = TokenBucket::new(1, t0 + Duration::from_secs(5));
+        assert!(bucket.take(t0 + Duration::from_secs(5)));
+        assert!(!bucket.take(t0));
+    }
 
     #[test]
     fn logs_once_per_interval_with_a_count() {

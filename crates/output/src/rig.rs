@@ -89,11 +89,61 @@ impl RigState {
         let curves = self.curves.0.map(f64::from);
         self.visemes = RigVisemes(visemes_from(&curves).map(|v| v as f32));
     }
+
+    /// This rig moved towards `other` by `share` (0: this one, 1: `other`), as a handover
+    /// mixes two sources' points: jaw and curves linearly, the lips' motions taken from the
+    /// source with the larger share, the visemes made again from the mixed curves.
+    pub fn blend(&self, other: &RigState, share: f32) -> RigState {
+        let share = share.clamp(0.0, 1.0);
+        let mix = |a: f32, b: f32| a + (b - a) * share;
+        let mut out = RigState {
+            jaw: RigJaw {
+                angle_deg: mix(self.jaw.angle_deg, other.jaw.angle_deg),
+                slide_m: mix(self.jaw.slide_m, other.jaw.slide_m),
+            },
+            lips: if share > 0.5 { other.lips } else { self.lips },
+            curves: RigCurves(std::array::from_fn(|i| {
+                mix(self.curves.0[i], other.curves.0[i])
+            })),
+            visemes: RigVisemes::default(),
+        };
+        out.set_visemes();
+        out
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_blend_moves_jaw_and_curves_by_the_share_and_remakes_the_visemes() {
+        let mut camera = RigState::default();
+        camera.curves.0[0] = 0.2;
+        camera.jaw.angle_deg = 4.0;
+        let mut speech = RigState::default();
+        speech.curves.0[0] = 0.6;
+        speech.jaw.angle_deg = 12.0;
+        speech.lips.lower.translation = [0.0, -0.004, 0.0];
+        speech.set_visemes();
+        let half = camera.blend(&speech, 0.5);
+        assert!((half.curves.0[0] - 0.4).abs() < 1e-6);
+        assert!((half.jaw.angle_deg - 8.0).abs() < 1e-6);
+        assert_eq!(
+            half.lips, camera.lips,
+            "at half, the lips stay the camera's"
+        );
+        let mut expected = half;
+        expected.set_visemes();
+        assert_eq!(half.visemes, expected.visemes);
+        assert_eq!(camera.blend(&speech, 0.0), {
+            let mut c = camera;
+            c.set_visemes();
+            c
+        });
+        assert_eq!(camera.blend(&speech, 1.0), speech);
+        assert_eq!(camera.blend(&speech, 7.0), speech, "the share is clamped");
+    }
 
     #[test]
     fn curves_serialise_by_name_in_order() {

@@ -11,6 +11,7 @@ use mouthpiece_lipsync::live::{LiveAnalyser, LiveMouth, LiveSettings, LiveStep, 
 use mouthpiece_lipsync::take::{Source, Tables, TakeError, DEFAULT_CLASSES, DEFAULT_CLASSES_NAME};
 use mouthpiece_lipsync::take::{DEFAULT_POSES, DEFAULT_POSES_NAME};
 use mouthpiece_output::MouthSource;
+use mouthpiece_retarget::rig::{Rig, RigSettings};
 use mouthpiece_retarget::smooth::smooth_closed;
 use mouthpiece_retarget::{Character, CharacterSettings, CharacterStep, Vec3};
 
@@ -45,6 +46,22 @@ struct Mouth {
     mouth: LiveMouth,
     handover: Handover,
     mixed: Vec<Vec3>,
+    /// The rig measured on the speech-driven performer dots, as `mouthpiece lipsync` does:
+    /// jaw, curves and visemes for a step speech alone drives; `None` for a layout the rig
+    /// cannot measure.
+    rig: Option<Rig>,
+    /// The share of speech in the last [`SpeechDriver::drive`]n step (0: the camera alone).
+    share: f64,
+}
+
+impl Mouth {
+    /// The speech-driven mouth at time `t` for `weights`, and the rig measured on its dots.
+    fn step(&mut self, tables: &Tables, t: f64, weights: &[f64]) {
+        self.mouth.step(tables, t, weights);
+        if let Some(rig) = &mut self.rig {
+            rig.step(self.mouth.performer());
+        }
+    }
 }
 
 /// The analyser and one mouth and handover per character.
@@ -140,10 +157,14 @@ impl SpeechDriver {
         let mouths = characters
             .iter()
             .map(|(c, h)| {
+                let mouth = LiveMouth::new(&tables, c.clone(), &c.name, output)?;
+                let rig = Rig::new(mouth.neutral(), RigSettings::default()).ok();
                 Ok(Mouth {
-                    mouth: LiveMouth::new(&tables, c.clone(), &c.name, output)?,
+                    mouth,
                     handover: Handover::new(*h),
                     mixed: Vec::with_capacity(c.len()),
+                    rig,
+                    share: 0.0,
                 })
             })
             .collect::<Result<_, TakeError>>()?;
@@ -207,10 +228,28 @@ impl SpeechDriver {
         self.queued.pop_front()
     }
 
-    /// Character `k`'s mouth from speech alone at stream time `t` (no camera step to mix).
-    pub fn mouth_alone(&mut self, k: usize, t: f64, weights: &[f64]) -> Option<&CharacterStep> {
+    /// The rig on character `k`'s speech-driven dots and the share of speech in its last
+    /// [`SpeechDriver::drive`]n step, when speech had a share in it; `None` when the camera
+    /// alone drove it (or the rig cannot measure the layout).
+    pub fn speech_rig(&self, k: usize) -> Option<(&Rig, f64)> {
+        let m = self.mouths.get(k)?;
+        if m.share <= 0.0 {
+            return None;
+        }
+        Some((m.rig.as_ref()?, m.share))
+    }
+
+    /// Character `k`'s mouth from speech alone at stream time `t` (no camera step to mix),
+    /// and the rig measured on the speech-driven performer dots.
+    pub fn mouth_alone(
+        &mut self,
+        k: usize,
+        t: f64,
+        weights: &[f64],
+    ) -> Option<(&CharacterStep, Option<&Rig>)> {
         let m = self.mouths.get_mut(k)?;
-        Some(m.mouth.step(&self.tables, t, weights))
+        m.step(&self.tables, t, weights);
+        Some((m.mouth.output(), m.rig.as_ref()))
     }
 
     /// The class heard last (the class table's index), if any sound came.
@@ -238,12 +277,14 @@ impl SpeechDriver {
             .as_ref()
             .is_some_and(|(_, at)| now.saturating_duration_since(*at) <= SPEECH_STALE);
         let mix = m.handover.step(t, lips_lost, live);
+        m.share = mix.speech.max(0.0);
         if mix.speech <= 0.0 {
             return mix.source;
         }
         let neutral = vec![0.0; self.tables.classes.poses.len()];
         let weights = self.latest.as_ref().map_or(&neutral, |(w, _)| w);
-        let speech = m.mouth.step(&self.tables, t, weights);
+        m.step(&self.tables, t, weights);
+        let speech = m.mouth.output();
         m.mixed.clear();
         m.mixed.resize(step.points.len(), Vec3::zeros());
         mix_points(&step.points, &speech.points, mix.speech, &mut m.mixed);

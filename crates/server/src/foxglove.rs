@@ -361,7 +361,7 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
     let reader = tokio::spawn(async move {
         let metrics = &reader_shared.hub.inner.metrics;
         let rate = reader_shared.config.limits.max_messages_per_second;
-        let mut bucket = crate::session::TokenBucket::new(rate);
+        let mut bucket = mouthpiece_output::TokenBucket::new(rate, Instant::now());
         let mut refused_in_a_row = 0u32;
         while let Some(message) = stream.next().await {
             heard.store(started.elapsed().as_millis() as u64, Ordering::Relaxed);
@@ -369,7 +369,7 @@ pub(crate) async fn run(shared: &Arc<Shared>, ws: Ws, peer: SocketAddr) {
                 message,
                 Ok(Message::Text(_) | Message::Binary(_) | Message::Ping(_))
             ) {
-                if !bucket.take() {
+                if !bucket.take(Instant::now()) {
                     metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
                     refused_in_a_row += 1;
                     if refused_in_a_row > rate.saturating_mul(2) {

@@ -290,6 +290,8 @@ pub(crate) struct HubInner {
     pub(crate) audio: Arc<crate::audio::AudioCounters>,
     /// The daemon's NATS link (`/metrics`, `/healthz`).
     pub(crate) nats: Arc<crate::nats::NatsCounters>,
+    /// Other outputs' counters shown in `/metrics`, by name.
+    metrics_sources: Mutex<Vec<(&'static str, Arc<dyn crate::metrics::MetricsSource>)>>,
 }
 
 impl Hub {
@@ -328,6 +330,7 @@ impl Hub {
                 takes: Default::default(),
                 audio: Arc::default(),
                 nats: Arc::default(),
+                metrics_sources: Mutex::new(Vec::new()),
             }),
         };
         (hub, ControlReceiver { rx })
@@ -523,7 +526,34 @@ impl Hub {
         self.inner.osc.render_metrics(&mut text);
         self.inner.audio.render_metrics(&mut text);
         self.inner.nats.render_metrics(&mut text);
+        for (_, source) in self
+            .inner
+            .metrics_sources
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+        {
+            source.render_metrics(&mut text);
+        }
         text
+    }
+
+    /// Shows (or with `None` stops showing) an output's counters in `/metrics`; `name` says
+    /// which output, and a second call with the same name replaces the first (a restart).
+    pub fn set_metrics_source(
+        &self,
+        name: &'static str,
+        source: Option<Arc<dyn crate::metrics::MetricsSource>>,
+    ) {
+        let mut sources = self
+            .inner
+            .metrics_sources
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        sources.retain(|(n, _)| *n != name);
+        if let Some(source) = source {
+            sources.push((name, source));
+        }
     }
 
     /// The audio thread's counters, for the daemon's audio thread to update.

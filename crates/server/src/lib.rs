@@ -108,6 +108,7 @@ pub use hub::{
     CharacterInfo, ControlCommand, ControlFailure, ControlOutcome, ControlReceiver, ControlRequest,
     Hub, HubConfig, Recording, SourceState, Status, StreamInfo,
 };
+pub use metrics::MetricsSource;
 /// The output vocabulary the hub publishes, defined once in `mouthpiece-output`.
 pub use mouthpiece_output::{
     CharacterFrame, CharacterHead, HeadPose, LookMode, PerformerFrame, RigCurves, RigJaw, RigLip,

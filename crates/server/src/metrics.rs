@@ -5,6 +5,13 @@
 use std::fmt::Write as _;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+/// Counters kept outside this crate (the Live Link output and its remote control, the
+/// iFacialMocap output) that `/metrics` shows: each appends its own Prometheus text.
+pub trait MetricsSource: Send + Sync + std::fmt::Debug {
+    /// Appends `# HELP`, `# TYPE` and sample lines, each metric named `mouthpiece_…`.
+    fn render_metrics(&self, out: &mut String);
+}
+
 /// Upper bounds (seconds) of the histogram buckets: 50 µs .. 1 s.
 const BUCKETS: [f64; 14] = [
     0.000_05, 0.000_1, 0.000_25, 0.000_5, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.25, 0.5,

@@ -65,24 +65,30 @@ impl OscCounters {
             .collect()
     }
 
-    /// Appends the Prometheus text (`/metrics`).
+    /// Appends the Prometheus text (`/metrics`) of the VMC output.
     pub fn render_metrics(&self, out: &mut String) {
+        self.render_metrics_as("osc", "OSC", out);
+    }
+
+    /// Appends the Prometheus text of a UDP output counted this way, its metrics named
+    /// `mouthpiece_{prefix}_…` and described as `what` (the Live Link output shares the type).
+    pub fn render_metrics_as(&self, prefix: &str, what: &str, out: &mut String) {
         let targets = self.targets();
         let _ = writeln!(
             out,
-            "# HELP mouthpiece_osc_dropped_total Frames the OSC sender could not take in time (oldest dropped).\n\
-             # TYPE mouthpiece_osc_dropped_total counter\nmouthpiece_osc_dropped_total {}",
+            "# HELP mouthpiece_{prefix}_dropped_total Frames the {what} sender could not take in time (oldest dropped).\n\
+             # TYPE mouthpiece_{prefix}_dropped_total counter\nmouthpiece_{prefix}_dropped_total {}",
             self.dropped.load(Ordering::Relaxed)
         );
         for (name, help, value) in [
             (
-                "mouthpiece_osc_sent_total",
-                "OSC datagrams sent, per target.",
+                format!("mouthpiece_{prefix}_sent_total"),
+                format!("{what} datagrams sent, per target."),
                 (|f: &OscTargetFigures| f.sent) as fn(&OscTargetFigures) -> u64,
             ),
             (
-                "mouthpiece_osc_errors_total",
-                "OSC sends that failed (refused, unreachable), per target.",
+                format!("mouthpiece_{prefix}_errors_total"),
+                format!("{what} sends that failed (refused, unreachable), per target."),
                 |f: &OscTargetFigures| f.errors,
             ),
         ] {

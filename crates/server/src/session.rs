@@ -146,36 +146,6 @@ impl Decimator {
     }
 }
 
-/// Messages per second with a burst of the same size.
-pub(crate) struct TokenBucket {
-    rate: f64,
-    tokens: f64,
-    last: Instant,
-}
-
-impl TokenBucket {
-    pub(crate) fn new(rate: u32) -> Self {
-        Self {
-            rate: f64::from(rate),
-            tokens: f64::from(rate),
-            last: Instant::now(),
-        }
-    }
-
-    pub(crate) fn take(&mut self) -> bool {
-        let now = Instant::now();
-        self.tokens =
-            (self.tokens + now.duration_since(self.last).as_secs_f64() * self.rate).min(self.rate);
-        self.last = now;
-        if self.tokens >= 1.0 {
-            self.tokens -= 1.0;
-            true
-        } else {
-            false
-        }
-    }
-}
-
 fn error_json(code: ErrorCode, message: impl Into<String>, id: Option<RequestId>) -> String {
     protocol::to_json(&ServerMessage::Error(ErrorMessage {
         code,

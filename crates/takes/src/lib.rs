@@ -23,6 +23,12 @@
 //! clock of its first sample, the clock of the frames' log times; `/audio/events` says where
 //! the sound started and stopped (a lost device) and why, and the metadata record
 //! `mouthpiece.audio`, written when the take closes, sums it up.
+//!
+//! Reading a take back ([`read`]) lives here too, beside its writer: the `mouthpiece.take`
+//! record ([`read::TakeMetadata`]), a character's recorded steps as take lines and their
+//! timecodes (`mouthpiece export` and `play`), its recorded heads, where the frames lie (the WAV beside an
+//! export), and the chunks of images, dots and sound the console's player shows. The binary,
+//! the daemon and the NATS uploader read takes through it.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -39,6 +45,7 @@ use mouthpiece_output::{CharacterHead, HeadPose, RigState, Throttle};
 use crate::writer::WriterJob;
 
 mod file;
+pub mod read;
 mod writer;
 
 pub use file::{create_new_take_file, file_name, free_mb, next_take, unix_us, utc_stamp};

@@ -78,7 +78,7 @@ fn slates_that_are_not_file_names_are_rejected() {
     }
 }
 
-fn settings(folder: &Path) -> TakeSettings {
+pub(crate) fn settings(folder: &Path) -> TakeSettings {
     TakeSettings {
         folder: folder.to_owned(),
         flush: Duration::from_millis(100),
@@ -116,7 +116,7 @@ fn frame(seq: u64) -> Arc<Frame> {
     })
 }
 
-fn derived(seq: u64) -> Box<Derived> {
+pub(crate) fn derived(seq: u64) -> Box<Derived> {
     Box::new(Derived {
         seq,
         t: seq as f64 / 30.0,
@@ -235,7 +235,11 @@ fn depth_messages(path: &Path) -> usize {
 const WAIT: Duration = Duration::from_secs(10);
 
 /// Starts a take and waits for the writer thread's answer.
-fn start_wait(takes: &mut Takes, slate: &str, take: Option<u32>) -> Result<TakeInfo, String> {
+pub(crate) fn start_wait(
+    takes: &mut Takes,
+    slate: &str,
+    take: Option<u32>,
+) -> Result<TakeInfo, String> {
     let (tx, rx) = crossbeam_channel::bounded(1);
     takes.start(
         slate,
@@ -250,7 +254,7 @@ fn start_wait(takes: &mut Takes, slate: &str, take: Option<u32>) -> Result<TakeI
 }
 
 /// Stops the take and waits until it is closed.
-fn stop_wait(takes: &mut Takes) -> Result<TakeEnded, String> {
+pub(crate) fn stop_wait(takes: &mut Takes) -> Result<TakeEnded, String> {
     let (tx, rx) = crossbeam_channel::bounded(1);
     takes.stop(Box::new(move |r| {
         let _ = tx.send(r);

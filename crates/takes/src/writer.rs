@@ -157,7 +157,7 @@ fn open_take(
     ]
     .into_iter()
     .collect();
-    writer.write_metadata("mouthpiece.take", metadata)?;
+    writer.write_metadata(crate::read::TAKE_METADATA, metadata)?;
     Ok((
         TakeInfo {
             slate: slate.to_owned(),
@@ -294,7 +294,7 @@ fn write_derived(
         .map(|(name, p)| (name.clone(), json!(p)))
         .collect();
     writer.write_json(
-        "/performer/points",
+        crate::read::TOPIC_POINTS,
         log_time,
         &stamped(json!({ "points": performer, "status": derived.status })),
     )?;
@@ -315,7 +315,11 @@ fn write_derived(
             &stamped(json!({ "points": points, "confidence": confidence })),
         )?;
     }
-    writer.write_json("/head", log_time, &stamped(json!(derived.head)))?;
+    writer.write_json(
+        crate::read::TOPIC_HEAD,
+        log_time,
+        &stamped(json!(derived.head)),
+    )?;
     for character in &derived.characters {
         let points: Map<String, Value> = character
             .points
@@ -344,7 +348,7 @@ fn write_derived(
             body["rig"] = json!(rig);
         }
         writer.write_json(
-            &format!("/character/{}", character.name),
+            &format!("{}{}", crate::read::CHARACTER_PREFIX, character.name),
             log_time,
             &stamped(body),
         )?;

@@ -70,6 +70,11 @@ impl LiveMouth {
         self.retarget.apply(&self.performer)
     }
 
+    /// The basic poses' neutral the character is bound to (the rig's rest).
+    pub fn neutral(&self) -> &NeutralPose {
+        &self.neutral
+    }
+
     /// The performer dots of the last step (for the rig).
     pub fn performer(&self) -> &StabilisedFrame {
         &self.performer

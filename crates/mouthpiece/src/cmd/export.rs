@@ -1,5 +1,5 @@
 //! `mouthpiece export`: a take (retarget/process JSONL) → glTF 2.0 / GLB / CSV keyframes. A
-//! daemon's take (`.mcap`) is read as it was recorded live (`recorded_take`); a plain
+//! daemon's take (`.mcap`) is read as it was recorded live (`mouthpiece_takes::read`); a plain
 //! recording (`.mcap`, `.oni`), or a take with `--reprocess`, is first processed into a
 //! temporary take by the same code as `mouthpiece process`.
 
@@ -14,6 +14,7 @@ use mouthpiece_export::{
     LiveLinkCsvWriter, ModelUp, MouthRig, RigPoint, TakeFrame, TakeReader,
 };
 use mouthpiece_server::{Timecode, TimecodeRate};
+use mouthpiece_takes::read::{self as take_file, ReadError};
 
 use crate::cmd::process::{process_recording, ProcessSetup};
 use crate::cmd::retarget::Smooth;
@@ -420,6 +421,11 @@ pub(crate) fn export_error(err: ExportError) -> anyhow::Error {
     bad_input_if(err.is_bad_input(), err)
 }
 
+/// A take file's fault exits 2, the machine's 1.
+pub(crate) fn take_error(err: ReadError) -> anyhow::Error {
+    bad_input_if(err.is_bad_input(), err)
+}
+
 pub(crate) struct TakeInput {
     pub(crate) name: String,
     pub(crate) reader: Box<dyn BufRead>,
@@ -433,11 +439,11 @@ fn recorded_labels(args: &Args, rig: &MouthRig) -> anyhow::Result<Vec<String>> {
         .input
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
-    if !is_mcap || args.reprocess || !crate::cmd::recorded_take::is_daemon_take(&args.input)? {
+    if !is_mcap || args.reprocess || !take_file::is_daemon_take(&args.input).map_err(take_error)? {
         return Ok(Vec::new());
     }
     match rig.character() {
-        Some(name) => crate::cmd::recorded_take::timecodes(&args.input, name),
+        Some(name) => take_file::timecodes(&args.input, name).map_err(take_error),
         None => Ok(Vec::new()),
     }
 }
@@ -465,28 +471,9 @@ fn take_clock(input: &Path) -> anyhow::Result<(i64, TimecodeRate)> {
     if !is_mcap {
         return Ok((0, TimecodeRate::Fps30));
     }
-    let error = |e: mouthpiece_recording::RecordingError| {
-        let bad = e.is_bad_input();
-        bad_input_if(bad, e)
-    };
-    let mut messages = mouthpiece_recording::MessageReader::open(input).map_err(error)?;
-    let (mut first_frame, mut first_step) = (None, None);
-    while let Some(m) = messages.next_message().map_err(error)? {
-        if &*m.topic == mouthpiece_recording::TOPIC_COLOR {
-            first_frame.get_or_insert(m.log_time);
-        } else if m.topic.starts_with("/character/") {
-            // A booth without a camera: its frames are the characters' steps.
-            first_step.get_or_insert(m.log_time);
-        }
-    }
-    let start_ns = first_frame.or(first_step).unwrap_or(0);
-    let rate = messages
-        .metadata()
-        .iter()
-        .find(|(n, _)| n == "mouthpiece.take")
-        .and_then(|(_, m)| m.get("timecode_rate"))
-        .and_then(|r| r.parse().ok())
-        .unwrap_or(TimecodeRate::Fps30);
+    let (span, take) = take_file::frame_span(input).map_err(take_error)?;
+    let start_ns = span.map_or(0, |s| s.first_ns);
+    let rate = take.and_then(|t| t.rate()).unwrap_or(TimecodeRate::Fps30);
     Ok(((start_ns / 1000) as i64, rate))
 }
 
@@ -546,14 +533,13 @@ pub(crate) fn recording_as_take(
     reprocess: bool,
     spool: &Path,
 ) -> anyhow::Result<TakeInput> {
-    use crate::cmd::recorded_take;
     let mut file = tempfile::tempfile_in(spool)
         .with_context(|| format!("cannot create a temporary take in {}", spool.display()))?;
     let is_mcap = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
-    let is_take = is_mcap && recorded_take::is_daemon_take(path)?;
-    if is_take && reprocess && recorded_take::has_no_images(path)? {
+    let is_take = is_mcap && take_file::is_daemon_take(path).map_err(take_error)?;
+    if is_take && reprocess && take_file::has_no_images(path).map_err(take_error)? {
         return Err(bad_input(anyhow!(
             "{}: --reprocess needs camera images and this take has none (speech alone drove \
              it): leave --reprocess out to use its recorded steps",
@@ -563,7 +549,7 @@ pub(crate) fn recording_as_take(
     let name = if is_take && !reprocess {
         let character = crate::cmd::process::load_character(character)?.name;
         let mut out = BufWriter::new(&mut file);
-        let steps = recorded_take::write_lines(path, &character, &mut out)?;
+        let steps = take_file::write_lines(path, &character, &mut out).map_err(take_error)?;
         out.flush().context("cannot write the temporary take")?;
         drop(out);
         eprintln!(

@@ -9,10 +9,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, Context as _};
 use mouthpiece_export::{write_bwf, BextInfo, PendingFile, Timeline, MAX_WAV_DATA_BYTES};
-use mouthpiece_recording::{AudioReader, MessageReader, TOPIC_COLOR};
+use mouthpiece_recording::AudioReader;
 
-use mouthpiece_server::{Timecode, TimecodeRate};
+use mouthpiece_server::Timecode;
 
+use crate::cmd::export::take_error;
 use crate::exit::{bad_input, bad_input_if};
 
 /// A WAV written aside, to be moved into place with [`PreparedWav::commit`].
@@ -45,38 +46,11 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
         return Ok(None);
     };
     // The frames' times (no image is decoded) and the take's metadata.
-    let mut messages = MessageReader::open(recording).map_err(recording_error)?;
-    // A take from a booth without a camera has no images: its frames are the steps of
-    // its (first) character.
-    let (mut first_frame, mut last_frame, mut frames) = (None, 0u64, 0u64);
-    let mut steps: (Option<u64>, u64, u64) = (None, 0, 0);
-    let mut step_topic: Option<String> = None;
-    // The timecode the first frame was published with (`/head` is stamped with every frame).
-    let mut first_label: Option<String> = None;
-    while let Some(m) = messages.next_message().map_err(recording_error)? {
-        if first_label.is_none() && &*m.topic == "/head" && m.data.len() < 1 << 20 {
-            first_label = serde_json::from_slice::<serde_json::Value>(&m.data)
-                .ok()
-                .and_then(|v| v["timecode"].as_str().map(str::to_owned));
-        }
-        if &*m.topic == TOPIC_COLOR {
-            first_frame.get_or_insert(m.log_time);
-            last_frame = last_frame.max(m.log_time);
-            frames += 1;
-        } else if m.topic.starts_with("/character/")
-            && step_topic.get_or_insert_with(|| m.topic.to_string()) == &*m.topic
-        {
-            steps.0.get_or_insert(m.log_time);
-            steps.1 = steps.1.max(m.log_time);
-            steps.2 += 1;
-        }
-    }
-    if first_frame.is_none() {
-        (first_frame, last_frame, frames) = steps;
-    }
-    let Some(start) = first_frame else {
+    let (span, take) = mouthpiece_takes::read::frame_span(recording).map_err(take_error)?;
+    let Some(span) = span else {
         return Err(bad_input(anyhow!("{}: no frames", recording.display())));
     };
+    let (start, last_frame, frames) = (span.first_ns, span.last_ns, span.frames);
     let period = if frames > 1 {
         (last_frame - start) / (frames - 1)
     } else {
@@ -117,26 +91,18 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
             format.channels
         );
     }
-    let meta = |name: &str, key: &str| -> Option<String> {
-        messages
-            .metadata()
-            .iter()
-            .find(|(n, _)| n == name)
-            .and_then(|(_, m)| m.get(key).cloned())
-    };
     let start_us = (start / 1000) as i64;
-    let rate = meta("mouthpiece.take", "timecode_rate")
-        .and_then(|r| TimecodeRate::ALL.into_iter().find(|t| t.name() == r))
-        .unwrap_or_default();
+    let rate = take.as_ref().and_then(|t| t.rate()).unwrap_or_default();
     let of_day = Timecode::from_unix_micros(start_us, rate);
     const DAY_US: u64 = 86_400 * 1_000_000;
     let us_of_day = (start / 1000) % DAY_US;
     // The take's own timecode wins: when the booth followed the studio's LTC, the first frame
     // went out with the LTC's label, not the time of day, and sample 0 is placed there (at
     // the start of that frame). Otherwise the time of day, to the microsecond.
-    let recorded = first_label
+    let recorded = span
+        .first_label
         .as_deref()
-        .and_then(parse_label)
+        .and_then(mouthpiece_takes::read::parse_timecode_label)
         .and_then(|tc| Some((tc, tc.to_frame_count(rate)?)))
         .filter(|(tc, _)| tc.to_string() != of_day.to_string());
     let (timecode, time_reference) = match recorded {
@@ -151,12 +117,9 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
             (u128::from(us_of_day) * u128::from(format.sample_rate) / 1_000_000) as u64,
         ),
     };
-    let name = match (
-        meta("mouthpiece.take", "slate"),
-        meta("mouthpiece.take", "take"),
-    ) {
-        (Some(slate), Some(take)) => format!("{slate} take {take}"),
-        _ => recording
+    let name = match take {
+        Some(take) => format!("{} take {}", take.slate, take.take),
+        None => recording
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default(),
@@ -196,22 +159,6 @@ pub fn prepare(recording: &Path, out: &Path) -> anyhow::Result<Option<PreparedWa
 }
 
 /// `yyyy-mm-dd` and `hh-mm-ss` (UTC) of Unix microseconds.
-/// A timecode label `HH:MM:SS:FF` (`;` before the frames: drop-frame) as recorded in a take.
-fn parse_label(label: &str) -> Option<Timecode> {
-    let b = label.as_bytes();
-    if b.len() != 11 || b[2] != b':' || b[5] != b':' || !(b[8] == b':' || b[8] == b';') {
-        return None;
-    }
-    let field = |i: usize| -> Option<u8> { label.get(i..i + 2)?.parse().ok() };
-    Some(Timecode {
-        hours: field(0)?,
-        minutes: field(3)?,
-        seconds: field(6)?,
-        frames: field(9)?,
-        drop_frame: b[8] == b';',
-    })
-}
-
 fn utc_date_time(unix_us: i64) -> (String, String) {
     let secs = unix_us.div_euclid(1_000_000);
     let days = secs.div_euclid(86_400);
@@ -234,25 +181,6 @@ fn utc_date_time(unix_us: i64) -> (String, String) {
 
 #[cfg(test)]
 mod tests {
-    #[test]
-    fn recorded_labels_parse_and_junk_does_not() {
-        let tc = super::parse_label("10:20:30;04").unwrap();
-        assert_eq!(
-            (tc.hours, tc.minutes, tc.seconds, tc.frames),
-            (10, 20, 30, 4)
-        );
-        assert!(tc.drop_frame);
-        for junk in [
-            "",
-            "10:20:30",
-            "1x:20:30:04",
-            "10-20-30-04",
-            "10:20:30:04\n",
-        ] {
-            assert!(super::parse_label(junk).is_none(), "{junk:?}");
-        }
-    }
-
     #[test]
     fn dates_are_utc_civil_dates() {
         assert_eq!(

@@ -13,8 +13,6 @@ pub mod lipsync_poses;
 pub mod play;
 pub mod process;
 pub mod record;
-pub mod recorded_heads;
-pub mod recorded_take;
 pub mod retarget;
 pub mod run;
 pub mod synth;

@@ -8,25 +8,16 @@ use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{anyhow, Context as _};
-use mouthpiece_export::{ExportError, TakeReader};
+use mouthpiece_export::{ExportError, PlayClock, TakeReader};
 use mouthpiece_osc::{VmcFrame, VmcSender};
-use mouthpiece_output::{visemes_from, CurveNaming, RigCurves, RigVisemes, VisemeNaming};
+use mouthpiece_output::{CurveNaming, VisemeNaming};
 
 use crate::cmd::export::{export_error, recording_as_take};
 use crate::cmd::process::load_character;
 use crate::exit::bad_input;
-
-/// Slowest `--speed` (a hundredth of the take's own pace).
-pub const MIN_SPEED: f64 = 0.01;
-/// Fastest `--speed`.
-pub const MAX_SPEED: f64 = 1000.0;
-/// Longest time between two lines of a take that `play` waits through, seconds of the take:
-/// a live take has a line per frame, so a longer gap is a broken or hostile file, refused at
-/// its line rather than waited on for years.
-pub const MAX_GAP_S: f64 = 60.0;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -77,12 +68,7 @@ fn resolve(text: &str) -> anyhow::Result<SocketAddr> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if !(MIN_SPEED..=MAX_SPEED).contains(&args.speed) {
-        return Err(bad_input(anyhow!(
-            "--speed must be from {MIN_SPEED} to {MAX_SPEED}, got {}",
-            args.speed
-        )));
-    }
+    PlayClock::check_speed(args.speed).map_err(bad_input)?;
     let targets = args
         .targets
         .iter()
@@ -120,42 +106,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.visemes,
     )
     .context("cannot open a UDP socket")?;
-    let mut start: Option<(Instant, f64)> = None;
-    let mut previous_t = None;
+    let mut clock = PlayClock::new(args.speed, name.clone()).map_err(bad_input)?;
+    let mut start: Option<Instant> = None;
     let mut frames = 0u64;
     while let Some(frame) = reader.next_frame().map_err(export_error)? {
         if frames == 0 {
             reader.check_character(&character.name).map_err(bad_input)?;
         }
-        // The reader has checked that `t` is finite and increasing; the gap is bounded here,
-        // so every wait below is a few hours at most.
-        if let Some(previous) = previous_t.replace(frame.t) {
-            if frame.t - previous > MAX_GAP_S {
-                return Err(bad_input(anyhow!(
-                    "{name} line {}: t is {} s after the previous line's, more than the {MAX_GAP_S} s \
-                     play waits between two lines",
-                    frame.line,
-                    frame.t - previous
-                )));
-            }
-        }
-        // Each frame at its time from the first, divided by the speed; a late frame goes at
-        // once (the receiver sees the take's times in /VMC/Ext/T either way).
-        let (t0_wall, t0) = *start.get_or_insert((Instant::now(), frame.t));
-        let due = Duration::try_from_secs_f64(((frame.t - t0) / args.speed).max(0.0))
-            .ok()
-            .and_then(|offset| t0_wall.checked_add(offset))
-            .ok_or_else(|| {
-                bad_input(anyhow!(
-                    "{name} line {}: t = {} is too far from the first line's",
-                    frame.line,
-                    frame.t
-                ))
-            })?;
-        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+        // A late frame goes at once (the receiver sees the take's times in /VMC/Ext/T either
+        // way); the clock has bounded every wait.
+        let due = clock.due(&frame).map_err(bad_input)?;
+        let t0_wall = *start.get_or_insert_with(Instant::now);
+        if let Some(wait) = (t0_wall + due).checked_duration_since(Instant::now()) {
             std::thread::sleep(wait);
         }
-        sender.send(&vmc_frame(&frame));
+        sender.send(&VmcFrame::from(&frame));
         frames += 1;
     }
     if frames == 0 {
@@ -168,23 +133,4 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         sender.errors
     );
     Ok(())
-}
-
-/// A take frame as the live output sends it: without a rig (before the neutral pose) every
-/// curve and viseme at rest; without a head, identities.
-fn vmc_frame(frame: &mouthpiece_export::TakeFrame) -> VmcFrame {
-    let f32s = |q: [f64; 4]| q.map(|v| v as f32);
-    let head = frame.head.unwrap_or(mouthpiece_export::HeadKeys::REST);
-    VmcFrame {
-        t: frame.t,
-        curves: frame.rig.map(|r| RigCurves(r.curves.map(|v| v as f32))),
-        visemes: frame
-            .rig
-            .map(|r| RigVisemes(visemes_from(&r.curves).map(|v| v as f32))),
-        head: f32s(head.head),
-        eye_left: f32s(head.eye_left),
-        eye_right: f32s(head.eye_right),
-        // A take line does not say what drove it live.
-        source: mouthpiece_output::MouthSource::Camera,
-    }
 }

@@ -14,9 +14,11 @@ use anyhow::Context as _;
 use mouthpiece_frame::{Frame, FrameSource};
 use mouthpiece_pipeline::{Pipeline, PipelineConfig, RetargetSettings};
 use mouthpiece_recording::SessionReader;
+use mouthpiece_retarget::head::HeadLine;
 use mouthpiece_retarget::{Character, ShapeSmoothing};
+use mouthpiece_takes::read::RecordedHeads;
 
-use crate::cmd::recorded_heads::RecordedHeads;
+use crate::cmd::export::take_error;
 use crate::cmd::retarget::Smooth;
 use crate::exit::{bad_input, bad_input_if};
 
@@ -196,7 +198,9 @@ pub fn process_recording(
     }
     let mut input = Input::open(setup.input)?;
     let mut recorded = match (&input, setup.recorded_heads) {
-        (Input::Mcap(_), true) => Some(RecordedHeads::open(setup.input, &character_name)?),
+        (Input::Mcap(_), true) => Some(
+            RecordedHeads::<HeadLine>::open(setup.input, &character_name).map_err(take_error)?,
+        ),
         _ => None,
     };
 
@@ -227,7 +231,7 @@ pub fn process_recording(
             .with_context(|| format!("frame {}", frame.seq))?;
         pipeline_ms.push(tick.elapsed().as_secs_f64() * 1e3);
         let head = match (&mut recorded, log_time) {
-            (Some(r), Some(t)) => r.at(t)?,
+            (Some(r), Some(t)) => r.at(t, checked_head).map_err(take_error)?,
             _ => None,
         };
         if let Some(head) = head {
@@ -282,6 +286,22 @@ pub fn process_recording(
         pipeline_p99_ms: pct(0.99),
         recorded_heads: recorded_frames,
     })
+}
+
+/// A daemon's take's recorded head (`export` of a take: the re-run tracker knows nothing of
+/// the `look_at` requests made live over the WebSocket, the recorded head has their turns),
+/// its rotations finite, made unit again in 64 bits (they were recorded as 32-bit floats).
+fn checked_head(mut h: HeadLine) -> Result<HeadLine, &'static str> {
+    for q in [&mut h.rotation, &mut h.eye_left, &mut h.eye_right] {
+        if !q.iter().all(|c| c.is_finite()) {
+            return Err("the head's rotations are not finite");
+        }
+        let n = q.iter().map(|c| c * c).sum::<f64>().sqrt();
+        if n > 0.0 {
+            q.iter_mut().for_each(|c| *c /= n);
+        }
+    }
+    Ok(h)
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {

@@ -5,6 +5,7 @@
 use crate::helper_alsa_booth as booth;
 use crate::helper_alsa_read_back as read_back;
 use crate::helper_daemon_run as daemon;
+use crate::repo;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -14,10 +15,6 @@ use daemon::{free_port, run_command, Daemon};
 use serde_json::Value;
 
 use read_back::python;
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 /// `GET path` on the daemon's port: the body (empty when it cannot connect).
 fn http_body(port: u16, path: &str) -> String {
@@ -55,7 +52,7 @@ fn wait_until(what: &str, mut check: impl FnMut() -> bool) {
 }
 
 fn mouthpiece(dir: &Path, args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    crate::mouthpiece()
         .args(args)
         .current_dir(dir)
         .output()

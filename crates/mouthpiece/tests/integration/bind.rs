@@ -5,6 +5,7 @@
 //! External tools come from `scripts/test` (Debian packages `nodejs`, `npm`, `blender`,
 //! `python3-numpy`; the npm package is installed here on first use if it is missing).
 
+use crate::repo;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
@@ -13,15 +14,8 @@ use mouthpiece_export::onto_rig::parse_glb;
 use mouthpiece_export::{ModelUp, MouthRig};
 use serde_json::Value;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .canonicalize()
-        .unwrap()
-}
-
 fn mouthpiece(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    crate::mouthpiece()
         .args(args)
         .env("RUST_LOG", "warn")
         .output()

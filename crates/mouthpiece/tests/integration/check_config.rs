@@ -1,13 +1,11 @@
 //! `mouthpiece check-config`: exit 0 for a valid file, 2 with the file, line and key for a
 //! bad one.
 
-use std::process::Command;
-
 fn check(text: &str) -> (i32, String, String) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("mouthpiece.toml");
     std::fs::write(&path, text).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let out = crate::mouthpiece()
         .arg("check-config")
         .arg(&path)
         .output()
@@ -21,7 +19,7 @@ fn check(text: &str) -> (i32, String, String) {
 
 #[test]
 fn the_example_config_is_valid() {
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let out = crate::mouthpiece()
         .arg("check-config")
         .arg(concat!(
             env!("CARGO_MANIFEST_DIR"),
@@ -62,7 +60,7 @@ fn a_bad_value_exits_2_naming_key_and_expectation() {
 
 #[test]
 fn a_missing_file_exits_2() {
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let out = crate::mouthpiece()
         .args(["check-config", "/nonexistent/mouthpiece.toml"])
         .output()
         .unwrap();

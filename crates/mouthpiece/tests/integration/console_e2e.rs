@@ -9,7 +9,6 @@ use crate::helper_daemon_run as daemon;
 use crate::helper_webdriver as webdriver;
 
 use std::path::Path;
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use daemon::{free_port, run_command, Daemon};
@@ -82,7 +81,7 @@ const STATE: &str = "const m = window.mouthpiece; if (!m) return null; \
 fn the_console_shows_the_camera_with_dots_calibrates_records_and_recovers() {
     let dir = tempfile::tempdir().unwrap();
     let session = dir.path().join("performer.mcap");
-    let synth = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let synth = crate::mouthpiece()
         .args(["synth", "--out"])
         .arg(&session)
         .args(["--seconds", "4", "--seed", "3", "--size", "320x240"])

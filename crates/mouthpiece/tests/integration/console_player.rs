@@ -11,7 +11,6 @@ use crate::helper_webdriver as webdriver;
 
 use std::io::{Read, Write};
 use std::path::Path;
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use daemon::{free_port, run_command, Daemon};
@@ -95,7 +94,7 @@ const PLAYER: &str = "const p = window.mouthpiece && window.mouthpiece.player; i
 fn a_take_plays_in_the_page_with_its_dots_and_its_sound() {
     let dir = tempfile::tempdir().unwrap();
     let session = dir.path().join("performer.mcap");
-    let synth = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let synth = crate::mouthpiece()
         .args(["synth", "--out"])
         .arg(&session)
         .args(["--seconds", "2", "--seed", "5", "--size", "320x240"])

@@ -9,7 +9,6 @@ use crate::helper_daemon_run as daemon;
 use crate::helper_webdriver as webdriver;
 
 use std::path::Path;
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use daemon::{free_port, run_command, Daemon};
@@ -22,7 +21,7 @@ fn synth(dir: &Path, name: &str, layout: &str, extra: &[&str]) -> std::path::Pat
     let out = dir.join(format!("{name}.mcap"));
     let layout_file = dir.join(format!("{name}.layout.toml"));
     std::fs::write(&layout_file, layout).unwrap();
-    let status = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let status = crate::mouthpiece()
         .args(["synth", "--seed", "7", "--seconds", "3", "--out"])
         .arg(&out)
         .arg("--layout")

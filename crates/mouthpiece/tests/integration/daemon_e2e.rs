@@ -133,7 +133,7 @@ impl Daemon {
 
     fn start_in(dir: tempfile::TempDir, port: u16, args: &[&str], env: &[(&str, &str)]) -> Daemon {
         let stderr = dir.path().join("stderr.log");
-        let mut command = Command::new(env!("CARGO_BIN_EXE_mouthpiece"));
+        let mut command = crate::mouthpiece();
         command.arg("run").current_dir(dir.path());
         // Without a config file in `dir`: the embedded default.
         let config = dir.path().join("mouthpiece.toml");
@@ -587,7 +587,7 @@ fn a_bad_config_exits_2_naming_the_key() {
         "[server]\nlisten = \"127.0.0.1:1\"\n[takes]\nmin_free_mb = \"lots\"\n",
     )
     .unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let out = crate::mouthpiece()
         .arg("run")
         .arg("--config")
         .arg(&path)
@@ -602,7 +602,7 @@ fn a_bad_config_exits_2_naming_the_key() {
 
     // A character file that does not exist: named by its key.
     std::fs::write(&path, "[characters]\nfiles = [\"nope.toml\"]\n").unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let out = crate::mouthpiece()
         .arg("run")
         .arg("--config")
         .arg(&path)
@@ -671,7 +671,7 @@ async fn sighup_reloads_characters_without_dropping_clients_and_keeps_the_old_on
     let dir = tempfile::tempdir().unwrap();
     let session = dir.path().join("s.mcap");
     write_session(&session, 60);
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let repo = crate::repo();
     let wolf = repo
         .join("config/characters/wolf.toml")
         .canonicalize()
@@ -1011,7 +1011,7 @@ async fn calibrate_answers_once_calibrated_and_a_reopened_replay_is_tracked_agai
     let dir = tempfile::tempdir().unwrap();
     let session = dir.path().join("s.mcap");
     // 1.5 s of still, closed mouth, then speech.
-    let synth = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let synth = crate::mouthpiece()
         .args(["synth", "--seconds", "3", "--seed", "1", "--out"])
         .arg(&session)
         .output()
@@ -1138,7 +1138,7 @@ async fn collect_wolf(ws: &mut Client, seconds: f64, settle: f64, lines: &mut Ve
 /// target is refused and the old ones kept.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn osc_sends_the_streamed_rig_to_a_python_osc_receiver_and_rig_and_osc_reload_on_sighup() {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let repo = crate::repo();
     let work = tempfile::tempdir().unwrap();
     let (port_file, stop_file, stream_file) = (
         work.path().join("port"),
@@ -1364,7 +1364,7 @@ fn quat_angle_deg(a: [f64; 4], b: [f64; 4]) -> f64 {
 /// exported head ends where the live stream's did, far from where it started.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_take_exported_keeps_the_look_at_turn_made_live() {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let repo = crate::repo();
     let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
     let mut daemon = Daemon::start(
         &format!("replay:{}?loop=1", demo.display()),
@@ -1418,13 +1418,7 @@ async fn a_take_exported_keeps_the_look_at_turn_made_live() {
     assert_eq!(files.len(), 1, "{files:?}\n{}", daemon.log());
 
     let csv = daemon.dir.path().join("take.csv");
-    let out = export_wolf(&files[0], &csv);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = std::fs::read_to_string(&csv).unwrap();
+    let text = crate::live_record::export_as_recorded(&files[0], "wolf", &csv);
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let qw = header
@@ -1452,25 +1446,12 @@ async fn a_take_exported_keeps_the_look_at_turn_made_live() {
 }
 
 /// `mouthpiece export TAKE --character wolf --out OUT`.
-fn export_wolf(take: &Path, out: &Path) -> std::process::Output {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-        .arg("export")
-        .arg(take)
-        .arg("--character")
-        .arg(repo.join("config/characters/wolf.toml"))
-        .arg("--out")
-        .arg(out)
-        .output()
-        .unwrap()
-}
-
 /// What was live is what is kept: a take's export is, frame for frame, what a WebSocket
 /// subscriber received while it was recorded: every mouth point and every rig curve the same
 /// 32-bit float, with no frame re-tracked (a re-run of the tracker recalibrates and differs).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_takes_export_is_what_subscribers_received_live() {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let repo = crate::repo();
     let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
     let mut daemon = Daemon::start(&format!("replay:{}?loop=1", demo.display()), "", &[], &[]);
     let mut ws = daemon
@@ -1488,11 +1469,9 @@ async fn a_takes_export_is_what_subscribers_received_live() {
     })
     .await;
     // Every frame from here on, by seq: the wolf's points and curves as received.
-    let mut live: std::collections::BTreeMap<u64, Value> = std::collections::BTreeMap::new();
-    let keep = |v: &Value, live: &mut std::collections::BTreeMap<u64, Value>| {
-        if v["type"] == "frame" {
-            live.insert(v["seq"].as_u64().unwrap(), wolf(v).unwrap());
-        }
+    let mut live = crate::live_record::LiveSteps::new();
+    let keep = |v: &Value, live: &mut crate::live_record::LiveSteps| {
+        crate::live_record::keep(v, "wolf", live)
     };
     send(
         &mut ws,
@@ -1530,78 +1509,17 @@ async fn a_takes_export_is_what_subscribers_received_live() {
     assert_eq!(files.len(), 1, "{files:?}\n{}", daemon.log());
 
     let csv = daemon.dir.path().join("take.csv");
-    let out = export_wolf(&files[0], &csv);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
-    assert!(stderr.contains("as recorded live"), "{stderr}");
-    let text = std::fs::read_to_string(&csv).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let text = crate::live_record::export_as_recorded(&files[0], "wolf", &csv);
+    let rows = crate::live_record::assert_rows_are_live(&text, &live);
     assert!(rows.len() >= 80, "{} rows", rows.len());
-    let f32_of = |cell: &str| -> f32 { cell.parse::<f64>().unwrap() as f32 };
-    let json_f32 = |v: &Value| -> f32 { v.as_f64().unwrap() as f32 };
-    let curve_columns: Vec<(usize, &str)> = header
-        .iter()
-        .enumerate()
-        .filter(|(_, h)| mouthpiece_output::CURVE_NAMES.contains(h))
-        .map(|(i, h)| (i, *h))
-        .collect();
-    assert_eq!(curve_columns.len(), mouthpiece_output::CURVES);
-    let same = |row: &[&str], frame: &Value| -> bool {
-        let points = frame["points"].as_array().unwrap();
-        let points_equal = points
-            .iter()
-            .enumerate()
-            .all(|(p, xyz)| (0..3).all(|k| f32_of(row[1 + 3 * p + k]) == json_f32(&xyz[k])));
-        let curves_equal = curve_columns
-            .iter()
-            .all(|(i, name)| f32_of(row[*i]) == json_f32(&frame["rig"]["curves"][name]));
-        points_equal && curves_equal
-    };
-    // Each row is a frame received live, and every row after it the next one: the seq of the
-    // take's first row from the first of its rows that was received.
-    let first = rows
-        .iter()
-        .take(10)
-        .enumerate()
-        .find_map(|(k, row)| {
-            let (seq, _) = live.iter().find(|(_, frame)| same(row, frame))?;
-            seq.checked_sub(k as u64)
-        })
-        .unwrap_or_else(|| {
-            panic!(
-                "none of the export's first rows is a frame received live: {:?}",
-                rows[0]
-            )
-        });
-    // (A frame this client did not receive, had it lagged on a loaded machine, is skipped;
-    // nearly all must be there.)
-    let mut compared = 0;
-    for (k, row) in rows.iter().enumerate() {
-        let seq = first + k as u64;
-        if let Some(frame) = live.get(&seq) {
-            assert!(
-                same(row, frame),
-                "row {k} differs from frame {seq}: {row:?}\n{frame}"
-            );
-            compared += 1;
-        }
-    }
-    assert!(
-        compared * 10 >= rows.len() * 9,
-        "{compared} of {} rows received live",
-        rows.len()
-    );
 
     // `play` of the same take sends, over VMC, the curves, visemes, head and eyes the
     // WebSocket carried (checked by the independent python-osc receiver, float32 exact).
     let stream: Vec<Value> = rows
         .iter()
-        .enumerate()
-        .filter_map(|(k, row)| {
-            let frame = live.get(&(first + k as u64))?;
-            Some(json!({"t": row[0].parse::<f64>().unwrap(), "rig": frame["rig"], "head": frame["head"]}))
+        .filter_map(|(seq, t)| {
+            let frame = live.get(seq)?;
+            Some(json!({"t": t, "rig": frame["rig"], "head": frame["head"]}))
         })
         .collect();
     let work = daemon.dir.path().join("play");
@@ -1624,7 +1542,7 @@ async fn a_takes_export_is_what_subscribers_received_live() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_daemons_messages_match_the_published_schemas() {
     use std::io::Write as _;
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let repo = crate::repo();
     let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
     let daemon = Daemon::start(&format!("replay:{}?loop=1", demo.display()), "", &[], &[]);
     let mut ws = daemon
@@ -1707,7 +1625,7 @@ fn ifm_curves(text: &str) -> Vec<i64> {
 /// and every datagram's 27 rig curves (×100, rounded) are a frame the WebSocket streamed.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn ifacialmocap_streams_the_streamed_rig_to_a_receiver_that_asks() {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let repo = crate::repo();
     let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
     let ifm_port = std::net::UdpSocket::bind("127.0.0.1:0")
         .unwrap()
@@ -1781,4 +1699,19 @@ async fn ifacialmocap_streams_the_streamed_rig_to_a_receiver_that_asks() {
         datagrams.iter().any(|d| ifm_curves(d)[0] > 0),
         "jawOpen never above 0"
     );
+    // The output's counters are in `/metrics`: the handshake answered, the stray datagram
+    // counted, the frames sent.
+    let metrics = http_body(daemon.port, "/metrics");
+    let counter = |name: &str| -> u64 {
+        metrics
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("mouthpiece_ifacialmocap_{name} ")))
+            .unwrap_or_else(|| panic!("no {name} in\n{metrics}"))
+            .parse()
+            .unwrap()
+    };
+    assert!(counter("handshakes_total") >= 1, "{metrics}");
+    assert!(counter("malformed_total") >= 1, "{metrics}");
+    assert!(counter("sent_total") > 0, "{metrics}");
+    assert_eq!(counter("receivers"), 1, "{metrics}");
 }

@@ -5,21 +5,15 @@
 //! External tools come from `scripts/test` (Debian packages `nodejs`, `npm`, `blender`,
 //! `python3-numpy`; the npm package is installed here on first use if it is missing).
 
+use crate::repo;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 use serde_json::{json, Value};
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .canonicalize()
-        .unwrap()
-}
-
 fn mouthpiece(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    crate::mouthpiece()
         .args(args)
         .env("RUST_LOG", "warn")
         .output()
@@ -473,7 +467,7 @@ fn bad_input_is_exit_2_naming_the_line() {
 /// `mouthpiece retarget` of the example performer onto `character`, written to `take`, with
 /// `extra` arguments; fails the test with retarget's stderr if it does not succeed.
 fn retarget_example(character: &Path, take: &Path, extra: &[&str]) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let out = crate::mouthpiece()
         .args(["retarget", "--character"])
         .arg(character)
         .arg("--input")

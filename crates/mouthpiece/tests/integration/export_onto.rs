@@ -3,21 +3,15 @@
 //! with ARKit-named shape keys, a material, and a second object with its own animation),
 //! judged by Khronos' glTF-Validator and by Blender importing the result.
 
+use crate::repo;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 use serde_json::Value;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../..")
-        .canonicalize()
-        .unwrap()
-}
-
 fn mouthpiece(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    crate::mouthpiece()
         .args(args)
         .env("RUST_LOG", "warn")
         .output()

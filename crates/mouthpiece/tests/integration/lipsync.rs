@@ -5,17 +5,14 @@
 //! them, measured by `bench/lipsync_accuracy.py`. Fails when Festival or the model is missing
 //! (scripts/test installs them).
 
+use crate::repo;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use serde_json::Value;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
 fn mouthpiece() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_mouthpiece"));
+    let mut c = crate::mouthpiece();
     c.env("RUST_LOG", "warn");
     c
 }

@@ -6,13 +6,13 @@
 use crate::helper_festival as festival;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use festival::*;
 use mouthpiece_lipsync::live::{LiveSettings, Profiles, SHIPPED_PROFILES};
 
 fn mouthpiece(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    crate::mouthpiece()
         .args(args)
         .current_dir(dir)
         .output()

@@ -34,6 +34,7 @@ mod export;
 mod export_onto;
 mod lipsync;
 mod lipsync_learn;
+mod live_record;
 mod nats_e2e;
 mod oni_hostile;
 mod record_audio;
@@ -43,3 +44,16 @@ mod synth_cli;
 mod systemd_unit;
 mod takes_hostile;
 mod tune_colours;
+
+/// The workspace's root (configuration, characters, recordings, docs), absolute.
+pub fn repo() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .expect("the workspace root")
+}
+
+/// The `mouthpiece` binary under test.
+pub fn mouthpiece() -> std::process::Command {
+    std::process::Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+}

@@ -7,7 +7,7 @@
 use crate::helper_harness as harness;
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 use futures_util::StreamExt;
@@ -37,7 +37,7 @@ impl Daemon {
         );
         std::fs::write(dir.join("mouthpiece.toml"), config).unwrap();
         let stderr = std::fs::File::create(dir.join("stderr.log")).unwrap();
-        let child = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        let child = crate::mouthpiece()
             .args(["run", "--config"])
             .arg(dir.join("mouthpiece.toml"))
             .env("MOUTHPIECE_TEST_NATS_PASSWORD", PASSWORD)
@@ -130,7 +130,7 @@ async fn control(client: &async_nats::Client, request: Value) -> Value {
 
 /// `mouthpiece takes` with the booth's config (its credentials) and `--server`.
 fn takes_cli(dir: &Path, url: &str, args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    crate::mouthpiece()
         .arg("takes")
         .arg("--config")
         .arg(dir.join("mouthpiece.toml"))

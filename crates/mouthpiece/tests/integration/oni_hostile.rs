@@ -8,9 +8,10 @@
 //! the test instead of killing it); the others played wrong frames or none, or failed with
 //! exit code 1 while converting a frame.
 
+use crate::repo;
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
+use std::process::Output;
 
 use openni2::oni_file::record_type::{
     GENERAL_PROPERTY, NEW_DATA, NODE_ADDED, NODE_STATE_READY, SEEK_TABLE,
@@ -19,12 +20,8 @@ use openni2::oni_file::record_type::{
 const DEPTH: u32 = 1;
 const COLOUR: u32 = 2;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
 fn mouthpiece(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    crate::mouthpiece()
         .args(args)
         .env("RUST_LOG", "warn")
         .output()

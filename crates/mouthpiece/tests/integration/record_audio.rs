@@ -4,16 +4,12 @@
 
 use crate::helper_alsa_booth as booth;
 use crate::helper_alsa_read_back as read_back;
+use crate::repo;
 
-use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use read_back::python;
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 /// Waits until `what` holds (a generous limit: a loaded machine passes too).
 fn wait_until(what: &str, mut check: impl FnMut() -> bool) {
@@ -37,7 +33,7 @@ fn a_device_string_with_a_pipe_or_the_file_plugin_is_refused() {
         format!("file:'|touch {}'", ran.display()),
         format!("file:FILE={},raw", written.display()),
     ] {
-        let run = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        let run = crate::mouthpiece()
             .args(["record", "--source"])
             .arg(format!("replay:{}", demo.display()))
             .arg("--out")
@@ -63,7 +59,7 @@ fn a_device_that_cannot_be_opened_is_named_and_nothing_is_written() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("s.mcap");
     let demo = repo().join("recordings/demo.mcap");
-    let run = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let run = crate::mouthpiece()
         .args(["record", "--source"])
         .arg(format!("replay:{}", demo.display()))
         .arg("--out")
@@ -88,7 +84,7 @@ fn a_recording_holds_the_booths_sound_bit_exact_and_where_it_stopped() {
     let out = dir.path().join("session.mcap");
     let demo = repo().join("recordings/demo.mcap");
     let log = dir.path().join("stderr.log");
-    let mut command = Command::new(env!("CARGO_BIN_EXE_mouthpiece"));
+    let mut command = crate::mouthpiece();
     command
         .args(["record", "--source"])
         .arg(format!("replay:{}?loop=1", demo.display()))
@@ -189,7 +185,7 @@ fn seconds_end_the_recording_whatever_the_sound_device_does() {
     let out = dir.path().join("s.mcap");
     let demo = repo().join("recordings/demo.mcap");
     let log = dir.path().join("stderr.log");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    let mut child = crate::mouthpiece()
         .args(["record", "--source"])
         .arg(format!("replay:{}?loop=1", demo.display()))
         .arg("--out")

@@ -1,18 +1,15 @@
 //! `mouthpiece retarget` end to end: against the independent numpy reference on unseen random
 //! cases, invariance to head motion, and bad input (exit code 2, the line named, no output).
 
+use crate::repo;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
 use serde_json::Value;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
 fn mouthpiece() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_mouthpiece"));
+    let mut c = crate::mouthpiece();
     c.env("RUST_LOG", "warn");
     c
 }

@@ -1,19 +1,11 @@
 //! `mouthpiece synth` end to end: the file it writes is read by Python's `mcap` package (an
 //! independent reader, `tests/read_session.py`) and by our own reader; bad input exits 2.
 
-use std::path::{Path, PathBuf};
+use crate::{mouthpiece, repo};
 use std::process::Command;
 
 use mouthpiece_recording::SessionReader;
 use mouthpiece_synth::{Synth, SynthConfig};
-
-fn mouthpiece() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-}
-
-fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
 
 fn python() -> String {
     std::env::var("MOUTHPIECE_PYTHON").unwrap_or_else(|_| "python3".into())
@@ -56,7 +48,7 @@ fn python_mcap_reads_what_synth_writes() {
     std::fs::write(&expected_file, expected.to_string()).unwrap();
 
     let output = Command::new(python())
-        .arg(repo_root().join("tests/read_session.py"))
+        .arg(repo().join("tests/read_session.py"))
         .arg(&out)
         .arg(&expected_file)
         .output()

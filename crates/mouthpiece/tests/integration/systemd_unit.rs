@@ -1,11 +1,7 @@
 //! The shipped systemd unit passes `systemd-analyze verify` without a single warning.
 
-use std::path::Path;
+use crate::repo;
 use std::process::Command;
-
-fn repo() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
-}
 
 #[test]
 fn unit_verifies_cleanly() {

@@ -5,7 +5,6 @@
 use crate::helper_harness as harness;
 
 use std::path::Path;
-use std::process::Command;
 
 use harness::NatsServer;
 use mouthpiece_nats::store::{TakeRecord, TakeStore};
@@ -13,7 +12,7 @@ use mouthpiece_nats::store::{TakeRecord, TakeStore};
 fn takes_cli(dir: &Path, url: &str, args: &[&str]) -> std::process::Output {
     let config = dir.join("empty.toml");
     std::fs::write(&config, "").unwrap();
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+    crate::mouthpiece()
         .arg("takes")
         .arg("--config")
         .arg(&config)
@@ -152,7 +151,7 @@ fn a_bad_ca_file_in_the_config_is_named_with_its_line() {
             ),
         )
         .unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
+        let out = crate::mouthpiece()
             .args(["takes", "--config"])
             .arg(&config)
             .arg("list")

@@ -3,16 +3,13 @@
 //! configuration, its ranges hold the paint's hue, and used as the detector's configuration it
 //! finds every dot in the session's frames. A session without dots exits 2.
 
+use crate::mouthpiece;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use mouthpiece_detect::{DetectConfig, Detector, DotRole};
 use mouthpiece_pipeline::PipelineConfig;
 use mouthpiece_recording::SessionReader;
-
-fn mouthpiece() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_mouthpiece"))
-}
 
 /// OpenCV's 8-bit hue (0–179) of an RGB colour.
 fn cv_hue(rgb: [u8; 3]) -> f64 {

@@ -13,7 +13,9 @@ use tokio_tungstenite::tungstenite::protocol::frame::coding::CloseCode;
 use tokio_tungstenite::tungstenite::{Error as WsError, Message};
 use tracing::{debug, info};
 
-use super::{error_json, Outgoing, ReaderExit, TokenBucket};
+use mouthpiece_output::TokenBucket;
+
+use super::{error_json, Outgoing, ReaderExit};
 use crate::config::Access;
 use crate::protocol::{self, ClientMessage, ErrorCode, ServerMessage};
 use crate::server::{Shared, Ws};
@@ -35,7 +37,7 @@ pub(super) async fn read_loop(
 ) -> ReaderExit {
     let limits = &shared.config.limits;
     let metrics = &shared.hub.inner.metrics;
-    let mut bucket = TokenBucket::new(limits.max_messages_per_second);
+    let mut bucket = TokenBucket::new(limits.max_messages_per_second, Instant::now());
     let mut refused_in_a_row = 0u32;
     // The writer stalls when the client does not read; its replies then pile up here.
     let overflow = || {
@@ -76,7 +78,7 @@ pub(super) async fn read_loop(
                 return Some((CloseCode::Protocol, format!("protocol error: {e}")));
             }
         };
-        if !bucket.take() {
+        if !bucket.take(Instant::now()) {
             metrics.bad_messages.fetch_add(1, Ordering::Relaxed);
             refused_in_a_row += 1;
             if refused_in_a_row > limits.max_messages_per_second.saturating_mul(2) {

@@ -219,7 +219,7 @@ const DEVICE_ID: &str = "0B2C5E4F-6A7D-4E8F-9A0B-1C2D3E4F5A6B";
 /// second target where nothing listens changes nothing.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn livelink_datagrams_decode_to_the_websocket_frames_of_the_same_steps() {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let repo = crate::repo();
     let wolf = mouthpiece_retarget::Character::from_toml_str(
         &std::fs::read_to_string(repo.join("config/characters/wolf.toml")).unwrap(),
     )
@@ -270,6 +270,21 @@ async fn livelink_datagrams_decode_to_the_websocket_frames_of_the_same_steps() {
         "{} datagrams\n{}",
         packets.len(),
         daemon.log()
+    );
+    // Both targets' counters are in `/metrics`: the listening one has sent, and the closed
+    // one's sends are counted whichever way they went.
+    let metrics = http_body(daemon.port, "/metrics");
+    let sent = |target: String| {
+        osc_counter(&metrics, "mouthpiece_livelink_sent_total", &target)
+            .unwrap_or_else(|| panic!("no Live Link counter for {target} in\n{metrics}"))
+    };
+    assert!(sent(format!("127.0.0.1:{port}")) > 0, "{metrics}");
+    let closed_target = format!("127.0.0.1:{closed}");
+    assert!(
+        sent(closed_target.clone())
+            + osc_counter(&metrics, "mouthpiece_livelink_errors_total", &closed_target).unwrap()
+            > 0,
+        "{metrics}"
     );
 
     for p in &packets {
@@ -372,10 +387,11 @@ fn text(arg: &rosc::OscType) -> String {
 /// Live Link Face's remote control: a take started, slated and stopped over OSC is an
 /// ordinary take (its file in the takes folder), confirmed with its timecode and path; the
 /// queries are answered as a mains-powered booth; a sender outside the allow list gets no
-/// answer; garbage, bundles and unknown commands are ignored and the daemon keeps going.
+/// answer; garbage, bundles and unknown commands are ignored and the daemon keeps going; a
+/// flood from the allowed address is cut to the control's rate and counted in `/metrics`.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn livelink_remote_control_records_a_take_and_refuses_strangers() {
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let repo = crate::repo();
     let demo = repo.join("recordings/demo.mcap").canonicalize().unwrap();
     let control_port = udp_port();
     let control: SocketAddr = format!("127.0.0.1:{control_port}").parse().unwrap();
@@ -452,6 +468,50 @@ async fn livelink_remote_control_records_a_take_and_refuses_strangers() {
         "{}",
         daemon.log()
     );
+
+    // A flood from the allowed address: 3000 queries at once. The control takes its rate of
+    // them (a burst of 50, then 50 a second), drops the rest unread and counts them, and
+    // answers the booth again once it slows down.
+    let flood_started = Instant::now();
+    for _ in 0..3000 {
+        booth
+            .send_to(&osc("/BatteryQuery", vec![]), control)
+            .unwrap();
+    }
+    booth
+        .set_read_timeout(Some(Duration::from_millis(500)))
+        .unwrap();
+    let mut answered = 0u32;
+    while booth.recv(&mut buf).is_ok() {
+        answered += 1;
+    }
+    // Ends after half a second without an answer: the rate allows a burst of 50 plus 50 for
+    // each second since the flood began, whatever the machine's load.
+    let allowed = 50.0 + 50.0 * flood_started.elapsed().as_secs_f64();
+    assert!(
+        answered >= 1 && f64::from(answered) <= allowed,
+        "{answered} answers to a flood, the rate allows {allowed:.0}"
+    );
+    let metrics = http_body(daemon.port, "/metrics");
+    let flooded: u64 = metrics
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("mouthpiece_livelink_control_datagrams_total{outcome=\"flooded\"} ")
+        })
+        .unwrap_or_else(|| panic!("no flood counter in\n{metrics}"))
+        .parse()
+        .unwrap();
+    assert!(flooded > 0, "{metrics}");
+    assert!(
+        metrics.contains("mouthpiece_livelink_control_datagrams_total{outcome=\"refused\"} 1"),
+        "{metrics}"
+    );
+    // A second without commands fills the bucket again: the next command is answered.
+    std::thread::sleep(Duration::from_millis(1100));
+    booth
+        .send_to(&osc("/BatteryQuery", vec![]), control)
+        .unwrap();
+    assert_eq!(reply(&booth).addr, "/Battery");
 
     // Replies go to the send target once one is set.
     let target = UdpSocket::bind("127.0.0.1:0").unwrap();
