@@ -523,7 +523,7 @@ impl Processor for LiveProcessor {
             source: source.to_owned(),
             mouth_frame: self.pipeline.tracker().neutral().map(|n| {
                 let rotation = nalgebra::UnitQuaternion::from_matrix(&n.frame.axes);
-                mouthpiece_server::FramePose {
+                mouthpiece_server::RigidPose {
                     rotation: [rotation.w, rotation.i, rotation.j, rotation.k],
                     translation: [n.frame.origin.x, n.frame.origin.y, n.frame.origin.z],
                 }

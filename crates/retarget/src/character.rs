@@ -19,29 +19,7 @@ mod points;
 use points::*;
 pub use points::{resample, MAX_POINTS_PER_LIP};
 
-/// How the deformation parameters `M` are chosen (docs/method.md §5).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum MMode {
-    /// Per point and axis `P/D` where that is safe, the axis extent ratio otherwise.
-    #[default]
-    PerPoint,
-    /// Every point uses the axis extent ratios.
-    PerAxis,
-    /// Values given in the file's `[m]` table.
-    Manual,
-}
-
-impl MMode {
-    /// The spelling of a character file's `m_mode` (kebab-case), which `hello` repeats.
-    pub fn name(self) -> &'static str {
-        match self {
-            MMode::PerPoint => "per-point",
-            MMode::PerAxis => "per-axis",
-            MMode::Manual => "manual",
-        }
-    }
-}
+pub use crate::deform::MMode;
 
 /// Units of a character's coordinates, when the file says (`units`). Export uses them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]

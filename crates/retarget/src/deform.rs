@@ -1,8 +1,33 @@
 //! Deformation parameters `M_n` (docs/method.md §5): how far each character point moves per unit
 //! of its performer dot's motion, per axis.
 
-use crate::character::MMode;
+use serde::Deserialize;
+
 use crate::Vec3;
+
+/// How the deformation parameters `M` are chosen (docs/method.md §5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MMode {
+    /// Per point and axis `P/D` where that is safe, the axis extent ratio otherwise.
+    #[default]
+    PerPoint,
+    /// Every point uses the axis extent ratios.
+    PerAxis,
+    /// Values given in the file's `[m]` table.
+    Manual,
+}
+
+impl MMode {
+    /// The spelling of a character file's `m_mode` (kebab-case), which `hello` repeats.
+    pub fn name(self) -> &'static str {
+        match self {
+            MMode::PerPoint => "per-point",
+            MMode::PerAxis => "per-axis",
+            MMode::Manual => "manual",
+        }
+    }
+}
 
 /// Bounds for a per-point ratio `P/D`.
 pub const M_MIN: f64 = 0.05;

@@ -56,6 +56,7 @@ pub mod one_euro;
 pub mod retarget;
 pub mod rig;
 pub mod smooth;
+mod stabilised;
 
 pub use character::{Character, MMode, Units};
 pub use error::Error;

@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::kabsch::kabsch;
 use crate::lip_fill::LipFill;
-use crate::retarget::StabilisedFrame;
+use crate::stabilised::StabilisedFrame;
 use crate::{Error, MouthFrame, Named, NeutralPose, Vec3};
 
 /// The curve names, in wire order (ARKit's blend-shape names; left and right are the

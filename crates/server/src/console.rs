@@ -4,8 +4,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::hub::Hub;
-
 /// The daemon's health over the last second; the daemon sets it about once a second.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Health {
@@ -104,15 +102,6 @@ pub struct TuneClass {
     pub per_frame: f64,
 }
 
-/// A frame's pose in its parent frame: `parent = R · child + t`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FramePose {
-    /// Unit quaternion `[w, x, y, z]`.
-    pub rotation: [f64; 4],
-    /// Translation, metres.
-    pub translation: [f64; 3],
-}
-
 /// The `health` message.
 #[derive(Debug, Serialize)]
 pub(crate) struct HealthMessage<'a> {
@@ -129,48 +118,10 @@ pub(crate) struct HealthMessage<'a> {
 /// How many takes `status` lists at most (the newest).
 pub const MAX_LISTED_TAKES: usize = 50;
 
-impl Hub {
-    /// Replaces the health figures; clients subscribed to `health` get them.
-    pub fn set_health(&self, health: Health) {
-        self.inner.health.send_replace(health);
-    }
-
-    /// Adds a finished take to the session's list in `status` (newest last, at most
-    /// [`MAX_LISTED_TAKES`]).
-    pub fn add_take(&self, take: TakeSummary) {
-        self.update_status(|s| {
-            s.takes.push(take);
-            let extra = s.takes.len().saturating_sub(MAX_LISTED_TAKES);
-            s.takes.drain(..extra);
-        });
-    }
-
-    /// Sets the last calibration shown in `status`.
-    pub fn set_calibration(&self, report: CalibrationReport) {
-        self.update_status(|s| s.calibration = Some(report));
-    }
-
-    /// Sets the last paint check shown in `status`.
-    pub fn set_tune(&self, report: Option<TuneReport>) {
-        self.update_status(|s| s.tune = report);
-    }
-
-    /// The `health` message text.
-    pub(crate) fn health_json(&self) -> String {
-        let health = self.inner.health.borrow().clone();
-        serde_json::to_string(&HealthMessage {
-            kind: "health",
-            clients: self.clients(),
-            preview_clients: self.preview_clients(),
-            health: &health,
-        })
-        .unwrap_or_default()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hub::Hub;
 
     #[test]
     fn the_take_list_keeps_the_newest() {

@@ -24,10 +24,10 @@ use tokio_tungstenite::tungstenite::protocol::CloseFrame;
 use tokio_tungstenite::tungstenite::{Error as WsError, Message};
 use tracing::{debug, info, warn};
 
+use crate::connection::{Shared, Ws};
 use crate::foxglove_scene as scene;
 use crate::hub::{PublishedFrame, StreamInfo};
 use crate::preview::{ClientPreview, PreviewRequest};
-use crate::server::{Shared, Ws};
 use crate::session::truncate_reason;
 
 /// Channel id of `/head`.
@@ -608,7 +608,12 @@ fn update_preview(
         .values()
         .any(|c| *c == scene::IMAGE_CHANNEL || *c == scene::ANNOTATIONS_CHANNEL);
     match (wants, preview.is_some()) {
-        (true, false) => *preview = Some(ClientPreview::start(hub, PreviewRequest::default())),
+        (true, false) => {
+            *preview = Some(ClientPreview::start(
+                &hub.inner.preview,
+                PreviewRequest::default(),
+            ))
+        }
         (false, true) => *preview = None,
         _ => {}
     }

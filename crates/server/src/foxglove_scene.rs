@@ -17,9 +17,9 @@
 use base64::Engine as _;
 use serde_json::{json, Value};
 
-use crate::console::FramePose;
 use crate::hub::{PublishedFrame, StreamInfo};
 use crate::preview::{DotState, EncodedPreview};
+use mouthpiece_output::RigidPose;
 
 /// Channel id of `/camera/image`.
 pub const IMAGE_CHANNEL: u32 = 3;
@@ -267,7 +267,7 @@ pub fn frame_transforms(frame: &PublishedFrame, info: &StreamInfo, timestamp_ns:
         head.pose.translation,
         head.pose.rotation,
     )];
-    let mouth = info.mouth_frame.clone().unwrap_or(FramePose {
+    let mouth = info.mouth_frame.unwrap_or(RigidPose {
         rotation: IDENTITY_QUATERNION,
         translation: [0.0, 0.0, 0.0],
     });

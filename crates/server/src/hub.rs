@@ -20,6 +20,7 @@ use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
 pub use mouthpiece_output::{CharacterFrame, HeadPose, PerformerFrame, StreamFrame};
 
+use crate::console::{CalibrationReport, Health, TakeSummary, TuneReport};
 use crate::metrics::Metrics;
 use crate::timecode::{Timecode, TimecodeRate};
 
@@ -70,7 +71,7 @@ pub struct StreamInfo {
     /// The performer's neutral mouth frame in the neutral head's (camera) coordinates, once
     /// calibrated: where `performer` points and the head pose meet.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub mouth_frame: Option<crate::console::FramePose>,
+    pub mouth_frame: Option<mouthpiece_output::RigidPose>,
 }
 
 /// The take being recorded.
@@ -456,25 +457,6 @@ impl Hub {
         self.inner.info.borrow().clone()
     }
 
-    /// The `hello` message for `info` (what a client gets first), as `server_name` with
-    /// `access` (`read` or `control`).
-    pub fn hello_json(&self, info: &StreamInfo, server_name: &str, access: &'static str) -> String {
-        use crate::protocol::{ClockDescription, HelloMessage, ServerIdentity, ServerMessage};
-        crate::protocol::to_json(&ServerMessage::Hello(HelloMessage {
-            protocol: crate::protocol::SUBPROTOCOL,
-            server: ServerIdentity {
-                name: server_name.to_owned(),
-                version: env!("CARGO_PKG_VERSION"),
-            },
-            info,
-            timecode_rate: self.inner.timecode_rate.name(),
-            clock: ClockDescription::default(),
-            access,
-            rig_curves: &mouthpiece_output::CURVE_NAMES,
-            rig_visemes: &mouthpiece_output::VISEME_NAMES,
-        }))
-    }
-
     /// The clock frames' timecodes are read from; the daemon's LTC thread feeds it.
     pub fn timecode_clock(&self) -> Arc<crate::timecode_clock::TimecodeClock> {
         self.inner.clock.clone()
@@ -608,6 +590,74 @@ impl Hub {
                 mpsc::error::TrySendError::Closed(_) => ControlQueueError::NoDaemon,
             })?;
         Ok(rx)
+    }
+
+    /// Replaces the health figures; clients subscribed to `health` get them.
+    pub fn set_health(&self, health: Health) {
+        self.inner.health.send_replace(health);
+    }
+
+    /// Adds a finished take to the session's list in `status` (newest last, at most
+    /// [`crate::console::MAX_LISTED_TAKES`]).
+    pub fn add_take(&self, take: TakeSummary) {
+        self.update_status(|s| {
+            s.takes.push(take);
+            let extra = s
+                .takes
+                .len()
+                .saturating_sub(crate::console::MAX_LISTED_TAKES);
+            s.takes.drain(..extra);
+        });
+    }
+
+    /// Sets the last calibration shown in `status`.
+    pub fn set_calibration(&self, report: CalibrationReport) {
+        self.update_status(|s| s.calibration = Some(report));
+    }
+
+    /// Sets the last paint check shown in `status`.
+    pub fn set_tune(&self, report: Option<TuneReport>) {
+        self.update_status(|s| s.tune = report);
+    }
+
+    /// The `health` message text.
+    pub(crate) fn health_json(&self) -> String {
+        let health = self.inner.health.borrow().clone();
+        serde_json::to_string(&crate::console::HealthMessage {
+            kind: "health",
+            clients: self.clients(),
+            preview_clients: self.preview_clients(),
+            health: &health,
+        })
+        .unwrap_or_default()
+    }
+
+    /// Whether a preview image of the frame at stream time `t` is wanted: some client asked
+    /// for the preview and an image is due at the highest rate asked for. Cheap (one lock,
+    /// no allocation); call it from the processing thread after [`Hub::publish`].
+    pub fn preview_due(&self, t: f64) -> bool {
+        self.inner.preview.due(t)
+    }
+
+    /// Hands a frame to the preview encoder. Never blocks: an image still waiting to be
+    /// encoded is replaced by this newer one. Does nothing when no client wants the preview.
+    pub fn offer_preview(&self, input: crate::preview::PreviewInput) {
+        self.inner.preview.offer(input)
+    }
+
+    /// The newest preview image, if one was encoded.
+    pub fn latest_preview(&self) -> Option<Arc<crate::preview::EncodedPreview>> {
+        self.inner.preview.latest_image()
+    }
+
+    /// How many clients (and Foxglove image subscriptions) want the preview now.
+    pub fn preview_clients(&self) -> usize {
+        self.inner.preview.clients()
+    }
+
+    /// Serves the takes of `archive` at `/take` (the console's player); `None` stops.
+    pub fn set_take_archive(&self, archive: Option<Arc<dyn crate::takes_http::TakeArchive>>) {
+        self.inner.takes.set_archive(archive)
     }
 }
 

@@ -71,6 +71,7 @@
 
 pub mod audio;
 pub mod config;
+mod connection;
 pub mod console;
 pub mod control;
 mod error;
@@ -96,9 +97,7 @@ mod tls;
 
 pub use audio::{AudioCounters, AudioState, AudioStatus, SILENCE_DBFS};
 pub use config::{Access, Limits, ServerConfig, TlsFiles, Token};
-pub use console::{
-    CalibrationReport, FramePose, Health, TakeSummary, TuneClass, TuneFound, TuneReport,
-};
+pub use console::{CalibrationReport, Health, TakeSummary, TuneClass, TuneFound, TuneReport};
 pub use error::ServerError;
 pub use foxglove::{
     check_client_message as check_foxglove_client_message, FIRST_CHARACTER_CHANNEL, HEAD_CHANNEL,

@@ -118,7 +118,7 @@ pub fn synthetic_info(frame_rate: f64) -> StreamInfo {
         frame_rate,
         source: "synthetic (mouthpiece-server loadgen)".into(),
         // A mouth 60 cm in front of the camera, 8 cm below the head's centre.
-        mouth_frame: Some(crate::console::FramePose {
+        mouth_frame: Some(mouthpiece_output::RigidPose {
             rotation: [0.0, 1.0, 0.0, 0.0],
             translation: [0.0, 0.08, 0.6],
         }),

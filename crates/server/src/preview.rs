@@ -26,8 +26,6 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 use tokio::sync::watch;
 
-use crate::hub::Hub;
-
 pub use encoding::{
     downscale_bgr, downscale_factor, encode, encode_preview_message, overlay_json, PreviewError,
 };
@@ -136,7 +134,7 @@ pub struct Overlay {
 
 /// What the processing thread hands over for one preview image.
 pub struct PreviewInput {
-    /// The frame's `seq` (as [`Hub::publish`] returned it).
+    /// The frame's `seq` (as [`crate::Hub::publish`] returned it).
     pub seq: u64,
     /// The frame's `t`.
     pub t: f64,
@@ -374,13 +372,12 @@ impl RateGate {
     }
 }
 
-impl Hub {
+impl PreviewShared {
     /// Whether a preview image of the frame at stream time `t` is wanted: some client asked
     /// for the preview and an image is due at the highest rate asked for. Cheap (one lock,
-    /// no allocation); call it from the processing thread after [`Hub::publish`].
-    pub fn preview_due(&self, t: f64) -> bool {
-        let shared = &self.inner.preview;
-        let mut demand = lock(&shared.demand);
+    /// no allocation); call it from the processing thread after [`crate::Hub::publish`].
+    pub(crate) fn due(&self, t: f64) -> bool {
+        let mut demand = lock(&self.demand);
         let Some(request) = demand.combined() else {
             demand.next_due = None;
             return false;
@@ -402,8 +399,8 @@ impl Hub {
 
     /// Hands a frame to the preview encoder. Never blocks: an image still waiting to be
     /// encoded is replaced by this newer one. Does nothing when no client wants the preview.
-    pub fn offer_preview(&self, input: PreviewInput) {
-        let shared = &self.inner.preview;
+    pub(crate) fn offer(self: &Arc<Self>, input: PreviewInput) {
+        let shared = self;
         let Some(request) = lock(&shared.demand).combined() else {
             return;
         };
@@ -429,13 +426,13 @@ impl Hub {
     }
 
     /// The newest preview image, if one was encoded.
-    pub fn latest_preview(&self) -> Option<Arc<EncodedPreview>> {
-        self.inner.preview.latest.borrow().clone()
+    pub(crate) fn latest_image(&self) -> Option<Arc<EncodedPreview>> {
+        self.latest.borrow().clone()
     }
 
     /// How many clients (and Foxglove image subscriptions) want the preview now.
-    pub fn preview_clients(&self) -> usize {
-        lock(&self.inner.preview.demand).requests.len()
+    pub(crate) fn clients(&self) -> usize {
+        lock(&self.demand).requests.len()
     }
 }
 
@@ -495,11 +492,11 @@ pub(crate) struct ClientPreview {
 
 impl ClientPreview {
     /// Registers `request` with the hub's preview.
-    pub(crate) fn start(hub: &Hub, request: PreviewRequest) -> Self {
-        let mut latest = hub.inner.preview.latest.subscribe();
+    pub(crate) fn start(preview: &Arc<PreviewShared>, request: PreviewRequest) -> Self {
+        let mut latest = preview.latest.subscribe();
         latest.mark_unchanged();
         Self {
-            guard: register(&hub.inner.preview, request),
+            guard: register(preview, request),
             gate: RateGate::new(request.max_rate),
             latest,
             request,

@@ -582,6 +582,27 @@ fn validate(message: &ClientMessage) -> Result<(), String> {
 
 pub use mouthpiece_output::{valid_slate, SLATE_RULE};
 
+impl crate::hub::Hub {
+    /// The `hello` message for `info` (what a client gets first), as `server_name` with
+    /// `access` (`read` or `control`).
+    pub fn hello_json(&self, info: &StreamInfo, server_name: &str, access: &'static str) -> String {
+        use crate::protocol::{ClockDescription, HelloMessage, ServerIdentity, ServerMessage};
+        crate::protocol::to_json(&ServerMessage::Hello(HelloMessage {
+            protocol: crate::protocol::SUBPROTOCOL,
+            server: ServerIdentity {
+                name: server_name.to_owned(),
+                version: env!("CARGO_PKG_VERSION"),
+            },
+            info,
+            timecode_rate: self.inner.timecode_rate.name(),
+            clock: ClockDescription::default(),
+            access,
+            rig_curves: &mouthpiece_output::CURVE_NAMES,
+            rig_visemes: &mouthpiece_output::VISEME_NAMES,
+        }))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -5,7 +5,7 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
-use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt};
+use tokio::io::AsyncWriteExt;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::watch;
 use tokio::task::JoinSet;
@@ -15,6 +15,7 @@ use tokio_tungstenite::WebSocketStream;
 use tracing::{debug, info, warn, Instrument};
 
 use crate::config::{Access, ServerConfig};
+use crate::connection::{BoxedIo, Pending, Shared};
 use crate::error::ServerError;
 use crate::http::{self, HeadError, Request};
 use crate::hub::Hub;
@@ -26,25 +27,6 @@ const CONSOLE_HTML: &str = include_str!("../assets/console.html");
 const CONSOLE_JS: &str = include_str!("../assets/console.js");
 /// The console's take player and paint check.
 const CONSOLE_TAKES_JS: &str = include_str!("../assets/console-takes.js");
-
-/// A byte stream a session runs on: plain TCP or TLS.
-pub(crate) trait Io: AsyncRead + AsyncWrite + Unpin + Send {}
-impl<T: AsyncRead + AsyncWrite + Unpin + Send> Io for T {}
-pub(crate) type BoxedIo = Box<dyn Io>;
-pub(crate) type Ws = WebSocketStream<BoxedIo>;
-
-/// State every connection task shares.
-pub(crate) struct Shared {
-    pub(crate) config: ServerConfig,
-    pub(crate) hub: Hub,
-    pub(crate) shutdown: watch::Receiver<bool>,
-    connections: AtomicUsize,
-    tls: Option<tokio_rustls::TlsAcceptor>,
-    /// The address the listener is bound to (for the `Host` check).
-    local: SocketAddr,
-    /// Connections still in TLS + request head, oldest first (see [`Pending`]).
-    pending: Pending,
-}
 
 /// An upgrade the front door said yes to: protocol, subprotocol to name in the response,
 /// access level, `Sec-WebSocket-Accept` value, the client's place under `max_clients`.
@@ -145,20 +127,6 @@ impl Drop for OpenConnection {
         self.0.connections.fetch_sub(1, Ordering::Relaxed);
     }
 }
-
-/// Connections that have not yet sent a full request head, oldest first. When
-/// `max_connections` is reached, a new connection evicts one of them: the oldest of those
-/// held by the peer holding the most (one peer opening connections and leaving them silent
-/// only ever evicts its own, never another peer's handshake), see [`Pending::evict`].
-/// Connections past the front door are never evicted.
-#[derive(Default)]
-struct Pending {
-    queue: std::sync::Mutex<std::collections::VecDeque<PendingEntry>>,
-    next: std::sync::atomic::AtomicU64,
-}
-
-/// One pending handshake: its id, its peer (see [`peer_key`]), the signal that closes it.
-type PendingEntry = (u64, IpAddr, Arc<tokio::sync::Notify>);
 
 /// Who a connection counts against in [`Pending`]: its IPv4 address, or the /64 network of
 /// its IPv6 address (one host usually holds a whole /64). Local processes all share the
@@ -350,7 +318,7 @@ async fn serve_http(shared: &Shared, io: &mut BoxedIo, req: &Request) -> std::io
             )
             .await
         }
-        "/take" => crate::takes_http::serve(shared, io, req).await,
+        "/take" => crate::takes_http::serve(&shared.hub, &shared.config, io, req).await,
         "/healthz" => {
             if let Some(reason) = shared.hub.failure() {
                 let body = serde_json::json!({ "status": "failed", "reason": reason });

@@ -23,10 +23,10 @@ use tokio_tungstenite::tungstenite::Message;
 use tracing::info;
 
 use crate::config::Access;
+use crate::connection::{Shared, Ws};
 use crate::protocol::{
     self, ErrorCode, ErrorMessage, FrameFormat, FrameSelection, RequestId, ServerMessage, Subscribe,
 };
-use crate::server::{Shared, Ws};
 
 use reader::read_loop;
 use writer::Writer;

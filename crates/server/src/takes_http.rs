@@ -96,15 +96,18 @@ impl Default for TakeService {
     }
 }
 
-impl crate::Hub {
-    /// Serves the takes of `archive` at `/take` (the console's player); `None` stops.
-    pub fn set_take_archive(&self, archive: Option<Arc<dyn TakeArchive>>) {
-        *self
-            .inner
-            .takes
-            .archive
+impl TakeService {
+    /// Serves the takes of `archive` (`None`: none).
+    pub(crate) fn set_archive(&self, archive: Option<Arc<dyn TakeArchive>>) {
+        *self.archive.lock().unwrap_or_else(|e| e.into_inner()) = archive;
+    }
+
+    /// The archive served now.
+    fn archive(&self) -> Option<Arc<dyn TakeArchive>> {
+        self.archive
             .lock()
-            .unwrap_or_else(|e| e.into_inner()) = archive;
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 }
 
@@ -228,9 +231,10 @@ pub(crate) fn parse_request(req: &crate::http::Request) -> Result<ChunkRequest, 
 }
 
 /// Answers `/take`: token, request, archive, a read slot, then the chunk.
-pub(crate) async fn serve(
-    shared: &crate::server::Shared,
-    io: &mut crate::server::BoxedIo,
+pub(crate) async fn serve<S: tokio::io::AsyncWrite + Unpin>(
+    hub: &crate::hub::Hub,
+    config: &crate::config::ServerConfig,
+    io: &mut S,
     req: &crate::http::Request,
 ) -> std::io::Result<()> {
     use crate::http::{respond, respond_error};
@@ -239,11 +243,7 @@ pub(crate) async fn serve(
         .and_then(|v| v.strip_prefix("Bearer "))
         .map(|v| v.trim().to_owned());
     let token = bearer.or_else(|| req.query_param("token"));
-    if shared
-        .hub
-        .access_for(&shared.config, token.as_deref())
-        .is_none()
-    {
+    if hub.access_for(config, token.as_deref()).is_none() {
         let why = if token.is_some() {
             "wrong token"
         } else {
@@ -255,18 +255,11 @@ pub(crate) async fn serve(
         Ok(r) => r,
         Err(why) => return respond_error(io, 400, &why).await,
     };
-    let archive = shared
-        .hub
-        .inner
-        .takes
-        .archive
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .clone();
+    let archive = hub.inner.takes.archive();
     let Some(archive) = archive else {
         return respond_error(io, 404, "takes are not served here (no takes folder)").await;
     };
-    let Ok(permit) = shared.hub.inner.takes.reads.clone().try_acquire_owned() else {
+    let Ok(permit) = hub.inner.takes.reads.clone().try_acquire_owned() else {
         return respond_error(io, 503, "busy reading other takes; try again").await;
     };
     let result = tokio::task::spawn_blocking(move || {

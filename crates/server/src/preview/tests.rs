@@ -1,6 +1,7 @@
 //! Preview tests: downscaling, the message layout, requests, rates and the encoder slot.
 
 use super::*;
+use crate::hub::Hub;
 
 fn gradient(w: u32, h: u32) -> OwnedBgr {
     let mut data = Vec::with_capacity((w * h * 3) as usize);

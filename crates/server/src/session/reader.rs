@@ -17,8 +17,8 @@ use mouthpiece_output::TokenBucket;
 
 use super::{error_json, Outgoing, ReaderExit};
 use crate::config::Access;
+use crate::connection::{Shared, Ws};
 use crate::protocol::{self, ClientMessage, ErrorCode, ServerMessage};
-use crate::server::{Shared, Ws};
 
 #[derive(Clone, Copy)]
 enum Kind {

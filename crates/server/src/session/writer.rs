@@ -16,12 +16,12 @@ use tracing::{debug, warn};
 
 use super::{error_json, truncate_reason, Decimator, Outgoing, ReaderEnd};
 use crate::config::Access;
+use crate::connection::{Shared, Ws};
 use crate::hub::{PublishedFrame, StreamInfo};
 use crate::protocol::{
     self, ErrorCode, ErrorMessage, FrameFormat, FrameSelection, FrameView, ResultMessage,
     ServerMessage, StatusMessage, Subscribe,
 };
-use crate::server::{Shared, Ws};
 
 pub(super) struct Writer {
     pub(super) shared: Arc<Shared>,
@@ -343,7 +343,7 @@ impl Writer {
             Some(p) => p.change(wanted),
             None => {
                 self.preview = Some(crate::preview::ClientPreview::start(
-                    &self.shared.hub,
+                    &self.shared.hub.inner.preview,
                     wanted,
                 ))
             }
