@@ -291,9 +291,26 @@ mod tests {
         );
     }
 
-    /// Runs a source thread over `opener` until `want` frames arrived (or 10 s passed) and
+    /// Runs a source thread over `opener` until `want` frames arrived (or 60 s passed) and
     /// returns the frames seen and every `Down` reason reported on the way.
     fn run_until_frames(opener: Opener, spec: &str, want: usize) -> (usize, Vec<String>) {
+        // Each reopen waits until the test has seen the `Down` before it: on a loaded machine
+        // the next `Down` could otherwise replace one the test never saw.
+        let downs_seen = Arc::new((std::sync::Mutex::new(0usize), std::sync::Condvar::new()));
+        let gate = downs_seen.clone();
+        let mut inner = opener;
+        let mut attempts = 0usize;
+        let opener: Opener = Box::new(move || {
+            if attempts > 0 {
+                let (count, changed) = &*gate;
+                let count = count.lock().unwrap();
+                let _ = changed
+                    .wait_timeout_while(count, Duration::from_secs(30), |c| *c < attempts)
+                    .unwrap();
+            }
+            attempts += 1;
+            inner()
+        });
         let shared = SourceShared::new();
         let ms = Duration::from_millis;
         let thread = spawn(
@@ -307,7 +324,7 @@ mod tests {
         let mut seen_down = Vec::new();
         let mut frames = 0;
         let mut generation = 0;
-        let deadline = Instant::now() + Duration::from_secs(10);
+        let deadline = Instant::now() + Duration::from_secs(60);
         while frames < want && Instant::now() < deadline {
             if let Taken::Value(_) = shared.frames.take_timeout(ms(5)) {
                 frames += 1;
@@ -317,6 +334,9 @@ mod tests {
                 generation = g;
                 if let SourceState::Down { reason, .. } = state {
                     seen_down.push(reason);
+                    let (count, changed) = &*downs_seen;
+                    *count.lock().unwrap() += 1;
+                    changed.notify_all();
                 }
             }
         }

@@ -166,7 +166,10 @@ pub enum NatsError {
     /// An object whose info or data cannot be trusted (no digest, a link out of the bucket,
     /// a size or digest that does not match what was received).
     #[error("object {object} {why}")]
-    Untrusted { object: String, why: String },
+    Untrusted {
+        object: String,
+        why: crate::store::Refused,
+    },
 }
 
 /// The reconnection delay after `attempts` failed attempts: none at first (another node of

@@ -216,7 +216,7 @@ impl TakeStore {
             Some(target) => {
                 let linked = info_of(target.clone()).await?;
                 if linked.options.as_ref().is_some_and(|o| o.link.is_some()) {
-                    return Err(untrusted(name, "is a link to another link".into()));
+                    return Err(untrusted(name, Refused::LinkToLink));
                 }
                 (target, linked)
             }
@@ -293,7 +293,7 @@ impl TakeStore {
     }
 }
 
-fn untrusted(name: &str, why: String) -> NatsError {
+fn untrusted(name: &str, why: Refused) -> NatsError {
     NatsError::Untrusted {
         object: shown(name).into_owned(),
         why,
@@ -302,8 +302,35 @@ fn untrusted(name: &str, why: String) -> NatsError {
 
 /// An object's info from the JSON the store holds (what the client library reads before
 /// [`TakeStore::fetch`] checks it); the entry point of the store's fuzz target.
-pub fn info_from_json(json: &[u8]) -> Result<ObjectInfo, String> {
-    serde_json::from_slice(json).map_err(|e| e.to_string())
+pub fn info_from_json(json: &[u8]) -> Result<ObjectInfo, serde_json::Error> {
+    serde_json::from_slice(json)
+}
+
+/// Why an object's info or data is not trusted; each says what it found.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Refused {
+    #[error("is a link to another link")]
+    LinkToLink,
+    #[error("is a link into another bucket ({0}): refused")]
+    LinkOutOfBucket(String),
+    #[error("is a link to a whole bucket: refused")]
+    LinkToBucket,
+    #[error("its info names another bucket ({0}): refused")]
+    OtherBucket(String),
+    #[error("is deleted")]
+    Deleted,
+    #[error("is a link: refused")]
+    Link,
+    #[error("has no digest: its data cannot be verified, refused")]
+    NoDigest,
+    #[error("has a digest that is not SHA-256=<base64url of 32 bytes> ({0}): refused")]
+    BadDigest(String),
+    #[error("sent more than the {size} bytes its info gives: refused, nothing kept")]
+    TooLong { size: u64 },
+    #[error("sent {got} bytes, its info gives {size}: refused, nothing kept")]
+    WrongSize { got: u64, size: u64 },
+    #[error("data does not match the digest in its info: refused, nothing kept")]
+    DigestMismatch,
 }
 
 /// Where a link object points, when `info` is one: `Ok(None)` for a plain object; refused
@@ -316,15 +343,9 @@ pub fn link_target(info: &ObjectInfo, bucket: &str) -> Result<Option<String>, Na
     match &link.name {
         _ if link.bucket != bucket => Err(untrusted(
             name,
-            format!(
-                "is a link into another bucket ({}): refused",
-                shown(&link.bucket)
-            ),
+            Refused::LinkOutOfBucket(shown(&link.bucket).into_owned()),
         )),
-        None => Err(untrusted(
-            name,
-            "is a link to a whole bucket: refused".into(),
-        )),
+        None => Err(untrusted(name, Refused::LinkToBucket)),
         Some(target) => Ok(Some(target.clone())),
     }
 }
@@ -339,28 +360,21 @@ pub struct Expected {
 /// Checks an object's info before its data is read: in `bucket`, not deleted, not a link,
 /// with a well-formed `SHA-256=<base64url>` digest (an object without one cannot be
 /// verified and is refused). The reason in words when refused.
-pub fn verified_info(info: &ObjectInfo, bucket: &str) -> Result<Expected, String> {
+pub fn verified_info(info: &ObjectInfo, bucket: &str) -> Result<Expected, Refused> {
     if info.bucket != bucket {
-        return Err(format!(
-            "its info names another bucket ({}): refused",
-            shown(&info.bucket)
-        ));
+        return Err(Refused::OtherBucket(shown(&info.bucket).into_owned()));
     }
     if info.deleted {
-        return Err("is deleted".into());
+        return Err(Refused::Deleted);
     }
     if info.options.as_ref().is_some_and(|o| o.link.is_some()) {
-        return Err("is a link: refused".into());
+        return Err(Refused::Link);
     }
     let Some(digest) = info.digest.as_deref() else {
-        return Err("has no digest: its data cannot be verified, refused".into());
+        return Err(Refused::NoDigest);
     };
-    let sha256 = parse_digest(digest).ok_or_else(|| {
-        format!(
-            "has a digest that is not SHA-256=<base64url of 32 bytes> ({}): refused",
-            shown(&excerpt(digest))
-        )
-    })?;
+    let sha256 = parse_digest(digest)
+        .ok_or_else(|| Refused::BadDigest(shown(&excerpt(digest)).into_owned()))?;
     Ok(Expected {
         size: info.size as u64,
         sha256,
@@ -404,28 +418,27 @@ impl Received {
     }
 
     /// Takes the next piece; refused once the data is longer than the info says.
-    pub fn update(&mut self, data: &[u8]) -> Result<(), String> {
+    pub fn update(&mut self, data: &[u8]) -> Result<(), Refused> {
         self.bytes += data.len() as u64;
         if self.bytes > self.expected.size {
-            return Err(format!(
-                "sent more than the {} bytes its info gives: refused, nothing kept",
-                self.expected.size
-            ));
+            return Err(Refused::TooLong {
+                size: self.expected.size,
+            });
         }
         self.digest.update(data);
         Ok(())
     }
 
     /// The byte count when the data is whole and its digest matches.
-    pub fn finish(self) -> Result<u64, String> {
+    pub fn finish(self) -> Result<u64, Refused> {
         if self.bytes != self.expected.size {
-            return Err(format!(
-                "sent {} bytes, its info gives {}: refused, nothing kept",
-                self.bytes, self.expected.size
-            ));
+            return Err(Refused::WrongSize {
+                got: self.bytes,
+                size: self.expected.size,
+            });
         }
         if self.digest.finish().as_ref() != self.expected.sha256.as_slice() {
-            return Err("data does not match the digest in its info: refused, nothing kept".into());
+            return Err(Refused::DigestMismatch);
         }
         Ok(self.bytes)
     }
@@ -475,15 +488,25 @@ mod tests {
 
         let mut short = Received::new(expected(data));
         short.update(&data[..4]).unwrap();
-        assert!(short.finish().unwrap_err().contains("sent 4 bytes"));
+        assert_eq!(
+            short.finish(),
+            Err(Refused::WrongSize {
+                got: 4,
+                size: data.len() as u64
+            })
+        );
 
         let mut long = Received::new(expected(data));
         long.update(data).unwrap();
-        assert!(long.update(b"x").unwrap_err().contains("more than"));
+        assert!(long
+            .update(b"x")
+            .unwrap_err()
+            .to_string()
+            .contains("more than"));
 
         let mut changed = Received::new(expected(data));
         changed.update(b"A take's bytes").unwrap();
-        assert!(changed.finish().unwrap_err().contains("digest"));
+        assert_eq!(changed.finish(), Err(Refused::DigestMismatch));
     }
 
     #[test]

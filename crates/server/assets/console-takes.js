@@ -145,7 +145,8 @@
     }
     el("player-time").textContent = `${Math.max(0, t).toFixed(1)} s`;
     if (!fetching && !lastChunk && fetchedTo - t < AHEAD_SECONDS) fetchChunk(run);
-    const done = lastChunk && !fetching && (frames.length === 0 || (shownIndex === frames.length - 1 && t > frames[frames.length - 1].t));
+    // Ended once the last picture is on screen, not while it is still being decoded.
+    const done = lastChunk && !fetching && !decoding && (frames.length === 0 || (shownIndex === frames.length - 1 && t > frames[frames.length - 1].t));
     if (done) {
       player.playing = false;
       player.ended = true;

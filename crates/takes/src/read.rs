@@ -26,8 +26,8 @@ use serde_json::{json, Map, Value};
 mod chunk;
 
 pub use chunk::{
-    decode_raw_audio, read_chunk, RawAudio, LATE_AUDIO_S, MAX_AUDIO_BYTES, MAX_CHUNK_BYTES,
-    TOPIC_AUDIO,
+    decode_raw_audio, read_chunk, RawAudio, RawAudioError, LATE_AUDIO_S, MAX_AUDIO_BYTES,
+    MAX_CHUNK_BYTES, TOPIC_AUDIO,
 };
 
 /// The metadata record that marks a daemon's take (written before any message).

@@ -36,12 +36,34 @@ pub struct RawAudio {
     pub channels: u32,
 }
 
+/// Why a `foxglove.RawAudio` message could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum RawAudioError {
+    #[error("bad CDR: {0}")]
+    Cdr(#[source] mouthpiece_recording::cdr::CdrError),
+    #[error("bad JSON: {0}")]
+    Json(#[source] serde_json::Error),
+    #[error("bad base64 data: {0}")]
+    Base64(#[source] base64::DecodeError),
+    #[error("message encoding {0:?} is not read here (cdr, json)")]
+    Encoding(String),
+}
+
 /// Decodes `foxglove.RawAudio` in CDR (`foxglove_msgs/msg/RawAudio`: timestamp, `uint8[]
 /// data`, `string format`, `uint32 sample_rate`, `uint32 number_of_channels`) or JSON (`data`
 /// in base64).
-pub fn decode_raw_audio(encoding: &str, data: &[u8]) -> Result<RawAudio, String> {
+pub fn decode_raw_audio(encoding: &str, data: &[u8]) -> Result<RawAudio, RawAudioError> {
     match encoding {
-        "cdr" => decode_raw_audio_cdr(data),
+        "cdr" => {
+            let m =
+                mouthpiece_recording::cdr::RawAudio::decode(data).map_err(RawAudioError::Cdr)?;
+            Ok(RawAudio {
+                data: m.data,
+                format: m.format,
+                sample_rate: m.sample_rate,
+                channels: m.number_of_channels,
+            })
+        }
         "json" => {
             use base64::Engine as _;
             #[derive(serde::Deserialize)]
@@ -51,30 +73,18 @@ pub fn decode_raw_audio(encoding: &str, data: &[u8]) -> Result<RawAudio, String>
                 sample_rate: u32,
                 number_of_channels: u32,
             }
-            let j: Json = serde_json::from_slice(data).map_err(|e| format!("bad JSON: {e}"))?;
+            let j: Json = serde_json::from_slice(data).map_err(RawAudioError::Json)?;
             Ok(RawAudio {
                 data: base64::engine::general_purpose::STANDARD
                     .decode(j.data.as_bytes())
-                    .map_err(|e| format!("bad base64 data: {e}"))?,
+                    .map_err(RawAudioError::Base64)?,
                 format: j.format,
                 sample_rate: j.sample_rate,
                 channels: j.number_of_channels,
             })
         }
-        other => Err(format!(
-            "message encoding {other:?} is not read here (cdr, json)"
-        )),
+        other => Err(RawAudioError::Encoding(other.chars().take(40).collect())),
     }
-}
-
-fn decode_raw_audio_cdr(data: &[u8]) -> Result<RawAudio, String> {
-    let m = mouthpiece_recording::cdr::RawAudio::decode(data).map_err(|e| e.to_string())?;
-    Ok(RawAudio {
-        data: m.data,
-        format: m.format,
-        sample_rate: m.sample_rate,
-        channels: m.number_of_channels,
-    })
 }
 
 /// Sound gathered for a chunk: blocks placed at their times, silence between.
