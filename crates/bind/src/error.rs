@@ -59,6 +59,32 @@ pub enum BindError {
     /// An invalid argument (a count of zero, a non-finite number).
     #[error("{0}")]
     BadArgument(String),
+    /// A network weights file cannot be read.
+    #[error("reading the model {}", path.display())]
+    ReadModel {
+        path: PathBuf,
+        #[source]
+        cause: io::Error,
+    },
+    /// The character does not have the twelve mouth points binding needs.
+    #[error("{}: the character has {points} mouth points; binding needs the 12 points P1…P12", path.display())]
+    NotTwelvePoints { path: PathBuf, points: usize },
+    /// The character's mouth corners do not lie apart.
+    #[error("{}: the mouth's width is {width}: its corners must lie apart along x", path.display())]
+    NoMouthWidth { path: PathBuf, width: f64 },
+    #[error(
+        "--heads {heads} is more than the {} procedural heads allowed",
+        crate::commands::MAX_HEADS
+    )]
+    TooManyHeads { heads: usize },
+    #[error("seed {} is the held-out heads' seed", crate::training::HELD_OUT_SEED)]
+    HeldOutSeed,
+    #[error("--rate must be a positive number")]
+    Rate,
+    #[error("give one --snout per --character ({characters} characters, {snouts} snouts)")]
+    SnoutCount { characters: usize, snouts: usize },
+    #[error("--snout number {number} is {snout}: it must be in 0…1")]
+    Snout { number: usize, snout: f64 },
     /// Writing an output failed.
     #[error("writing {}", path.display())]
     Write {

@@ -21,6 +21,7 @@
 // Numerical code over vertices × joints: index loops read like the formulas they implement.
 #![allow(clippy::needless_range_loop)]
 
+pub mod commands;
 mod error;
 pub mod eval;
 pub mod families;

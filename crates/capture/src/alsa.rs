@@ -73,12 +73,15 @@ impl AlsaSource {
                 .map_err(|e| alsa_error(&spec, "cannot read the device's parameters", e))?;
             hw.set_access(Access::RWInterleaved)
                 .map_err(|e| alsa_error(&spec, "interleaved read access refused", e))?;
-            sample = choose_format(&hw).map_err(|offered| SourceError::Format {
-                spec: spec.clone(),
-                message: format!(
-                    "the device offers none of the sample formats mouthpiece reads (S16_LE, S32_LE, FLOAT_LE); it offers {offered}"
-                ),
-                cause: None,
+            sample = choose_format(&hw).map_err(|e| match e {
+                FormatChoice::Set(e) => alsa_error(&spec, "sample format refused", e),
+                FormatChoice::NoneRead { offered } => SourceError::Format {
+                    spec: spec.clone(),
+                    message: format!(
+                        "the device offers none of the sample formats mouthpiece reads (S16_LE, S32_LE, FLOAT_LE); it offers {offered}"
+                    ),
+                    cause: None,
+                },
             })?;
             hw.set_channels_near(u32::from(request.channels))
                 .map_err(|e| alsa_error(&spec, "no channel count near the one asked for", e))?;
@@ -193,15 +196,23 @@ impl AlsaSource {
     }
 }
 
+/// Why no sample format was set.
+enum FormatChoice {
+    /// The device refused the format it offered.
+    Set(alsa::Error),
+    /// None of those read is offered; `offered`: those that are, in words.
+    NoneRead { offered: String },
+}
+
 /// S16 if offered, else S32, else FLOAT (converted); the offered formats in words otherwise.
-fn choose_format(hw: &HwParams) -> Result<Sample, String> {
+fn choose_format(hw: &HwParams) -> Result<Sample, FormatChoice> {
     for (format, sample) in [
         (Format::s16(), Sample::S16),
         (Format::s32(), Sample::S32),
         (Format::float(), Sample::F32),
     ] {
         if hw.test_format(format).is_ok() {
-            hw.set_format(format).map_err(|e| e.to_string())?;
+            hw.set_format(format).map_err(FormatChoice::Set)?;
             return Ok(sample);
         }
     }
@@ -221,10 +232,12 @@ fn choose_format(hw: &HwParams) -> Result<Sample, String> {
     .filter(|f| hw.test_format(*f).is_ok())
     .map(|f| format!("{f:?}"))
     .collect();
-    Err(if offered.is_empty() {
-        "no format mouthpiece knows".to_owned()
-    } else {
-        offered.join(", ")
+    Err(FormatChoice::NoneRead {
+        offered: if offered.is_empty() {
+            "no format mouthpiece knows".to_owned()
+        } else {
+            offered.join(", ")
+        },
     })
 }
 

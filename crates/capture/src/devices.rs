@@ -11,7 +11,7 @@ pub struct OpenNiDevice {
     pub vendor: String,
     pub name: String,
     /// `(sensor, modes)`; or why the device could not be opened to ask (busy, …).
-    pub modes: Result<Vec<(String, Vec<String>)>, String>,
+    pub modes: Result<Vec<(String, Vec<String>)>, Unavailable>,
 }
 
 /// One V4L2 format of a node.
@@ -39,8 +39,20 @@ pub struct V4l2Node {
 #[derive(Debug, Clone, PartialEq)]
 pub struct DeviceReport {
     /// The OpenNI2 devices, or why OpenNI2 could not be asked.
-    pub openni2: Result<Vec<OpenNiDevice>, String>,
+    pub openni2: Result<Vec<OpenNiDevice>, Unavailable>,
     pub v4l2: Vec<V4l2Node>,
+}
+
+/// Why OpenNI2, or one of its devices, could not be asked (the report is a snapshot, so the
+/// cause is kept as its message).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Unavailable {
+    #[error("{0}")]
+    OpenNi2(String),
+    #[error("cannot open it: {0} (in use by another process?)")]
+    Open(String),
+    #[error("OpenNI2 support is not built in (feature openni2)")]
+    NotBuilt,
 }
 
 /// FourCCs of depth formats.
@@ -55,14 +67,14 @@ pub fn list() -> DeviceReport {
 }
 
 #[cfg(feature = "openni2")]
-fn list_openni2() -> Result<Vec<OpenNiDevice>, String> {
+fn list_openni2() -> Result<Vec<OpenNiDevice>, Unavailable> {
     use openni2::{Device, SensorType};
-    let devices = openni2::devices().map_err(|e| e.to_string())?;
+    let devices = openni2::devices().map_err(|e| Unavailable::OpenNi2(e.to_string()))?;
     Ok(devices
         .into_iter()
         .map(|d| {
             let modes = Device::open(&d.uri)
-                .map_err(|e| format!("cannot open it: {e} (in use by another process?)"))
+                .map_err(|e| Unavailable::Open(e.to_string()))
                 .map(|dev| {
                     [SensorType::Depth, SensorType::Color, SensorType::Ir]
                         .into_iter()
@@ -85,8 +97,8 @@ fn list_openni2() -> Result<Vec<OpenNiDevice>, String> {
 }
 
 #[cfg(not(feature = "openni2"))]
-fn list_openni2() -> Result<Vec<OpenNiDevice>, String> {
-    Err("OpenNI2 support is not built in (feature openni2)".into())
+fn list_openni2() -> Result<Vec<OpenNiDevice>, Unavailable> {
+    Err(Unavailable::NotBuilt)
 }
 
 #[cfg(feature = "v4l2")]

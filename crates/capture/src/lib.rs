@@ -56,6 +56,10 @@ pub mod openni;
 pub mod record;
 #[cfg(feature = "mcap")]
 pub mod record_audio;
+#[cfg(all(feature = "mcap", feature = "alsa"))]
+pub mod record_job;
+#[cfg(feature = "mcap")]
+pub mod session_file;
 #[cfg(feature = "v4l2")]
 pub mod v4l2;
 
@@ -112,29 +116,38 @@ impl Default for CaptureConfig {
     }
 }
 
+/// A capture setting out of range; the message names the field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CaptureConfigError {
+    #[error("v4l2_buffers = {0}: expected 2 to 4")]
+    Buffers(u32),
+    #[error("depth_units_m = {0}: expected a positive number of metres")]
+    DepthUnits(f64),
+    #[error("width/height/fps = {width}x{height}@{fps}: expected positive values")]
+    Mode { width: u32, height: u32, fps: u32 },
+    #[error("stall_timeout: expected more than 0 s")]
+    StallTimeout,
+}
+
 impl CaptureConfig {
     /// Checks the values a user can get wrong; the message names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), CaptureConfigError> {
+        use CaptureConfigError as E;
         if !(2..=4).contains(&self.v4l2_buffers) {
-            return Err(format!(
-                "v4l2_buffers = {}: expected 2 to 4",
-                self.v4l2_buffers
-            ));
+            return Err(E::Buffers(self.v4l2_buffers));
         }
         if !(self.depth_units_m > 0.0 && self.depth_units_m.is_finite()) {
-            return Err(format!(
-                "depth_units_m = {}: expected a positive number of metres",
-                self.depth_units_m
-            ));
+            return Err(E::DepthUnits(self.depth_units_m));
         }
         if self.width == 0 || self.height == 0 || self.fps == 0 {
-            return Err(format!(
-                "width/height/fps = {}x{}@{}: expected positive values",
-                self.width, self.height, self.fps
-            ));
+            return Err(E::Mode {
+                width: self.width,
+                height: self.height,
+                fps: self.fps,
+            });
         }
         if self.stall_timeout.is_zero() {
-            return Err("stall_timeout: expected more than 0 s".into());
+            return Err(E::StallTimeout);
         }
         Ok(())
     }

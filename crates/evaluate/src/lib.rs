@@ -29,6 +29,7 @@ mod character_head;
 mod measures;
 pub mod rig;
 mod steps;
+pub mod sweep;
 
 use mouthpiece_pipeline::{Pipeline, PipelineConfig, ProcessLine};
 use mouthpiece_retarget::{Character, CharacterSettings, PerformerLayout, ShapeSmoothing};
@@ -310,7 +311,7 @@ impl Guard {
     };
 
     /// Every figure of `m` against this guard; the error lists the session's figures.
-    pub fn check(&self, m: &Metrics) -> Result<(), String> {
+    pub fn check(&self, m: &Metrics) -> Result<(), Missed> {
         let figures = format!(
             "found and named {:.2} %, {} wrong of {}, 3D RMS {:.2} mm, head RMS {:.2}°, character RMS {:.2} % of its width on visible dots, {:.2} % on all",
             m.found_pct(),
@@ -330,9 +331,22 @@ impl Guard {
         if ok {
             Ok(())
         } else {
-            Err(format!("{figures}; guard {self:?}"))
+            Err(Missed {
+                figures,
+                limits: format!("guard {self:?}"),
+            })
         }
     }
+}
+
+/// A session's figures outside a guard's or targets' limits.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{figures}; {limits}")]
+pub struct Missed {
+    /// The session's figures.
+    pub figures: String,
+    /// The limits missed.
+    pub limits: String,
 }
 
 /// The table `mouthpiece evaluate` prints: its header lines.

@@ -132,7 +132,7 @@ impl RigTargets {
     };
 
     /// Every figure of `m` against these targets; the error lists the session's figures.
-    pub fn check(&self, m: &RigMetrics) -> Result<(), String> {
+    pub fn check(&self, m: &RigMetrics) -> Result<(), crate::Missed> {
         let (_, rms) = m.worst_curve();
         // NaN figures fail (every comparison with NaN is false).
         let ok = m.frames > 0
@@ -143,7 +143,10 @@ impl RigTargets {
         if ok {
             Ok(())
         } else {
-            Err(format!("{}; targets {self:?}", m.summary()))
+            Err(crate::Missed {
+                figures: m.summary(),
+                limits: format!("targets {self:?}"),
+            })
         }
     }
 }

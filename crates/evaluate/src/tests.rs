@@ -165,7 +165,7 @@ fn a_guard_names_the_figures_it_refuses() {
         },
         ..Metrics::default()
     };
-    let err = Guard::TARGETS.check(&m).unwrap_err();
+    let err = Guard::TARGETS.check(&m).unwrap_err().to_string();
     assert!(
         err.contains("found and named 99.00 %") && err.contains("1 wrong"),
         "{err}"

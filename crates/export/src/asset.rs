@@ -47,22 +47,44 @@ pub fn read_bounded(path: &Path, limit: u64) -> io::Result<Vec<u8>> {
     Ok(bytes)
 }
 
+/// Why a URI may not be read; the message follows the URI (`URI `x` is empty`).
+#[derive(Debug, thiserror::Error)]
+pub enum UriError {
+    #[error("is empty")]
+    Empty,
+    #[error("has a scheme: only `data:` URIs and files beside the document are read")]
+    Scheme,
+    #[error("is an absolute path: only files beside the document are read")]
+    Absolute,
+    #[error("is not UTF-8 once its %-escapes are undone")]
+    NotUtf8,
+    #[error("holds a NUL character")]
+    Nul,
+    #[error("climbs out of the document's folder with `..`")]
+    Climbs,
+    #[error("names the folder itself, not a file")]
+    Folder,
+    #[error("cannot be found next to the document: {0}")]
+    NotFound(io::Error),
+    #[error("leads outside the document's folder {} (through a symbolic link)", .0.display())]
+    Outside(PathBuf),
+    #[error("the document's folder {}: {cause}", folder.display())]
+    DocumentFolder { folder: PathBuf, cause: io::Error },
+}
+
 /// The file a (non-`data:`) URI names, relative to `folder` (the folder of the document that
 /// holds the URI), or why it may not be read. Nothing is opened: the checks are on the text
 /// and on the canonical paths. The file must exist (symbolic links are followed to see where
 /// they land).
-pub fn resolve_inside(folder: &Path, uri: &str) -> Result<PathBuf, String> {
+pub fn resolve_inside(folder: &Path, uri: &str) -> Result<PathBuf, UriError> {
     let relative = relative_path(uri)?;
     let folder = canonical_folder(folder)?;
     let target = folder
         .join(&relative)
         .canonicalize()
-        .map_err(|e| format!("cannot be found next to the document: {e}"))?;
+        .map_err(UriError::NotFound)?;
     if !target.starts_with(&folder) {
-        return Err(format!(
-            "leads outside the document's folder {} (through a symbolic link)",
-            folder.display()
-        ));
+        return Err(UriError::Outside(folder));
     }
     Ok(target)
 }
@@ -70,21 +92,18 @@ pub fn resolve_inside(folder: &Path, uri: &str) -> Result<PathBuf, String> {
 /// Like [`resolve_inside`] for a file that is named but never read (an image): the URI must
 /// stay inside `folder` by its text, and, when the file exists, by its canonical path; a
 /// missing file is no error.
-pub fn check_inside(folder: &Path, uri: &str) -> Result<(), String> {
+pub fn check_inside(folder: &Path, uri: &str) -> Result<(), UriError> {
     let relative = relative_path(uri)?;
     let Ok(folder) = folder.canonicalize() else {
         return Ok(());
     };
     match folder.join(&relative).canonicalize() {
-        Ok(target) if !target.starts_with(&folder) => Err(format!(
-            "leads outside the document's folder {} (through a symbolic link)",
-            folder.display()
-        )),
+        Ok(target) if !target.starts_with(&folder) => Err(UriError::Outside(folder)),
         _ => Ok(()),
     }
 }
 
-fn canonical_folder(folder: &Path) -> Result<PathBuf, String> {
+fn canonical_folder(folder: &Path) -> Result<PathBuf, UriError> {
     let folder = if folder.as_os_str().is_empty() {
         Path::new(".")
     } else {
@@ -92,29 +111,30 @@ fn canonical_folder(folder: &Path) -> Result<PathBuf, String> {
     };
     folder
         .canonicalize()
-        .map_err(|e| format!("the document's folder {}: {e}", folder.display()))
+        .map_err(|cause| UriError::DocumentFolder {
+            folder: folder.to_path_buf(),
+            cause,
+        })
 }
 
 /// A relative URI reference as a relative path that stays below its folder by its text.
-fn relative_path(uri: &str) -> Result<PathBuf, String> {
+fn relative_path(uri: &str) -> Result<PathBuf, UriError> {
     if uri.is_empty() {
-        return Err("is empty".into());
+        return Err(UriError::Empty);
     }
     if has_scheme(uri) {
-        return Err(
-            "has a scheme: only `data:` URIs and files beside the document are read".into(),
-        );
+        return Err(UriError::Scheme);
     }
     if uri.starts_with(['/', '\\']) {
-        return Err("is an absolute path: only files beside the document are read".into());
+        return Err(UriError::Absolute);
     }
     // RFC 3986 relative reference: drop a query or fragment, undo %-escapes (`%20`).
     let path_part = uri.split(['?', '#']).next().unwrap_or_default();
     let decoded = percent_encoding::percent_decode_str(path_part)
         .decode_utf8()
-        .map_err(|_| "is not UTF-8 once its %-escapes are undone".to_owned())?;
+        .map_err(|_| UriError::NotUtf8)?;
     if decoded.contains('\0') {
-        return Err("holds a NUL character".into());
+        return Err(UriError::Nul);
     }
     let path = PathBuf::from(decoded.as_ref());
     let mut depth = 0usize;
@@ -123,16 +143,12 @@ fn relative_path(uri: &str) -> Result<PathBuf, String> {
             Component::Normal(_) => depth += 1,
             Component::CurDir => {}
             Component::ParentDir if depth > 0 => depth -= 1,
-            Component::ParentDir => {
-                return Err("climbs out of the document's folder with `..`".into())
-            }
-            Component::RootDir | Component::Prefix(_) => {
-                return Err("is an absolute path: only files beside the document are read".into())
-            }
+            Component::ParentDir => return Err(UriError::Climbs),
+            Component::RootDir | Component::Prefix(_) => return Err(UriError::Absolute),
         }
     }
     if depth == 0 {
-        return Err("names the folder itself, not a file".into());
+        return Err(UriError::Folder);
     }
     Ok(path)
 }
@@ -177,7 +193,7 @@ mod tests {
             ("", "empty"),
             (".", "folder itself"),
         ] {
-            let err = resolve_inside(&inner, uri).unwrap_err();
+            let err = resolve_inside(&inner, uri).unwrap_err().to_string();
             assert!(err.contains(why), "{uri}: {err}");
         }
         assert!(check_inside(&inner, "missing.png").is_ok());

@@ -32,6 +32,7 @@ pub mod onto_rig;
 mod output;
 pub mod play;
 pub mod reduce;
+pub mod retarget_files;
 pub mod rig;
 pub mod take;
 pub mod wav;

@@ -7,6 +7,19 @@
 //! join C¹ whatever the time scaling of the stage: the mapping stretches stable stages, which
 //! would break any non-zero slope matching at a join.
 
+/// Why control points do not make a stage curve.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CurveError {
+    #[error("needs at least 2 control points, got {0}")]
+    TooFew(usize),
+    #[error("control points must run from u = 0 to u = 1")]
+    Ends,
+    #[error("control point {0} is not finite")]
+    NotFinite(usize),
+    #[error("control point {0}: u must increase")]
+    NotIncreasing(usize),
+}
+
 /// A stage curve.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StageCurve {
@@ -27,22 +40,19 @@ impl StageCurve {
     }
 
     /// From control points `(u, w)`: at least two, u strictly increasing from 0 to 1, w finite.
-    pub fn from_points(points: &[(f64, f64)]) -> Result<Self, String> {
+    pub fn from_points(points: &[(f64, f64)]) -> Result<Self, CurveError> {
         if points.len() < 2 {
-            return Err(format!(
-                "needs at least 2 control points, got {}",
-                points.len()
-            ));
+            return Err(CurveError::TooFew(points.len()));
         }
         if points[0].0 != 0.0 || points[points.len() - 1].0 != 1.0 {
-            return Err("control points must run from u = 0 to u = 1".into());
+            return Err(CurveError::Ends);
         }
         for (i, p) in points.iter().enumerate() {
             if !(p.0.is_finite() && p.1.is_finite()) {
-                return Err(format!("control point {i} is not finite"));
+                return Err(CurveError::NotFinite(i));
             }
             if i > 0 && p.0 <= points[i - 1].0 {
-                return Err(format!("control point {i}: u must increase"));
+                return Err(CurveError::NotIncreasing(i));
             }
         }
         let u: Vec<f64> = points.iter().map(|p| p.0).collect();

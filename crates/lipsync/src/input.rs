@@ -30,6 +30,86 @@ pub fn valid_name(name: &str) -> bool {
             .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
 }
 
+/// Largest phone file read (a phone file of hours is a few MB).
+pub const MAX_PHONE_FILE_BYTES: u64 = 64 << 20;
+/// Largest class, pose or segment table read.
+pub const MAX_TABLE_FILE_BYTES: u64 = 4 << 20;
+/// Largest transcript read.
+pub const MAX_TRANSCRIPT_BYTES: u64 = 1 << 20;
+/// Largest weights CSV `synth --speech` reads (a CSV of an hour at 60 fps is 25 MB).
+pub const MAX_WEIGHTS_CSV_BYTES: u64 = 64 << 20;
+
+/// Why a text file cannot be read; every case is the caller's file.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    #[error("cannot read {what} {path}")]
+    Io {
+        what: String,
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: {what} longer than {limit} bytes")]
+    TooLong {
+        what: String,
+        path: String,
+        limit: u64,
+    },
+    #[error(transparent)]
+    Decode(#[from] Error),
+    #[error("{path} line {line}: {what}: {cause}")]
+    Line {
+        what: String,
+        path: String,
+        line: usize,
+        cause: std::io::Error,
+    },
+}
+
+/// Reads a text file of at most `limit` bytes (UTF-8, or UTF-16 with a byte order mark):
+/// a longer one (a device such as `/dev/zero`, a wrong path) is an error naming the file, and
+/// so is a line longer than [`MAX_LINE_BYTES`](mouthpiece_retarget::jsonl::MAX_LINE_BYTES),
+/// naming its line. `what` says what the file is in errors (`phone file`).
+pub fn read_text(path: &std::path::Path, what: &str, limit: u64) -> Result<String, ReadError> {
+    use mouthpiece_retarget::jsonl::{read_line_limited, MAX_LINE_BYTES};
+    use std::io::Read;
+    let name = path.display().to_string();
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(limit + 1).read_to_end(&mut bytes))
+        .map_err(|source| ReadError::Io {
+            what: what.to_string(),
+            path: name.clone(),
+            source,
+        })?;
+    if bytes.len() as u64 > limit {
+        return Err(ReadError::TooLong {
+            what: what.to_string(),
+            path: name,
+            limit,
+        });
+    }
+    let text = decode_text(&bytes, &name)?;
+    // Line by line as the take readers read, with their limit: a line of megabytes is not a
+    // phone file, table or transcript, and the error says where it is.
+    let (mut rest, mut line) = (text.as_bytes(), String::new());
+    for n in 1.. {
+        match read_line_limited(&mut rest, &mut line, MAX_LINE_BYTES) {
+            Ok(0) => break,
+            Ok(_) => {}
+            Err(cause) => {
+                return Err(ReadError::Line {
+                    what: what.to_string(),
+                    path: name,
+                    line: n,
+                    cause,
+                })
+            }
+        }
+    }
+    Ok(text)
+}
+
 /// A text file's bytes → text: UTF-8 (a leading byte order mark dropped), or UTF-16 little-
 /// or big-endian when the file starts with that byte order mark. `source_name` names the
 /// file in errors.

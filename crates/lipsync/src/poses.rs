@@ -255,6 +255,115 @@ impl BasicPoses {
     }
 }
 
+/// Why pose marks (`name = [start_s, end_s]` per pose, for `lipsync poses`) are refused;
+/// `source_name` names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum MarksError {
+    #[error("{source_name}: expected `name = [start_s, end_s]` per pose")]
+    Toml {
+        source_name: String,
+        #[source]
+        source: Box<toml::de::Error>,
+    },
+    #[error("{source_name}: no poses marked")]
+    Empty { source_name: String },
+    #[error(
+        "{source_name}: pose name {name} must be {} (it becomes a column and a key)",
+        crate::input::NAME_RULE
+    )]
+    Name { source_name: String, name: String },
+    #[error("{source_name}: {name}: expected [start_s, end_s], got {count} values")]
+    Count {
+        source_name: String,
+        name: String,
+        count: usize,
+    },
+    #[error("{source_name}: {name}: the range must be [start, end] with 0 ≤ start < end ≤ {}, got [{start}, {end}]", crate::phones::MAX_TIME)]
+    Range {
+        source_name: String,
+        name: String,
+        start: f64,
+        end: f64,
+    },
+}
+
+/// Parses pose marks: `name = [start, end]` (session seconds), start < end, finite.
+pub fn parse_marks(text: &str, source_name: &str) -> Result<Vec<(String, f64, f64)>, MarksError> {
+    let source_name = source_name.to_string();
+    // A list, its length checked here: a `[f64; 2]` would take `[1, 2, 3]` as `[1, 2]`.
+    let table: BTreeMap<String, Vec<f64>> = toml::from_str(text).map_err(|e| MarksError::Toml {
+        source_name: source_name.clone(),
+        source: Box::new(e),
+    })?;
+    if table.is_empty() {
+        return Err(MarksError::Empty { source_name });
+    }
+    table
+        .into_iter()
+        .map(|(name, range)| {
+            if !crate::input::valid_name(&name) {
+                return Err(MarksError::Name {
+                    source_name: source_name.clone(),
+                    name: crate::input::cut(&name),
+                });
+            }
+            let &[start, end] = range.as_slice() else {
+                return Err(MarksError::Count {
+                    source_name: source_name.clone(),
+                    name,
+                    count: range.len(),
+                });
+            };
+            let day = crate::phones::MAX_TIME;
+            if !(start.is_finite() && end.is_finite() && 0.0 <= start && start < end && end <= day)
+            {
+                return Err(MarksError::Range {
+                    source_name: source_name.clone(),
+                    name: crate::input::cut(&name),
+                    start,
+                    end,
+                });
+            }
+            Ok((name, start, end))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod marks_tests {
+    use super::parse_marks;
+
+    #[test]
+    fn marks_are_two_times_under_a_plain_name() {
+        let marks = parse_marks("open = [1.0, 2.5]\nclosed = [3, 4]\n", "m.toml").unwrap();
+        assert_eq!(
+            marks,
+            [
+                ("closed".to_owned(), 3.0, 4.0),
+                ("open".to_owned(), 1.0, 2.5)
+            ]
+        );
+        for (text, says) in [
+            (
+                "open = [1.0, 2.0, 3.0]\n",
+                "open: expected [start_s, end_s], got 3 values",
+            ),
+            ("open = [1.0]\n", "got 1 values"),
+            ("\"a,b\" = [1.0, 2.0]\n", "pose name a,b must be"),
+            ("\"a.b\" = [1.0, 2.0]\n", "pose name a.b must be"),
+            (
+                "\"a\\u001b[2J\" = [1.0, 2.0]\n",
+                "pose name a\\u{1b}[2J must be",
+            ),
+        ] {
+            let err = parse_marks(text, "m.toml").unwrap_err().to_string();
+            assert!(err.starts_with("m.toml: "), "{err}");
+            assert!(err.contains(says), "{text}: {err}");
+            assert!(!err.contains('\u{1b}'), "{err:?}");
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -114,9 +114,9 @@ impl SegmentTable {
         a: usize,
         b: usize,
         segment: Segment,
-    ) -> Result<(), String> {
+    ) -> Result<(), JoinError> {
         if segment.stable.len() != self.poses || segment.change.len() != self.poses {
-            return Err(format!("a segment needs {} curves per stage", self.poses));
+            return Err(JoinError::Curves(self.poses));
         }
         for p in 0..self.poses {
             let name = &table.poses[p];
@@ -124,25 +124,27 @@ impl SegmentTable {
             let ta = table.classes[a].target[p];
             let tb = table.classes[b].target[p];
             if (s.first() - ta).abs() > JOIN_TOLERANCE {
-                return Err(format!(
-                    "stable.{name} must start at class {:?}'s target {ta}, starts at {}",
-                    table.classes[a].name,
-                    s.first()
-                ));
+                return Err(JoinError::Start {
+                    pose: name.clone(),
+                    class: table.classes[a].name.clone(),
+                    target: ta,
+                    starts: s.first(),
+                });
             }
             if (c.last() - tb).abs() > JOIN_TOLERANCE {
-                return Err(format!(
-                    "change.{name} must end at class {:?}'s target {tb}, ends at {}",
-                    table.classes[b].name,
-                    c.last()
-                ));
+                return Err(JoinError::End {
+                    pose: name.clone(),
+                    class: table.classes[b].name.clone(),
+                    target: tb,
+                    ends: c.last(),
+                });
             }
             if (s.last() - c.first()).abs() > JOIN_TOLERANCE {
-                return Err(format!(
-                    "change.{name} must start where stable.{name} ends ({}), starts at {}",
-                    s.last(),
-                    c.first()
-                ));
+                return Err(JoinError::Gap {
+                    pose: name.clone(),
+                    stable_ends: s.last(),
+                    starts: c.first(),
+                });
             }
         }
         self.segments[a * self.classes + b] = segment;
@@ -207,13 +209,44 @@ impl SegmentTable {
                         ));
                     }
                     let pts: Vec<(f64, f64)> = points.iter().map(|q| (q[0], q[1])).collect();
-                    out[p] = StageCurve::from_points(&pts).map_err(|e| config(&key, e))?;
+                    out[p] =
+                        StageCurve::from_points(&pts).map_err(|e| config(&key, e.to_string()))?;
                 }
             }
-            self.set(table, a, b, segment).map_err(|e| config("", e))?;
+            self.set(table, a, b, segment)
+                .map_err(|e| config("", e.to_string()))?;
         }
         Ok(())
     }
+}
+
+/// A segment that does not join its classes' targets (the conventions of the module docs).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum JoinError {
+    #[error("a segment needs {0} curves per stage")]
+    Curves(usize),
+    #[error("stable.{pose} must start at class {class:?}'s target {target}, starts at {starts}")]
+    Start {
+        pose: String,
+        class: String,
+        target: f64,
+        starts: f64,
+    },
+    #[error("change.{pose} must end at class {class:?}'s target {target}, ends at {ends}")]
+    End {
+        pose: String,
+        class: String,
+        target: f64,
+        ends: f64,
+    },
+    #[error(
+        "change.{pose} must start where stable.{pose} ends ({stable_ends}), starts at {starts}"
+    )]
+    Gap {
+        pose: String,
+        stable_ends: f64,
+        starts: f64,
+    },
 }
 
 #[cfg(test)]

@@ -43,7 +43,18 @@ pub(crate) struct Runtime {
     tx: Sender<Command>,
 }
 
-static RUNTIME: OnceLock<std::result::Result<Runtime, String>> = OnceLock::new();
+static RUNTIME: OnceLock<std::result::Result<Runtime, StartError>> = OnceLock::new();
+
+/// Why the OpenNI thread did not start (kept for every later call, hence shared causes).
+#[derive(Debug, Clone, thiserror::Error)]
+enum StartError {
+    #[error("cannot spawn the OpenNI2 thread: {0}")]
+    Spawn(Arc<std::io::Error>),
+    #[error("the OpenNI2 thread died during start-up")]
+    Died,
+    #[error("{0}")]
+    Initialize(Arc<Error>),
+}
 
 /// Device events from OpenNI's callback thread: (uri, reason).
 static DEVICE_EVENTS: Mutex<Vec<(String, String)>> = Mutex::new(Vec::new());
@@ -51,13 +62,13 @@ static DEVICE_EVENTS: Mutex<Vec<(String, String)>> = Mutex::new(Vec::new());
 pub(crate) fn get() -> Result<&'static Runtime> {
     match RUNTIME.get_or_init(start) {
         Ok(rt) => Ok(rt),
-        Err(msg) => Err(Error::Runtime(msg.clone())),
+        Err(err) => Err(Error::Runtime(err.to_string())),
     }
 }
 
-fn start() -> std::result::Result<Runtime, String> {
+fn start() -> std::result::Result<Runtime, StartError> {
     let (tx, rx) = bounded::<Command>(COMMAND_QUEUE);
-    let (ready_tx, ready_rx) = bounded::<std::result::Result<(), String>>(1);
+    let (ready_tx, ready_rx) = bounded::<std::result::Result<(), StartError>>(1);
     thread::Builder::new()
         .name(THREAD_NAME.into())
         .spawn(move || match State::initialize() {
@@ -66,13 +77,11 @@ fn start() -> std::result::Result<Runtime, String> {
                 state.run(rx);
             }
             Err(err) => {
-                let _ = ready_tx.send(Err(err.to_string()));
+                let _ = ready_tx.send(Err(StartError::Initialize(Arc::new(err))));
             }
         })
-        .map_err(|e| format!("cannot spawn the OpenNI2 thread: {e}"))?;
-    ready_rx
-        .recv()
-        .map_err(|_| "the OpenNI2 thread died during start-up".to_string())??;
+        .map_err(|e| StartError::Spawn(Arc::new(e)))?;
+    ready_rx.recv().map_err(|_| StartError::Died)??;
     Ok(Runtime { tx })
 }
 

@@ -12,6 +12,7 @@
 //!     silence between them, and its word segmentation is the phone segmentation.
 
 mod decoder;
+pub mod festival;
 mod isolated;
 pub mod wav;
 

@@ -83,47 +83,41 @@ impl DotLayout {
         })?;
         layout
             .validate()
-            .map_err(|what| SynthError::LayoutInvalid {
+            .map_err(|problem| SynthError::LayoutInvalid {
                 path: path.to_path_buf(),
-                what,
+                problem,
             })?;
         Ok(layout)
     }
 
-    pub(crate) fn validate(&self) -> Result<(), String> {
+    pub(crate) fn validate(&self) -> Result<(), LayoutError> {
+        use LayoutError as E;
         if self.lip_dots < 4 || !self.lip_dots.is_multiple_of(2) || self.lip_dots > 40 {
-            return Err(format!(
-                "lip_dots must be even and within 4–40, got {}",
-                self.lip_dots
-            ));
+            return Err(E::LipDots(self.lip_dots));
         }
         if !(1.0..=4.0).contains(&self.radius_mm) {
-            return Err(format!(
-                "radius_mm must be within 1–4 mm, got {}",
-                self.radius_mm
-            ));
+            return Err(E::Radius(self.radius_mm));
         }
         if !(1.0..=6.0).contains(&self.forehead_radius_mm) {
-            return Err(format!(
-                "forehead_radius_mm must be within 1–6 mm, got {}",
-                self.forehead_radius_mm
-            ));
+            return Err(E::ForeheadRadius(self.forehead_radius_mm));
         }
         if self.forehead.len() < 3 {
-            return Err(format!(
-                "at least 3 forehead dots are needed, got {}",
-                self.forehead.len()
-            ));
+            return Err(E::TooFewForehead(self.forehead.len()));
         }
         for (i, f) in self.forehead.iter().enumerate() {
             if !(-60.0..=60.0).contains(&f.x_mm) || !(-150.0..=-70.0).contains(&f.y_mm) {
-                return Err(format!(
-                    "forehead[{i}] ({}): x_mm must be within ±60 and y_mm within -150..-70 (the forehead), got ({}, {})",
-                    f.name, f.x_mm, f.y_mm
-                ));
+                return Err(E::ForeheadPlace {
+                    index: i,
+                    name: f.name.clone(),
+                    x_mm: f.x_mm,
+                    y_mm: f.y_mm,
+                });
             }
             if f.name.starts_with('D') || self.forehead[..i].iter().any(|g| g.name == f.name) {
-                return Err(format!("forehead[{i}]: name {:?} is taken", f.name));
+                return Err(E::NameTaken {
+                    index: i,
+                    name: f.name.clone(),
+                });
             }
         }
         // Not collinear: the head pose needs a plane.
@@ -139,9 +133,7 @@ impl DotLayout {
                 )
             });
         if area < 50.0 {
-            return Err(
-                "forehead dots are (nearly) collinear; the head pose needs them spread".into(),
-            );
+            return Err(E::Collinear);
         }
         Ok(())
     }
@@ -153,6 +145,30 @@ impl DotLayout {
             .chain(self.forehead.iter().map(|f| f.name.clone()))
             .collect()
     }
+}
+
+/// A dot layout the synthetic performer cannot wear; the message names the key.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LayoutError {
+    #[error("lip_dots must be even and within 4–40, got {0}")]
+    LipDots(usize),
+    #[error("radius_mm must be within 1–4 mm, got {0}")]
+    Radius(f64),
+    #[error("forehead_radius_mm must be within 1–6 mm, got {0}")]
+    ForeheadRadius(f64),
+    #[error("at least 3 forehead dots are needed, got {0}")]
+    TooFewForehead(usize),
+    #[error("forehead[{index}] ({name}): x_mm must be within ±60 and y_mm within -150..-70 (the forehead), got ({x_mm}, {y_mm})")]
+    ForeheadPlace {
+        index: usize,
+        name: String,
+        x_mm: f64,
+        y_mm: f64,
+    },
+    #[error("forehead[{index}]: name {name:?} is taken")]
+    NameTaken { index: usize, name: String },
+    #[error("forehead dots are (nearly) collinear; the head pose needs them spread")]
+    Collinear,
 }
 
 #[cfg(test)]

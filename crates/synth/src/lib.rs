@@ -20,12 +20,14 @@
 //! - lip dots: [`LIP_DOT_RGB`], green, hue ≈ 66 (rendered: [`LIP_DOT_HUE_RANGE_CV`]);
 //! - forehead dots: [`FOREHEAD_DOT_RGB`], blue, hue ≈ 111 (rendered: [`FOREHEAD_DOT_HUE_RANGE_CV`]).
 
+pub mod args;
 mod dots;
 mod head;
 mod layout;
 mod motion;
 mod render;
 mod rng;
+pub mod session;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -36,7 +38,7 @@ pub use mouthpiece_recording::{GroundTruth, HeadPose, MouthTruth};
 
 pub use dots::dot_positions;
 pub use head::HINGE;
-pub use layout::{DotLayout, ForeheadDot};
+pub use layout::{DotLayout, ForeheadDot, LayoutError};
 pub use motion::{HeadState, MouthState};
 
 /// Default lip-dot paint, RGB: a saturated green (OpenCV HSV ≈ (64, 200, 200)).
@@ -130,28 +132,20 @@ pub const MAX_JAW_SLIDE_M: f64 = 0.005;
 impl JawOptions {
     /// The hinge moves are within ±[`MAX_HINGE_MOVE`]; the error names the axis (`back`,
     /// `down`).
-    pub fn validate_hinge(&self) -> Result<(), String> {
+    pub fn validate_hinge(&self) -> Result<(), JawError> {
         for (axis, v) in [("back", self.hinge_back), ("down", self.hinge_down)] {
             if !(v.is_finite() && v.abs() <= MAX_HINGE_MOVE) {
-                return Err(format!(
-                    "the hinge's move {axis} must be within ±{} %, got {} %",
-                    100.0 * MAX_HINGE_MOVE,
-                    100.0 * v
-                ));
+                return Err(JawError::Hinge { axis, value: v });
             }
         }
         Ok(())
     }
 
     /// The slide amplitude is from 0 to [`MAX_JAW_SLIDE_M`].
-    pub fn validate_slide(&self) -> Result<(), String> {
+    pub fn validate_slide(&self) -> Result<(), JawError> {
         let v = self.slide_m;
         if !(v.is_finite() && (0.0..=MAX_JAW_SLIDE_M).contains(&v)) {
-            return Err(format!(
-                "the jaw's slide must be from 0 to {} mm, got {} mm",
-                1e3 * MAX_JAW_SLIDE_M,
-                1e3 * v
-            ));
+            return Err(JawError::Slide { value: v });
         }
         Ok(())
     }
@@ -253,9 +247,26 @@ impl SynthConfig {
                 return bad("depth camera intrinsics out of range".into());
             }
         }
-        self.jaw.validate_hinge().map_err(SynthError::Config)?;
-        self.jaw.validate_slide().map_err(SynthError::Config)?;
-        self.layout.validate().map_err(SynthError::Config)
+        self.jaw.validate_hinge()?;
+        self.jaw.validate_slide()?;
+        Ok(self.layout.validate()?)
+    }
+
+    /// Renders depth from a separate depth camera `mm` millimetres to the colour camera's
+    /// right (a baseline along x, no lens distortion) instead of registered to the colour
+    /// grid.
+    pub fn set_depth_baseline_mm(&mut self, mm: f64) -> Result<(), SynthError> {
+        if !(mm.is_finite() && mm.abs() <= MAX_DEPTH_BASELINE_MM) {
+            return Err(SynthError::DepthBaseline { mm });
+        }
+        let mut depth_to_color = Extrinsics::IDENTITY;
+        // The depth camera sits `mm` to the colour camera's right: a point at its origin is
+        // at +x in the colour frame.
+        depth_to_color.translation = [mm / 1000.0, 0.0, 0.0];
+        let mut depth = self.camera;
+        depth.distortion = [0.0; 5];
+        self.depth_camera = Some((depth, depth_to_color));
+        Ok(())
     }
 
     /// The calibration frames carry.
@@ -277,14 +288,29 @@ impl SynthConfig {
 pub const MIN_FPS: f64 = 1.0;
 /// Fastest frame rate of a synthetic session.
 pub const MAX_FPS: f64 = 1000.0;
+/// Largest baseline of a separate depth camera, millimetres.
+pub const MAX_DEPTH_BASELINE_MM: f64 = 200.0;
 /// Longest synthetic session, seconds (a day).
 pub const MAX_SECONDS: f64 = 86_400.0;
+
+/// A jaw option out of the synthetic performer's range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum JawError {
+    #[error("the hinge's move {axis} must be within ±{} %, got {} %", 100.0 * MAX_HINGE_MOVE, 100.0 * .value)]
+    Hinge { axis: &'static str, value: f64 },
+    #[error("the jaw's slide must be from 0 to {} mm, got {} mm", 1e3 * MAX_JAW_SLIDE_M, 1e3 * .value)]
+    Slide { value: f64 },
+}
 
 /// What can go wrong setting up the synthetic performer.
 #[derive(Debug, thiserror::Error)]
 pub enum SynthError {
     #[error("invalid synthetic performer configuration: {0}")]
     Config(String),
+    #[error("invalid synthetic performer configuration: {0}")]
+    Jaw(#[from] JawError),
+    #[error("--depth-baseline-mm must be within ±{MAX_DEPTH_BASELINE_MM}, got {mm}")]
+    DepthBaseline { mm: f64 },
     #[error("cannot read dot layout {path}")]
     LayoutRead {
         path: PathBuf,
@@ -297,8 +323,10 @@ pub enum SynthError {
         #[source]
         source: Box<toml::de::Error>,
     },
-    #[error("dot layout {path}: {what}")]
-    LayoutInvalid { path: PathBuf, what: String },
+    #[error("dot layout {path}: {problem}")]
+    LayoutInvalid { path: PathBuf, problem: LayoutError },
+    #[error("invalid synthetic performer configuration: {0}")]
+    Layout(#[from] LayoutError),
 }
 
 /// The synthetic performer: an iterator of frames with their ground truth.

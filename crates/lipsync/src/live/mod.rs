@@ -11,6 +11,7 @@
 
 pub mod features;
 pub mod learn;
+pub mod learn_files;
 pub mod mouth;
 pub mod profiles;
 

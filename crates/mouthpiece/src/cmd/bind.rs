@@ -2,14 +2,13 @@
 //! GLB); `bind head` makes a procedural head for a character, `bind train` trains the
 //! network, `bind evaluate` measures it against the baselines.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{anyhow, Context as _};
+use anyhow::anyhow;
 use mouthpiece_bind::network::Widths;
-use mouthpiece_bind::training::{self, TrainOptions};
-use mouthpiece_bind::{BindError, Method, ModelUp, Network};
-use mouthpiece_export::MouthRig;
+use mouthpiece_bind::training;
+use mouthpiece_bind::{commands, BindError, Method, ModelUp};
 
 use crate::exit::{bad_input, bad_input_if};
 
@@ -171,69 +170,21 @@ pub struct EvaluateArgs {
     pub snout: Vec<f64>,
 }
 
-// Held-out random heads come from this seed stream; training seeds must differ.
-use mouthpiece_bind::training::HELD_OUT_SEED;
-
-/// Largest network weights file read (the `paper` network is 650 kB).
-const MAX_MODEL_BYTES: u64 = 64 * 1024 * 1024;
-
-/// Most procedural heads `bind train` and `bind evaluate` build (each takes seconds and
-/// megabytes; the shipped network was trained on 16).
-pub const MAX_HEADS: usize = 1000;
-
-fn check_heads(heads: usize) -> anyhow::Result<()> {
-    if heads > MAX_HEADS {
-        return Err(bad_input(anyhow!(
-            "--heads {heads} is more than the {MAX_HEADS} procedural heads allowed"
-        )));
-    }
-    Ok(())
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
-    match args.action {
+    let result = match args.action {
         Some(Action::Head(a)) => head(a),
         Some(Action::Train(a)) => train(a),
-        Some(Action::Evaluate(a)) => evaluate(a),
-        None => bind(args),
-    }
+        Some(Action::Evaluate(a)) => {
+            commands::evaluate(a.model.as_deref(), a.heads, &a.character, &a.snout)
+                .map(|table| print!("{table}"))
+        }
+        None => return bind(args),
+    };
+    result.map_err(bind_error)
 }
 
 fn bind_error(err: BindError) -> anyhow::Error {
     bad_input_if(err.is_bad_input(), err)
-}
-
-fn load_network(model: Option<&Path>) -> anyhow::Result<Network> {
-    match model {
-        Some(path) => {
-            let bytes = mouthpiece_export::asset::read_bounded(path, MAX_MODEL_BYTES)
-                .with_context(|| format!("reading the model {}", path.display()))
-                .map_err(bad_input)?;
-            Network::from_bytes(&bytes, path).map_err(bind_error)
-        }
-        None => mouthpiece_bind::shipped_network().map_err(anyhow::Error::from),
-    }
-}
-
-/// A character that can be bound: the twelve points P1…P12 and a mouth of positive width
-/// (errors name the file).
-fn load_rig(path: &Path) -> anyhow::Result<MouthRig> {
-    let rig = MouthRig::load_character(path).map_err(|e| bad_input_if(e.is_bad_input(), e))?;
-    if rig.points().len() != mouthpiece_bind::procedural::POINTS {
-        return Err(bad_input(anyhow!(
-            "{}: the character has {} mouth points; binding needs the 12 points P1…P12",
-            path.display(),
-            rig.points().len()
-        )));
-    }
-    let width = rig.mouth_width();
-    if !(width.is_finite() && width > 0.0) {
-        return Err(bad_input(anyhow!(
-            "{}: the mouth's width is {width}: its corners must lie apart along x",
-            path.display()
-        )));
-    }
-    Ok(rig)
 }
 
 fn bind(args: Args) -> anyhow::Result<()> {
@@ -242,9 +193,11 @@ fn bind(args: Args) -> anyhow::Result<()> {
             "bind needs --character, --mesh and --out"
         )));
     };
-    let rig = load_rig(&character)?;
+    let rig = commands::load_rig(&character).map_err(bind_error)?;
     let network = match args.method {
-        MethodArg::Network => Some(load_network(args.model.as_deref())?),
+        MethodArg::Network => {
+            Some(commands::load_network(args.model.as_deref()).map_err(bind_error)?)
+        }
         _ => None,
     };
     let method = match (&network, args.method) {
@@ -284,13 +237,9 @@ fn bind(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn head(args: HeadArgs) -> anyhow::Result<()> {
-    let rig = load_rig(&args.character)?;
-    let mesh =
-        mouthpiece_bind::character_head(&rig, args.model_up.into(), args.snout, args.resolution)
-            .map_err(bind_error)?;
-    let name = rig.character().unwrap_or("head").to_owned();
-    mouthpiece_bind::gltf_io::write_plain_glb(&args.out, &mesh, &name).map_err(bind_error)?;
+fn head(args: HeadArgs) -> Result<(), BindError> {
+    let up = args.model_up.into();
+    let mesh = commands::write_head(&args.character, up, args.snout, args.resolution, &args.out)?;
     eprintln!(
         "wrote {}: {} vertices, {} triangles",
         args.out.display(),
@@ -300,85 +249,26 @@ fn head(args: HeadArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn train(args: TrainArgs) -> anyhow::Result<()> {
-    if args.seed == HELD_OUT_SEED {
-        return Err(bad_input(anyhow!(
-            "seed {HELD_OUT_SEED} is the held-out heads' seed"
-        )));
-    }
-    if !(args.rate > 0.0 && args.rate.is_finite()) {
-        return Err(bad_input(anyhow!("--rate must be a positive number")));
-    }
-    check_heads(args.heads)?;
+fn train(args: TrainArgs) -> Result<(), BindError> {
     let start = Instant::now();
-    let cases = training::random_cases("train", args.heads, args.seed);
-    let vertices: usize = cases.iter().map(|c| c.head.mesh.len()).sum();
-    eprintln!(
-        "{} training heads, {vertices} vertices, references in {:.1} s",
-        cases.len(),
-        start.elapsed().as_secs_f64()
-    );
-    let options = TrainOptions {
+    let request = commands::TrainRequest {
+        out: args.out.clone(),
+        seed: args.seed,
+        heads: args.heads,
+        epochs: args.epochs,
+        rate: args.rate,
         widths: match args.widths {
             WidthsArg::Paper => Widths::PAPER,
             WidthsArg::Small => Widths::SMALL,
             WidthsArg::Tiny => Widths::TINY,
         },
-        seed: args.seed,
-        epochs: args.epochs,
-        rate: args.rate,
     };
-    let net = training::train(&cases, options, |epoch, loss| {
-        if epoch % 10 == 0 || epoch + 1 == args.epochs {
-            eprintln!(
-                "epoch {epoch}: mean KL {loss:.4} ({:.0} s)",
-                start.elapsed().as_secs_f64()
-            );
-        }
-    })
-    .map_err(bind_error)?;
-    net.save(&args.out).map_err(bind_error)?;
+    let net = commands::train(&request, |line| eprintln!("{line}"))?;
     eprintln!(
         "wrote {}: {} parameters, {:.0} s",
         args.out.display(),
         net.parameter_count(),
         start.elapsed().as_secs_f64()
     );
-    Ok(())
-}
-
-fn evaluate(args: EvaluateArgs) -> anyhow::Result<()> {
-    if args.character.len() != args.snout.len() {
-        return Err(bad_input(anyhow!(
-            "give one --snout per --character ({} characters, {} snouts)",
-            args.character.len(),
-            args.snout.len()
-        )));
-    }
-    check_heads(args.heads)?;
-    for (k, snout) in args.snout.iter().enumerate() {
-        if !(0.0..=1.0).contains(snout) {
-            return Err(bad_input(anyhow!(
-                "--snout number {} is {snout}: it must be in 0…1",
-                k + 1
-            )));
-        }
-    }
-    let network = load_network(args.model.as_deref())?;
-    let mut characters = Vec::new();
-    for (path, &snout) in args.character.iter().zip(&args.snout) {
-        let rig = load_rig(path)?;
-        let w = rig.mouth_width();
-        let points = std::array::from_fn(|k| rig.points()[k].rest.map(|c| c / w));
-        characters.push((
-            rig.character().unwrap_or("character").to_owned(),
-            points,
-            snout,
-        ));
-    }
-    let mut cases = training::random_cases("held-out ", args.heads, HELD_OUT_SEED);
-    cases.extend(training::character_cases(&characters));
-    let rows = training::evaluate(&cases, &network);
-    print!("{}", training::table(&rows));
     Ok(())
 }

@@ -1,17 +1,15 @@
 //! `mouthpiece evaluate`: renders synthetic sessions and measures the pipeline on them
-//! against their ground truth (the figures and their definitions: `mouthpiece-evaluate`),
-//! printing one table row per session.
+//! against their ground truth (the sweep, the figures and their definitions:
+//! `mouthpiece_evaluate::sweep`), printing one table row per session.
 
 use anyhow::Context as _;
 use std::path::PathBuf;
 
-use mouthpiece_evaluate::rig::RigAccuracy;
-use mouthpiece_evaluate::{EvaluateError, Measure, Metrics, StepStats, TABLE_HEADER};
-use mouthpiece_retarget::PerformerLayout;
-use mouthpiece_synth::{HeadMotion, NoiseModel, SynthConfig};
+use mouthpiece_evaluate::sweep::{self, SweepOptions};
+use mouthpiece_synth::{HeadMotion, NoiseModel};
 
 use crate::cmd::process::{load_character, load_config};
-use crate::exit::bad_input;
+use crate::exit::{bad_input, bad_input_if};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Motion {
@@ -86,46 +84,6 @@ pub struct Args {
     pub jaw: crate::cmd::synth::JawArgs,
 }
 
-/// The sessions' camera and distance from `--size` and `--distance`, checked by the synthetic
-/// performer's own rules before any session is rendered: a bad value is the caller's input
-/// (exit code 2), named by its flags.
-fn session_view(size: (u32, u32), distance: f64) -> anyhow::Result<SynthConfig> {
-    let view = SynthConfig {
-        camera: SynthConfig::camera_for_size(size.0, size.1),
-        distance_m: distance,
-        ..SynthConfig::default()
-    };
-    view.validate()
-        .map_err(|e| bad_input(anyhow::Error::new(e).context("--size / --distance")))?;
-    Ok(view)
-}
-
-/// A bad `--layout` is the caller's input (exit code 2); anything else is not.
-fn to_anyhow(e: EvaluateError) -> anyhow::Error {
-    match e {
-        EvaluateError::Layout { .. } => bad_input(anyhow::Error::new(e).context("--layout")),
-        other => anyhow::Error::new(other),
-    }
-}
-
-fn print_per_dot(m: &Metrics, layout: PerformerLayout) {
-    println!("|  dot | visible | found | wrong | bias x, y, z (mm) | RMS x, y, z (mm) |");
-    for (i, d) in m.naming.per_dot.iter().enumerate() {
-        let name = if i < layout.lip_dots {
-            PerformerLayout::lip_name(i)
-        } else {
-            PerformerLayout::forehead_name(i - layout.lip_dots)
-        };
-        let n = d.found_named.max(1) as f64;
-        let bias = d.err_sum * 1e3 / n;
-        let rms = (d.err_sq / n).map(f64::sqrt) * 1e3;
-        println!(
-            "| {name:>4} | {} | {} | {} | {:+.2}, {:+.2}, {:+.2} | {:.2}, {:.2}, {:.2} |",
-            d.visible, d.found_named, d.wrong, bias.x, bias.y, bias.z, rms.x, rms.y, rms.z
-        );
-    }
-}
-
 /// The built-in wolf the daemon drives by default.
 fn builtin_wolf() -> anyhow::Result<mouthpiece_retarget::Character> {
     let (name, text) = mouthpiece_daemon::characters::BUILTIN
@@ -142,142 +100,42 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(path) => mouthpiece_synth::DotLayout::from_file(path).map_err(bad_input)?,
         None => mouthpiece_synth::DotLayout::default(),
     };
-    mouthpiece_evaluate::check_layout(&layout, &config).map_err(to_anyhow)?;
     let character = match &args.character {
         Some(path) => load_character(path)?,
         None => builtin_wolf()?,
     };
-    if !(args.seconds > 2.0 && args.seconds.is_finite()) {
-        return Err(bad_input(anyhow::anyhow!(
-            "--seconds must be more than 2 (the neutral pose takes the first 1.5 s)"
-        )));
-    }
-    let view = session_view(args.size, args.distance)?;
-    let mut frames_csv = match &args.rig_frames {
-        Some(path) => Some(crate::cmd::evaluate_rig::FramesCsv::create(
-            path,
-            config.track.layout().lip_dots,
-        )?),
-        None => None,
+    let options = SweepOptions {
+        config,
+        character,
+        layout,
+        seeds: args.seeds,
+        noises: args
+            .noise
+            .iter()
+            .map(|n| match n {
+                Noise::None => NoiseModel::None,
+                Noise::Kinect => NoiseModel::Kinect,
+                Noise::Realsense => NoiseModel::Realsense,
+            })
+            .collect(),
+        motions: args
+            .head_motion
+            .iter()
+            .map(|m| match m {
+                Motion::None => HeadMotion::None,
+                Motion::Mild => HeadMotion::Mild,
+                Motion::Strong => HeadMotion::Strong,
+            })
+            .collect(),
+        seconds: args.seconds,
+        size: args.size,
+        distance: args.distance,
+        jaw: args.jaw.options(),
+        per_dot: args.per_dot,
+        steps: args.steps,
+        per_curve: args.per_curve,
+        rig_frames: args.rig_frames,
     };
-    println!("{TABLE_HEADER}");
-    let mut steps = StepStats::default();
-    let mut rig_rows = Vec::new();
-    for &motion in &args.head_motion {
-        for &noise in &args.noise {
-            for &seed in &args.seeds {
-                let synth = SynthConfig {
-                    seed,
-                    seconds: args.seconds,
-                    head_motion: match motion {
-                        Motion::None => HeadMotion::None,
-                        Motion::Mild => HeadMotion::Mild,
-                        Motion::Strong => HeadMotion::Strong,
-                    },
-                    noise: match noise {
-                        Noise::None => NoiseModel::None,
-                        Noise::Kinect => NoiseModel::Kinect,
-                        Noise::Realsense => NoiseModel::Realsense,
-                    },
-                    layout: layout.clone(),
-                    camera: view.camera,
-                    distance_m: view.distance_m,
-                    jaw: args.jaw.options(),
-                    ..SynthConfig::default()
-                };
-                let mut rig = RigAccuracy::new(
-                    config.rig.clone(),
-                    character.clone(),
-                    config.track.layout(),
-                    config.track.calibration_s,
-                );
-                if frames_csv.is_some() {
-                    rig = rig.keep_frames();
-                }
-                let m = mouthpiece_evaluate::evaluate_with(
-                    synth,
-                    &config,
-                    &character,
-                    1.0,
-                    &mut [&mut rig as &mut dyn Measure],
-                )
-                .map_err(to_anyhow)?;
-                println!(
-                    "| {seed} | {noise:?} | {motion:?} | {}",
-                    mouthpiece_evaluate::table_cells(&m)
-                );
-                if args.per_dot {
-                    print_per_dot(&m, config.track.layout());
-                }
-                if args.steps {
-                    println!("\n{}", m.steps.table());
-                    steps.add(&m.steps);
-                }
-                if let (Some(csv), Some(frames)) = (&mut frames_csv, &rig.frames) {
-                    csv.session(&format!("{seed},{noise:?},{motion:?}"), frames)?;
-                }
-                rig_rows.push((format!("{seed} | {noise:?} | {motion:?}"), rig.metrics));
-            }
-        }
-    }
-    if let Some(csv) = frames_csv {
-        csv.finish()?;
-    }
-    if args.steps {
-        println!("All sessions:\n\n{}", steps.table());
-    }
-    crate::cmd::evaluate_rig::print_header();
-    for (label, r) in &rig_rows {
-        crate::cmd::evaluate_rig::print_row(label, r);
-        if args.per_curve {
-            crate::cmd::evaluate_rig::print_curves(r);
-        }
-    }
-    Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// `--size` and `--distance` out of the synthetic performer's range, or NaN, are a bad
-    /// input (exit code 2) naming the flags, before anything is rendered.
-    #[test]
-    fn sizes_and_distances_the_performer_cannot_render_are_bad_input() {
-        assert!(session_view((640, 480), 0.6).is_ok());
-        for (size, distance) in [
-            ((640, 480), 10.0),
-            ((640, 480), f64::NAN),
-            ((100_000, 10), 0.6),
-        ] {
-            let err = session_view(size, distance).unwrap_err();
-            assert!(
-                err.chain().any(|e| e.is::<crate::exit::BadInput>()),
-                "{err:#}"
-            );
-            assert!(
-                format!("{err:#}").contains("--size / --distance"),
-                "{err:#}"
-            );
-        }
-    }
-
-    /// A `--layout` that does not match the configuration's dots is a bad input (exit code
-    /// 2), not a panic.
-    #[test]
-    fn a_layout_that_does_not_match_the_configuration_is_refused() {
-        let layout = mouthpiece_synth::DotLayout {
-            lip_dots: 8,
-            ..Default::default()
-        };
-        let config = mouthpiece_pipeline::PipelineConfig::default();
-        let err = mouthpiece_evaluate::check_layout(&layout, &config)
-            .map_err(to_anyhow)
-            .unwrap_err();
-        assert!(
-            err.chain().any(|e| e.is::<crate::exit::BadInput>()),
-            "{err:#}"
-        );
-        assert!(format!("{err:#}").contains("track.lip_dots"), "{err:#}");
-    }
+    sweep::run(&options, &mut std::io::stdout().lock())
+        .map_err(|e| bad_input_if(e.is_bad_input(), e))
 }

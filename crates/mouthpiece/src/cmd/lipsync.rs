@@ -92,45 +92,13 @@ pub enum Action {
     Learn(crate::cmd::lipsync_learn::LearnArgs),
 }
 
-/// Largest phone file read (a TIMIT file of 10 minutes is 100 KB).
-pub const MAX_PHONE_FILE_BYTES: u64 = 64 << 20;
-/// Largest class table, pose file, segment overrides or marks file read.
-pub const MAX_TABLE_FILE_BYTES: u64 = 4 << 20;
-/// Largest transcript read.
-pub const MAX_TRANSCRIPT_BYTES: u64 = 1 << 20;
-/// Largest weights CSV `synth --speech` reads (a CSV of an hour at 60 fps is 25 MB).
-pub const MAX_WEIGHTS_CSV_BYTES: u64 = 64 << 20;
+pub use mouthpiece_lipsync::input::{
+    MAX_PHONE_FILE_BYTES, MAX_TABLE_FILE_BYTES, MAX_TRANSCRIPT_BYTES, MAX_WEIGHTS_CSV_BYTES,
+};
 
-/// Reads a text file of at most `limit` bytes (UTF-8, or UTF-16 with a byte order mark):
-/// a longer one (a device such as `/dev/zero`, a wrong path) is an error naming the file, and
-/// so is a line longer than [`MAX_LINE_BYTES`](mouthpiece_retarget::jsonl::MAX_LINE_BYTES),
-/// naming its line.
+/// [`mouthpiece_lipsync::input::read_text`]: every error is the caller's file (exit code 2).
 pub fn read_text(path: &Path, what: &str, limit: u64) -> anyhow::Result<String> {
-    use std::io::Read;
-    let name = path.display().to_string();
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| f.take(limit + 1).read_to_end(&mut bytes))
-        .with_context(|| format!("cannot read {what} {name}"))
-        .map_err(bad_input)?;
-    if bytes.len() as u64 > limit {
-        return Err(bad_input(anyhow::anyhow!(
-            "{name}: {what} longer than {limit} bytes"
-        )));
-    }
-    let text = mouthpiece_lipsync::input::decode_text(&bytes, &name).map_err(bad_input)?;
-    // Line by line as the take readers read, with their limit: a line of megabytes is not a
-    // phone file, table or transcript, and the error says where it is.
-    use mouthpiece_retarget::jsonl::{read_line_limited, MAX_LINE_BYTES};
-    let (mut rest, mut line) = (text.as_bytes(), String::new());
-    for n in 1.. {
-        match read_line_limited(&mut rest, &mut line, MAX_LINE_BYTES) {
-            Ok(0) => break,
-            Ok(_) => {}
-            Err(e) => return Err(bad_input(anyhow::anyhow!("{name} line {n}: {what}: {e}"))),
-        }
-    }
-    Ok(text)
+    mouthpiece_lipsync::input::read_text(path, what, limit).map_err(bad_input)
 }
 
 /// The method's tables from `--classes`, `--poses` and `--segments` (the shipped ones when

@@ -44,43 +44,6 @@ pub struct PosesArgs {
     pub config: Option<PathBuf>,
 }
 
-/// Parses marks: `name = [start, end]`, start < end, finite.
-pub fn parse_marks(text: &str, source_name: &str) -> anyhow::Result<Vec<(String, f64, f64)>> {
-    // A list, its length checked here: a `[f64; 2]` would take `[1, 2, 3]` as `[1, 2]`.
-    let table: BTreeMap<String, Vec<f64>> = toml::from_str(text)
-        .with_context(|| format!("{source_name}: expected `name = [start_s, end_s]` per pose"))
-        .map_err(bad_input)?;
-    if table.is_empty() {
-        return Err(bad_input(anyhow::anyhow!("{source_name}: no poses marked")));
-    }
-    table
-        .into_iter()
-        .map(|(name, range)| {
-            if !mouthpiece_lipsync::input::valid_name(&name) {
-                return Err(bad_input(anyhow::anyhow!(
-                    "{source_name}: pose name {} must be {} (it becomes a column and a key)",
-                    mouthpiece_lipsync::input::cut(&name),
-                    mouthpiece_lipsync::input::NAME_RULE
-                )));
-            }
-            let &[a, b] = range.as_slice() else {
-                return Err(bad_input(anyhow::anyhow!(
-                    "{source_name}: {name}: expected [start_s, end_s], got {} values",
-                    range.len()
-                )));
-            };
-            let day = mouthpiece_lipsync::phones::MAX_TIME;
-            if !(a.is_finite() && b.is_finite() && 0.0 <= a && a < b && b <= day) {
-                return Err(bad_input(anyhow::anyhow!(
-                    "{source_name}: {}: the range must be [start, end] with 0 ≤ start < end ≤ {day}, got [{a}, {b}]",
-                    mouthpiece_lipsync::input::cut(&name)
-                )));
-            }
-            Ok((name, a, b))
-        })
-        .collect()
-}
-
 /// Captures the poses (see the module docs).
 pub fn capture(
     session: &Path,
@@ -172,7 +135,8 @@ pub fn run(args: PosesArgs) -> anyhow::Result<()> {
         "marks",
         crate::cmd::lipsync::MAX_TABLE_FILE_BYTES,
     )?;
-    let marks = parse_marks(&text, &args.marks.display().to_string())?;
+    let marks = mouthpiece_lipsync::poses::parse_marks(&text, &args.marks.display().to_string())
+        .map_err(bad_input)?;
     let poses = capture(&args.session, &marks, args.config.as_deref())?;
     let text = poses.to_toml_string(&format!(
         "Basic lip poses captured from {} (marks {}): performer mouth frame, metres.",
@@ -187,39 +151,4 @@ pub fn run(args: PosesArgs) -> anyhow::Result<()> {
     f.commit()
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn marks_are_two_times_under_a_plain_name() {
-        let marks = parse_marks("open = [1.0, 2.5]\nclosed = [3, 4]\n", "m.toml").unwrap();
-        assert_eq!(
-            marks,
-            [
-                ("closed".to_owned(), 3.0, 4.0),
-                ("open".to_owned(), 1.0, 2.5)
-            ]
-        );
-        for (text, says) in [
-            (
-                "open = [1.0, 2.0, 3.0]\n",
-                "open: expected [start_s, end_s], got 3 values",
-            ),
-            ("open = [1.0]\n", "got 1 values"),
-            ("\"a,b\" = [1.0, 2.0]\n", "pose name a,b must be"),
-            ("\"a.b\" = [1.0, 2.0]\n", "pose name a.b must be"),
-            (
-                "\"a\\u001b[2J\" = [1.0, 2.0]\n",
-                "pose name a\\u{1b}[2J must be",
-            ),
-        ] {
-            let err = format!("{:#}", parse_marks(text, "m.toml").unwrap_err());
-            assert!(err.starts_with("m.toml: "), "{err}");
-            assert!(err.contains(says), "{text}: {err}");
-            assert!(!err.contains('\u{1b}'), "{err:?}");
-        }
-    }
 }

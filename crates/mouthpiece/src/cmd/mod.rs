@@ -4,7 +4,6 @@ pub mod bind;
 pub mod check_config;
 pub mod devices;
 pub mod evaluate;
-pub mod evaluate_rig;
 pub mod export;
 pub mod export_audio;
 pub mod lipsync;

@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context as _;
-use mouthpiece_frame::{Frame, FrameSource};
+use mouthpiece_capture::session_file::{SessionFile, SessionFileError};
+use mouthpiece_frame::Frame;
 use mouthpiece_pipeline::{Pipeline, PipelineConfig, RetargetSettings};
-use mouthpiece_recording::SessionReader;
 use mouthpiece_retarget::head::HeadLine;
 use mouthpiece_retarget::{Character, ShapeSmoothing};
 use mouthpiece_takes::read::RecordedHeads;
@@ -70,57 +70,26 @@ pub(crate) fn smoothing(smooth: Smooth) -> ShapeSmoothing {
     .smoothing()
 }
 
-/// A finite stream of frames from a recorded session.
-pub enum Input {
-    Mcap(Box<SessionReader>),
-    Oni(Box<dyn FrameSource>),
+/// A finite stream of frames from a recorded session (errors marked for the exit code).
+pub struct Input(SessionFile);
+
+fn session_error(e: SessionFileError) -> anyhow::Error {
+    bad_input_if(e.is_bad_input(), e)
 }
 
 impl Input {
     /// Opens a session by its file extension.
     pub fn open(path: &Path) -> anyhow::Result<Self> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        match ext.as_deref() {
-            Some("mcap") => {
-                let reader = SessionReader::open(path)
-                    .with_context(|| format!("cannot open session {}", path.display()))
-                    .map_err(bad_input)?;
-                Ok(Input::Mcap(Box::new(reader)))
-            }
-            Some("oni") => {
-                // OpenNI2 playback through the capture crate, unpaced (`speed=0`).
-                let spec = format!("replay:{}?speed=0", path.display());
-                let source = mouthpiece_capture::open_source(
-                    &spec,
-                    &mouthpiece_capture::CaptureConfig::default(),
-                )
-                .with_context(|| format!("cannot open session {}", path.display()))
-                .map_err(bad_input)?;
-                Ok(Input::Oni(source))
-            }
-            _ => Err(bad_input(anyhow::anyhow!(
-                "{}: unknown session type (expected .mcap or .oni)",
-                path.display()
-            ))),
-        }
+        SessionFile::open(path).map(Input).map_err(session_error)
     }
 
     pub fn next_frame(&mut self) -> anyhow::Result<Option<Frame>> {
-        Ok(self.next_logged()?.map(|(f, _)| f))
+        self.0.next_frame().map_err(session_error)
     }
 
     /// The next frame and, from an MCAP file, its log time (ns).
     pub fn next_logged(&mut self) -> anyhow::Result<Option<(Frame, Option<u64>)>> {
-        match self {
-            Input::Mcap(r) => Ok(r
-                .next_frame()
-                .map_err(|e| bad_input_if(e.is_bad_input(), e))?
-                .map(|f| (f.frame, Some(f.log_time)))),
-            Input::Oni(s) => Ok(s.next_frame()?.map(|f| (f, None))),
-        }
+        self.0.next_logged().map_err(session_error)
     }
 }
 
@@ -198,7 +167,7 @@ pub fn process_recording(
     }
     let mut input = Input::open(setup.input)?;
     let mut recorded = match (&input, setup.recorded_heads) {
-        (Input::Mcap(_), true) => Some(
+        (Input(SessionFile::Mcap(_)), true) => Some(
             RecordedHeads::<HeadLine>::open(setup.input, &character_name).map_err(take_error)?,
         ),
         _ => None,

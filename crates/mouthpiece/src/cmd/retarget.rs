@@ -1,22 +1,15 @@
-//! `mouthpiece retarget`: 3D dots (JSONL) → character mouth points (JSONL). The flags and
-//! the files are here; the lines are [`mouthpiece_retarget::batch`]'s.
-//!
-//! Output to a file goes to a temporary file beside it, renamed into place only on success.
+//! `mouthpiece retarget`: 3D dots (JSONL) → character mouth points (JSONL). The flags are
+//! here; the files are [`mouthpiece_export::retarget_files`]'s, the lines
+//! [`mouthpiece_retarget::batch`]'s.
 
-use std::fs::File;
-use std::io::{self, BufReader, BufWriter, Seek, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::Context as _;
+use mouthpiece_export::retarget_files::retarget_files;
 use mouthpiece_pipeline::RetargetSettings;
-use mouthpiece_retarget::batch::{self, BatchError};
-use mouthpiece_retarget::jsonl::OutputLine;
-use mouthpiece_retarget::{
-    Character, CharacterSettings, MissingDots, OneEuroParams, RetargetConfig,
-};
+use mouthpiece_retarget::{CharacterSettings, MissingDots, OneEuroParams, RetargetConfig};
 
 use crate::exit::{bad_input, bad_input_if};
-use mouthpiece_export::PendingFile;
 
 /// The shape smoothing: one enum for the configuration's `[retarget] smooth` and `--smooth`.
 pub use mouthpiece_pipeline::Smooth;
@@ -152,19 +145,9 @@ impl Args {
     }
 }
 
-fn is_dash(p: &Path) -> bool {
-    p.as_os_str() == "-"
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     let config = args.config()?;
-    let character_src =
-        mouthpiece_config::read_bounded(&args.character, mouthpiece_config::MAX_CONFIG_FILE_BYTES)
-            .with_context(|| format!("cannot read character file {}", args.character.display()))
-            .map_err(bad_input)?;
-    let character = Character::from_toml_str(&character_src)
-        .with_context(|| format!("character file {}", args.character.display()))
-        .map_err(bad_input)?;
+    let character = crate::cmd::process::load_character(&args.character)?;
     tracing::info!(character = %character.name, points = character.len(), "character loaded");
     if let Some(look) = &args.look_at {
         let in_reach = character
@@ -174,109 +157,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map_err(bad_input)?;
         tracing::info!(point = ?look.point, in_reach, "viewpoint");
     }
-    let look_at = args.look_at;
-
-    let input_name = if is_dash(&args.input) {
-        "stdin".to_string()
-    } else {
-        args.input.display().to_string()
-    };
-    let result = if is_dash(&args.input) {
-        let mut out = Output::open(&args.out, true)?;
-        let stdin = io::stdin().lock();
-        let written =
-            batch::retarget_stream(stdin, &input_name, character, config, look_at, &mut out);
-        written.and_then(|n| out.finish().map(|()| n))
-    } else {
-        let file = File::open(&args.input)
-            .with_context(|| format!("cannot open input {}", args.input.display()))
-            .map_err(bad_input)?;
-        let regular = file.metadata().is_ok_and(|m| m.is_file());
-        let mut reader = BufReader::new(file);
-        if regular {
-            let neutral = batch::scan(&mut reader, &input_name, character.len())
-                .map_err(|e| bad_input_if(e.is_bad_input(), e))?;
-            reader
-                .rewind()
-                .with_context(|| format!("cannot rewind {input_name}"))?;
-            let mut out = Output::open(&args.out, false)?;
-            let written = batch::retarget_file(
-                reader,
-                &input_name,
-                character,
-                config,
-                neutral,
-                look_at,
-                &mut out,
-            );
-            written.and_then(|n| out.finish().map(|()| n))
-        } else {
-            // A pipe or device given by path: it cannot be read twice, so stream it like stdin.
-            let mut out = Output::open(&args.out, true)?;
-            let written =
-                batch::retarget_stream(reader, &input_name, character, config, look_at, &mut out);
-            written.and_then(|n| out.finish().map(|()| n))
-        }
-    };
-    match result {
-        Ok(lines) => {
-            tracing::info!(lines, "retarget done");
-            Ok(())
-        }
-        Err(e) if e.is_broken_pipe() => Ok(()),
-        Err(e) => Err(bad_input_if(e.is_bad_input(), e)),
+    let lines = retarget_files(&args.input, &args.out, character, config, args.look_at)
+        .map_err(|e| bad_input_if(e.is_bad_input(), e))?;
+    if let Some(lines) = lines {
+        tracing::info!(lines, "retarget done");
     }
-}
-
-/// Where the output goes: stdout, or a file written under a temporary name and moved into
-/// place by `finish` ([`PendingFile`]).
-struct Output {
-    sink: Sink,
-    flush_each_line: bool,
-}
-
-enum Sink {
-    Stdout(BufWriter<io::Stdout>),
-    File(PendingFile),
-}
-
-impl Output {
-    fn open(path: &Path, streaming: bool) -> anyhow::Result<Self> {
-        let sink = if is_dash(path) {
-            Sink::Stdout(BufWriter::new(io::stdout()))
-        } else {
-            Sink::File(
-                PendingFile::create(path)
-                    .with_context(|| format!("cannot create output {}", path.display()))
-                    .map_err(bad_input)?,
-            )
-        };
-        Ok(Self {
-            flush_each_line: streaming && matches!(sink, Sink::Stdout(_)),
-            sink,
-        })
-    }
-
-    /// Flushes stdout, or moves the file into place.
-    fn finish(self) -> Result<(), BatchError> {
-        match self.sink {
-            Sink::Stdout(mut w) => w.flush().map_err(BatchError::Output),
-            Sink::File(f) => f.commit().map_err(BatchError::Output),
-        }
-    }
-}
-
-impl batch::LineSink for Output {
-    fn write_line(&mut self, line: &OutputLine) -> io::Result<()> {
-        let writer: &mut dyn Write = match &mut self.sink {
-            Sink::Stdout(w) => w,
-            Sink::File(f) => f,
-        };
-        serde_json::to_writer(&mut *writer, line)?;
-        writer.write_all(b"\n")?;
-        if self.flush_each_line {
-            writer.flush()?;
-        }
-        Ok(())
-    }
+    Ok(())
 }
