@@ -606,13 +606,17 @@ impl Tracker {
         if !self.window.push(t, dots, crop, self.calibration_s) {
             return Ok(());
         }
-        let width_m = self
-            .window
-            .shape(self.layout)
-            .filter(|shape| {
-                shape.still_and_closed(self.config.still_tolerance_m, self.config.max_opening_ratio)
-            })
-            .map(|shape| shape.width_m);
+        let still_and_closed = self.window.shape(self.layout).is_some_and(|shape| {
+            shape.still_and_closed(self.config.still_tolerance_m, self.config.max_opening_ratio)
+        });
+        // The check judges the width of the pose the window would give, the one kept and
+        // logged (the median width over the frames can differ from it by a millimetre).
+        let pose = if still_and_closed {
+            Some(self.window.neutral(self.layout)?)
+        } else {
+            None
+        };
+        let width_m = pose.as_ref().map(NeutralPose::mouth_width);
         if let Some(width_m) = width_m {
             self.neutral_check.observe(self.window.interval(), width_m);
         }
@@ -644,11 +648,10 @@ impl Tracker {
             }
             return Ok(());
         }
-        let Some(width_m) = width_m.filter(|w| self.neutral_check.admits(*w)) else {
+        let Some(neutral) = pose.filter(|p| self.neutral_check.admits(p.mouth_width())) else {
             return Ok(());
         };
-        self.neutral_check.taken(width_m);
-        let neutral = self.window.neutral(self.layout)?;
+        self.neutral_check.taken(neutral.mouth_width());
         tracing::info!(
             frames = neutral.frames,
             mouth_width_mm = neutral.mouth_width() * 1e3,
