@@ -147,7 +147,8 @@ impl NeutralCheck {
 /// weight at or below it. `None` for no weight.
 pub(crate) fn weighted_median(samples: &[(f64, f64)]) -> Option<f64> {
     let total: f64 = samples.iter().map(|s| s.0).sum();
-    if !(total > 0.0) {
+    // NaN weights count as none.
+    if total.is_nan() || total <= 0.0 {
         return None;
     }
     let mut sorted = samples.to_vec();
