@@ -14,8 +14,9 @@
 //!    (`lip_depth`), and, once calibrated, the head motion is refined on the whole forehead
 //!    surface (`forehead`, `head`) and the forehead dots placed by it;
 //! 6. neutral calibration (`calibration`, docs/method.md) once the mouth has been still for
-//!    [`TrackConfig::calibration_s`] (again on [`Tracker::calibrate`]), then head pose and
-//!    stabilised lip dots every frame through the retarget core's [`Stabiliser`].
+//!    [`TrackConfig::calibration_s`] (again on [`Tracker::calibrate`]), checked against the
+//!    performer's typical still, closed mouth and taken again when atypical, then head pose
+//!    and stabilised lip dots every frame through the retarget core's [`Stabiliser`].
 //!
 //! Everything is on the caller's thread; no queues. A frame allocates nothing once the
 //! buffers kept between frames have grown.
