@@ -8,6 +8,15 @@ use mouthpiece_config::{ConfigError, Location};
 pub enum CheckError {
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// The characters, the pipeline's tables or the speech settings.
+    #[error(transparent)]
+    Setup(Box<mouthpiece_pipeline::setup::SetupError>),
     #[error("{location}: {message}")]
     Invalid { location: Location, message: String },
+}
+
+impl From<mouthpiece_pipeline::setup::SetupError> for CheckError {
+    fn from(e: mouthpiece_pipeline::setup::SetupError) -> Self {
+        CheckError::Setup(Box::new(e))
+    }
 }

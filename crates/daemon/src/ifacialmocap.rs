@@ -21,7 +21,7 @@ pub fn settings(config: &Config) -> Result<Option<IfmSettings>, CheckError> {
     let listen = section
         .listen()
         .map_err(|e| invalid("ifacialmocap.address", e))?;
-    let characters = crate::characters::load(config)?;
+    let characters = mouthpiece_pipeline::setup::characters(config)?;
     let character = match &section.character {
         Some(name) => characters.iter().find(|c| &c.name == name).ok_or_else(|| {
             let known: Vec<&str> = characters.iter().map(|c| c.name.as_str()).collect();

@@ -5,8 +5,9 @@
 //!   source with [`backoff`];
 //! - [`console`]: what the booth console page needs: the preview's image and dots, health
 //!   figures, the calibration report;
-//! - [`live`]: the processor: the frame pipeline (`mouthpiece_pipeline`: detect +
-//!   track + retarget) for every configured character;
+//! - [`live`]: the processor: the live pipeline (`mouthpiece_pipeline::live`: detect +
+//!   track + retarget + rig and the mouths from speech, which fills the published step) for
+//!   every configured character, plus the console's view of the dots;
 //! - [`pipeline`]: the processing thread around a [`pipeline::Processor`];
 //! - [`factory`]: builds the processor and its reloads from a configuration;
 //! - [`check`]: everything a configuration must satisfy; [`error`], [`settings`]: leaf
@@ -32,14 +33,12 @@
 pub mod audio;
 pub mod backoff;
 pub mod capture;
-pub mod characters;
 pub mod check;
 pub mod console;
 pub mod daemon;
 pub mod error;
 pub mod factory;
 pub mod hardening;
-pub mod head;
 pub mod ifacialmocap;
 pub mod live;
 pub mod livelink;
@@ -48,7 +47,6 @@ pub mod ltc;
 pub mod notify;
 pub mod osc;
 pub mod pipeline;
-pub mod rig;
 pub mod settings;
 pub mod slot;
 pub mod source;

@@ -21,7 +21,7 @@ pub fn settings(config: &Config, rate: TimecodeRate) -> Result<LiveLinkSettings,
         location: config.locate(key),
         message,
     };
-    let characters = crate::characters::load(config)?;
+    let characters = mouthpiece_pipeline::setup::characters(config)?;
     let livelink = &config.livelink;
     let mut sent: Vec<LiveLinkCharacter> = Vec::new();
     let mut targets = Vec::new();

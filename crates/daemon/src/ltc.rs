@@ -16,7 +16,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use mouthpiece_frame::{AudioBlock, AudioEvent, AudioSubscription};
-use mouthpiece_ltc::{Decoded, Decoder, LtcRate};
+use mouthpiece_ltc::channel::Block;
+use mouthpiece_ltc::{ChannelDecoder, Decoded, LtcRate};
 use mouthpiece_server::timecode_clock::{ClockState, TimecodeClock};
 use mouthpiece_server::{Hub, Timecode, TimecodeRate};
 
@@ -46,14 +47,8 @@ fn unix_micros(t: SystemTime) -> i64 {
 /// Decodes one channel of the audio stream's blocks into the clock. No thread of its own, so
 /// the thread below and tests drive it alike.
 pub struct LtcReader {
-    /// Channel index in the interleaved blocks (0-based).
-    channel: usize,
-    rate: LtcRate,
+    reader: ChannelDecoder,
     clock: Arc<TimecodeClock>,
-    /// The decoder and the stream it reads: (sample rate, channels, next expected sample).
-    decoder: Option<(Decoder, u32, u16, u64)>,
-    mono: Vec<i16>,
-    decoded: Vec<Decoded>,
     /// Frames decoded since the start, for logs and tests.
     pub frames_read: u64,
     warned_channels: bool,
@@ -64,12 +59,8 @@ impl LtcReader {
     /// LTC rate (the configuration refuses those).
     pub fn new(channel: usize, clock: Arc<TimecodeClock>) -> Option<LtcReader> {
         Some(LtcReader {
-            channel,
-            rate: ltc_rate(clock.rate())?,
+            reader: ChannelDecoder::new(channel, ltc_rate(clock.rate())?),
             clock,
-            decoder: None,
-            mono: Vec::new(),
-            decoded: Vec::new(),
             frames_read: 0,
             warned_channels: false,
         })
@@ -77,59 +68,36 @@ impl LtcReader {
 
     /// Forgets the stream (a source stopped or started): the next block starts a decoder.
     pub fn restart(&mut self) {
-        self.decoder = None;
+        self.reader.restart();
     }
 
     /// Decodes `block`, tells the clock each LTC frame and the time the block ends; returns
     /// the labels decoded.
     pub fn block(&mut self, block: &AudioBlock) -> &[Decoded] {
-        self.decoded.clear();
         let format = block.format;
         let channels = usize::from(format.channels);
         if format.sample_rate == 0 || channels == 0 {
-            return &self.decoded;
+            return &[];
         }
-        if self.channel >= channels {
+        if self.reader.channel() >= channels {
             if !self.warned_channels {
                 tracing::warn!(
-                    channel = self.channel + 1,
+                    channel = self.reader.channel() + 1,
                     channels,
                     "the audio device delivers fewer channels than the LTC channel: no LTC"
                 );
                 self.warned_channels = true;
             }
-            return &self.decoded;
+            return &[];
         }
-        let fresh = match &self.decoder {
-            Some((_, rate, ch, next)) => {
-                *rate != format.sample_rate || *ch != format.channels || block.first_frame < *next
-            }
-            None => true,
-        };
-        if fresh {
-            self.decoder = Some((
-                Decoder::new(format.sample_rate, self.rate),
-                format.sample_rate,
-                format.channels,
-                block.first_frame,
-            ));
-        }
-        let Some((decoder, _, _, next)) = self.decoder.as_mut() else {
-            return &self.decoded;
-        };
-        self.mono.clear();
-        self.mono
-            .extend(block.samples.iter().skip(self.channel).step_by(channels));
-        decoder.write(&self.mono, block.first_frame, &mut self.decoded);
-        *next = block.first_frame + self.mono.len() as u64;
-        let first_wall = unix_micros(block.wall_clock.unwrap_or_else(SystemTime::now));
-        let rate = i128::from(format.sample_rate);
-        // The wall-clock time at which sample `s` of the stream was captured.
-        let wall_of = |s: u64| {
-            let offset = i128::from(s) - i128::from(block.first_frame);
-            first_wall + (offset * 1_000_000 / rate) as i64
-        };
-        for d in &self.decoded {
+        self.reader.block(&Block {
+            samples: &block.samples,
+            sample_rate: format.sample_rate,
+            channels: format.channels,
+            first_frame: block.first_frame,
+            first_wall_us: unix_micros(block.wall_clock.unwrap_or_else(SystemTime::now)),
+        });
+        for d in self.reader.decoded() {
             if d.reverse {
                 // Played backwards: a label, but not a clock.
                 continue;
@@ -142,11 +110,14 @@ impl LtcReader {
                 drop_frame: d.label.drop_frame,
             };
             // The frame's label held until its last sample; the next begins one sample on.
-            self.clock.observe(label, wall_of(d.end_sample + 1));
+            self.clock
+                .observe(label, self.reader.wall_of(d.end_sample + 1));
             self.frames_read += 1;
         }
-        self.clock.tick(wall_of(*next));
-        &self.decoded
+        if let Some(next) = self.reader.next_frame() {
+            self.clock.tick(self.reader.wall_of(next));
+        }
+        self.reader.decoded()
     }
 }
 
@@ -173,7 +144,7 @@ pub fn spawn(
 fn run(mut reader: LtcReader, events: &AudioSubscription, audio: &AudioShared, hub: &Hub) {
     let clock = reader.clock.clone();
     let mut shown = clock.state();
-    tracing::info!(channel = reader.channel + 1, rate = %clock.rate(), "LTC thread started");
+    tracing::info!(channel = reader.reader.channel() + 1, rate = %clock.rate(), "LTC thread started");
     while !audio.is_stopping() {
         match events.events.recv_timeout(IDLE_TICK) {
             Ok(AudioEvent::Block(block)) => {

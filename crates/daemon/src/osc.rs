@@ -16,7 +16,7 @@ pub fn settings(config: &Config) -> Result<OscSettings, CheckError> {
         location: config.locate(key),
         message,
     };
-    let characters = crate::characters::load(config)?;
+    let characters = mouthpiece_pipeline::setup::characters(config)?;
     let find = |name: &str, key: &str| {
         characters.iter().find(|c| c.name == name).ok_or_else(|| {
             let known: Vec<&str> = characters.iter().map(|c| c.name.as_str()).collect();

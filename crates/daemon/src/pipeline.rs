@@ -18,7 +18,7 @@ use mouthpiece_frame::Frame;
 use mouthpiece_server::timecode_clock::TimecodeClock;
 use mouthpiece_server::{
     ControlCommand, ControlFailure, ControlReceiver, ControlRequest, Hub, Recording,
-    SourceState as WireSourceState, StreamFrame, StreamInfo, TimecodeRate,
+    SourceState as WireSourceState, StreamInfo, TimecodeRate,
 };
 use serde_json::json;
 
@@ -26,30 +26,9 @@ use crate::slot::Taken;
 use crate::source::{SourceShared, SourceState};
 use mouthpiece_takes::{CharacterRecord, Derived, TakeEnded, Takes};
 
-/// Per-frame flags a processor reports besides the stream frame.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Flags {
-    /// No neutral pose yet, or a requested calibration is collecting frames.
-    pub calibrating: bool,
-    /// Fewer than three forehead dots: the head pose is the last good one.
-    pub head_lost: bool,
-    /// Dots not seen in this frame.
-    pub dots_missing: usize,
-    /// No dot of any colour found at all.
-    pub no_dots: bool,
-    /// This frame completed a neutral calibration (answers waiting `calibrate` requests).
-    pub neutral_taken: bool,
-}
-
-/// What a processor fills per frame; reused from frame to frame.
-#[derive(Debug, Default)]
-pub struct Output {
-    /// Sent to clients (`t`, `capture_us` and `wall_us` are set by the pipeline).
-    pub stream: StreamFrame,
-    /// Tracked dots `D1..`, `F1..` in the camera frame (metres), for takes.
-    pub performer_camera: Vec<Option<[f64; 3]>>,
-    pub flags: Flags,
-}
+/// What a processor fills per frame (the live pipeline's step, reused from frame to frame)
+/// and the flags it reports besides the stream frame.
+pub use mouthpiece_pipeline::live::{Flags, Output};
 
 /// Turns a frame into the stream's per-frame result. The real one is detect + track +
 /// retarget; the trait keeps the daemon independent of how.

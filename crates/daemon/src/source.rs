@@ -189,21 +189,7 @@ fn sleep_unless_stopped(shared: &SourceShared, total: Duration) {
     }
 }
 
-/// Runs `f`, turning a panic into its message.
-pub fn catch_panic<T>(f: impl FnOnce() -> T) -> Result<T, String> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| panic_message(&*p))
-}
-
-/// The message of a panic payload (`panic!("...")` gives a `&str` or a `String`).
-pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
-    payload
-        .downcast_ref::<&str>()
-        .map(|s| (*s).to_owned())
-        .or_else(|| payload.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "(no message)".into())
-}
-
-pub use mouthpiece_output::error_chain;
+pub use mouthpiece_output::{catch_panic, error_chain, panic_message};
 
 #[cfg(test)]
 mod tests {

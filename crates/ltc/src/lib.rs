@@ -12,9 +12,15 @@
 //! [`Encoder`] writes LTC as audio, as a timecode generator would (used by the tests and by
 //! anyone who wants to check a booth's wiring).
 //!
+//! [`ChannelDecoder`] reads one channel of an interleaved stream that may stop and start
+//! again, stamping each frame with the wall-clock time it ended at.
+//!
 //! Rates: 23.976 and 24 (film, 24 labels a second), 25, 29.97 drop-frame and 30.
 
 use std::ptr::NonNull;
+
+pub mod channel;
+pub use channel::ChannelDecoder;
 
 use ltc_sys as sys;
 

@@ -11,7 +11,8 @@
 //!   points, confidences, curve, rig and head;
 //! - [`slate`]: the one rule for naming a take;
 //! - [`shown`](mod@shown): how a name from a file or the network is printed (control characters escaped);
-//! - [`log`]: how the long-running outputs report trouble (error chains, throttled warnings).
+//! - [`log`]: how the long-running outputs report trouble (error chains, throttled warnings,
+//!   a thread's panic as its message).
 //!
 //! Plain data with serde; no I/O, no threads, no dependencies beyond serde, so the pure
 //! math at the bottom of the workspace and the servers at the top can share it.
@@ -35,7 +36,7 @@ pub use curves::{
 };
 pub use frame::{CharacterFrame, MouthSource, PerformerFrame, StreamFrame};
 pub use head::{CharacterHead, HeadPose, LookMode, RigidPose};
-pub use log::{error_chain, Throttle, TokenBucket};
+pub use log::{catch_panic, error_chain, panic_message, Throttle, TokenBucket};
 pub use rig::{RigCurves, RigJaw, RigLip, RigLips, RigState, RigVisemes};
 pub use shown::{shown, shown_message, Shown};
 pub use slate::{valid_slate, SLATE_RULE};

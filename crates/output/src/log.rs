@@ -1,6 +1,7 @@
 //! How the long-running outputs report trouble: an error with its causes on one line, and
 //! a repeated warning at most once per interval (a source that fails to open every half
-//! second, a full disk under a take, a refusing OSC target must not fill the journal).
+//! second, a full disk under a take, a refusing OSC target must not fill the journal), and a
+//! panic caught on a long-running thread as its message.
 
 use std::time::{Duration, Instant};
 
@@ -98,6 +99,20 @@ pub fn error_chain(err: &dyn std::error::Error) -> String {
         cause = c.source();
     }
     text
+}
+
+/// Runs `f`, turning a panic into its message.
+pub fn catch_panic<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| panic_message(&*p))
+}
+
+/// The message of a panic payload (`panic!("...")` gives a `&str` or a `String`).
+pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_owned())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "(no message)".into())
 }
 
 #[cfg(test)]

@@ -3,9 +3,24 @@
 //! `mouthpiece evaluate`, the benchmark and the daemon (which streams every character,
 //! [`Pipeline::step`]). Its settings come from one place, [`PipelineConfig`]: the `[detect]`,
 //! `[track]` and `[retarget]` tables of a configuration file.
+//!
+//! - [`live`]: the daemon's step: [`Pipeline::step`] and the mouths from speech filling the
+//!   published frame (`mouthpiece_output::StreamFrame`) for every character;
+//! - [`quality`]: how good a neutral pose is (the lip wobble of the console's calibration
+//!   report);
+//! - [`setup`]: the live pipeline's set-up from a daemon configuration (characters, speech);
+//! - [`speech`], [`handover`]: the mouths from speech and the handover camera ↔ speech;
+//! - [`tune`]: the paint check's proposal from frames, written into a configuration file;
+//! - [`wire`]: the retarget core's rig and heads in the output vocabulary (the one
+//!   conversion).
 
 pub mod handover;
+pub mod live;
+pub mod quality;
+pub mod setup;
 pub mod speech;
+pub mod tune;
+pub mod wire;
 
 use mouthpiece_config::{ConfigError, ConfigText};
 use mouthpiece_detect::DetectConfig;

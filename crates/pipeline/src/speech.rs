@@ -79,10 +79,25 @@ pub struct SpeechDriver {
     next_alone: f64,
 }
 
+/// Why a live lip-sync profile file cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ProfilesError {
+    #[error("cannot read live lip-sync profiles {file}")]
+    Read {
+        file: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Invalid(#[from] mouthpiece_lipsync::Error),
+    #[error("{file}: no class has a profile")]
+    Empty { file: String },
+}
+
 /// Reads a profile file (`mouthpiece lipsync learn`) and checks it against the shipped class
 /// table: a missing, oversized or malformed file, or a class the table lacks, is an error
 /// naming the file.
-pub fn load_profiles(path: &std::path::Path) -> Result<Profiles, String> {
+pub fn load_profiles(path: &std::path::Path) -> Result<Profiles, ProfilesError> {
     use mouthpiece_lipsync::live::profiles::MAX_PROFILE_BYTES;
     use std::io::Read;
     let name = path.display().to_string();
@@ -92,14 +107,16 @@ pub fn load_profiles(path: &std::path::Path) -> Result<Profiles, String> {
             f.take(MAX_PROFILE_BYTES as u64 + 1)
                 .read_to_string(&mut text)
         })
-        .map_err(|e| format!("cannot read live lip-sync profiles {name}: {e}"))?;
-    let profiles = Profiles::from_toml_str(&text, &name).map_err(|e| e.to_string())?;
+        .map_err(|source| ProfilesError::Read {
+            file: name.clone(),
+            source,
+        })?;
+    let profiles = Profiles::from_toml_str(&text, &name)?;
     let table =
-        mouthpiece_lipsync::ClassTable::from_toml_str(DEFAULT_CLASSES, DEFAULT_CLASSES_NAME)
-            .map_err(|e| e.to_string())?;
-    profiles.bind(&table, &name).map_err(|e| e.to_string())?;
+        mouthpiece_lipsync::ClassTable::from_toml_str(DEFAULT_CLASSES, DEFAULT_CLASSES_NAME)?;
+    profiles.bind(&table, &name)?;
     if profiles.classes.is_empty() {
-        return Err(format!("{name}: no class has a profile"));
+        return Err(ProfilesError::Empty { file: name });
     }
     Ok(profiles)
 }

@@ -272,25 +272,8 @@ impl HeadConfig {
     }
 }
 
-/// What drives the head.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum HeadMode {
-    /// The performer's head rotation, scaled and clamped.
-    Follow,
-    /// Turning to (or facing) a viewpoint.
-    LookAt,
-}
-
-impl HeadMode {
-    /// `follow` or `look_at`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            HeadMode::Follow => "follow",
-            HeadMode::LookAt => "look_at",
-        }
-    }
-}
+/// What drives the head: the output vocabulary's one enum (`follow` or `look_at`).
+pub use mouthpiece_output::LookMode;
 
 /// One step of a character's head and eyes.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -302,7 +285,7 @@ pub struct HeadFrame {
     /// The right eye's rotation relative to the head.
     pub eye_right: Quat,
     /// What drives the head.
-    pub mode: HeadMode,
+    pub mode: LookMode,
     /// With a viewpoint: whether the head can face it. `None` while following.
     pub in_reach: Option<bool>,
     /// How far the current turn has come, 0..=1 (1 when no turn is under way).
@@ -317,7 +300,7 @@ impl Default for HeadFrame {
             rotation: Quat::identity(),
             eye_left: Quat::identity(),
             eye_right: Quat::identity(),
-            mode: HeadMode::Follow,
+            mode: LookMode::Follow,
             in_reach: None,
             progress: 1.0,
             limited: false,
@@ -495,9 +478,9 @@ impl HeadDriver {
             eye_left: model(&eye_left),
             eye_right: model(&eye_right),
             mode: if self.viewpoint.is_some() {
-                HeadMode::LookAt
+                LookMode::LookAt
             } else {
-                HeadMode::Follow
+                LookMode::Follow
             },
             in_reach: self.viewpoint.map(|v| v.in_reach),
             progress,
@@ -523,7 +506,7 @@ pub struct HeadLine {
     /// The right eye's rotation relative to the head, `[w, x, y, z]`.
     pub eye_right: [f64; 4],
     /// `follow` or `look_at`.
-    pub mode: HeadMode,
+    pub mode: LookMode,
     /// With a viewpoint: whether it is in reach; `null` while following.
     pub in_reach: Option<bool>,
     /// How far the current turn has come, 0..=1.
@@ -728,7 +711,7 @@ mod tests {
             let f = out.rotation * FORWARD;
             assert_relative_eq!(f, direction_deg(want, 0.0), epsilon = 1e-9);
             assert_relative_eq!(out.progress, (f64::from(k) / 3.0).min(1.0), epsilon = 1e-9);
-            assert_eq!(out.mode, HeadMode::LookAt);
+            assert_eq!(out.mode, LookMode::LookAt);
         }
     }
 
@@ -779,7 +762,7 @@ mod tests {
         assert_relative_eq!(half.progress, 0.5, epsilon = 1e-9);
         let done = *head.step(3.5, &Quat::identity());
         assert_relative_eq!(done.rotation.angle(), 0.0, epsilon = 1e-9);
-        assert_eq!(done.mode, HeadMode::Follow);
+        assert_eq!(done.mode, LookMode::Follow);
         // Non-finite points and the pivot itself are refused.
         assert!(head.look_at(Some(Vec3::new(f64::NAN, 0.0, 1.0))).is_err());
         assert!(head.look_at(Some(config.pivot)).is_err());

@@ -61,7 +61,7 @@ mod stabilised;
 pub use character::{Character, MMode, Units};
 pub use error::Error;
 pub use frame::MouthFrame;
-pub use head::{HeadConfig, HeadDriver, HeadFrame, HeadMode, Reach};
+pub use head::{HeadConfig, HeadDriver, HeadFrame, LookMode, Reach};
 pub use kabsch::RigidTransform;
 pub use layout::{DotId, PerformerDots, PerformerLayout};
 pub use named::Named;

@@ -21,7 +21,8 @@ fn unreadable_tls_files_are_refused_by_the_check() {
 #[test]
 fn a_character_file_that_never_ends_is_refused() {
     let (_dir, config) = load("[characters]\nfiles = [\"/dev/zero\"]\n");
-    let err = check(&config.unwrap()).unwrap_err().to_string();
+    // The key and the file, then the cause.
+    let err = mouthpiece_daemon::source::error_chain(&check(&config.unwrap()).unwrap_err());
     assert!(err.contains("characters.files[0]"), "{err}");
     // Refused once it runs past a megabyte, not when memory runs out.
     assert!(err.contains("longer than 1048576 bytes"), "{err}");

@@ -86,7 +86,7 @@ pub struct Args {
 
 /// The built-in wolf the daemon drives by default.
 fn builtin_wolf() -> anyhow::Result<mouthpiece_retarget::Character> {
-    let (name, text) = mouthpiece_daemon::characters::BUILTIN
+    let (name, text) = mouthpiece_pipeline::setup::BUILTIN
         .iter()
         .find(|(name, _)| name.ends_with("/wolf.toml"))
         .expect("the built-in characters include the wolf");

@@ -1,7 +1,11 @@
-//! The retarget core's rig (docs/rig.md) as the server publishes it.
+//! The retarget core's results in the output vocabulary: its rig (docs/rig.md) and a
+//! character's head (docs/head.md). The core keeps its math-side types; this is the one
+//! place they become the published ones.
 
+use mouthpiece_output::{CharacterHead, RigCurves, RigJaw, RigLip, RigLips, RigState, RigVisemes};
+use mouthpiece_retarget::head::{wxyz, HeadFrame};
 use mouthpiece_retarget::rig::{curves_from, LipMotion, RangeOverrides, Rig, RigFrame, CURVES};
-use mouthpiece_server::{RigCurves, RigJaw, RigLip, RigLips, RigState, RigVisemes};
+use mouthpiece_retarget::Vec3;
 
 fn lip(m: &LipMotion) -> RigLip {
     RigLip {
@@ -11,7 +15,7 @@ fn lip(m: &LipMotion) -> RigLip {
     }
 }
 
-/// The server's copy of one step's rig (no allocation).
+/// The published copy of one step's rig (no allocation).
 pub fn rig_state(rig: &RigFrame) -> RigState {
     let mut curves = [0.0f32; CURVES];
     for (dst, (_, v)) in curves.iter_mut().zip(rig.curves.iter()) {
@@ -33,7 +37,7 @@ pub fn rig_state(rig: &RigFrame) -> RigState {
     }
 }
 
-/// The server's copy of one step's rig with a character's own ranges (docs/rig.md:
+/// The published copy of one step's rig with a character's own ranges (docs/rig.md:
 /// character, then configuration, then the performer's learned ranges). No allocation.
 pub fn rig_state_for(rig: &Rig, character: &RangeOverrides) -> RigState {
     let mut state = rig_state(rig.output());
@@ -46,6 +50,24 @@ pub fn rig_state_for(rig: &Rig, character: &RangeOverrides) -> RigState {
         state.set_visemes();
     }
     state
+}
+
+/// The published entry for a character's head frame.
+pub fn head(h: &HeadFrame) -> CharacterHead {
+    let q = |q| wxyz(q).map(|c| c as f32);
+    CharacterHead {
+        rotation: q(&h.rotation),
+        eye_left: q(&h.eye_left),
+        eye_right: q(&h.eye_right),
+        mode: h.mode,
+        in_reach: h.in_reach,
+        progress: h.progress as f32,
+    }
+}
+
+/// A point as published (single precision).
+pub fn point(v: &Vec3) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
 }
 
 #[cfg(test)]
@@ -62,20 +84,35 @@ mod tests {
         assert_eq!(s.jaw.angle_deg, 7.0);
     }
 
+    /// The head's mode, reach and progress are published as the core made them.
+    #[test]
+    fn a_head_frame_is_published_as_made() {
+        let frame = HeadFrame {
+            mode: mouthpiece_output::LookMode::LookAt,
+            in_reach: Some(false),
+            progress: 0.5,
+            ..HeadFrame::default()
+        };
+        let h = head(&frame);
+        assert_eq!(h.mode, mouthpiece_output::LookMode::LookAt);
+        assert_eq!(h.in_reach, Some(false));
+        assert_eq!(h.progress, 0.5);
+        assert_eq!(h.rotation, [1.0, 0.0, 0.0, 0.0]);
+    }
+
     /// A character with ranges of its own gets its curves with them; one without gets the
     /// performer's.
     #[test]
     fn a_characters_own_ranges_reach_its_entry() {
         use mouthpiece_retarget::retarget::StabilisedFrame;
         use mouthpiece_retarget::{NeutralPose, PerformerLayout, RigSettings, RigidTransform};
-        use nalgebra::Vector3;
         // A 12-dot mouth in its own frame (forehead straight above).
-        let mut lip = vec![Vector3::new(0.025, 0.0, 0.0)];
-        lip.extend((0..5).map(|k| Vector3::new(0.016 - 0.008 * k as f64, 0.006, 0.0)));
-        lip.push(Vector3::new(-0.025, 0.0, 0.0));
-        lip.extend((0..5).map(|k| Vector3::new(-0.016 + 0.008 * k as f64, -0.008, 0.0)));
+        let mut lip = vec![Vec3::new(0.025, 0.0, 0.0)];
+        lip.extend((0..5).map(|k| Vec3::new(0.016 - 0.008 * k as f64, 0.006, 0.0)));
+        lip.push(Vec3::new(-0.025, 0.0, 0.0));
+        lip.extend((0..5).map(|k| Vec3::new(-0.016 + 0.008 * k as f64, -0.008, 0.0)));
         let forehead = [(-0.03, 0.1), (0.03, 0.1), (0.0, 0.12)]
-            .map(|(x, y)| Some(Vector3::new(x, y, -0.01)))
+            .map(|(x, y)| Some(Vec3::new(x, y, -0.01)))
             .to_vec();
         let neutral = NeutralPose::from_positions(
             PerformerLayout::default(),
@@ -93,7 +130,7 @@ mod tests {
         let drawn: Vec<_> = neutral
             .lip
             .iter()
-            .map(|p| Vector3::new(0.9 * p.x, p.y, p.z))
+            .map(|p| Vec3::new(0.9 * p.x, p.y, p.z))
             .collect();
         rig.step(&StabilisedFrame {
             t: 0.0,
