@@ -18,6 +18,8 @@ pub enum Motion {
     None,
     Mild,
     Strong,
+    /// The strong motion at 1.5 times its speed.
+    Fast,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -173,6 +175,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         Motion::None => HeadMotion::None,
                         Motion::Mild => HeadMotion::Mild,
                         Motion::Strong => HeadMotion::Strong,
+                        Motion::Fast => HeadMotion::Fast,
                     },
                     noise: match noise {
                         Noise::None => NoiseModel::None,
