@@ -589,8 +589,7 @@ impl Tracks {
         let tracks = self.dots.as_mut().expect("checked");
         // The forehead dots' largest miss of the prediction, when every dot was seen now and
         // its velocity measured (seen the two frames before).
-        let all_seen_now = names.iter().all(Option::is_some);
-        if all_seen_now && self.velocities_known {
+        if all_seen && self.velocities_known {
             let miss = tracks[n..]
                 .iter()
                 .zip(&names[n..])
@@ -602,11 +601,11 @@ impl Tracks {
                 .fold(0.0f64, f64::max);
             self.recent_head_miss_px[self.motion_frames % SEARCH_MOTION_FRAMES] = miss;
             self.motion_frames = self.motion_frames.saturating_add(1);
-        } else if !all_seen_now {
+        } else if !all_seen {
             self.motion_frames = 0;
         }
         // Velocities are measured this frame for every dot seen now and last frame.
-        self.velocities_known = all_seen_now && tracks.iter().all(|t| t.missing == 0);
+        self.velocities_known = all_seen && tracks.iter().all(|t| t.missing == 0);
         for (track, name) in tracks.iter_mut().zip(names) {
             match name {
                 Some(c) => {
