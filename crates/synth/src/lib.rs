@@ -66,7 +66,14 @@ pub enum HeadMotion {
     Mild,
     /// Yaw ±30°, pitch ±15°, roll ±10°, ±5 cm.
     Strong,
+    /// The strong motion played [`FAST_HEAD_SPEEDUP`] times as fast: the same poses, turns
+    /// and nods at 1.5 times the strong motion's angular and linear speed (and 2.25 times its
+    /// acceleration), for checking the tracker past the motion it was tuned on.
+    Fast,
 }
+
+/// How many times faster [`HeadMotion::Fast`] runs through the strong motion's poses.
+pub const FAST_HEAD_SPEEDUP: f64 = 1.5;
 
 /// Depth sensor noise.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -171,7 +171,16 @@ impl HeadTrack {
         let bounds = match self.motion {
             HeadMotion::None => return HeadState::default(),
             HeadMotion::Mild => [10.0 * deg, 3.0 * deg, 2.0 * deg, 0.005, 0.005, 0.005],
-            HeadMotion::Strong => [30.0 * deg, 15.0 * deg, 10.0 * deg, 0.05, 0.05, 0.05],
+            HeadMotion::Strong | HeadMotion::Fast => {
+                [30.0 * deg, 15.0 * deg, 10.0 * deg, 0.05, 0.05, 0.05]
+            }
+        };
+        // The fast motion is the strong one on a faster clock (after the same neutral lead-in
+        // and fade): every speed scaled by the same factor, the poses unchanged.
+        let speed = if self.motion == HeadMotion::Fast {
+            crate::FAST_HEAD_SPEEDUP
+        } else {
+            1.0
         };
         let fade = smoothstep(self.neutral_s, self.neutral_s + 1.0, t);
         let mut v = [0.0; 6];
@@ -181,7 +190,8 @@ impl HeadTrack {
                 .iter()
                 .zip(amps)
                 .map(|((period, phase), a)| {
-                    a * (std::f64::consts::TAU * (t - self.neutral_s) / period + phase).sin()
+                    a * (std::f64::consts::TAU * speed * (t - self.neutral_s) / period + phase)
+                        .sin()
                 })
                 .sum();
             *value = bounds[c] * fade * s;
@@ -324,5 +334,34 @@ mod tests {
             max_yaw > 15f64.to_radians(),
             "strong motion turns the head ({max_yaw})"
         );
+    }
+
+    /// *Fast head motion*: the strong motion's poses on a clock 1.5 times as fast, so its
+    /// peak yaw and pitch speeds (finite differences over 20 s, after the fade-in) are 1.5
+    /// times the strong motion's, within the same bounds.
+    #[test]
+    fn fast_head_motion_is_the_strong_one_at_one_and_a_half_times_the_speed() {
+        let (strong, fast) = (
+            HeadTrack::new(11, HeadMotion::Strong, 1.5),
+            HeadTrack::new(11, HeadMotion::Fast, 1.5),
+        );
+        // Strong from 3.0 s and fast from 2.5 s (both faded in) run through the same poses.
+        let fast_t = |t: f64| 1.5 + (t - 1.5) / crate::FAST_HEAD_SPEEDUP;
+        let (dt, mut most) = (1e-5, [[0.0f64; 2]; 2]);
+        for i in 0..4000 {
+            let t = 3.0 + i as f64 * 0.005;
+            let pose = fast.at(fast_t(t));
+            assert!((pose.yaw - strong.at(t).yaw).abs() < 1e-12);
+            assert!((pose.pitch - strong.at(t).pitch).abs() < 1e-12);
+            for (k, (head, t)) in [(&strong, t), (&fast, fast_t(t))].into_iter().enumerate() {
+                let (a, b) = (head.at(t), head.at(t + dt));
+                most[k][0] = most[k][0].max((b.yaw - a.yaw).abs() / dt);
+                most[k][1] = most[k][1].max((b.pitch - a.pitch).abs() / dt);
+            }
+        }
+        for axis in 0..2 {
+            let ratio = most[1][axis] / most[0][axis];
+            assert!((ratio - 1.5).abs() < 1e-3, "axis {axis}: {ratio}");
+        }
     }
 }

@@ -556,8 +556,14 @@ impl Tracker {
         out.steps.extend_from_slice(&self.scratch.log.events);
         self.tracks.count(&names);
         let neutral = self.stabiliser.as_ref().map(|s| s.neutral());
-        self.tracks
-            .update(&self.config, self.layout, &names, &self.cands.list, neutral);
+        self.tracks.update(
+            &self.config,
+            self.layout,
+            &names,
+            &self.cands.list,
+            neutral,
+            self.step_ratio,
+        );
         // After the frame's tracks are kept, so that the next frame names from geometry and
         // not from these names; only when geometry can name this frame, so that a lasting
         // extra blob (a smear of paint the size of a dot) never leaves the dots unnamed.

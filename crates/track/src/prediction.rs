@@ -66,18 +66,29 @@ const FULL_FRAME_DIVISOR: i64 = 2;
 /// The search region's margin doubles per frame with dots missing, up to 2^this times.
 const SEARCH_GROWTH_MAX_DOUBLINGS: u32 = 4;
 
-/// *Search margin by motion*: over the last this many frames with every dot seen ...
+/// *Search margin from the prediction's uncertainty*: over the last this many frames with
+/// every dot seen in them and in the two before (the prediction's miss measured) ...
 pub(crate) const SEARCH_MOTION_FRAMES: usize = 8;
-/// ... the dots' largest displacement in one frame, times this, carried forward by the step
-/// ratio, is the search region's margin (the prediction moves a dot on at its last velocity,
-/// so its error is a change of velocity, at most the displacement itself plus half again) ...
-pub(crate) const SEARCH_MOTION_FACTOR: f64 = 1.5;
-/// ... but at least this many dot spacings: a lip starting from rest, which the measured
-/// motion does not know yet, moves up to 1.4 spacings in its first frame (a jaw dropping),
-/// and its paint reaches 0.2 spacings round its centre. At most
-/// [`TrackConfig::roi_margin_spacings`], which is also the margin until the window is full
-/// and while dots are missing.
-pub(crate) const SEARCH_FLOOR_SPACINGS: f64 = 1.6;
+/// ... the head's largest miss of the constant-velocity prediction (the forehead dots' largest
+/// distance from where their own velocity put them: the head's change of velocity in a frame,
+/// its acceleration, with the sensor's noise in the centroids and in the measured velocity) is
+/// the prediction's measured uncertainty; a head may accelerate past what the window saw (its
+/// acceleration grows while it turns into a move), so the region allows this many times it ...
+pub(crate) const SEARCH_HEAD_MISS_FACTOR: f64 = 2.0;
+/// ... carried `r` frame intervals on as `r (r + 1) / 2` (a velocity measured over the last
+/// interval lags the motion by half of it, and a change of velocity adds up over the step) ...
+fn miss_over_steps(miss: f64, step_ratio: f64) -> f64 {
+    let r = step_ratio.max(1.0);
+    miss * r * (r + 1.0) / 2.0
+}
+/// ... on top of what no measured motion predicts: a lip starting from rest moves up to this
+/// many dot spacings in a frame relative to the head (a jaw dropping), and its paint reaches
+/// [`SEARCH_PAINT_SPACINGS`] round its centre. The margin is never below
+/// [`TrackConfig::roi_margin_spacings`] (those two and the prediction's own error at rest),
+/// which is also the margin until the window is full and while dots are missing.
+pub(crate) const SEARCH_LIP_JUMP_SPACINGS: f64 = 1.4;
+/// The reach of a dot's paint round its centre, dot spacings.
+pub(crate) const SEARCH_PAINT_SPACINGS: f64 = 0.2;
 
 /// One dot's track.
 #[derive(Debug, Clone)]
@@ -371,12 +382,15 @@ pub(crate) struct Tracks {
     pub(crate) frames_with_missing: u32,
     /// Frames in a row with a lip blob left unnamed between two named neighbours.
     pub(crate) frames_with_blob_between: u32,
-    /// The dots' largest displacement (pixels) in each of the last frames with every dot
-    /// seen in it and the one before, a ring indexed by `motion_frames` (*search margin by
-    /// motion*).
-    pub(crate) recent_motion_px: [f64; SEARCH_MOTION_FRAMES],
-    /// Frames measured into `recent_motion_px` since the names began or a dot went missing.
+    /// The forehead dots' largest miss of the constant-velocity prediction (pixels) in each
+    /// of the last frames with every dot seen in it and the two before, a ring indexed by
+    /// `motion_frames` (*search margin from the prediction's uncertainty*).
+    pub(crate) recent_head_miss_px: [f64; SEARCH_MOTION_FRAMES],
+    /// Frames measured into `recent_head_miss_px` since the names began or a dot went missing.
     pub(crate) motion_frames: usize,
+    /// Whether every dot's velocity was measured last frame (every dot seen in it and the one
+    /// before): this frame's misses measure the prediction.
+    pub(crate) velocities_known: bool,
 }
 
 /// *Slipped names*: after this many frames in a row with a lip blob left unnamed between two
@@ -396,6 +410,7 @@ impl Tracks {
         self.frames_with_missing = 0;
         self.frames_with_blob_between = 0;
         self.motion_frames = 0;
+        self.velocities_known = false;
     }
 
     /// Counts the frames in a row with a lip blob left between two named neighbours; true
@@ -460,27 +475,31 @@ impl Tracks {
         })
     }
 
-    /// *Search margin by motion*, in dot spacings (`spacing_px` pixels each): the dots'
-    /// largest displacement in a frame over the last [`SEARCH_MOTION_FRAMES`] frames, carried
-    /// `step_ratio` frame intervals on, times [`SEARCH_MOTION_FACTOR`], between
-    /// [`SEARCH_FLOOR_SPACINGS`] and [`TrackConfig::roi_margin_spacings`]; the latter while
-    /// dots are missing or fewer frames have been measured since (the region grows back).
+    /// *Search margin from the prediction's uncertainty*, in dot spacings (`spacing_px`
+    /// pixels each): a lip's jump from rest ([`SEARCH_LIP_JUMP_SPACINGS`]) and its paint
+    /// ([`SEARCH_PAINT_SPACINGS`]), plus [`SEARCH_HEAD_MISS_FACTOR`] times the head's largest
+    /// miss over the last [`SEARCH_MOTION_FRAMES`] frames carried `step_ratio` frame
+    /// intervals on; at least [`TrackConfig::roi_margin_spacings`], which is the margin
+    /// while dots are missing or fewer frames have been measured since (the region then
+    /// grows from it: [`Self::search_region`]).
     pub(crate) fn margin_spacings(
         &self,
         config: &TrackConfig,
         step_ratio: f64,
         spacing_px: f64,
     ) -> f64 {
-        let most = config.roi_margin_spacings;
+        let least = config.roi_margin_spacings;
         if self.frames_with_missing > 0 || self.motion_frames < SEARCH_MOTION_FRAMES {
-            return most;
+            return least;
         }
-        let moved_px = self.recent_motion_px.iter().copied().fold(0.0, f64::max);
-        let wanted = SEARCH_MOTION_FACTOR * moved_px * step_ratio.max(1.0) / spacing_px;
+        let miss_px = self.recent_head_miss_px.iter().copied().fold(0.0, f64::max);
+        let wanted = SEARCH_LIP_JUMP_SPACINGS
+            + SEARCH_PAINT_SPACINGS
+            + SEARCH_HEAD_MISS_FACTOR * miss_over_steps(miss_px, step_ratio) / spacing_px;
         if wanted.is_finite() {
-            wanted.clamp(SEARCH_FLOOR_SPACINGS.min(most), most)
+            wanted.max(least)
         } else {
-            most
+            least
         }
     }
 
@@ -510,6 +529,7 @@ impl Tracks {
         names: &[Option<usize>],
         cands: &[Candidate],
         neutral: Option<&NeutralPose>,
+        step_ratio: f64,
     ) {
         let n = layout.lip_dots;
         let all_seen = names.iter().all(|c| c.is_some());
@@ -552,6 +572,7 @@ impl Tracks {
                     .collect(),
             );
             self.motion_frames = 0;
+            self.velocities_known = false;
             tracing::info!("all dots named from geometry; tracking");
             return;
         }
@@ -566,23 +587,25 @@ impl Tracks {
         self.head = self.reference(layout).now(names, cands);
         let inverse = self.head.inverse();
         let tracks = self.dots.as_mut().expect("checked");
-        // The frame's largest displacement, when every dot was seen now and a frame before.
-        let moved = tracks
-            .iter()
-            .zip(names)
-            .try_fold(0.0f64, |most, (track, name)| {
-                let c = &cands[(*name)?];
-                (track.missing == 0).then(|| {
-                    most.max((c.pixel[0] - track.pixel[0]).hypot(c.pixel[1] - track.pixel[1]))
+        // The forehead dots' largest miss of the prediction, when every dot was seen now and
+        // its velocity measured (seen the two frames before).
+        if all_seen && self.velocities_known {
+            let miss = tracks[n..]
+                .iter()
+                .zip(&names[n..])
+                .filter_map(|(track, name)| {
+                    let p = track.predicted_pixel(step_ratio);
+                    let c = &cands[(*name)?];
+                    Some((c.pixel[0] - p[0]).hypot(c.pixel[1] - p[1]))
                 })
-            });
-        match moved {
-            Some(px) => {
-                self.recent_motion_px[self.motion_frames % SEARCH_MOTION_FRAMES] = px;
-                self.motion_frames = self.motion_frames.saturating_add(1);
-            }
-            None => self.motion_frames = 0,
+                .fold(0.0f64, f64::max);
+            self.recent_head_miss_px[self.motion_frames % SEARCH_MOTION_FRAMES] = miss;
+            self.motion_frames = self.motion_frames.saturating_add(1);
+        } else if !all_seen {
+            self.motion_frames = 0;
         }
+        // Velocities are measured this frame for every dot seen now and last frame.
+        self.velocities_known = all_seen && tracks.iter().all(|t| t.missing == 0);
         for (track, name) in tracks.iter_mut().zip(names) {
             match name {
                 Some(c) => {
@@ -761,13 +784,15 @@ mod tests {
         assert!((grown - margin).abs() <= 1.0, "{grown} against {margin}");
     }
 
-    /// *Search margin by motion*: the margin is the configured 2.2 spacings until eight
-    /// frames of motion are measured; lips moving 0.2 spacings a frame then search within
-    /// the floor of 1.6 spacings (the region narrower by 0.6 spacings a side), a frame
-    /// moving 1.2 spacings widens it to 1.8, and a dot going missing brings back 2.2 (twice
-    /// it while missing) until eight frames are measured again.
+    /// *Search margin from the prediction's uncertainty*: the margin is the configured 2.2
+    /// spacings until eight frames of misses are measured, and stays 2.2 while the lips move
+    /// on a steady head (a lip's jump and its paint, 1.6, are below it); a head accelerating
+    /// 0.5 spacings a frame per frame (the forehead missing its constant-velocity prediction
+    /// by 0.5 spacings) widens it to 1.6 + 2 × 0.5 = 2.6, and to 1.6 + 2 × 0.5 × 3 = 4.6 over
+    /// a step of two frame intervals; a dot going missing brings back 2.2, the region twice
+    /// as wide a side on the very next frame, until eight frames are measured again.
     #[test]
-    fn the_search_margin_follows_the_dots_measured_motion() {
+    fn the_search_margin_follows_the_predictions_uncertainty() {
         let mut scene = Scene::calibrated();
         let config = scene.config.clone();
         let layout = scene.layout;
@@ -778,14 +803,15 @@ mod tests {
             reference_forehead: scene.forehead.clone(),
             ..calibrated_tracks(&scene)
         };
-        // One frame: the lip dots `shift` spacings right of rest, dot `hidden` unseen.
-        let mut frame = |tracks: &mut Tracks, shift: f64, hidden: Option<usize>| {
+        // One frame: every dot `head` spacings right of rest, the lip dots `lip` more, dot
+        // `hidden` unseen.
+        let mut frame = |tracks: &mut Tracks, head: f64, lip: f64, hidden: Option<usize>| {
             let pixels: Vec<[f64; 2]> = rest
                 .iter()
                 .enumerate()
                 .map(|(i, p)| match i < layout.lip_dots {
-                    true => [p[0] + shift * spacing, p[1]],
-                    false => *p,
+                    true => [p[0] + (head + lip) * spacing, p[1]],
+                    false => [p[0] + head * spacing, p[1]],
                 })
                 .collect();
             let cands = match hidden {
@@ -800,40 +826,51 @@ mod tests {
                 })
                 .collect();
             tracks.count(&names);
-            tracks.update(&config, layout, &names, &cands.list, None);
+            tracks.update(&config, layout, &names, &cands.list, None, 1.0);
         };
-        let margin = |tracks: &Tracks| tracks.margin_spacings(&config, 1.0, spacing);
-        let most = config.roi_margin_spacings;
-        assert_eq!(margin(&tracks), most, "nothing measured yet");
-        for k in 0..SEARCH_MOTION_FRAMES {
-            assert_eq!(margin(&tracks), most, "{k} frames measured");
-            frame(&mut tracks, 0.2 * (k % 2) as f64, None);
+        let margin = |tracks: &Tracks, r: f64| tracks.margin_spacings(&config, r, spacing);
+        let least = config.roi_margin_spacings;
+        assert_eq!(margin(&tracks, 1.0), least, "nothing measured yet");
+        // The lips jump about on a still head: the misses are the lips', not the head's.
+        for k in 0..SEARCH_MOTION_FRAMES + 2 {
+            assert_eq!(margin(&tracks, 1.0), least, "{k} frames measured");
+            frame(&mut tracks, 0.0, 1.2 * (k % 2) as f64, None);
         }
-        assert!((margin(&tracks) - SEARCH_FLOOR_SPACINGS).abs() < 1e-9);
+        assert_eq!(margin(&tracks, 1.0), least, "lips alone");
+        // The head accelerates: 0.5 spacings more each frame than the frame before.
+        let mut head = 0.0;
+        for k in 1..=SEARCH_MOTION_FRAMES + 2 {
+            head += 0.5 * k as f64;
+            frame(&mut tracks, head, 0.0, None);
+        }
+        assert!(
+            (margin(&tracks, 1.0) - 2.6).abs() < 1e-6,
+            "{}",
+            margin(&tracks, 1.0)
+        );
+        assert!(
+            (margin(&tracks, 2.0) - 4.6).abs() < 1e-6,
+            "{}",
+            margin(&tracks, 2.0)
+        );
         // The lips move sideways only: the dots' box is as tall each time.
         let height = |tracks: &Tracks| {
             let r = tracks.search_region(&config, 1.0, [4000, 4000], fx, DOT_RADIUS_M);
             r.unwrap().all.height as f64
         };
-        let slow = height(&tracks);
-        frame(&mut tracks, 1.4, None);
-        assert!((margin(&tracks) - 1.8).abs() < 1e-6, "{}", margin(&tracks));
-        frame(&mut tracks, 1.4, Some(3));
-        assert_eq!(margin(&tracks), most, "a dot missing");
+        let moving = height(&tracks);
+        head += 0.5 * (SEARCH_MOTION_FRAMES + 3) as f64;
+        frame(&mut tracks, head, 0.0, Some(3));
+        assert_eq!(margin(&tracks, 1.0), least, "a dot missing");
         let missing = height(&tracks);
-        frame(&mut tracks, 1.4, None);
-        assert_eq!(margin(&tracks), most, "the dot found again");
-        let found = height(&tracks);
-        // The margins a side differ by 0.6 spacings, then by 2.2 (the margin doubled).
+        // Twice the least margin a side on the frame after the loss, against 2.6 before.
         let side = |a: f64, b: f64| (a - b) / 2.0 / spacing;
         assert!(
-            (side(found, slow) - 0.6).abs() < 0.15,
-            "{found} against {slow}"
+            (side(missing, moving) - (2.0 * least - 2.6)).abs() < 0.15,
+            "{missing} against {moving}"
         );
-        assert!(
-            (side(missing, found) - most).abs() < 0.15,
-            "{missing} against {found}"
-        );
+        frame(&mut tracks, head, 0.0, None);
+        assert_eq!(margin(&tracks, 1.0), least, "the dot found again");
     }
 
     /// *Corners a line apart*: corners 5 px apart are a line where the dots are 4 px apart,

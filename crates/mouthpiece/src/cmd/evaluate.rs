@@ -16,6 +16,8 @@ pub enum Motion {
     None,
     Mild,
     Strong,
+    /// The strong motion at 1.5 times its speed.
+    Fast,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -125,6 +127,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Motion::None => HeadMotion::None,
                 Motion::Mild => HeadMotion::Mild,
                 Motion::Strong => HeadMotion::Strong,
+                Motion::Fast => HeadMotion::Fast,
             })
             .collect(),
         seconds: args.seconds,

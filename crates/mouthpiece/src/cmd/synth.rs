@@ -18,6 +18,8 @@ pub enum MotionArg {
     None,
     Mild,
     Strong,
+    /// The strong motion at 1.5 times its speed.
+    Fast,
 }
 
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
@@ -171,6 +173,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             MotionArg::None => HeadMotion::None,
             MotionArg::Mild => HeadMotion::Mild,
             MotionArg::Strong => HeadMotion::Strong,
+            MotionArg::Fast => HeadMotion::Fast,
         },
         noise: match args.noise {
             NoiseArg::None => NoiseModel::None,
