@@ -359,8 +359,8 @@ mod tests {
                 most[k][1] = most[k][1].max((b.pitch - a.pitch).abs() / dt);
             }
         }
-        for axis in 0..2 {
-            let ratio = most[1][axis] / most[0][axis];
+        for (axis, (fast, strong)) in most[1].iter().zip(&most[0]).enumerate() {
+            let ratio = fast / strong;
             assert!((ratio - 1.5).abs() < 1e-3, "axis {axis}: {ratio}");
         }
     }
