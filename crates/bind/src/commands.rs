@@ -56,7 +56,10 @@ pub fn load_rig(path: &Path) -> Result<MouthRig, BindError> {
 
 fn check_heads(heads: usize) -> Result<(), BindError> {
     if heads > MAX_HEADS {
-        return Err(BindError::TooManyHeads { heads });
+        return Err(BindError::TooManyHeads {
+            heads,
+            max: MAX_HEADS,
+        });
     }
     Ok(())
 }
@@ -90,7 +93,9 @@ pub struct TrainRequest {
 /// hears what to report as it goes.
 pub fn train(req: &TrainRequest, mut progress: impl FnMut(String)) -> Result<Network, BindError> {
     if req.seed == HELD_OUT_SEED {
-        return Err(BindError::HeldOutSeed);
+        return Err(BindError::HeldOutSeed {
+            seed: HELD_OUT_SEED,
+        });
     }
     if !(req.rate > 0.0 && req.rate.is_finite()) {
         return Err(BindError::Rate);

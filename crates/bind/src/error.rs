@@ -72,13 +72,10 @@ pub enum BindError {
     /// The character's mouth corners do not lie apart.
     #[error("{}: the mouth's width is {width}: its corners must lie apart along x", path.display())]
     NoMouthWidth { path: PathBuf, width: f64 },
-    #[error(
-        "--heads {heads} is more than the {} procedural heads allowed",
-        crate::commands::MAX_HEADS
-    )]
-    TooManyHeads { heads: usize },
-    #[error("seed {} is the held-out heads' seed", crate::training::HELD_OUT_SEED)]
-    HeldOutSeed,
+    #[error("--heads {heads} is more than the {max} procedural heads allowed")]
+    TooManyHeads { heads: usize, max: usize },
+    #[error("seed {seed} is the held-out heads' seed")]
+    HeldOutSeed { seed: u64 },
     #[error("--rate must be a positive number")]
     Rate,
     #[error("give one --snout per --character ({characters} characters, {snouts} snouts)")]
