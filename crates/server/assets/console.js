@@ -450,7 +450,7 @@
     if (hello) tiles.push(tile("device", esc(hello.source || "–"), "device", hello.source || ""));
     if (st) {
       const c = st.calibration;
-      tiles.push(tile("calibration", st.calibrating ? "waiting for a neutral face: mouth closed and relaxed…" : c
+      tiles.push(tile("calibration", st.calibrating ? "calibrating…" : c
         ? `${fmtTime(c.wall_us)} · width ${c.mouth_width_mm.toFixed(1)} mm · wobble ${Number.isFinite(c.lip_wobble_mm) ? c.lip_wobble_mm.toFixed(2) : "–"} mm`
         : "none yet", st.calibrating ? "warn" : c ? "" : "warn"));
     }

@@ -14,9 +14,8 @@
 //!    (`lip_depth`), and, once calibrated, the head motion is refined on the whole forehead
 //!    surface (`forehead`, `head`) and the forehead dots placed by it;
 //! 6. neutral calibration (`calibration`, docs/method.md) once the mouth has been still for
-//!    [`TrackConfig::calibration_s`] (again on [`Tracker::calibrate`]), checked against the
-//!    performer's typical still, closed mouth and taken again when atypical, then head pose
-//!    and stabilised lip dots every frame through the retarget core's [`Stabiliser`].
+//!    [`TrackConfig::calibration_s`] (again on [`Tracker::calibrate`]), then head pose and
+//!    stabilised lip dots every frame through the retarget core's [`Stabiliser`].
 //!
 //! Everything is on the caller's thread; no queues. A frame allocates nothing once the
 //! buffers kept between frames have grown.
@@ -149,9 +148,6 @@ pub struct Tracker {
     /// ([`TrackConfig::calibration_s`] unless [`Tracker::calibrate_for`] said otherwise).
     calibration_s: f64,
     pub(crate) window: calibration::Window,
-    /// The neutral-face criterion: whether the pose taken is the performer's typical still,
-    /// closed mouth.
-    neutral_check: calibration::NeutralCheck,
     /// The neutral forehead surface the head motion is refined on, once calibrated.
     forehead_surface: Option<forehead::ForeheadSurface>,
     stabiliser: Option<Stabiliser>,
@@ -210,7 +206,6 @@ impl Tracker {
             calibrating: true,
             calibration_s: config.calibration_s,
             window: calibration::Window::default(),
-            neutral_check: calibration::NeutralCheck::default(),
             forehead_surface: None,
             stabiliser: None,
             registered: DepthImage::new(0, 0),
@@ -267,7 +262,6 @@ impl Tracker {
         self.calibrating = true;
         self.calibration_s = seconds;
         self.window.clear();
-        self.neutral_check.restart();
     }
 
     /// The source was reopened (a replay from its beginning, a camera plugged back in): the
@@ -580,12 +574,10 @@ impl Tracker {
         Ok(())
     }
 
-    /// Collects fully seen frames while calibrating or checking a new neutral pose; takes
-    /// the neutral pose once the window spans `calibration_s` of a still, closed mouth that
-    /// the neutral-face check admits ([`calibration::NeutralCheck`]), and takes it again when
-    /// the check finds it atypical.
+    /// Collects fully seen frames while calibrating; takes the neutral pose once the window
+    /// spans `calibration_s` of a still, closed mouth.
     fn update_calibration(&mut self, t: f64, sensor: &Sensor) -> Result<(), TrackError> {
-        if !self.calibrating && !self.neutral_check.surveying() {
+        if !self.calibrating {
             return Ok(());
         }
         let dots = &self.out.dots;
@@ -597,7 +589,7 @@ impl Tracker {
         }
         let n = self.layout.lip_dots;
         let margin_m = self.config.forehead_surface_margin_m;
-        let crop = (margin_m > 0.0 && self.calibrating).then(|| {
+        let crop = (margin_m > 0.0).then(|| {
             let pixels: Small<[f64; 2]> = self.out.pixels[n..].iter().flatten().copied().collect();
             let lips: Small<[f64; 2]> = self.out.pixels[..n].iter().flatten().copied().collect();
             let mouth = camera::pixel_mean(&lips);
@@ -613,52 +605,14 @@ impl Tracker {
         if !self.window.push(t, dots, crop, self.calibration_s) {
             return Ok(());
         }
-        let still_and_closed = self.window.shape(self.layout).is_some_and(|shape| {
-            shape.still_and_closed(self.config.still_tolerance_m, self.config.max_opening_ratio)
-        });
-        // The check judges the width of the pose the window would give, the one kept and
-        // logged (the median width over the frames can differ from it by a millimetre).
-        let pose = if still_and_closed {
-            Some(self.window.neutral(self.layout)?)
-        } else {
-            None
-        };
-        let width_m = pose.as_ref().map(NeutralPose::mouth_width);
-        if let Some(width_m) = width_m {
-            self.neutral_check.observe(self.window.interval(), width_m);
-        }
-        if !self.calibrating {
-            let survey_s = calibration::NEUTRAL_SURVEY_WINDOWS * self.calibration_s;
-            match self.neutral_check.verdict(survey_s) {
-                Some(calibration::Verdict::Typical { typical_m }) => {
-                    tracing::info!(
-                        typical_mouth_width_mm = typical_m * 1e3,
-                        "neutral pose checked: a typical still, closed mouth"
-                    );
-                    self.window.clear();
-                }
-                Some(calibration::Verdict::Atypical {
-                    typical_m,
-                    neutral_m,
-                }) => {
-                    tracing::info!(
-                        mouth_width_mm = neutral_m * 1e3,
-                        typical_mouth_width_mm = typical_m * 1e3,
-                        "neutral pose is not the performer's typical still, closed mouth; \
-                         waiting for a neutral face to take it again"
-                    );
-                    // The pose in use stays until the new one is taken, as on a request.
-                    self.calibrating = true;
-                    self.window.clear();
-                }
-                None => {}
-            }
+        if !self.window.is_still(
+            self.layout,
+            self.config.still_tolerance_m,
+            self.config.max_opening_ratio,
+        ) {
             return Ok(());
         }
-        let Some(neutral) = pose.filter(|p| self.neutral_check.admits(p.mouth_width())) else {
-            return Ok(());
-        };
-        self.neutral_check.taken(neutral.mouth_width());
+        let neutral = self.window.neutral(self.layout)?;
         tracing::info!(
             frames = neutral.frames,
             mouth_width_mm = neutral.mouth_width() * 1e3,
