@@ -109,6 +109,21 @@ fn lips_lost(confidence: &[f64]) -> bool {
     2 * confidence.iter().filter(|&&c| c > 0.0).count() < confidence.len()
 }
 
+/// A step without the performer: no head pose, no performer points, one entry per character
+/// under its name (buffers reused); the caller fills each character's mouth.
+fn without_performer(stream: &mut StreamFrame, characters: &[Character]) {
+    stream.head = Default::default();
+    stream.performer = None;
+    stream
+        .characters
+        .resize_with(characters.len(), CharacterFrame::default);
+    for (c, slot) in characters.iter().zip(stream.characters.iter_mut()) {
+        if slot.name != c.name {
+            slot.name.clone_from(&c.name);
+        }
+    }
+}
+
 /// A character's points and curve into its published entry (buffers reused).
 fn fill_points(slot: &mut CharacterFrame, points: &[Vec3], curve: &[Vec3]) {
     slot.points.clear();
@@ -207,17 +222,9 @@ impl LivePipeline {
     /// Every character at rest, confidence 0, no performer: before calibration, and when a
     /// frame could not be tracked (the last points are not repeated as if they were new).
     fn at_rest(&self, out: &mut Output) {
-        let stream = &mut out.stream;
-        stream.head = Default::default();
-        stream.performer = None;
         let characters = self.pipeline.characters();
-        stream
-            .characters
-            .resize_with(characters.len(), CharacterFrame::default);
-        for (c, slot) in characters.iter().zip(stream.characters.iter_mut()) {
-            if slot.name != c.name {
-                slot.name.clone_from(&c.name);
-            }
+        without_performer(&mut out.stream, characters);
+        for (c, slot) in characters.iter().zip(out.stream.characters.iter_mut()) {
             slot.points.clear();
             slot.points.extend(c.neutral.iter().map(point));
             slot.confidence.clear();
@@ -343,21 +350,13 @@ impl LivePipeline {
         };
         out.flags = Default::default();
         out.performer_camera.clear();
-        let stream = &mut out.stream;
-        stream.head = Default::default();
-        stream.performer = None;
         let characters = self.pipeline.characters();
-        stream
-            .characters
-            .resize_with(characters.len(), CharacterFrame::default);
+        without_performer(&mut out.stream, characters);
         for (k, (c, slot)) in characters
             .iter()
-            .zip(stream.characters.iter_mut())
+            .zip(out.stream.characters.iter_mut())
             .enumerate()
         {
-            if slot.name != c.name {
-                slot.name.clone_from(&c.name);
-            }
             let Some((result, rig)) = driver.mouth_alone(k, step.t, &step.weights) else {
                 continue;
             };

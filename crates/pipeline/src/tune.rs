@@ -74,21 +74,11 @@ pub fn sample_and_check(
     let mut sampler = ColourSampler::new(options);
     let mut registered = DepthImage::new(0, 0);
     for frame in frames {
-        let calib = &frame.calibration;
-        let depth = if calib.depth_registered {
-            &frame.depth
-        } else {
-            mouthpiece_track::camera::register_depth(&frame.depth, calib, &mut registered);
-            &registered
-        };
-        let has_depth = depth.width == frame.color.width
-            && depth.height == frame.color.height
-            && depth.data.iter().any(|&d| d != 0);
         sampler
             .add_frame(
                 &frame.color,
-                has_depth.then_some((depth, calib.depth_scale_m)),
-                calib.color.fx,
+                sampling_depth(&frame, &mut registered),
+                frame.calibration.color.fx,
             )
             .map_err(|source| TuneError::Frame {
                 seq: frame.seq,
@@ -99,6 +89,26 @@ pub fn sample_and_check(
         return Err(TuneError::NoFrames);
     }
     sampler.propose_checked(detect).map_err(TuneError::Check)
+}
+
+/// The frame's depth registered to its colour image, with its scale, for the colour sampler;
+/// `None` when the frame carries no usable depth (the background is then not masked).
+/// `registered` is the buffer kept between frames for cameras that do not register depth.
+pub fn sampling_depth<'a>(
+    frame: &'a Frame,
+    registered: &'a mut DepthImage,
+) -> Option<(&'a DepthImage, f64)> {
+    let calib = &frame.calibration;
+    let depth = if calib.depth_registered {
+        &frame.depth
+    } else {
+        mouthpiece_track::camera::register_depth(&frame.depth, calib, registered);
+        &*registered
+    };
+    let has_depth = depth.width == frame.color.width
+        && depth.height == frame.color.height
+        && depth.data.iter().any(|&d| d != 0);
+    has_depth.then_some((depth, calib.depth_scale_m))
 }
 
 /// A dot role as the configuration file writes it.

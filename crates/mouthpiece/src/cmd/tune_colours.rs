@@ -88,21 +88,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if frame.device_ts_us.saturating_sub(t0) as f64 * 1e-6 >= args.seconds {
             break;
         }
-        let calib = &frame.calibration;
-        let depth = if calib.depth_registered {
-            &frame.depth
-        } else {
-            mouthpiece_track::camera::register_depth(&frame.depth, calib, &mut registered);
-            &registered
-        };
-        let has_depth = depth.width == frame.color.width
-            && depth.height == frame.color.height
-            && depth.data.iter().any(|&d| d != 0);
         let sample = sampler
             .add_frame(
                 &frame.color,
-                has_depth.then_some((depth, calib.depth_scale_m)),
-                calib.color.fx,
+                mouthpiece_pipeline::tune::sampling_depth(&frame, &mut registered),
+                frame.calibration.color.fx,
             )
             .with_context(|| format!("frame {}", frame.seq))
             .map_err(bad_input)?;
